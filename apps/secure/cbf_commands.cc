@@ -1,0 +1,358 @@
+// secure cbf train | eval | predict | table1, and secure demo (the Table 1 reproduction until the
+// full pipeline lands).
+#include <cstdio>
+#include <functional>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <tuple>
+
+#include "cli_common.h"
+#include "commands.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/barrier_trainer.h"
+#include "secure/cbf/double_integrator_study.h"
+#include "secure/cbf/validation.h"
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+#include "secure/common/timer.h"
+#include "secure/data/data.h"
+
+namespace secure::cli {
+namespace {
+
+namespace di = domains::double_integrator;
+
+constexpr const char* kDomainName = "double-integrator";
+
+// Flags for BarrierTrainerOptions fields (shared by train, table1 and demo). Values land in
+// `parsed`; ApplyTo() copies only the flags that were given onto a base (the general defaults or a
+// domain preset, with the YAML config applied), so the precedence is base < config < flags.
+class TrainerFlags {
+ public:
+  void Add(CLI::App* cmd, const cbf::BarrierTrainerOptions& shown_defaults) {
+    parsed_ = shown_defaults;
+    Bind(cmd, "--hidden", &Options::hidden, "hidden layer widths, e.g. 64,64,64")->delimiter(',');
+    activation_ = cmd->add_option("--activation", activation_name_, "hidden activation: relu | tanh")
+                      ->default_str(ToString(nn::kActivationNames, shown_defaults.activation));
+    Bind(cmd, "--epochs", &Options::max_epochs, "maximum epochs");
+    Bind(cmd, "--batch-size", &Options::batch_size, "minibatch size");
+    Bind(cmd, "--lr", &Options::learning_rate, "Adam learning rate (start of the cosine decay)");
+    Bind(cmd, "--final-lr", &Options::final_learning_rate, "learning rate at the last epoch");
+    Bind(cmd, "--weight-decay", &Options::weight_decay, "L2 weight decay");
+    Bind(cmd, "--safe-margin", &Options::safe_margin, "hinge margin for safe states");
+    Bind(cmd, "--unsafe-margin", &Options::unsafe_margin, "hinge margin for near-dangerous states");
+    Bind(cmd, "--safe-weight", &Options::safe_weight, "weight of the safe term");
+    Bind(cmd, "--unsafe-weight", &Options::unsafe_weight, "weight of the near-dangerous term");
+    Bind(cmd, "--validation-fraction", &Options::validation_fraction,
+         "fraction of each class held out for best-checkpoint selection");
+    Bind(cmd, "--patience", &Options::patience, "early-stopping patience in epochs (0: off)");
+    Bind(cmd, "--threads", &Options::threads, "LibTorch threads for training");
+    CLI::Option* verbose = cmd->add_flag("--verbose", parsed_.verbose, "training progress on stderr");
+    copies_.emplace_back(verbose, [](const Options& from, Options* to) { to->verbose = from.verbose; });
+  }
+
+  /// Copies the given flags onto `options`, then validates.
+  void ApplyTo(cbf::BarrierTrainerOptions* options) const {
+    for (const auto& [option, copy] : copies_)
+      if (option->count() > 0) copy(parsed_, options);
+    if (activation_->count() > 0)
+      options->activation = FromString(nn::kActivationNames, activation_name_, "--activation");
+    options->Validate();
+  }
+
+ private:
+  using Options = cbf::BarrierTrainerOptions;
+  template <typename T>
+  CLI::Option* Bind(CLI::App* cmd, const std::string& name, T Options::*field,
+                    const std::string& help) {
+    CLI::Option* option = cmd->add_option(name, parsed_.*field, help)->capture_default_str();
+    copies_.emplace_back(option, [field](const Options& from, Options* to) { to->*field = from.*field; });
+    return option;
+  }
+
+  Options parsed_;
+  std::string activation_name_;
+  CLI::Option* activation_ = nullptr;
+  std::vector<std::pair<CLI::Option*, std::function<void(const Options&, Options*)>>> copies_;
+};
+
+// ------------------------------------------------------------------------------------------
+struct TrainCommand {
+  YAML::Node trainer_yaml;  // the config's `trainer:` section, applied over the base options
+  std::string config_path;
+  cbf::BarrierTrainerOptions trainer;
+  TrainerFlags trainer_flags;
+  di::GroundTruth truth;
+  std::vector<double> obstacle;
+  std::string domain, safe_path, nd_path, features, out;
+  long n_safe = 800, n_unsafe = 800;
+  std::uint64_t seed = 0;
+  double test_fraction = 0.0;
+  bool json = false;
+
+  void Register(CLI::App& app, const Config& config) {
+    CLI::App* cmd = app.add_subcommand(
+        "train", "Learn a barrier h(s) from safe and near-dangerous states (Eq. 4)");
+    trainer_yaml = config.Section("trainer");
+    config_path = config.path;
+    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+    AddConfigFlag(cmd, config);
+    cmd->add_option("--domain", domain,
+                    "sample labelled states from a domain: double-integrator (trainer options then "
+                    "start from the double-integrator preset, see docs/RESULTS.md)");
+    cmd->add_option("--safe-states", safe_path, "CSV of safe states (header row)");
+    cmd->add_option("--near-dangerous-states", nd_path, "CSV of near-dangerous states");
+    cmd->add_option("--features", features,
+                    "comma-separated column names to use as state features (default: all)");
+    cmd->add_option("--safe", n_safe, "safe states to sample (with --domain)")->capture_default_str();
+    cmd->add_option("--unsafe", n_unsafe, "unsafe states to sample (with --domain)")
+        ->capture_default_str();
+    AddGroundTruthFlags(cmd, &truth, &obstacle);
+    cmd->add_option("--seed", seed, "seed for sampling, weights and minibatches")
+        ->capture_default_str();
+    cmd->add_option("--out", out, "model file to write")->required();
+    cmd->add_option("--test-fraction", test_fraction,
+                    "hold out this fraction of each class before training and report the "
+                    "model's accuracy on it")
+        ->capture_default_str();
+    trainer_flags.Add(cmd, cbf::BarrierTrainerOptions{});
+    cmd->add_flag("--json", json, "print the result as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    const bool from_domain = !domain.empty();
+    trainer = from_domain ? cbf::DoubleIntegratorTrainerPreset() : cbf::BarrierTrainerOptions{};
+    if (trainer_yaml.IsMap()) trainer.ApplyYaml(trainer_yaml, config_path);
+    trainer_flags.ApplyTo(&trainer);
+    trainer.seed = seed;
+    data::StateSet safe, nd;
+    const bool from_files = !safe_path.empty() || !nd_path.empty();
+    SECURE_CHECK(from_domain != from_files,
+                 "cbf train: give either --domain or both --safe-states and "
+                 "--near-dangerous-states");
+    if (from_domain) {
+      SECURE_CHECK(domain == kDomainName, "--domain = '" << domain << "', must be " << kDomainName);
+      FinishGroundTruth(obstacle, &truth);
+      auto sampled = cbf::SampleDoubleIntegratorData(truth, di::StateBox{}, n_safe, n_unsafe, seed);
+      safe = std::move(sampled.safe);
+      nd = std::move(sampled.unsafe);
+    } else {
+      SECURE_CHECK(!safe_path.empty() && !nd_path.empty(),
+                   "cbf train: --safe-states and --near-dangerous-states go together");
+      const auto names = data::SplitList(features);
+      safe = data::ReadStateSet(safe_path, names);
+      nd = data::ReadStateSet(nd_path, names);
+    }
+    // Held-out test split per class, drawn before training from its own stream.
+    data::StateSet safe_test, nd_test;
+    if (test_fraction > 0) {
+      Rng rng(seed ^ 0x7e57'0000'0000'0000ULL);
+      std::tie(safe, safe_test) = data::SplitStateSet(safe, test_fraction, rng);
+      std::tie(nd, nd_test) = data::SplitStateSet(nd, test_fraction, rng);
+    }
+    cbf::BarrierTrainingSummary summary;
+    cbf::BarrierNet net = cbf::TrainBarrier(trainer, safe, nd, &summary);
+    std::optional<cbf::ClassAccuracy> test;
+    if (test_fraction > 0) {
+      test = cbf::EvaluateAccuracy(*net.MakeEvaluator(), safe_test.states, nd_test.states);
+      net.provenance["test"] = {{"fraction", test_fraction},
+                                {"safe", safe_test.size()},
+                                {"near_dangerous", nd_test.size()},
+                                {"accuracy_safe", test->safe},
+                                {"accuracy_near_dangerous", test->near_dangerous}};
+    }
+    if (from_domain) {
+      net.provenance["double_integrator"] = {{"obstacle", {truth.obstacle_x, truth.obstacle_y}},
+                                             {"radius", truth.radius},
+                                             {"gamma", truth.gamma}};
+    }
+    net.Save(out);
+    if (json) {
+      nlohmann::json r{{"command", "cbf train"},
+                       {"model", out},
+                       {"features", net.features},
+                       {"options", trainer.ToJson()},
+                       {"summary", summary.ToJson()}};
+      if (test) {
+        r["test"] = {{"safe", safe_test.size()},
+                     {"near_dangerous", nd_test.size()},
+                     {"accuracy",
+                      {{"safe", test->safe},
+                       {"near_dangerous", test->near_dangerous},
+                       {"balanced", test->Balanced()}}}};
+      }
+      PrintJson(r);
+    } else {
+      std::cout << "trained " << net.MakeEvaluator()->Describe() << " on " << safe.size()
+                << " safe + " << nd.size() << " near-dangerous states -> " << out << "\n"
+                << summary.FullReport();
+      if (test) {
+        std::printf("held-out test: %ld safe, %ld near-dangerous; accuracy safe %.4f, "
+                    "near-dangerous %.4f, balanced %.4f\n",
+                    safe_test.size(), nd_test.size(), test->safe, test->near_dangerous,
+                    test->Balanced());
+      }
+    }
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+struct EvalCommand {
+  di::GroundTruth truth;
+  std::vector<double> obstacle;
+  std::string model, domain;
+  cbf::GridValidationOptions validation;
+  bool json = false;
+
+  void Register(CLI::App& app, const Config& config) {
+    CLI::App* cmd = app.add_subcommand(
+        "eval", "Confusion matrix of a barrier against a domain's ground truth on its grid");
+    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+    AddConfigFlag(cmd, config);
+    cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--domain", domain, "domain with a ground truth: double-integrator")
+        ->required();
+    AddGroundTruthFlags(cmd, &truth, &obstacle);
+    cmd->add_option("--threads", validation.threads, "worker threads")->capture_default_str();
+    cmd->add_flag("--json", json, "print the result as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    SECURE_CHECK(domain == kDomainName, "--domain = '" << domain << "', must be " << kDomainName);
+    FinishGroundTruth(obstacle, &truth);
+    const cbf::BarrierNet net = cbf::BarrierNet::Load(model);
+    net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", model);
+    const di::Grid grid;
+    const Stopwatch clock;
+    const cbf::Confusion c =
+        cbf::ValidateOnGrid([&] { return net.MakeEvaluator(); }, truth, grid, validation);
+    const double seconds = clock.Seconds();
+    if (json) {
+      nlohmann::json r = c.ToJson();
+      r["command"] = "cbf eval";
+      r["model"] = model;
+      r["seconds"] = seconds;
+      PrintJson(r);
+    } else {
+      std::printf("| predicted \\ ground truth | safe | unsafe |\n|---|---:|---:|\n");
+      std::printf("| safe | %.3f%% | %.3f%% |\n", 100 * c.SafeCorrect(), 100 * c.UnderConservative());
+      std::printf("| unsafe | %.3f%% | %.3f%% |\n", 100 * c.OverConservative(),
+                  100 * c.UnsafeCorrect());
+      std::printf("%ld grid states (%ld truly safe, %ld truly unsafe) in %.2f s\n", c.total(),
+                  c.truly_safe(), c.truly_unsafe(), seconds);
+    }
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+struct PredictCommand {
+  std::string model, states, out;
+  bool json = false;
+
+  void Register(CLI::App& app, const Config& config) {
+    CLI::App* cmd = app.add_subcommand(
+        "predict", "h(s) for every row of a CSV (columns picked by the model's feature names)");
+    cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--states", states, "CSV of states with a header row")->required();
+    cmd->add_option("--out", out, "CSV to write: columns h, safe (1 if h >= 0)")->required();
+    cmd->add_flag("--json", json, "print a summary as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    const cbf::BarrierNet net = cbf::BarrierNet::Load(model);
+    const data::StateSet set = data::ReadStateSet(states, net.features);
+    Eigen::VectorXf h(set.size());
+    net.MakeEvaluator()->Evaluate(set.states, h);
+    Eigen::MatrixXd table(2, set.size());
+    table.row(0) = h.cast<double>().transpose();
+    table.row(1) = (h.array() >= 0.0f).cast<double>().matrix().transpose();
+    data::WriteCsv(out, {"h", "safe"}, table);
+    const long n_safe = static_cast<long>(table.row(1).sum());
+    if (json) {
+      PrintJson({{"command", "cbf predict"},
+                 {"model", model},
+                 {"states", states},
+                 {"out", out},
+                 {"rows", set.size()},
+                 {"predicted_safe", n_safe}});
+    } else {
+      std::cout << "wrote h for " << set.size() << " states to " << out << " (" << n_safe
+                << " predicted safe)\n";
+    }
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+struct Table1Command {
+  cbf::Table1Options options;
+  TrainerFlags trainer_flags;
+  std::vector<double> obstacle;
+  bool json = false;
+
+  void Register(CLI::App& app, const Config& config, const std::string& name,
+                const std::string& description) {
+    CLI::App* cmd = app.add_subcommand(name, description);
+    if (config.Section("trainer").IsMap())
+      options.trainer.ApplyYaml(config.Section("trainer"), config.path);
+    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+    AddConfigFlag(cmd, config);
+    cmd->add_option("--seeds", options.seeds, "number of training seeds")->capture_default_str();
+    cmd->add_option("--first-seed", options.first_seed, "seed of the first run")
+        ->capture_default_str();
+    cmd->add_option("--safe", options.n_safe, "safe training states")->capture_default_str();
+    cmd->add_option("--unsafe", options.n_unsafe, "unsafe training states")->capture_default_str();
+    AddGroundTruthFlags(cmd, &options.truth, &obstacle);
+    cmd->add_option("--grid-threads", options.validation.threads, "threads for grid validation")
+        ->capture_default_str();
+    trainer_flags.Add(cmd, options.trainer);
+    cmd->add_flag("--json", json, "print the result as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    trainer_flags.ApplyTo(&options.trainer);
+    FinishGroundTruth(obstacle, &options.truth);
+    const cbf::Table1Result result = cbf::RunTable1(options);
+    if (json) {
+      nlohmann::json r = result.ToJson();
+      r["command"] = "cbf table1";
+      r["options"] = {{"seeds", options.seeds},
+                      {"first_seed", options.first_seed},
+                      {"safe", options.n_safe},
+                      {"unsafe", options.n_unsafe},
+                      {"obstacle", {options.truth.obstacle_x, options.truth.obstacle_y}},
+                      {"radius", options.truth.radius},
+                      {"gamma", options.truth.gamma},
+                      {"trainer", options.trainer.ToJson()}};
+      PrintJson(r);
+    } else {
+      std::cout << result.Table();
+    }
+  }
+};
+
+}  // namespace
+
+void RegisterCbfCommands(CLI::App& app, const Config& config) {
+  CLI::App* cbf = app.add_subcommand("cbf", "Learn, check and use control barrier functions");
+  cbf->require_subcommand(1);
+  static TrainCommand train;
+  static EvalCommand eval;
+  static PredictCommand predict;
+  static Table1Command table1;
+  static Table1Command demo;
+  train.Register(*cbf, config);
+  eval.Register(*cbf, config);
+  predict.Register(*cbf, config);
+  table1.Register(*cbf, config, "table1",
+                  "The paper's Table 1: learn the double-integrator CBF over seeds, validate on "
+                  "the 9M-state grid");
+  demo.Register(app, config, "demo",
+                "The main job (for now the Table 1 reproduction with default settings)");
+}
+
+}  // namespace secure::cli

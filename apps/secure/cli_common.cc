@@ -1,0 +1,94 @@
+#include "cli_common.h"
+
+#include <cstring>
+#include <iostream>
+
+#include "secure/common/build_info.h"
+#include "secure/common/error.h"
+
+namespace secure::cli {
+
+YAML::Node Config::Section(const std::string& key) const {
+  if (!root || !root.IsMap() || !root[key]) return YAML::Node();
+  const YAML::Node node = root[key];
+  SECURE_CHECK(node.IsMap(), path << ": section '" << key << "' must be a mapping");
+  return node;
+}
+
+Config PreScanConfig(int argc, char** argv) {
+  Config config;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--config" && i + 1 < argc) {
+      config.path = argv[i + 1];
+    } else if (arg.rfind("--config=", 0) == 0) {
+      config.path = arg.substr(std::strlen("--config="));
+    }
+  }
+  if (config.path.empty()) return config;
+  try {
+    config.root = YAML::LoadFile(config.path);
+  } catch (const YAML::BadFile&) {
+    SECURE_THROW("cannot open config file '" << config.path << "'");
+  } catch (const YAML::Exception& e) {
+    SECURE_THROW(config.path << ": invalid YAML: " << e.what());
+  }
+  SECURE_CHECK(!config.root || config.root.IsMap(),
+               config.path << ": the config file must be a mapping of sections");
+  return config;
+}
+
+void AddConfigFlag(CLI::App* cmd, const Config& config) {
+  cmd->add_option("--config", "YAML file with option sections; command-line flags override it")
+      ->check(CLI::ExistingFile);
+}
+
+void AddGroundTruthFlags(CLI::App* cmd, domains::double_integrator::GroundTruth* truth,
+                         std::vector<double>* obstacle) {
+  cmd->add_option("--obstacle", *obstacle, "obstacle centre X,Y")
+      ->delimiter(',')
+      ->expected(2)
+      ->default_str("5,5");
+  cmd->add_option("--radius", truth->radius, "obstacle radius r")->capture_default_str();
+  cmd->add_option("--gamma", truth->gamma, "gamma of the ground-truth CBF")->capture_default_str();
+}
+
+void ApplyGroundTruthYaml(const YAML::Node& node, const std::string& source,
+                          domains::double_integrator::GroundTruth* truth) {
+  if (!node.IsMap()) return;  // section absent
+  for (const auto& item : node) {
+    const std::string key = item.first.as<std::string>();
+    try {
+      if (key == "obstacle") {
+        const auto xy = item.second.as<std::vector<double>>();
+        SECURE_CHECK(xy.size() == 2, source << ": double_integrator.obstacle must be [x, y]");
+        truth->obstacle_x = xy[0];
+        truth->obstacle_y = xy[1];
+      } else if (key == "radius") {
+        truth->radius = item.second.as<double>();
+      } else if (key == "gamma") {
+        truth->gamma = item.second.as<double>();
+      } else {
+        SECURE_THROW(source << ": unknown field '" << key << "' in section double_integrator");
+      }
+    } catch (const YAML::Exception&) {
+      SECURE_THROW(source << ": field double_integrator." << key << " has an invalid value");
+    }
+  }
+}
+
+void FinishGroundTruth(const std::vector<double>& obstacle,
+                       domains::double_integrator::GroundTruth* truth) {
+  if (obstacle.size() == 2) {
+    truth->obstacle_x = obstacle[0];
+    truth->obstacle_y = obstacle[1];
+  }
+  truth->Validate();
+}
+
+void PrintJson(nlohmann::json result) {
+  result["context"] = BuildContext();
+  std::cout << result.dump(2) << std::endl;
+}
+
+}  // namespace secure::cli

@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Sets up a Debian 12 machine for secure and builds it (Release).
+#
+#   scripts/setup.sh            install missing packages, configure, build everything
+#   scripts/setup.sh --deps     only install missing packages
+#
+# Every dependency is a Debian package; nothing is downloaded at build time. Packages are
+# installed only when missing, so a second run is fast. Needs root or sudo for apt-get.
+set -euo pipefail
+
+# Why each package is here:
+#   build-essential cmake       compiler and build system
+#   libtorch-dev                training (Adam, autograd); inference does not use it
+#   libopenblas0-pthread        BLAS behind LibTorch: the reference BLAS is ~30x slower
+#   libopenblas-pthread-dev     cblas.h for the sgemm peak benchmark (bench/peak_bench.cc)
+#   libeigen3-dev               fast inference path (the shield's hot loop), linear algebra
+#   libcli11-dev                command-line parsing
+#   nlohmann-json3-dev          --json results, model file headers
+#   libyaml-cpp-dev             experiment config files
+#   libboost-dev                Boost.CRC (model file checksums); Boost.Math (statistics)
+#   libmujoco-dev libqhull-dev  MuJoCo for the Panda domain (its CMake config needs qhull)
+#   libgtest-dev libgmock-dev   unit tests
+#   librapidcheck-dev           property-based tests
+#   libbenchmark-dev            benchmarks under bench/
+PACKAGES=(
+  build-essential cmake git
+  libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
+  libeigen3-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
+  libmujoco-dev libqhull-dev
+  libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
+)
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build_dir="${SECURE_BUILD_DIR:-$root/build}"
+
+install_missing() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [ ${#missing[@]} -eq 0 ]; then
+    echo "setup: all ${#PACKAGES[@]} packages present"
+    return
+  fi
+  echo "setup: installing ${missing[*]}"
+  local sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -qq
+  $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+install_missing
+# LibTorch must find OpenBLAS, not the reference BLAS, through the libblas.so.3 alternative.
+blas="$(readlink -f /usr/lib/x86_64-linux-gnu/libblas.so.3 || true)"
+case "$blas" in
+  *openblas*) ;;
+  *) echo "setup: warning: libblas.so.3 resolves to '$blas', not OpenBLAS: training will be slow" >&2 ;;
+esac
+[ "${1:-}" = "--deps" ] && exit 0
+
+jobs="$(nproc)"
+cmake -S "$root" -B "$build_dir" -DCMAKE_BUILD_TYPE=Release
+cmake --build "$build_dir" -j "$jobs"
+echo "setup: built in $build_dir"

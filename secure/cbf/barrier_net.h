@@ -1,0 +1,63 @@
+#pragma once
+// BarrierNet: the learned barrier h(s) of SECURE (paper Section 4.1) — an MLP with input
+// normalisation and a scalar output, trained with the Eq. 4 hinge loss (barrier_trainer.h).
+// Immutable once trained; evaluate it through MakeEvaluator(), one evaluator per thread.
+
+#include <Eigen/Core>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "secure/cbf/barrier.h"
+#include "secure/nn/inference_mlp.h"
+#include "secure/nn/mlp.h"
+
+namespace secure::cbf {
+
+inline constexpr const char* kBarrierModelKind = "barrier_mlp";
+
+struct BarrierNet {
+  nn::MlpParams mlp;                  // output_dim == 1
+  nn::Normalizer normalizer;          // applied to raw states before the MLP
+  std::vector<std::string> features;  // names of the state rows, in order
+  nlohmann::json provenance = nlohmann::json::object();  // training options, summary, data
+
+  int state_dim() const { return mlp.spec.input_dim; }
+
+  /// Checks internal consistency (dims of mlp, normalizer, features; finite weights).
+  void Validate(const std::string& what = "barrier") const;
+
+  /// Throws unless `data_features` equals features (same names, same order); the message names
+  /// `source` and the first mismatch ("states.csv has 3 features (x, y, vx); model.bin expects 4
+  /// (x, y, vx, vy)").
+  void CheckFeatures(const std::vector<std::string>& data_features, const std::string& source,
+                     const std::string& model_name = "the model") const;
+
+  /// Atomic write / checked read in the secure model file format (nn/model_file.h).
+  void Save(const std::string& path) const;
+  static BarrierNet Load(const std::string& path);
+
+  /// An evaluator with preallocated buffers for batches of up to `chunk` states; larger batches
+  /// are evaluated in chunks.
+  std::unique_ptr<Barrier> MakeEvaluator(int chunk = 4096) const;
+};
+
+/// The evaluator behind BarrierNet::MakeEvaluator, exposed for the shield's hot path.
+class BarrierNetEvaluator final : public Barrier {
+ public:
+  BarrierNetEvaluator(const BarrierNet& net, int chunk);
+  int state_dim() const override { return mlp_.input_dim(); }
+  std::string Describe() const override { return description_; }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override;
+
+ private:
+  nn::InferenceMlp mlp_;
+  nn::InferenceMlp::Workspace workspace_;
+  std::string description_;
+};
+
+}  // namespace secure::cbf

@@ -1,0 +1,96 @@
+#pragma once
+// Learning a barrier from safe and near-dangerous states (paper Section 4.1, Eq. 4):
+//
+//   L(w) = w_safe * sum_{s in S_s}  max(m_safe - h(s), 0)
+//        + w_nd   * sum_{s in S_nd} max(h(s) + m_nd,  0)
+//
+// Eq. 4 has zero margins, for which h == 0 is a minimiser; the margins m_safe, m_nd > 0 make the
+// problem well-posed (the authors' code uses 0.05 and 0.001 on Panda). Minimised with Adam over
+// shuffled minibatches; a stratified validation split picks the best epoch (best-checkpoint) and
+// stops training early once it has not improved for `patience` epochs.
+//
+//   BarrierTrainer::Options options;          // documented defaults
+//   options.hidden = {64, 64};
+//   BarrierTrainer::Summary summary;
+//   BarrierNet net = TrainBarrier(options, safe, near_dangerous, &summary);
+//   std::cout << summary.BriefReport() << "\n";
+
+#include <cstdint>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/validation.h"
+#include "secure/data/data.h"
+#include "secure/nn/mlp.h"
+
+namespace YAML {
+class Node;
+}
+
+namespace secure::cbf {
+
+struct BarrierTrainerOptions {
+  // Architecture.
+  std::vector<int> hidden = {64, 64, 64};  // hidden layer widths
+  nn::Activation activation = nn::Activation::kTanh;
+
+  // Loss (Eq. 4 with margins and class weights).
+  double safe_margin = 0.1;           // m_safe: safe states are pushed to h >= m_safe
+  double unsafe_margin = 0.1;         // m_nd: near-dangerous states are pushed to h <= -m_nd
+  bool balance_classes = true;        // weight each class by N / (2 N_class) (then the weights below)
+  double safe_weight = 1.0;           // extra weight on the safe term (> 0)
+  double unsafe_weight = 1.0;         // extra weight on the near-dangerous term (> 0)
+
+  // Optimisation.
+  double learning_rate = 3e-3;        // Adam step size
+  double final_learning_rate = 3e-5;  // cosine decay from learning_rate to this over max_epochs
+  double weight_decay = 0.0;          // L2 on weights (Adam's coupled decay)
+  int batch_size = 128;               // states per minibatch (both classes shuffled together)
+  int max_epochs = 400;               // passes over the training split
+  int patience = 0;                   // stop after this many epochs without a better validation
+                                      // score (0: never stop early, keep the best checkpoint)
+  double validation_fraction = 0.1;   // per class, held out for best-checkpoint selection; 0: none
+  std::uint64_t seed = 0;             // weights, splits and minibatch order
+  int threads = 1;                    // LibTorch intra-op threads (1 is fastest for small nets)
+  bool verbose = false;               // one progress line per few seconds on stderr
+
+  /// Throws secure::Error naming the field, value and constraint
+  /// ("BarrierTrainerOptions::batch_size = 0, must be > 0").
+  void Validate() const;
+  /// Reads fields from a YAML mapping; unknown keys are an error naming the key and `source`.
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+  nlohmann::json ToJson() const;
+};
+
+struct BarrierTrainingSummary {
+  int epochs = 0;            // epochs run
+  int best_epoch = 0;        // epoch whose weights were kept (1-based)
+  long iterations = 0;       // optimizer steps
+  double train_loss = 0.0;   // weighted hinge loss of the kept weights on the training split
+  double validation_loss = 0.0;
+  ClassAccuracy train_accuracy;
+  ClassAccuracy validation_accuracy;  // zeros if validation_fraction == 0
+  long train_safe = 0, train_near_dangerous = 0, validation_safe = 0, validation_near_dangerous = 0;
+  double wall_seconds = 0.0;
+  std::string stop_reason;   // "max_epochs", "early_stopping", "callback"
+
+  std::string BriefReport() const;  // one line
+  std::string FullReport() const;   // a small table
+  nlohmann::json ToJson() const;
+};
+
+/// Called after every epoch with (epoch, training loss, validation balanced accuracy); return
+/// false to stop training (the best checkpoint so far is kept).
+using BarrierEpochCallback = std::function<bool(int epoch, double train_loss, double val_accuracy)>;
+
+/// Trains a BarrierNet on `safe` and `near_dangerous` (same features, each non-empty and finite).
+/// The returned net records the options and summary in its provenance.
+/// @throws secure::Error on invalid options or data (names the set and the problem).
+BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& safe,
+                        const data::StateSet& near_dangerous, BarrierTrainingSummary* summary,
+                        const BarrierEpochCallback& callback = nullptr);
+
+}  // namespace secure::cbf

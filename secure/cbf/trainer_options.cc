@@ -1,0 +1,168 @@
+// BarrierTrainerOptions and BarrierTrainingSummary: validation, YAML, JSON and reports.
+// (No LibTorch in this translation unit.)
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <sstream>
+
+#include "secure/cbf/barrier_trainer.h"
+#include "secure/common/error.h"
+
+namespace secure::cbf {
+namespace {
+
+#define SECURE_OPTION_CHECK(cond, field, value, rule)                                         \
+  SECURE_CHECK(cond, "BarrierTrainerOptions::" << field << " = " << value << ", must be " << rule)
+
+template <typename T>
+T YamlValue(const YAML::Node& node, const std::string& key, const std::string& source) {
+  try {
+    return node.as<T>();
+  } catch (const YAML::Exception&) {
+    SECURE_THROW(source << ": field '" << key << "' has value '" << YAML::Dump(node)
+                        << "', which is not a valid " << (std::is_same_v<T, bool> ? "boolean"
+                                                          : std::is_integral_v<T> ? "integer"
+                                                          : std::is_floating_point_v<T> ? "number"
+                                                                                        : "value"));
+  }
+}
+
+}  // namespace
+
+void BarrierTrainerOptions::Validate() const {
+  SECURE_OPTION_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
+  for (std::size_t i = 0; i < hidden.size(); ++i)
+    SECURE_OPTION_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
+  SECURE_OPTION_CHECK(std::isfinite(safe_margin) && safe_margin >= 0, "safe_margin", safe_margin,
+                      ">= 0");
+  SECURE_OPTION_CHECK(std::isfinite(unsafe_margin) && unsafe_margin >= 0, "unsafe_margin",
+                      unsafe_margin, ">= 0");
+  SECURE_OPTION_CHECK(std::isfinite(safe_weight) && safe_weight > 0, "safe_weight", safe_weight,
+                      "> 0");
+  SECURE_OPTION_CHECK(std::isfinite(unsafe_weight) && unsafe_weight > 0, "unsafe_weight",
+                      unsafe_weight, "> 0");
+  SECURE_OPTION_CHECK(std::isfinite(learning_rate) && learning_rate > 0, "learning_rate",
+                      learning_rate, "> 0");
+  SECURE_OPTION_CHECK(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
+                          final_learning_rate <= learning_rate,
+                      "final_learning_rate", final_learning_rate, "in (0, learning_rate]");
+  SECURE_OPTION_CHECK(std::isfinite(weight_decay) && weight_decay >= 0, "weight_decay",
+                      weight_decay, ">= 0");
+  SECURE_OPTION_CHECK(batch_size > 0, "batch_size", batch_size, "> 0");
+  SECURE_OPTION_CHECK(max_epochs > 0, "max_epochs", max_epochs, "> 0");
+  SECURE_OPTION_CHECK(patience >= 0, "patience", patience, ">= 0");
+  SECURE_OPTION_CHECK(std::isfinite(validation_fraction) && validation_fraction >= 0 &&
+                          validation_fraction < 1,
+                      "validation_fraction", validation_fraction, "in [0, 1)");
+  SECURE_OPTION_CHECK(threads > 0, "threads", threads, "> 0");
+}
+
+void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier trainer options");
+  static const std::set<std::string> known = {
+      "hidden",        "activation",  "safe_margin",  "unsafe_margin",       "balance_classes",
+      "safe_weight",   "unsafe_weight", "learning_rate", "final_learning_rate", "weight_decay",
+      "batch_size",    "max_epochs",  "patience",     "validation_fraction", "seed",
+      "threads",       "verbose"};
+  for (const auto& item : node) {
+    const std::string key = item.first.as<std::string>();
+    SECURE_CHECK(known.count(key), source << ": unknown field '" << key
+                                          << "' in the barrier trainer options");
+    const YAML::Node& v = item.second;
+    if (key == "hidden") {
+      SECURE_CHECK(v.IsSequence(), source << ": field 'hidden' must be a list of layer widths");
+      hidden.clear();
+      for (const auto& w : v) hidden.push_back(YamlValue<int>(w, "hidden", source));
+    } else if (key == "activation") {
+      activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
+                              source + ": activation");
+    } else if (key == "safe_margin") { safe_margin = YamlValue<double>(v, key, source);
+    } else if (key == "unsafe_margin") { unsafe_margin = YamlValue<double>(v, key, source);
+    } else if (key == "balance_classes") { balance_classes = YamlValue<bool>(v, key, source);
+    } else if (key == "safe_weight") { safe_weight = YamlValue<double>(v, key, source);
+    } else if (key == "unsafe_weight") { unsafe_weight = YamlValue<double>(v, key, source);
+    } else if (key == "learning_rate") { learning_rate = YamlValue<double>(v, key, source);
+    } else if (key == "final_learning_rate") { final_learning_rate = YamlValue<double>(v, key, source);
+    } else if (key == "weight_decay") { weight_decay = YamlValue<double>(v, key, source);
+    } else if (key == "batch_size") { batch_size = YamlValue<int>(v, key, source);
+    } else if (key == "max_epochs") { max_epochs = YamlValue<int>(v, key, source);
+    } else if (key == "patience") { patience = YamlValue<int>(v, key, source);
+    } else if (key == "validation_fraction") { validation_fraction = YamlValue<double>(v, key, source);
+    } else if (key == "seed") { seed = YamlValue<std::uint64_t>(v, key, source);
+    } else if (key == "threads") { threads = YamlValue<int>(v, key, source);
+    } else if (key == "verbose") { verbose = YamlValue<bool>(v, key, source);
+    }
+  }
+}
+
+nlohmann::json BarrierTrainerOptions::ToJson() const {
+  return {{"hidden", hidden},
+          {"activation", ToString(nn::kActivationNames, activation)},
+          {"safe_margin", safe_margin},
+          {"unsafe_margin", unsafe_margin},
+          {"balance_classes", balance_classes},
+          {"safe_weight", safe_weight},
+          {"unsafe_weight", unsafe_weight},
+          {"learning_rate", learning_rate},
+          {"final_learning_rate", final_learning_rate},
+          {"weight_decay", weight_decay},
+          {"batch_size", batch_size},
+          {"max_epochs", max_epochs},
+          {"patience", patience},
+          {"validation_fraction", validation_fraction},
+          {"seed", seed},
+          {"threads", threads}};
+}
+
+std::string BarrierTrainingSummary::BriefReport() const {
+  char line[256];
+  std::snprintf(line, sizeof line,
+                "epochs %d (best %d, %s), %ld steps, train acc safe %.4f nd %.4f, val acc safe "
+                "%.4f nd %.4f, %.2f s",
+                epochs, best_epoch, stop_reason.c_str(), iterations, train_accuracy.safe,
+                train_accuracy.near_dangerous, validation_accuracy.safe,
+                validation_accuracy.near_dangerous, wall_seconds);
+  return line;
+}
+
+std::string BarrierTrainingSummary::FullReport() const {
+  std::ostringstream s;
+  char buf[160];
+  s << "| split | safe states | near-dangerous states | loss | acc safe | acc near-dangerous |\n"
+    << "|---|---:|---:|---:|---:|---:|\n";
+  std::snprintf(buf, sizeof buf, "| train | %ld | %ld | %.5f | %.4f | %.4f |\n", train_safe,
+                train_near_dangerous, train_loss, train_accuracy.safe,
+                train_accuracy.near_dangerous);
+  s << buf;
+  std::snprintf(buf, sizeof buf, "| validation | %ld | %ld | %.5f | %.4f | %.4f |\n",
+                validation_safe, validation_near_dangerous, validation_loss,
+                validation_accuracy.safe, validation_accuracy.near_dangerous);
+  s << buf;
+  std::snprintf(buf, sizeof buf, "epochs %d, best epoch %d, stop: %s, %ld steps, %.2f s\n", epochs,
+                best_epoch, stop_reason.c_str(), iterations, wall_seconds);
+  s << buf;
+  return s.str();
+}
+
+nlohmann::json BarrierTrainingSummary::ToJson() const {
+  auto acc = [](const ClassAccuracy& a) {
+    return nlohmann::json{{"safe", a.safe}, {"near_dangerous", a.near_dangerous},
+                          {"balanced", a.Balanced()}};
+  };
+  return {{"epochs", epochs},
+          {"best_epoch", best_epoch},
+          {"iterations", iterations},
+          {"train_loss", train_loss},
+          {"validation_loss", validation_loss},
+          {"train_accuracy", acc(train_accuracy)},
+          {"validation_accuracy", acc(validation_accuracy)},
+          {"train_counts", {{"safe", train_safe}, {"near_dangerous", train_near_dangerous}}},
+          {"validation_counts",
+           {{"safe", validation_safe}, {"near_dangerous", validation_near_dangerous}}},
+          {"wall_seconds", wall_seconds},
+          {"stop_reason", stop_reason}};
+}
+
+}  // namespace secure::cbf

@@ -1,0 +1,98 @@
+#pragma once
+// Datasets read from and written to CSV files with a header row.
+//
+// Conventions: a set of states is an Eigen matrix (dim x N), one state per column, with the
+// feature names of its rows. Readers validate everything and throw secure::Error with a message
+// that names the file, the line (1-based, the header is line 1), the column name and the value.
+
+#include <Eigen/Core>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "secure/common/rng.h"
+
+namespace secure::data {
+
+/// A numeric CSV table. values is (columns x rows): column j of the matrix is data row j.
+struct NumericTable {
+  std::string source;                // file path, for messages
+  std::vector<std::string> columns;  // selected column names, in selection order
+  Eigen::MatrixXd values;            // (columns.size() x rows)
+  std::vector<long> lines;           // 1-based file line of each data row
+};
+
+/// Reads a CSV file with a header row. `select` picks and orders columns by name (empty: all
+/// columns in file order). Every data row must have as many cells as the header; every selected
+/// cell must parse completely as a finite number.
+/// @throws secure::Error on: missing/unreadable file, empty file (no header), header with an
+///   empty or duplicate name, a selected name not in the header (the message lists the header),
+///   a row with the wrong number of cells, a non-numeric, NaN or infinite selected cell, and a
+///   file with no data rows.
+NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& select = {});
+
+/// Writes a CSV with a header row; `values` is (columns x rows) as in NumericTable. Atomic.
+/// Numbers are written in shortest round-trip form (std::to_chars); non-finite values are an
+/// error naming the column and row.
+void WriteCsv(const std::string& path, const std::vector<std::string>& columns,
+              const Eigen::Ref<const Eigen::MatrixXd>& values);
+
+/// A set of states with named features, e.g. the safe or the near-dangerous states.
+struct StateSet {
+  std::string source;
+  std::vector<std::string> features;
+  Eigen::MatrixXf states;  // (features.size() x N)
+
+  int dim() const { return static_cast<int>(features.size()); }
+  long size() const { return static_cast<long>(states.cols()); }
+};
+
+/// Reads a state set; `features` selects columns by name (empty: all columns).
+/// @throws secure::Error as ReadCsv, and if the file holds zero states.
+StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features = {});
+
+/// Task demonstrations: state/action pairs grouped into episodes, as rows of one CSV file.
+struct TrajectorySet {
+  std::string source;
+  std::vector<std::string> state_features;
+  std::vector<std::string> action_features;
+  Eigen::MatrixXf states;    // (state dim x T) all steps of all episodes, in file order
+  Eigen::MatrixXf actions;   // (action dim x T)
+  std::vector<long> episode_begin;  // start column of each episode, plus T at the end
+
+  long num_episodes() const { return static_cast<long>(episode_begin.size()) - 1; }
+  long num_steps() const { return static_cast<long>(states.cols()); }
+};
+
+/// Reads trajectories: rows with the same value in `episode_column` that are adjacent form one
+/// episode (a value that reappears after another episode is an error naming the line).
+/// @throws secure::Error as ReadCsv, if the episode column holds a non-integer, or if the file
+///   holds no rows.
+TrajectorySet ReadTrajectories(const std::string& path,
+                               const std::vector<std::string>& state_features,
+                               const std::vector<std::string>& action_features,
+                               const std::string& episode_column = "episode");
+
+/// Checks that a set has at least one state and only finite values; `what` names it in the
+/// message ("near-dangerous states (file.csv): 0 states; each class needs at least one").
+void CheckNonEmptyFinite(const StateSet& set, const std::string& what);
+
+/// Splits {0..n-1} at random into consecutive parts with the given fractions (which must be
+/// > 0 and sum to 1 within 1e-9); part sizes are rounded down except the last, which takes the
+/// rest. Deterministic for a given Rng state.
+std::vector<std::vector<long>> RandomSplit(long n, const std::vector<double>& fractions, Rng& rng);
+
+/// Splits a state set at random into (first, second), `second_fraction` of the states (rounded
+/// down, but at least one when the set has two or more) going to `second`; e.g. a held-out test
+/// set. Sources are suffixed " [split 1/2]" / " [split 2/2]". Deterministic for a given Rng state.
+/// @throws secure::Error unless 0 <= second_fraction < 1.
+std::pair<StateSet, StateSet> SplitStateSet(const StateSet& set, double second_fraction, Rng& rng);
+
+/// The columns `indices` of `states`, in that order.
+Eigen::MatrixXf SelectColumns(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                              const std::vector<long>& indices);
+
+/// Splits "a,b,c" at commas, trimming spaces; empty input gives an empty list.
+std::vector<std::string> SplitList(const std::string& text);
+
+}  // namespace secure::data

@@ -1,0 +1,205 @@
+// State sets, trajectories and splits built on the CSV reader (see data.h for the contract).
+
+#include "secure/data/data.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstddef>
+#include <numeric>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+
+namespace secure::data {
+namespace {
+
+// Formats a value read from a file as it most likely appeared there (shortest round trip).
+std::string Shown(double value) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
+  return std::string(buffer, result.ptr);
+}
+
+// Rows [first, first + count) of `table`, converted to float. A value that is finite as a double
+// can still overflow float (e.g. 1e300), which would put an infinity into training data.
+Eigen::MatrixXf ToFloatRows(const NumericTable& table, Eigen::Index first, Eigen::Index count) {
+  const Eigen::MatrixXd& values = table.values;
+  Eigen::MatrixXf out = values.middleRows(first, count).cast<float>();
+  for (Eigen::Index row = 0; row < out.cols(); ++row) {
+    for (Eigen::Index j = 0; j < out.rows(); ++j) {
+      SECURE_CHECK(std::isfinite(out(j, row)),
+                   table.source << ":" << table.lines[static_cast<std::size_t>(row)] << ": column '"
+                                << table.columns[static_cast<std::size_t>(first + j)]
+                                << "': value '" << Shown(values(first + j, row))
+                                << "' is out of the float range");
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features) {
+  NumericTable table = ReadCsv(path, features);
+  StateSet set;
+  set.source = path;
+  set.states = ToFloatRows(table, 0, table.values.rows());
+  set.features = std::move(table.columns);
+  // ReadCsv already rejects a file without rows; kept so the contract does not hinge on it.
+  SECURE_CHECK(set.size() > 0, path << ": 0 states");
+  return set;
+}
+
+TrajectorySet ReadTrajectories(const std::string& path,
+                               const std::vector<std::string>& state_features,
+                               const std::vector<std::string>& action_features,
+                               const std::string& episode_column) {
+  SECURE_CHECK(!state_features.empty(), path << ": no state features selected");
+  std::vector<std::string> select;
+  select.reserve(1 + state_features.size() + action_features.size());
+  select.push_back(episode_column);
+  select.insert(select.end(), state_features.begin(), state_features.end());
+  select.insert(select.end(), action_features.begin(), action_features.end());
+  const NumericTable table = ReadCsv(path, select);
+
+  TrajectorySet set;
+  set.source = path;
+  set.state_features = state_features;
+  set.action_features = action_features;
+  const auto state_dim = static_cast<Eigen::Index>(state_features.size());
+  const auto action_dim = static_cast<Eigen::Index>(action_features.size());
+  set.states = ToFloatRows(table, 1, state_dim);
+  set.actions = ToFloatRows(table, 1 + state_dim, action_dim);
+
+  // Episode ids must be exact integers: 2^53 bounds the doubles that hold integers exactly.
+  constexpr double kMaxExactInteger = 9007199254740992.0;
+  std::unordered_map<long long, long> end_line_of;  // episode id -> line of its last row
+  long long current = 0;
+  const long num_rows = static_cast<long>(table.values.cols());
+  for (long row = 0; row < num_rows; ++row) {
+    const double value = table.values(0, row);
+    const long line = table.lines[static_cast<std::size_t>(row)];
+    SECURE_CHECK(std::floor(value) == value && std::abs(value) <= kMaxExactInteger,
+                 path << ":" << line << ": column '" << episode_column << "': value '"
+                      << Shown(value) << "' is not an integer episode id");
+    const auto id = static_cast<long long>(value);
+    if (row == 0 || id != current) {
+      const auto previous = end_line_of.find(id);
+      SECURE_CHECK(previous == end_line_of.end(),
+                   path << ":" << line << ": column '" << episode_column << "': episode " << id
+                        << " reappears after episode " << current << " (it ended on line "
+                        << previous->second << "); the rows of an episode must be adjacent");
+      set.episode_begin.push_back(row);
+      current = id;
+    }
+    end_line_of[id] = line;
+  }
+  set.episode_begin.push_back(num_rows);
+  return set;
+}
+
+void CheckNonEmptyFinite(const StateSet& set, const std::string& what) {
+  const std::string name = set.source.empty() ? what : what + " (" + set.source + ")";
+  SECURE_CHECK(set.states.rows() == set.dim(), name << ": states have " << set.states.rows()
+                                                    << " rows but " << set.dim()
+                                                    << " feature names");
+  SECURE_CHECK(set.size() > 0, name << ": 0 states; each class needs at least one");
+  for (Eigen::Index i = 0; i < set.states.cols(); ++i) {
+    for (Eigen::Index j = 0; j < set.states.rows(); ++j) {
+      SECURE_CHECK(std::isfinite(set.states(j, i)),
+                   name << ": state " << i << " (0-based), feature '"
+                        << set.features[static_cast<std::size_t>(j)] << "' is " << set.states(j, i)
+                        << "; states must be finite");
+    }
+  }
+}
+
+std::vector<std::vector<long>> RandomSplit(long n, const std::vector<double>& fractions, Rng& rng) {
+  SECURE_CHECK(n >= 0, "random split: the number of items is " << n << ", must be >= 0");
+  SECURE_CHECK(!fractions.empty(), "random split: no fractions given");
+  double sum = 0.0;
+  for (std::size_t k = 0; k < fractions.size(); ++k) {
+    SECURE_CHECK(std::isfinite(fractions[k]) && fractions[k] > 0.0,
+                 "random split: fraction " << k + 1 << " is " << fractions[k] << ", must be > 0");
+    sum += fractions[k];
+  }
+  SECURE_CHECK(std::abs(sum - 1.0) <= 1e-9,
+               "random split: fractions sum to " << sum << ", must sum to 1");
+
+  std::vector<long> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), 0L);
+  Shuffle(order.begin(), order.end(), rng);
+
+  std::vector<std::vector<long>> parts(fractions.size());
+  long begin = 0;
+  for (std::size_t k = 0; k < fractions.size(); ++k) {
+    long size = n - begin;  // the last part takes the rest
+    if (k + 1 < fractions.size()) {
+      // The epsilon keeps e.g. 0.29 * 100 = 28.999999999999996 from rounding down to 28.
+      const auto wanted =
+          static_cast<long>(std::floor(static_cast<double>(n) * fractions[k] + 1e-9));
+      size = std::min(wanted, n - begin);
+    }
+    parts[k].assign(order.begin() + begin, order.begin() + begin + size);
+    begin += size;
+  }
+  return parts;
+}
+
+Eigen::MatrixXf SelectColumns(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                              const std::vector<long>& indices) {
+  Eigen::MatrixXf out(states.rows(), static_cast<Eigen::Index>(indices.size()));
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    const long index = indices[k];
+    SECURE_CHECK(index >= 0 && index < states.cols(),
+                 "select columns: index " << index << " (entry " << k << ") is outside [0, "
+                                          << states.cols() << ")");
+    out.col(static_cast<Eigen::Index>(k)) = states.col(index);
+  }
+  return out;
+}
+
+std::vector<std::string> SplitList(const std::string& text) {
+  const auto is_blank = [](char c) { return c == ' ' || c == '\t'; };
+  std::vector<std::string> items;
+  if (std::all_of(text.begin(), text.end(), is_blank)) return items;
+  // Empty items ("a,,b") are kept, so that a typo surfaces as an error about the name ''.
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = text.find(',', start);
+    const std::size_t end = comma == std::string::npos ? text.size() : comma;
+    std::size_t first = start;
+    std::size_t last = end;
+    while (first < last && is_blank(text[first])) ++first;
+    while (last > first && is_blank(text[last - 1])) --last;
+    items.push_back(text.substr(first, last - first));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return items;
+}
+
+std::pair<StateSet, StateSet> SplitStateSet(const StateSet& set, double second_fraction,
+                                            Rng& rng) {
+  SECURE_CHECK(std::isfinite(second_fraction) && second_fraction >= 0 && second_fraction < 1,
+               "split fraction = " << second_fraction << ", must be in [0, 1)");
+  const long n = set.size();
+  long n_second = static_cast<long>(std::floor(second_fraction * static_cast<double>(n) + 1e-9));
+  if (second_fraction > 0 && n >= 2) n_second = std::max(n_second, 1L);
+  std::vector<long> order(static_cast<std::size_t>(n));
+  for (long i = 0; i < n; ++i) order[static_cast<std::size_t>(i)] = i;
+  Shuffle(order.begin(), order.end(), rng);
+  const std::vector<long> second(order.begin(), order.begin() + n_second);
+  const std::vector<long> first(order.begin() + n_second, order.end());
+  return {StateSet{set.source + " [split 1/2]", set.features, SelectColumns(set.states, first)},
+          StateSet{set.source + " [split 2/2]", set.features, SelectColumns(set.states, second)}};
+}
+
+}  // namespace secure::data

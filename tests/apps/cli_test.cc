@@ -1,0 +1,202 @@
+// End-to-end tests of the `secure` command-line tool: run the real binary, check exit codes,
+// messages and --json documents.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int exit_code;
+  std::string out;  // stdout
+  std::string err;  // stderr
+};
+
+// One directory per test process: ctest runs the tests of this file as parallel processes.
+fs::path TempDir() {
+  static const fs::path dir = [] {
+    fs::path d = fs::path(::testing::TempDir()) / ("secure_cli_test_" + std::to_string(::getpid()));
+    fs::remove_all(d);
+    fs::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+// Runs `secure <args>`; stdout and stderr are captured through files.
+Result RunCli(const std::string& args) {
+  const fs::path out = TempDir() / "stdout.txt", err = TempDir() / "stderr.txt";
+  const std::string cmd = std::string(SECURE_CLI) + " " + args + " >" + out.string() + " 2>" +
+                          err.string();
+  const int status = std::system(cmd.c_str());
+  auto slurp = [](const fs::path& p) {
+    std::ifstream in(p);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
+}
+
+std::string Write(const std::string& name, const std::string& content) {
+  const fs::path p = TempDir() / name;
+  std::ofstream(p) << content;
+  return p.string();
+}
+
+// A separable 2-D data set: safe states have x > 0.2, near-dangerous x < -0.2.
+void WriteToyData() {
+  std::string safe = "x,y,extra\n", nd = "y,x\n";
+  for (int i = 0; i < 60; ++i) {
+    const double y = -1.0 + 2.0 * i / 59.0;
+    safe += std::to_string(0.3 + 0.01 * i) + "," + std::to_string(y) + ",7\n";
+    nd += std::to_string(y) + "," + std::to_string(-0.3 - 0.01 * i) + "\n";
+  }
+  Write("safe.csv", safe);
+  Write("nd.csv", nd);
+}
+
+const std::string kFastTrain = " --epochs 30 --hidden 8,8 --lr 0.01 --final-lr 0.001";
+
+TEST(CliTest, HelpListsTheCommands) {
+  Result r = RunCli("--help");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.out.find("cbf"), std::string::npos);
+  EXPECT_NE(r.out.find("demo"), std::string::npos);
+  r = RunCli("cbf --help");
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* sub : {"train", "eval", "predict", "table1"})
+    EXPECT_NE(r.out.find(sub), std::string::npos) << sub;
+  EXPECT_NE(RunCli("").exit_code, 0);  // a command is required
+}
+
+TEST(CliTest, TrainFromFilesThenPredict) {
+  WriteToyData();
+  const std::string model = (TempDir() / "toy.model").string();
+  Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
+                 " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                 " --features x,y --out " + model + kFastTrain + " --test-fraction 0.2 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["features"], nlohmann::json({"x", "y"}));
+  EXPECT_EQ(j["test"]["safe"], 12);
+  EXPECT_EQ(j["test"]["near_dangerous"], 12);
+  EXPECT_GE(j["test"]["accuracy"]["balanced"].get<double>(), 0.9);
+  EXPECT_TRUE(j["context"].contains("git_sha"));
+
+  // predict picks the model's features by name, in any column order.
+  const std::string h = (TempDir() / "h.csv").string();
+  r = RunCli("cbf predict --model " + model + " --states " + (TempDir() / "nd.csv").string() +
+          " --out " + h + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto p = nlohmann::json::parse(r.out);
+  EXPECT_EQ(p["rows"], 60);
+  EXPECT_LE(p["predicted_safe"].get<int>(), 6);
+  std::ifstream in(h);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "h,safe");
+  int rows = 0;
+  for (std::string line; std::getline(in, line);) ++rows;
+  EXPECT_EQ(rows, 60);
+}
+
+TEST(CliTest, RejectsBadCsvWithFileLineColumnAndValue) {
+  WriteToyData();
+  const std::string bad = Write("bad.csv", "x,y\n1,2\n3,nan\n");
+  const Result r = RunCli("cbf train --safe-states " + bad + " --near-dangerous-states " +
+                       (TempDir() / "nd.csv").string() + " --features x,y --out " +
+                       (TempDir() / "never.model").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("bad.csv:3"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("'y'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("nan"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(TempDir() / "never.model"));
+}
+
+TEST(CliTest, RejectsAMissingFeatureColumn) {
+  WriteToyData();
+  const Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
+                       " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                       " --features x,z --out " + (TempDir() / "never.model").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("'z' not found"), std::string::npos) << r.err;
+}
+
+TEST(CliTest, RejectsACorruptModel) {
+  const std::string model = Write("corrupt.model", "secure-model 1\n{\"kind\": \"barrier_mlp\"");
+  const Result r = RunCli("cbf predict --model " + model + " --states " +
+                       (TempDir() / "nd.csv").string() + " --out " +
+                       (TempDir() / "h2.csv").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("corrupt.model"), std::string::npos) << r.err;
+}
+
+TEST(CliTest, RejectsImpossibleOptions) {
+  Result r = RunCli("cbf train --domain double-integrator --out x.model --batch-size 0");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("batch_size = 0, must be > 0"), std::string::npos) << r.err;
+  r = RunCli("cbf train --domain double-integrator --out x.model --activation sigmoid");
+  EXPECT_NE(r.err.find("sigmoid"), std::string::npos) << r.err;
+  r = RunCli("cbf train --domain double-integrator --out x.model --radius -1");
+  EXPECT_NE(r.err.find("radius = -1"), std::string::npos) << r.err;
+  r = RunCli("cbf train --domain pendulum --out x.model");
+  EXPECT_NE(r.err.find("pendulum"), std::string::npos) << r.err;
+  r = RunCli("cbf train --domain double-integrator --safe-states a.csv --out x.model");
+  EXPECT_EQ(r.exit_code, 1);
+  const std::string cfg = Write("bad.yaml", "trainer:\n  epoch: 3\n");
+  r = RunCli("cbf train --domain double-integrator --out x.model --config " + cfg);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("unknown field 'epoch'"), std::string::npos) << r.err;
+}
+
+TEST(CliTest, ConfigFileIsOverriddenByFlags) {
+  WriteToyData();
+  const std::string cfg = Write("cfg.yaml", "trainer:\n  max_epochs: 3\n  hidden: [4]\n");
+  const Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
+                       " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                       " --features x,y --out " + (TempDir() / "cfg.model").string() +
+                       " --config " + cfg + " --epochs 2 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["options"]["max_epochs"], 2);        // flag wins
+  EXPECT_EQ(j["options"]["hidden"], nlohmann::json({4}));  // from the file
+  EXPECT_EQ(j["summary"]["epochs"], 2);
+}
+
+TEST(CliTest, DoubleIntegratorTrainEvalAndTable1Json) {
+  const std::string model = (TempDir() / "di.model").string();
+  Result r = RunCli("cbf train --domain double-integrator --safe 100 --unsafe 100 --out " + model +
+                 kFastTrain + " --obstacle 3,7 --radius 1.2 --gamma 0.5");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("cbf eval --model " + model +
+          " --domain double-integrator --obstacle 3,7 --radius 1.2 --gamma 0.5 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto e = nlohmann::json::parse(r.out);
+  EXPECT_EQ(e["states"], 9000000);
+  const double safe_correct = e["safe_correct"], over = e["over_conservative"];
+  EXPECT_NEAR(safe_correct + over, 1.0, 1e-12);
+  EXPECT_GT(safe_correct, 0.5);  // a real, if briefly trained, barrier
+
+  r = RunCli("cbf table1 --seeds 2 --safe 60 --unsafe 60 --epochs 3 --hidden 8 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto t = nlohmann::json::parse(r.out);
+  for (const char* key : {"over_conservative", "under_conservative", "safe_correct",
+                          "unsafe_correct"}) {
+    const double mean = t[key]["mean"], std = t[key]["std"];
+    EXPECT_GE(mean, 0.0) << key;
+    EXPECT_LE(mean, 1.0) << key;
+    EXPECT_GE(std, 0.0) << key;
+  }
+  EXPECT_EQ(t["per_seed"].size(), 2u);
+  EXPECT_NEAR(t["safe_correct"]["mean"].get<double>() + t["over_conservative"]["mean"].get<double>(),
+              1.0, 1e-12);
+}
+
+}  // namespace

@@ -1,0 +1,160 @@
+#include "secure/cbf/barrier_net.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "secure/common/error.h"
+#include "secure/nn/model_file.h"
+
+namespace secure::cbf {
+namespace {
+
+std::string TempPath(const std::string& name) {
+  const auto dir = std::filesystem::path(::testing::TempDir()) / "secure_barrier_net_test";
+  std::filesystem::create_directories(dir);
+  return (dir / name).string();
+}
+
+BarrierNet MakeNet(int dim, std::vector<int> hidden, nn::Activation act, unsigned long long seed) {
+  BarrierNet net;
+  nn::MlpSpec spec{dim, std::move(hidden), 1, act};
+  net.mlp = nn::RandomMlpParams(spec, seed);
+  Eigen::MatrixXf samples = Eigen::MatrixXf::Random(dim, 50) * 3.0f;
+  samples.array() += 2.0f;
+  net.normalizer = nn::Normalizer::Fit(samples);
+  for (int i = 0; i < dim; ++i) net.features.push_back("f" + std::to_string(i));
+  return net;
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(BarrierNetTest, EvaluatorMatchesDoublePrecisionReference) {
+  const BarrierNet net = MakeNet(4, {16, 16}, nn::Activation::kTanh, 3);
+  const Eigen::MatrixXf states = Eigen::MatrixXf::Random(4, 300) * 5.0f;
+  Eigen::VectorXf h(300);
+  net.MakeEvaluator()->Evaluate(states, h);
+  const Eigen::MatrixXd ref = nn::ReferenceForward(net.mlp, net.normalizer, states);
+  EXPECT_LT((h.cast<double>() - ref.row(0).transpose()).cwiseAbs().maxCoeff(), 1e-5);
+}
+
+TEST(BarrierNetTest, ChunkedEvaluationEqualsOneBatch) {
+  const BarrierNet net = MakeNet(3, {8}, nn::Activation::kRelu, 4);
+  const Eigen::MatrixXf states = Eigen::MatrixXf::Random(3, 1000);
+  Eigen::VectorXf whole(1000), chunked(1000);
+  net.MakeEvaluator(4096)->Evaluate(states, whole);
+  net.MakeEvaluator(7)->Evaluate(states, chunked);  // 142 full chunks and a partial one
+  EXPECT_LT((whole - chunked).cwiseAbs().maxCoeff(), 1e-6f);
+}
+
+TEST(BarrierNetTest, SaveLoadRoundTripIsExact) {
+  BarrierNet net = MakeNet(5, {7, 3}, nn::Activation::kTanh, 5);
+  net.provenance = {{"note", "round trip"}};
+  const std::string path = TempPath("roundtrip.model");
+  net.Save(path);
+  const BarrierNet loaded = BarrierNet::Load(path);
+  EXPECT_EQ(loaded.features, net.features);
+  EXPECT_TRUE(loaded.mlp.spec == net.mlp.spec);
+  for (std::size_t l = 0; l < net.mlp.layers.size(); ++l) {
+    EXPECT_EQ(loaded.mlp.layers[l].weight, net.mlp.layers[l].weight);
+    EXPECT_EQ(loaded.mlp.layers[l].bias, net.mlp.layers[l].bias);
+  }
+  EXPECT_EQ(loaded.normalizer.mean, net.normalizer.mean);
+  EXPECT_EQ(loaded.normalizer.scale, net.normalizer.scale);
+  EXPECT_EQ(loaded.provenance["note"], "round trip");
+  const Eigen::MatrixXf states = Eigen::MatrixXf::Random(5, 20);
+  Eigen::VectorXf a(20), b(20);
+  net.MakeEvaluator()->Evaluate(states, a);
+  loaded.MakeEvaluator()->Evaluate(states, b);
+  EXPECT_EQ(a, b);
+}
+
+TEST(BarrierNetTest, LoadRejectsAModelOfAnotherKind) {
+  nn::ModelFile file;
+  file.kind = "gaussian_policy";
+  nn::AddMlp("barrier", nn::RandomMlpParams({2, {3}, 1, nn::Activation::kRelu}, 1), &file);
+  const std::string path = TempPath("policy.model");
+  nn::WriteModelFile(path, file);
+  const std::string msg = ErrorOf([&] { BarrierNet::Load(path); });
+  EXPECT_NE(msg.find(path), std::string::npos) << msg;
+  EXPECT_NE(msg.find("gaussian_policy"), std::string::npos) << msg;
+}
+
+TEST(BarrierNetTest, LoadRejectsACorruptFileNamingIt) {
+  const std::string path = TempPath("corrupt.model");
+  MakeNet(2, {4}, nn::Activation::kTanh, 6).Save(path);
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  bytes[bytes.size() - 30] ^= 0x40;  // a payload byte
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << bytes;
+  }
+  const std::string msg = ErrorOf([&] { BarrierNet::Load(path); });
+  EXPECT_NE(msg.find(path), std::string::npos) << msg;
+  EXPECT_NE(msg.find("checksum"), std::string::npos) << msg;
+}
+
+TEST(BarrierNetTest, CheckFeaturesNamesBothSides) {
+  const BarrierNet net = MakeNet(2, {4}, nn::Activation::kTanh, 7);
+  EXPECT_NO_THROW(net.CheckFeatures({"f0", "f1"}, "data.csv"));
+  const std::string msg = ErrorOf([&] { net.CheckFeatures({"f0", "x", "y"}, "data.csv", "m.bin"); });
+  EXPECT_NE(msg.find("data.csv has 3 features (f0, x, y)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("m.bin expects 2 (f0, f1)"), std::string::npos) << msg;
+}
+
+TEST(BarrierNetTest, ValidateRejectsInconsistentParts) {
+  BarrierNet net = MakeNet(3, {4}, nn::Activation::kTanh, 8);
+  net.features.pop_back();
+  EXPECT_NE(ErrorOf([&] { net.Validate(); }).find("2 feature names for a network input of 3"),
+            std::string::npos);
+  net = MakeNet(3, {4}, nn::Activation::kTanh, 8);
+  net.normalizer = nn::Normalizer::Identity(2);
+  EXPECT_NE(ErrorOf([&] { net.Validate(); }).find("normalizer has dimension 2"), std::string::npos);
+  net = MakeNet(3, {4}, nn::Activation::kTanh, 8);
+  net.mlp = nn::RandomMlpParams({3, {4}, 2, nn::Activation::kTanh}, 1);
+  EXPECT_NE(ErrorOf([&] { net.Validate(); }).find("2 outputs, expected 1"), std::string::npos);
+}
+
+TEST(BarrierNetTest, EvaluateChecksDimensions) {
+  auto barrier = MakeNet(4, {4}, nn::Activation::kTanh, 9).MakeEvaluator();
+  Eigen::VectorXf h(10);
+  EXPECT_THROW(barrier->Evaluate(Eigen::MatrixXf::Zero(3, 10), h), Error);
+  Eigen::VectorXf wrong(9);
+  EXPECT_THROW(barrier->Evaluate(Eigen::MatrixXf::Zero(4, 10), wrong), Error);
+}
+
+TEST(GroundTruthBarrierTest, MatchesTheDomainFormula) {
+  domains::double_integrator::GroundTruth truth;
+  truth.obstacle_x = 3;
+  truth.obstacle_y = 7;
+  truth.radius = 1.2;
+  truth.gamma = 0.5;
+  DoubleIntegratorGroundTruth barrier(truth);
+  Eigen::MatrixXf states(4, 3);
+  states << 3, 0, 5, 7, 1, 8, 0, 1, -1, 0, -1, 1;
+  Eigen::VectorXf h(3);
+  barrier.Evaluate(states, h);
+  for (int i = 0; i < 3; ++i) {
+    const double dx = states(0, i) - 3.0, dy = states(1, i) - 7.0;
+    const double expected =
+        0.5 * (dx * dx + dy * dy - 1.44) + 2.0 * (dx * states(2, i) + dy * states(3, i));
+    EXPECT_NEAR(h[i], expected, 1e-5);
+  }
+  EXPECT_LT(h[0], 0.0f);  // at the obstacle centre
+}
+
+}  // namespace
+}  // namespace secure::cbf

@@ -1,0 +1,171 @@
+#include "secure/cbf/barrier_trainer.h"
+
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+
+namespace secure::cbf {
+namespace {
+
+// Two classes in 2-D separated by the circle |p| = 1: inside is near-dangerous.
+data::StateSet Disk(bool inside, int n, std::uint64_t seed) {
+  Rng rng(seed);
+  data::StateSet set{inside ? "inside" : "outside", {"px", "py"}, Eigen::MatrixXf(2, n)};
+  int have = 0;
+  while (have < n) {
+    const double x = rng.Uniform(-2, 2), y = rng.Uniform(-2, 2);
+    const double r = std::hypot(x, y);
+    if ((inside && r < 0.9) || (!inside && r > 1.1)) {
+      set.states(0, have) = static_cast<float>(x);
+      set.states(1, have) = static_cast<float>(y);
+      ++have;
+    }
+  }
+  return set;
+}
+
+BarrierTrainerOptions Fast() {
+  BarrierTrainerOptions o;
+  o.hidden = {16, 16};
+  o.max_epochs = 60;
+  o.batch_size = 64;
+  o.learning_rate = 1e-2;
+  o.final_learning_rate = 1e-3;
+  return o;
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(BarrierTrainerTest, LearnsASeparableProblem) {
+  BarrierTrainingSummary summary;
+  const BarrierNet net = TrainBarrier(Fast(), Disk(false, 300, 1), Disk(true, 200, 2), &summary);
+  EXPECT_GE(summary.train_accuracy.Balanced(), 0.98);
+  EXPECT_GE(summary.validation_accuracy.Balanced(), 0.95);
+  // Fresh data from the same distribution.
+  auto barrier = net.MakeEvaluator();
+  const ClassAccuracy test =
+      EvaluateAccuracy(*barrier, Disk(false, 500, 11).states, Disk(true, 500, 12).states);
+  EXPECT_GE(test.safe, 0.95);
+  EXPECT_GE(test.near_dangerous, 0.95);
+  EXPECT_EQ(net.features, (std::vector<std::string>{"px", "py"}));
+}
+
+TEST(BarrierTrainerTest, SummaryCountsAndProvenance) {
+  BarrierTrainerOptions o = Fast();
+  o.validation_fraction = 0.2;
+  BarrierTrainingSummary s;
+  const BarrierNet net = TrainBarrier(o, Disk(false, 100, 1), Disk(true, 50, 2), &s);
+  EXPECT_EQ(s.validation_safe, 20);
+  EXPECT_EQ(s.validation_near_dangerous, 10);
+  EXPECT_EQ(s.train_safe, 80);
+  EXPECT_EQ(s.train_near_dangerous, 40);
+  EXPECT_EQ(s.epochs, 60);
+  EXPECT_EQ(s.iterations, 60 * 2);  // 120 training states, batches of 64
+  EXPECT_GE(s.best_epoch, 1);
+  EXPECT_LE(s.best_epoch, 60);
+  EXPECT_EQ(s.stop_reason, "max_epochs");
+  EXPECT_GT(s.wall_seconds, 0.0);
+  EXPECT_EQ(net.provenance["options"]["hidden"], nlohmann::json({16, 16}));
+  EXPECT_EQ(net.provenance["safe_states"]["count"], 100);
+  EXPECT_FALSE(s.BriefReport().empty());
+  EXPECT_NE(s.FullReport().find("validation"), std::string::npos);
+}
+
+TEST(BarrierTrainerTest, SameSeedSameWeightsOtherSeedOtherWeights) {
+  const auto safe = Disk(false, 120, 1);
+  const auto nd = Disk(true, 80, 2);
+  BarrierTrainerOptions o = Fast();
+  o.max_epochs = 5;
+  const BarrierNet a = TrainBarrier(o, safe, nd, nullptr);
+  const BarrierNet b = TrainBarrier(o, safe, nd, nullptr);
+  o.seed = 1;
+  const BarrierNet c = TrainBarrier(o, safe, nd, nullptr);
+  for (std::size_t l = 0; l < a.mlp.layers.size(); ++l) {
+    EXPECT_EQ(a.mlp.layers[l].weight, b.mlp.layers[l].weight) << "layer " << l;
+    EXPECT_EQ(a.mlp.layers[l].bias, b.mlp.layers[l].bias) << "layer " << l;
+  }
+  EXPECT_NE(a.mlp.layers[0].weight, c.mlp.layers[0].weight);
+}
+
+TEST(BarrierTrainerTest, EarlyStoppingAndCallbackStop) {
+  BarrierTrainerOptions o = Fast();
+  o.max_epochs = 500;
+  o.patience = 5;
+  BarrierTrainingSummary s;
+  TrainBarrier(o, Disk(false, 100, 1), Disk(true, 100, 2), &s);
+  EXPECT_EQ(s.stop_reason, "early_stopping");
+  EXPECT_LT(s.epochs, 500);
+  EXPECT_EQ(s.epochs - s.best_epoch, 5);
+
+  o.patience = 0;
+  int calls = 0;
+  TrainBarrier(o, Disk(false, 100, 1), Disk(true, 100, 2), &s,
+               [&](int epoch, double, double) { return ++calls < 3; });
+  EXPECT_EQ(calls, 3);
+  EXPECT_EQ(s.epochs, 3);
+  EXPECT_EQ(s.stop_reason, "callback");
+}
+
+TEST(BarrierTrainerTest, RejectsBadData) {
+  const auto safe = Disk(false, 10, 1);
+  data::StateSet empty{"empty.csv", {"px", "py"}, Eigen::MatrixXf(2, 0)};
+  std::string msg = ErrorOf([&] { TrainBarrier(Fast(), safe, empty, nullptr); });
+  EXPECT_NE(msg.find("near-dangerous"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("empty.csv"), std::string::npos) << msg;
+
+  data::StateSet other{"other.csv", {"px", "vx"}, Eigen::MatrixXf::Zero(2, 3)};
+  msg = ErrorOf([&] { TrainBarrier(Fast(), safe, other, nullptr); });
+  EXPECT_NE(msg.find("different features"), std::string::npos) << msg;
+
+  data::StateSet nan = Disk(true, 10, 2);
+  nan.states(1, 4) = std::numeric_limits<float>::quiet_NaN();
+  msg = ErrorOf([&] { TrainBarrier(Fast(), safe, nan, nullptr); });
+  EXPECT_FALSE(msg.empty());
+}
+
+TEST(BarrierTrainerOptionsTest, ValidateNamesFieldValueAndRule) {
+  BarrierTrainerOptions o;
+  o.batch_size = 0;
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }),
+            "BarrierTrainerOptions::batch_size = 0, must be > 0");
+  o = {};
+  o.hidden = {64, 0};
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }), "BarrierTrainerOptions::hidden[1] = 0, must be > 0");
+  o = {};
+  o.validation_fraction = 1.0;
+  EXPECT_NE(ErrorOf([&] { o.Validate(); }).find("validation_fraction = 1"), std::string::npos);
+  o = {};
+  o.learning_rate = std::nan("");
+  EXPECT_NE(ErrorOf([&] { o.Validate(); }).find("learning_rate = nan"), std::string::npos);
+  EXPECT_NO_THROW(BarrierTrainerOptions{}.Validate());
+}
+
+TEST(BarrierTrainerOptionsTest, YamlOverridesAndRejectsUnknownKeys) {
+  BarrierTrainerOptions o;
+  o.ApplyYaml(YAML::Load("{hidden: [8, 4], activation: relu, max_epochs: 7, safe_margin: 0.5}"),
+              "cfg.yaml");
+  EXPECT_EQ(o.hidden, (std::vector<int>{8, 4}));
+  EXPECT_EQ(o.activation, nn::Activation::kRelu);
+  EXPECT_EQ(o.max_epochs, 7);
+  EXPECT_DOUBLE_EQ(o.safe_margin, 0.5);
+  EXPECT_EQ(o.batch_size, BarrierTrainerOptions{}.batch_size);  // untouched
+  std::string msg = ErrorOf([&] { o.ApplyYaml(YAML::Load("{max_epoch: 3}"), "cfg.yaml"); });
+  EXPECT_NE(msg.find("cfg.yaml: unknown field 'max_epoch'"), std::string::npos) << msg;
+  msg = ErrorOf([&] { o.ApplyYaml(YAML::Load("{batch_size: many}"), "cfg.yaml"); });
+  EXPECT_NE(msg.find("'batch_size'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("many"), std::string::npos) << msg;
+  msg = ErrorOf([&] { o.ApplyYaml(YAML::Load("{activation: sigmoid}"), "cfg.yaml"); });
+  EXPECT_NE(msg.find("sigmoid"), std::string::npos) << msg;
+}
+
+}  // namespace
+}  // namespace secure::cbf
