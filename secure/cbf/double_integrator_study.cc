@@ -13,8 +13,8 @@ namespace di = domains::double_integrator;
 
 BarrierTrainerOptions DoubleIntegratorTrainerPreset() {
   BarrierTrainerOptions o;
-  o.safe_margin = 0.3;
-  o.unsafe_margin = 0.03;
+  o.safe_margin = 0.2;
+  o.unsafe_margin = 0.05;
   o.learning_rate = 1e-3;
   o.final_learning_rate = 1e-5;
   o.max_epochs = 200;
