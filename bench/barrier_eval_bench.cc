@@ -27,9 +27,12 @@ enum class Net { kDoubleIntegrator, kDerby, kPanda };
 
 nn::MlpSpec SpecOf(Net net) {
   switch (net) {
-    case Net::kDoubleIntegrator: return DoubleIntegratorSpec();
-    case Net::kDerby: return DerbySpec();
-    case Net::kPanda: return PandaSpec();
+    case Net::kDoubleIntegrator:
+      return DoubleIntegratorSpec();
+    case Net::kDerby:
+      return DerbySpec();
+    case Net::kPanda:
+      return PandaSpec();
   }
   return {};
 }
@@ -54,9 +57,9 @@ void BM_BarrierEval(benchmark::State& state, Net net) {
   }
 
   const double macs = static_cast<double>(spec.MultiplyAddsPerSample());
-  state.counters["GFLOPS"] = benchmark::Counter(
-      2.0 * macs * batch * 1e-9, benchmark::Counter::kIsIterationInvariantRate,
-      benchmark::Counter::kIs1000);
+  state.counters["GFLOPS"] =
+      benchmark::Counter(2.0 * macs * batch * 1e-9, benchmark::Counter::kIsIterationInvariantRate,
+                         benchmark::Counter::kIs1000);
   state.counters["us_per_state"] = benchmark::Counter(
       batch * 1e-6, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
   state.counters["states"] = batch;
@@ -66,13 +69,22 @@ void BM_BarrierEval(benchmark::State& state, Net net) {
 }
 
 BENCHMARK_CAPTURE(BM_BarrierEval, DI, Net::kDoubleIntegrator)
-    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+    ->ArgName("batch")
+    ->Arg(1)
+    ->Arg(64)
+    ->Arg(128)
+    ->Arg(1024)
+    ->Arg(4096);
 // Derby: M agent states x 12 obstacles; M = 1 is one shield step, M = 64, 128 the batched cases
 // (768 and 1536 network inputs).
-BENCHMARK_CAPTURE(BM_BarrierEval, Derby, Net::kDerby)
-    ->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
+BENCHMARK_CAPTURE(BM_BarrierEval, Derby, Net::kDerby)->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
 BENCHMARK_CAPTURE(BM_BarrierEval, Panda, Net::kPanda)
-    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+    ->ArgName("batch")
+    ->Arg(1)
+    ->Arg(64)
+    ->Arg(128)
+    ->Arg(1024)
+    ->Arg(4096);
 
 }  // namespace
 }  // namespace secure::bench

@@ -1,6 +1,7 @@
 // One Table-1 training run: sample 800 safe + 800 unsafe double-integrator states (seed 0) and
-// train a barrier with the documented BarrierTrainerOptions defaults (4-64-64-64-1 tanh, Adam,
-// 400 epochs, batch 128, one LibTorch thread). Sampling is done once, outside the timed region.
+// train a barrier with cbf::DoubleIntegratorTrainerPreset(), the settings `secure cbf table1` uses
+// (4-64-64-64-1 tanh, Adam, 200 epochs, batch 128, one LibTorch thread). Sampling is done once,
+// outside the timed region.
 //
 // One iteration is one full training run; run with --benchmark_repetitions=N for a spread.
 //
@@ -9,7 +10,8 @@
 //   train_seconds    the trainer's own wall_seconds (summary).
 //   epochs           epochs run; best_epoch the one kept; steps the optimizer steps.
 //   steps_per_second optimizer steps per second of benchmark time.
-//   val_accuracy     balanced validation accuracy of the kept weights (a sanity check).
+//   train_accuracy   balanced training accuracy of the kept weights (a sanity check; the preset
+//                    holds out no validation split).
 
 #include <benchmark/benchmark.h>
 
@@ -27,7 +29,7 @@ void BM_BarrierTrain_Table1(benchmark::State& state) {
   constexpr std::uint64_t kSeed = 0;
   const cbf::DoubleIntegratorData data =
       cbf::SampleDoubleIntegratorData(di::GroundTruth{}, di::StateBox{}, 800, 800, kSeed);
-  cbf::BarrierTrainerOptions options;  // documented defaults
+  cbf::BarrierTrainerOptions options = cbf::DoubleIntegratorTrainerPreset();  // as in Table 1
   options.seed = kSeed;
   cbf::BarrierTrainingSummary summary;
   for (auto _ : state) {
@@ -42,7 +44,7 @@ void BM_BarrierTrain_Table1(benchmark::State& state) {
   state.counters["steps"] = static_cast<double>(summary.iterations);
   state.counters["steps_per_second"] = benchmark::Counter(
       static_cast<double>(summary.iterations), benchmark::Counter::kIsIterationInvariantRate);
-  state.counters["val_accuracy"] = summary.validation_accuracy.Balanced();
+  state.counters["train_accuracy"] = summary.train_accuracy.Balanced();
   state.SetLabel("stop: " + summary.stop_reason);
 }
 BENCHMARK(BM_BarrierTrain_Table1)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);

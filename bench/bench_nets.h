@@ -11,16 +11,12 @@ namespace secure::bench {
 
 /// Double integrator (paper Table 1): 4 -> 64 -> 64 -> 64 -> 1, tanh (BarrierTrainerOptions
 /// defaults).
-inline nn::MlpSpec DoubleIntegratorSpec() {
-  return {4, {64, 64, 64}, 1, nn::Activation::kTanh};
-}
+inline nn::MlpSpec DoubleIntegratorSpec() { return {4, {64, 64, 64}, 1, nn::Activation::kTanh}; }
 
 /// Derby-sized per-obstacle barrier: 4 -> 64 -> 128 -> 64 -> 1, relu. The shield evaluates it once
 /// per (state, obstacle) pair, so a batch of M states is M x kDerbyObstacles network inputs.
 inline constexpr int kDerbyObstacles = 12;
-inline nn::MlpSpec DerbySpec() {
-  return {4, {64, 128, 64}, 1, nn::Activation::kRelu};
-}
+inline nn::MlpSpec DerbySpec() { return {4, {64, 128, 64}, 1, nn::Activation::kRelu}; }
 
 /// Panda-sized barrier: 9 inputs, hidden 32,128,128,256,256,256,256,128,128,32, tanh.
 inline nn::MlpSpec PandaSpec() {

@@ -46,9 +46,8 @@ cbf::BarrierNet MakeDoubleIntegratorNet() {
 void ReportGrid(benchmark::State& state, const di::Grid& grid, const cbf::Confusion& c) {
   const double states = static_cast<double>(grid.size());
   state.SetItemsProcessed(state.iterations() * grid.size());
-  state.counters["seconds"] =
-      benchmark::Counter(1.0, benchmark::Counter::kIsIterationInvariantRate |
-                                  benchmark::Counter::kInvert);
+  state.counters["seconds"] = benchmark::Counter(
+      1.0, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
   state.counters["states"] = states;
   state.counters["counted"] = static_cast<double>(c.total());
   state.counters["unsafe_as_safe"] = static_cast<double>(c.unsafe_as_safe);
@@ -71,8 +70,12 @@ void BM_GridValidation_Net(benchmark::State& state) {
   state.SetLabel(Describe(net.mlp.spec) + ", chunk " + std::to_string(options.chunk));
 }
 BENCHMARK(BM_GridValidation_Net)
-    ->ArgName("threads")->Arg(1)->Arg(2)
-    ->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
+    ->ArgName("threads")
+    ->Arg(1)
+    ->Arg(2)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->Unit(benchmark::kSecond);
 
 void BM_GridValidation_GroundTruth(benchmark::State& state) {
   const di::GroundTruth truth;
@@ -90,8 +93,11 @@ void BM_GridValidation_GroundTruth(benchmark::State& state) {
   state.SetLabel("analytic ground truth (no network)");
 }
 BENCHMARK(BM_GridValidation_GroundTruth)
-    ->ArgName("threads")->Arg(1)
-    ->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
+    ->ArgName("threads")
+    ->Arg(1)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->Unit(benchmark::kSecond);
 
 }  // namespace
 }  // namespace secure::bench

@@ -40,8 +40,8 @@ void BM_Sgemm(benchmark::State& state) {
   const Eigen::MatrixXf a = Eigen::MatrixXf::Random(m, k), b = Eigen::MatrixXf::Random(k, n);
   Eigen::MatrixXf c = Eigen::MatrixXf::Zero(m, n);
   auto run = [&] {
-    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, m, n, k, 1.0f, a.data(), m, b.data(),
-                k, 0.0f, c.data(), m);
+    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, m, n, k, 1.0f, a.data(), m, b.data(), k,
+                0.0f, c.data(), m);
   };
   run();  // warm up (and let OpenBLAS set up its buffers)
   for (auto _ : state) {
@@ -155,9 +155,9 @@ void BM_FmaPeak(benchmark::State& state) {
   for (int i = 1; i < kAcc; ++i) total = add(total, acc[i]);
   float result = sum(total);
   benchmark::DoNotOptimize(result);
-  state.counters["GFLOPS"] =
-      benchmark::Counter(2.0 * kLanes * kAcc * kInner * 1e-9,
-                         benchmark::Counter::kIsIterationInvariantRate, benchmark::Counter::kIs1000);
+  state.counters["GFLOPS"] = benchmark::Counter(2.0 * kLanes * kAcc * kInner * 1e-9,
+                                                benchmark::Counter::kIsIterationInvariantRate,
+                                                benchmark::Counter::kIs1000);
   state.SetLabel(std::string(isa) + ", " + std::to_string(kAcc) + " accumulators");
 #endif
 }

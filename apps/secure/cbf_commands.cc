@@ -33,8 +33,9 @@ class TrainerFlags {
   void Add(CLI::App* cmd, const cbf::BarrierTrainerOptions& shown_defaults) {
     parsed_ = shown_defaults;
     Bind(cmd, "--hidden", &Options::hidden, "hidden layer widths, e.g. 64,64,64")->delimiter(',');
-    activation_ = cmd->add_option("--activation", activation_name_, "hidden activation: relu | tanh")
-                      ->default_str(ToString(nn::kActivationNames, shown_defaults.activation));
+    activation_ =
+        cmd->add_option("--activation", activation_name_, "hidden activation: relu | tanh")
+            ->default_str(ToString(nn::kActivationNames, shown_defaults.activation));
     Bind(cmd, "--epochs", &Options::max_epochs, "maximum epochs");
     Bind(cmd, "--batch-size", &Options::batch_size, "minibatch size");
     Bind(cmd, "--lr", &Options::learning_rate, "Adam learning rate (start of the cosine decay)");
@@ -48,8 +49,10 @@ class TrainerFlags {
          "fraction of each class held out for best-checkpoint selection");
     Bind(cmd, "--patience", &Options::patience, "early-stopping patience in epochs (0: off)");
     Bind(cmd, "--threads", &Options::threads, "LibTorch threads for training");
-    CLI::Option* verbose = cmd->add_flag("--verbose", parsed_.verbose, "training progress on stderr");
-    copies_.emplace_back(verbose, [](const Options& from, Options* to) { to->verbose = from.verbose; });
+    CLI::Option* verbose =
+        cmd->add_flag("--verbose", parsed_.verbose, "training progress on stderr");
+    copies_.emplace_back(verbose,
+                         [](const Options& from, Options* to) { to->verbose = from.verbose; });
   }
 
   /// Copies the given flags onto `options`, then validates.
@@ -67,7 +70,8 @@ class TrainerFlags {
   CLI::Option* Bind(CLI::App* cmd, const std::string& name, T Options::*field,
                     const std::string& help) {
     CLI::Option* option = cmd->add_option(name, parsed_.*field, help)->capture_default_str();
-    copies_.emplace_back(option, [field](const Options& from, Options* to) { to->*field = from.*field; });
+    copies_.emplace_back(option,
+                         [field](const Options& from, Options* to) { to->*field = from.*field; });
     return option;
   }
 
@@ -105,7 +109,8 @@ struct TrainCommand {
     cmd->add_option("--near-dangerous-states", nd_path, "CSV of near-dangerous states");
     cmd->add_option("--features", features,
                     "comma-separated column names to use as state features (default: all)");
-    cmd->add_option("--safe", n_safe, "safe states to sample (with --domain)")->capture_default_str();
+    cmd->add_option("--safe", n_safe, "safe states to sample (with --domain)")
+        ->capture_default_str();
     cmd->add_option("--unsafe", n_unsafe, "unsafe states to sample (with --domain)")
         ->capture_default_str();
     AddGroundTruthFlags(cmd, &truth, &obstacle);
@@ -189,10 +194,10 @@ struct TrainCommand {
                 << " safe + " << nd.size() << " near-dangerous states -> " << out << "\n"
                 << summary.FullReport();
       if (test) {
-        std::printf("held-out test: %ld safe, %ld near-dangerous; accuracy safe %.4f, "
-                    "near-dangerous %.4f, balanced %.4f\n",
-                    safe_test.size(), nd_test.size(), test->safe, test->near_dangerous,
-                    test->Balanced());
+        std::printf(
+            "held-out test: %ld safe, %ld near-dangerous; accuracy safe %.4f, "
+            "near-dangerous %.4f, balanced %.4f\n",
+            safe_test.size(), nd_test.size(), test->safe, test->near_dangerous, test->Balanced());
       }
     }
   }
@@ -238,7 +243,8 @@ struct EvalCommand {
       PrintJson(r);
     } else {
       std::printf("| predicted \\ ground truth | safe | unsafe |\n|---|---:|---:|\n");
-      std::printf("| safe | %.3f%% | %.3f%% |\n", 100 * c.SafeCorrect(), 100 * c.UnderConservative());
+      std::printf("| safe | %.3f%% | %.3f%% |\n", 100 * c.SafeCorrect(),
+                  100 * c.UnderConservative());
       std::printf("| unsafe | %.3f%% | %.3f%% |\n", 100 * c.OverConservative(),
                   100 * c.UnsafeCorrect());
       std::printf("%ld grid states (%ld truly safe, %ld truly unsafe) in %.2f s\n", c.total(),

@@ -1,11 +1,11 @@
 #pragma once
 // Pieces shared by the CLI commands.
 
+#include <yaml-cpp/yaml.h>
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-#include <yaml-cpp/yaml.h>
 
 #include "secure/domains/double_integrator/double_integrator.h"
 

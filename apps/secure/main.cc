@@ -9,8 +9,9 @@
 #include "secure/common/error.h"
 
 int main(int argc, char** argv) {
-  CLI::App app{"secure: learn control barrier functions from demonstrations and shield "
-               "learned policies with them (SECURE)"};
+  CLI::App app{
+      "secure: learn control barrier functions from demonstrations and shield "
+      "learned policies with them (SECURE)"};
   app.set_version_flag("--version", std::string(secure::Version()) + " (" + secure::GitSha() + ")");
   app.require_subcommand(1);
   try {

@@ -10,9 +10,9 @@ void Barrier::Evaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                        Eigen::Ref<Eigen::VectorXf> h) {
   SECURE_CHECK(states.rows() == state_dim(), Describe() << ": states have " << states.rows()
                                                         << " rows, expected " << state_dim());
-  SECURE_CHECK(h.size() == states.cols(), Describe() << ": output has " << h.size()
-                                                     << " entries for " << states.cols()
-                                                     << " states");
+  SECURE_CHECK(h.size() == states.cols(), Describe()
+                                              << ": output has " << h.size() << " entries for "
+                                              << states.cols() << " states");
   DoEvaluate(states, h);
 }
 
@@ -24,8 +24,8 @@ DoubleIntegratorGroundTruth::DoubleIntegratorGroundTruth(
 
 std::string DoubleIntegratorGroundTruth::Describe() const {
   std::ostringstream s;
-  s << "double-integrator ground truth (obstacle (" << truth_.obstacle_x << ", " << truth_.obstacle_y
-    << "), r = " << truth_.radius << ", gamma = " << truth_.gamma << ")";
+  s << "double-integrator ground truth (obstacle (" << truth_.obstacle_x << ", "
+    << truth_.obstacle_y << "), r = " << truth_.radius << ", gamma = " << truth_.gamma << ")";
   return s.str();
 }
 

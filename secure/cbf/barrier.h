@@ -22,7 +22,8 @@ class Barrier {
 
   /// Number of rows a state has.
   virtual int state_dim() const = 0;
-  /// Short description for reports ("barrier_mlp 4-64-64-1 tanh", "double-integrator ground truth").
+  /// Short description for reports ("barrier_mlp 4-64-64-1 tanh", "double-integrator ground
+  /// truth").
   virtual std::string Describe() const = 0;
 
   /// h(s) for every column of `states` (state_dim x N) into h (N).

@@ -41,9 +41,9 @@ void BarrierNet::Validate(const std::string& what) const {
 void BarrierNet::CheckFeatures(const std::vector<std::string>& data_features,
                                const std::string& source, const std::string& model_name) const {
   if (data_features == features) return;
-  SECURE_THROW(source << " has " << data_features.size() << " features (" << JoinNames(data_features)
-                      << "); " << model_name << " expects " << features.size() << " ("
-                      << JoinNames(features) << ")");
+  SECURE_THROW(source << " has " << data_features.size() << " features ("
+                      << JoinNames(data_features) << "); " << model_name << " expects "
+                      << features.size() << " (" << JoinNames(features) << ")");
 }
 
 void BarrierNet::Save(const std::string& path) const {
@@ -81,7 +81,8 @@ std::unique_ptr<Barrier> BarrierNet::MakeEvaluator(int chunk) const {
 }
 
 BarrierNetEvaluator::BarrierNetEvaluator(const BarrierNet& net, int chunk)
-    : mlp_(net.mlp, net.normalizer), workspace_(mlp_.MakeWorkspace(chunk)),
+    : mlp_(net.mlp, net.normalizer),
+      workspace_(mlp_.MakeWorkspace(chunk)),
       description_(DescribeSpec(net.mlp.spec)) {
   net.Validate();
 }

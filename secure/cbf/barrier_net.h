@@ -18,9 +18,9 @@ namespace secure::cbf {
 inline constexpr const char* kBarrierModelKind = "barrier_mlp";
 
 struct BarrierNet {
-  nn::MlpParams mlp;                  // output_dim == 1
-  nn::Normalizer normalizer;          // applied to raw states before the MLP
-  std::vector<std::string> features;  // names of the state rows, in order
+  nn::MlpParams mlp;                                     // output_dim == 1
+  nn::Normalizer normalizer;                             // applied to raw states before the MLP
+  std::vector<std::string> features;                     // names of the state rows, in order
   nlohmann::json provenance = nlohmann::json::object();  // training options, summary, data
 
   int state_dim() const { return mlp.spec.input_dim; }

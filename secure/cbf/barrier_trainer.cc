@@ -52,8 +52,8 @@ struct Batch {
 };
 
 Batch MakeBatch(const Eigen::MatrixXf& safe, const Eigen::MatrixXf& nd,
-                const nn::Normalizer& normalizer, const BarrierTrainerOptions& o,
-                double w_safe, double w_nd) {
+                const nn::Normalizer& normalizer, const BarrierTrainerOptions& o, double w_safe,
+                double w_nd) {
   Batch b;
   b.n_safe = safe.cols();
   b.n_nd = nd.cols();
@@ -63,8 +63,8 @@ Batch MakeBatch(const Eigen::MatrixXf& safe, const Eigen::MatrixXf& nd,
   b.x = nn::ToTensor(normalizer.Apply(all));
   b.y = torch::cat({torch::ones({b.n_safe}), -torch::ones({b.n_nd})});
   b.w = torch::cat({torch::full({b.n_safe}, w_safe), torch::full({b.n_nd}, w_nd)});
-  b.margin = torch::cat({torch::full({b.n_safe}, o.safe_margin),
-                         torch::full({b.n_nd}, o.unsafe_margin)});
+  b.margin =
+      torch::cat({torch::full({b.n_safe}, o.safe_margin), torch::full({b.n_nd}, o.unsafe_margin)});
   return b;
 }
 
@@ -174,9 +174,9 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   for (int epoch = 1; epoch <= options.max_epochs; ++epoch) {
     // Cosine learning-rate decay.
     const double progress = static_cast<double>(epoch - 1) / std::max(1, options.max_epochs - 1);
-    const double lr = options.final_learning_rate +
-                      0.5 * (options.learning_rate - options.final_learning_rate) *
-                          (1.0 + std::cos(M_PI * progress));
+    const double lr =
+        options.final_learning_rate + 0.5 * (options.learning_rate - options.final_learning_rate) *
+                                          (1.0 + std::cos(M_PI * progress));
     for (auto& group : optimizer.param_groups())
       static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
 
@@ -187,9 +187,9 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
       const long m = std::min<long>(options.batch_size, n - first);
       const torch::Tensor idx = perm.slice(0, first, first + m);
       const torch::Tensor h = model->forward(train.x.index_select(0, idx)).squeeze(1);
-      const torch::Tensor loss = HingeLoss(h, train.y.index_select(0, idx),
-                                           train.w.index_select(0, idx),
-                                           train.margin.index_select(0, idx));
+      const torch::Tensor loss =
+          HingeLoss(h, train.y.index_select(0, idx), train.w.index_select(0, idx),
+                    train.margin.index_select(0, idx));
       optimizer.zero_grad();
       loss.backward();
       optimizer.step();
@@ -211,7 +211,8 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
       ++epochs_since_best;
     }
     if (options.verbose && (epoch % 50 == 0 || epoch == options.max_epochs)) {
-      std::fprintf(stderr, "[cbf train] epoch %d/%d loss %.5f %s balanced acc %.4f (best %.4f @ %d)\n",
+      std::fprintf(stderr,
+                   "[cbf train] epoch %d/%d loss %.5f %s balanced acc %.4f (best %.4f @ %d)\n",
                    epoch, options.max_epochs, epoch_loss, has_validation ? "val" : "train",
                    score.accuracy.Balanced(), best.accuracy.Balanced(), s.best_epoch);
     }

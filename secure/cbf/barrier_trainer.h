@@ -38,11 +38,11 @@ struct BarrierTrainerOptions {
   nn::Activation activation = nn::Activation::kTanh;
 
   // Loss (Eq. 4 with margins and class weights).
-  double safe_margin = 0.1;           // m_safe: safe states are pushed to h >= m_safe
-  double unsafe_margin = 0.1;         // m_nd: near-dangerous states are pushed to h <= -m_nd
-  bool balance_classes = true;        // weight each class by N / (2 N_class) (then the weights below)
-  double safe_weight = 1.0;           // extra weight on the safe term (> 0)
-  double unsafe_weight = 1.0;         // extra weight on the near-dangerous term (> 0)
+  double safe_margin = 0.1;     // m_safe: safe states are pushed to h >= m_safe
+  double unsafe_margin = 0.1;   // m_nd: near-dangerous states are pushed to h <= -m_nd
+  bool balance_classes = true;  // weight each class by N / (2 N_class) (then the weights below)
+  double safe_weight = 1.0;     // extra weight on the safe term (> 0)
+  double unsafe_weight = 1.0;   // extra weight on the near-dangerous term (> 0)
 
   // Optimisation.
   double learning_rate = 3e-3;        // Adam step size
@@ -66,16 +66,16 @@ struct BarrierTrainerOptions {
 };
 
 struct BarrierTrainingSummary {
-  int epochs = 0;            // epochs run
-  int best_epoch = 0;        // epoch whose weights were kept (1-based)
-  long iterations = 0;       // optimizer steps
-  double train_loss = 0.0;   // weighted hinge loss of the kept weights on the training split
+  int epochs = 0;           // epochs run
+  int best_epoch = 0;       // epoch whose weights were kept (1-based)
+  long iterations = 0;      // optimizer steps
+  double train_loss = 0.0;  // weighted hinge loss of the kept weights on the training split
   double validation_loss = 0.0;
   ClassAccuracy train_accuracy;
   ClassAccuracy validation_accuracy;  // zeros if validation_fraction == 0
   long train_safe = 0, train_near_dangerous = 0, validation_safe = 0, validation_near_dangerous = 0;
   double wall_seconds = 0.0;
-  std::string stop_reason;   // "max_epochs", "early_stopping", "callback"
+  std::string stop_reason;  // "max_epochs", "early_stopping", "callback"
 
   std::string BriefReport() const;  // one line
   std::string FullReport() const;   // a small table

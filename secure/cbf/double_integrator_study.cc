@@ -33,8 +33,8 @@ void Table1Options::Validate() const {
 }
 
 DoubleIntegratorData SampleDoubleIntegratorData(const di::GroundTruth& truth,
-                                                const di::StateBox& box, long n_safe,
-                                                long n_unsafe, std::uint64_t seed) {
+                                                const di::StateBox& box, long n_safe, long n_unsafe,
+                                                std::uint64_t seed) {
   // The data stream is derived from the seed but independent of the trainer's stream.
   Rng rng(seed ^ 0x5ec0'da7a'0000'0000ULL);
   di::LabelledStates sample = di::SampleLabelled(truth, box, n_safe, n_unsafe, rng);
@@ -64,8 +64,8 @@ Table1Result RunTable1(const Table1Options& options) {
   std::vector<double> sc, oc, uc, ucorr;
   for (int i = 0; i < options.seeds; ++i) {
     const std::uint64_t seed = options.first_seed + static_cast<std::uint64_t>(i);
-    const DoubleIntegratorData data =
-        SampleDoubleIntegratorData(options.truth, options.box, options.n_safe, options.n_unsafe, seed);
+    const DoubleIntegratorData data = SampleDoubleIntegratorData(
+        options.truth, options.box, options.n_safe, options.n_unsafe, seed);
     BarrierTrainerOptions trainer = options.trainer;
     trainer.seed = seed;
     BarrierTrainingSummary summary;

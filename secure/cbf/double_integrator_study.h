@@ -36,7 +36,7 @@ struct Table1Options {
   std::uint64_t first_seed = 0;  // seed i of the study is first_seed + i (data, weights, order)
   BarrierTrainerOptions trainer = DoubleIntegratorTrainerPreset();
   GridValidationOptions validation;
-  bool progress = true;          // one stderr line per seed
+  bool progress = true;  // one stderr line per seed
 
   void Validate() const;
 };
@@ -45,9 +45,10 @@ struct Table1Options {
 struct DoubleIntegratorData {
   data::StateSet safe, unsafe;
 };
-DoubleIntegratorData SampleDoubleIntegratorData(const domains::double_integrator::GroundTruth& truth,
-                                                const domains::double_integrator::StateBox& box,
-                                                long n_safe, long n_unsafe, std::uint64_t seed);
+DoubleIntegratorData SampleDoubleIntegratorData(
+    const domains::double_integrator::GroundTruth& truth,
+    const domains::double_integrator::StateBox& box, long n_safe, long n_unsafe,
+    std::uint64_t seed);
 
 struct MeanStd {
   double mean = 0.0;

@@ -13,7 +13,7 @@
 namespace secure::cbf {
 namespace {
 
-#define SECURE_OPTION_CHECK(cond, field, value, rule)                                         \
+#define SECURE_OPTION_CHECK(cond, field, value, rule) \
   SECURE_CHECK(cond, "BarrierTrainerOptions::" << field << " = " << value << ", must be " << rule)
 
 template <typename T>
@@ -22,10 +22,11 @@ T YamlValue(const YAML::Node& node, const std::string& key, const std::string& s
     return node.as<T>();
   } catch (const YAML::Exception&) {
     SECURE_THROW(source << ": field '" << key << "' has value '" << YAML::Dump(node)
-                        << "', which is not a valid " << (std::is_same_v<T, bool> ? "boolean"
-                                                          : std::is_integral_v<T> ? "integer"
-                                                          : std::is_floating_point_v<T> ? "number"
-                                                                                        : "value"));
+                        << "', which is not a valid "
+                        << (std::is_same_v<T, bool>       ? "boolean"
+                            : std::is_integral_v<T>       ? "integer"
+                            : std::is_floating_point_v<T> ? "number"
+                                                          : "value"));
   }
 }
 
@@ -53,23 +54,23 @@ void BarrierTrainerOptions::Validate() const {
   SECURE_OPTION_CHECK(batch_size > 0, "batch_size", batch_size, "> 0");
   SECURE_OPTION_CHECK(max_epochs > 0, "max_epochs", max_epochs, "> 0");
   SECURE_OPTION_CHECK(patience >= 0, "patience", patience, ">= 0");
-  SECURE_OPTION_CHECK(std::isfinite(validation_fraction) && validation_fraction >= 0 &&
-                          validation_fraction < 1,
-                      "validation_fraction", validation_fraction, "in [0, 1)");
+  SECURE_OPTION_CHECK(
+      std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
+      "validation_fraction", validation_fraction, "in [0, 1)");
   SECURE_OPTION_CHECK(threads > 0, "threads", threads, "> 0");
 }
 
 void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier trainer options");
   static const std::set<std::string> known = {
-      "hidden",        "activation",  "safe_margin",  "unsafe_margin",       "balance_classes",
-      "safe_weight",   "unsafe_weight", "learning_rate", "final_learning_rate", "weight_decay",
-      "batch_size",    "max_epochs",  "patience",     "validation_fraction", "seed",
-      "threads",       "verbose"};
+      "hidden",      "activation",    "safe_margin",   "unsafe_margin",       "balance_classes",
+      "safe_weight", "unsafe_weight", "learning_rate", "final_learning_rate", "weight_decay",
+      "batch_size",  "max_epochs",    "patience",      "validation_fraction", "seed",
+      "threads",     "verbose"};
   for (const auto& item : node) {
     const std::string key = item.first.as<std::string>();
-    SECURE_CHECK(known.count(key), source << ": unknown field '" << key
-                                          << "' in the barrier trainer options");
+    SECURE_CHECK(known.count(key),
+                 source << ": unknown field '" << key << "' in the barrier trainer options");
     const YAML::Node& v = item.second;
     if (key == "hidden") {
       SECURE_CHECK(v.IsSequence(), source << ": field 'hidden' must be a list of layer widths");
@@ -78,21 +79,36 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
     } else if (key == "activation") {
       activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
                               source + ": activation");
-    } else if (key == "safe_margin") { safe_margin = YamlValue<double>(v, key, source);
-    } else if (key == "unsafe_margin") { unsafe_margin = YamlValue<double>(v, key, source);
-    } else if (key == "balance_classes") { balance_classes = YamlValue<bool>(v, key, source);
-    } else if (key == "safe_weight") { safe_weight = YamlValue<double>(v, key, source);
-    } else if (key == "unsafe_weight") { unsafe_weight = YamlValue<double>(v, key, source);
-    } else if (key == "learning_rate") { learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "final_learning_rate") { final_learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "weight_decay") { weight_decay = YamlValue<double>(v, key, source);
-    } else if (key == "batch_size") { batch_size = YamlValue<int>(v, key, source);
-    } else if (key == "max_epochs") { max_epochs = YamlValue<int>(v, key, source);
-    } else if (key == "patience") { patience = YamlValue<int>(v, key, source);
-    } else if (key == "validation_fraction") { validation_fraction = YamlValue<double>(v, key, source);
-    } else if (key == "seed") { seed = YamlValue<std::uint64_t>(v, key, source);
-    } else if (key == "threads") { threads = YamlValue<int>(v, key, source);
-    } else if (key == "verbose") { verbose = YamlValue<bool>(v, key, source);
+    } else if (key == "safe_margin") {
+      safe_margin = YamlValue<double>(v, key, source);
+    } else if (key == "unsafe_margin") {
+      unsafe_margin = YamlValue<double>(v, key, source);
+    } else if (key == "balance_classes") {
+      balance_classes = YamlValue<bool>(v, key, source);
+    } else if (key == "safe_weight") {
+      safe_weight = YamlValue<double>(v, key, source);
+    } else if (key == "unsafe_weight") {
+      unsafe_weight = YamlValue<double>(v, key, source);
+    } else if (key == "learning_rate") {
+      learning_rate = YamlValue<double>(v, key, source);
+    } else if (key == "final_learning_rate") {
+      final_learning_rate = YamlValue<double>(v, key, source);
+    } else if (key == "weight_decay") {
+      weight_decay = YamlValue<double>(v, key, source);
+    } else if (key == "batch_size") {
+      batch_size = YamlValue<int>(v, key, source);
+    } else if (key == "max_epochs") {
+      max_epochs = YamlValue<int>(v, key, source);
+    } else if (key == "patience") {
+      patience = YamlValue<int>(v, key, source);
+    } else if (key == "validation_fraction") {
+      validation_fraction = YamlValue<double>(v, key, source);
+    } else if (key == "seed") {
+      seed = YamlValue<std::uint64_t>(v, key, source);
+    } else if (key == "threads") {
+      threads = YamlValue<int>(v, key, source);
+    } else if (key == "verbose") {
+      verbose = YamlValue<bool>(v, key, source);
     }
   }
 }
@@ -148,8 +164,8 @@ std::string BarrierTrainingSummary::FullReport() const {
 
 nlohmann::json BarrierTrainingSummary::ToJson() const {
   auto acc = [](const ClassAccuracy& a) {
-    return nlohmann::json{{"safe", a.safe}, {"near_dangerous", a.near_dangerous},
-                          {"balanced", a.Balanced()}};
+    return nlohmann::json{
+        {"safe", a.safe}, {"near_dangerous", a.near_dangerous}, {"balanced", a.Balanced()}};
   };
   return {{"epochs", epochs},
           {"best_epoch", best_epoch},

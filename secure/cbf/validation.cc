@@ -1,6 +1,7 @@
 #include "secure/cbf/validation.h"
 
 #include <algorithm>
+#include <exception>
 #include <thread>
 #include <vector>
 
@@ -8,7 +9,9 @@
 
 namespace secure::cbf {
 namespace {
-double Ratio(long a, long b) { return b > 0 ? static_cast<double>(a) / static_cast<double>(b) : 0.0; }
+double Ratio(long a, long b) {
+  return b > 0 ? static_cast<double>(a) / static_cast<double>(b) : 0.0;
+}
 }  // namespace
 
 ClassAccuracy EvaluateAccuracy(Barrier& barrier, const Eigen::Ref<const Eigen::MatrixXf>& safe,
@@ -58,10 +61,10 @@ Confusion ValidateOnGrid(const std::function<std::unique_ptr<Barrier>()>& make_b
   namespace di = domains::double_integrator;
   truth.Validate();
   grid.Validate();
-  SECURE_CHECK(options.threads > 0, "GridValidationOptions::threads = " << options.threads
-                                                                        << ", must be > 0");
-  SECURE_CHECK(options.chunk > 0, "GridValidationOptions::chunk = " << options.chunk
-                                                                    << ", must be > 0");
+  SECURE_CHECK(options.threads > 0,
+               "GridValidationOptions::threads = " << options.threads << ", must be > 0");
+  SECURE_CHECK(options.chunk > 0,
+               "GridValidationOptions::chunk = " << options.chunk << ", must be > 0");
   const long total = grid.size();
   const int threads = static_cast<int>(std::min<long>(options.threads, std::max(1L, total / 1024)));
   // Evaluators are made on this thread (make_barrier need not be thread safe).
@@ -73,32 +76,40 @@ Confusion ValidateOnGrid(const std::function<std::unique_ptr<Barrier>()>& make_b
                                              << "-dimensional states; the double integrator has 4");
   }
   std::vector<Confusion> partial(threads);
+  std::vector<std::exception_ptr> errors(threads);
   auto work = [&](int t) {
-    // Contiguous slices: thread t takes [t*total/threads, (t+1)*total/threads).
-    const long begin = total * t / threads, end = total * (t + 1) / threads;
-    Eigen::MatrixXf states(di::kStateDim, options.chunk);
-    Eigen::VectorXf h(options.chunk);
-    Confusion c;
-    for (long first = begin; first < end; first += options.chunk) {
-      const long n = std::min(options.chunk, end - first);
-      grid.Fill(first, n, states);
-      barriers[t]->Evaluate(states.leftCols(n), h.head(n));
-      for (long i = 0; i < n; ++i) {
-        const bool truly_safe = truth.H(states(0, i), states(1, i), states(2, i), states(3, i)) >= 0.0;
-        const bool predicted_safe = h[i] >= 0.0f;
-        if (truly_safe) {
-          ++(predicted_safe ? c.safe_as_safe : c.safe_as_unsafe);
-        } else {
-          ++(predicted_safe ? c.unsafe_as_safe : c.unsafe_as_unsafe);
+    try {
+      // Contiguous slices: thread t takes [t*total/threads, (t+1)*total/threads).
+      const long begin = total * t / threads, end = total * (t + 1) / threads;
+      Eigen::MatrixXf states(di::kStateDim, options.chunk);
+      Eigen::VectorXf h(options.chunk);
+      Confusion c;
+      for (long first = begin; first < end; first += options.chunk) {
+        const long n = std::min(options.chunk, end - first);
+        grid.Fill(first, n, states);
+        barriers[t]->Evaluate(states.leftCols(n), h.head(n));
+        for (long i = 0; i < n; ++i) {
+          const bool truly_safe =
+              truth.H(states(0, i), states(1, i), states(2, i), states(3, i)) >= 0.0;
+          const bool predicted_safe = h[i] >= 0.0f;
+          if (truly_safe) {
+            ++(predicted_safe ? c.safe_as_safe : c.safe_as_unsafe);
+          } else {
+            ++(predicted_safe ? c.unsafe_as_safe : c.unsafe_as_unsafe);
+          }
         }
       }
+      partial[t] = c;
+    } catch (...) {
+      errors[t] = std::current_exception();  // rethrown on the calling thread below
     }
-    partial[t] = c;
   };
   std::vector<std::thread> pool;
   for (int t = 1; t < threads; ++t) pool.emplace_back(work, t);
   work(0);
   for (auto& th : pool) th.join();
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
   Confusion result;
   for (const auto& c : partial) result += c;
   return result;

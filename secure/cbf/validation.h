@@ -44,8 +44,8 @@ struct Confusion {
 };
 
 struct GridValidationOptions {
-  int threads = 2;      // worker threads; each gets its own barrier evaluator
-  long chunk = 4096;    // states per batch
+  int threads = 2;    // worker threads; each gets its own barrier evaluator
+  long chunk = 4096;  // states per batch
 };
 
 /// Confusion of the barriers made by `make_barrier` (called once per worker thread, each

@@ -32,7 +32,8 @@ E FromString(const EnumTable<E, N>& table, std::string_view text, std::string_vi
   for (const auto& [v, name] : table)
     if (name == text) return v;
   std::string choices;
-  for (const auto& entry : table) choices += (choices.empty() ? "" : ", ") + std::string(entry.second);
+  for (const auto& entry : table)
+    choices += (choices.empty() ? "" : ", ") + std::string(entry.second);
   SECURE_THROW(what << " = '" << text << "', must be one of " << choices);
 }
 

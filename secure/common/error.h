@@ -1,8 +1,8 @@
 #pragma once
 // Errors and checks. Three tiers (see docs/ARCHITECTURE.md):
-//   SECURE_CHECK(cond, msg)          user-facing: bad file, bad option, wrong size. Throws secure::Error.
-//   SECURE_INTERNAL_CHECK(cond, msg) a broken invariant of our own code. Prints and aborts.
-//   SECURE_DCHECK(cond)              debug-only assertion, free in Release.
+//   SECURE_CHECK(cond, msg)          user-facing: bad file, bad option, wrong size. Throws
+//   secure::Error. SECURE_INTERNAL_CHECK(cond, msg) a broken invariant of our own code. Prints and
+//   aborts. SECURE_DCHECK(cond)              debug-only assertion, free in Release.
 // Messages are built with operator<<, e.g.
 //   SECURE_CHECK(x.size() == n, "state has " << x.size() << " values, expected " << n);
 
@@ -26,26 +26,24 @@ namespace internal {
 
 }  // namespace secure
 
-#define SECURE_CHECK(cond, msg)                                             \
-  do {                                                                      \
-    if (!(cond)) {                                                          \
-      std::ostringstream secure_check_stream_;                              \
-      secure_check_stream_ << msg;                                          \
-      ::secure::internal::ThrowError(__FILE__, __LINE__,                    \
-                                     secure_check_stream_.str());           \
-    }                                                                       \
+#define SECURE_CHECK(cond, msg)                                                       \
+  do {                                                                                \
+    if (!(cond)) {                                                                    \
+      std::ostringstream secure_check_stream_;                                        \
+      secure_check_stream_ << msg;                                                    \
+      ::secure::internal::ThrowError(__FILE__, __LINE__, secure_check_stream_.str()); \
+    }                                                                                 \
   } while (false)
 
 #define SECURE_THROW(msg) SECURE_CHECK(false, msg)
 
-#define SECURE_INTERNAL_CHECK(cond, msg)                                    \
-  do {                                                                      \
-    if (!(cond)) {                                                          \
-      std::ostringstream secure_check_stream_;                              \
-      secure_check_stream_ << msg;                                          \
-      ::secure::internal::AbortInternal(__FILE__, __LINE__, #cond,          \
-                                        secure_check_stream_.str());        \
-    }                                                                       \
+#define SECURE_INTERNAL_CHECK(cond, msg)                                                        \
+  do {                                                                                          \
+    if (!(cond)) {                                                                              \
+      std::ostringstream secure_check_stream_;                                                  \
+      secure_check_stream_ << msg;                                                              \
+      ::secure::internal::AbortInternal(__FILE__, __LINE__, #cond, secure_check_stream_.str()); \
+    }                                                                                           \
   } while (false)
 
 #ifdef NDEBUG

@@ -56,8 +56,8 @@ struct TrajectorySet {
   std::string source;
   std::vector<std::string> state_features;
   std::vector<std::string> action_features;
-  Eigen::MatrixXf states;    // (state dim x T) all steps of all episodes, in file order
-  Eigen::MatrixXf actions;   // (action dim x T)
+  Eigen::MatrixXf states;           // (state dim x T) all steps of all episodes, in file order
+  Eigen::MatrixXf actions;          // (action dim x T)
   std::vector<long> episode_begin;  // start column of each episode, plus T at the end
 
   long num_episodes() const { return static_cast<long>(episode_begin.size()) - 1; }

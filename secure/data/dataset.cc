@@ -186,8 +186,7 @@ std::vector<std::string> SplitList(const std::string& text) {
   return items;
 }
 
-std::pair<StateSet, StateSet> SplitStateSet(const StateSet& set, double second_fraction,
-                                            Rng& rng) {
+std::pair<StateSet, StateSet> SplitStateSet(const StateSet& set, double second_fraction, Rng& rng) {
   SECURE_CHECK(std::isfinite(second_fraction) && second_fraction >= 0 && second_fraction < 1,
                "split fraction = " << second_fraction << ", must be in [0, 1)");
   const long n = set.size();

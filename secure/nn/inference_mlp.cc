@@ -11,25 +11,24 @@ InferenceMlp::InferenceMlp(const MlpParams& params, const Normalizer& normalizer
   params.Validate();
   normalizer.Validate();
   SECURE_CHECK(normalizer.dim() == spec_.input_dim,
-               "InferenceMlp: normalizer has dimension " << normalizer.dim()
-                                                         << ", the network input is "
-                                                         << spec_.input_dim);
+               "InferenceMlp: normalizer has dimension "
+                   << normalizer.dim() << ", the network input is " << spec_.input_dim);
   // Fold x' = (x - mean) / scale into the first layer: W x' + b = (W / scale) x + (b - W' mean).
   // Computed in double so that folding adds no rounding beyond the final cast.
   const Eigen::MatrixXd w = params.layers[0].weight.cast<double>();
   const Eigen::VectorXd inv_scale = normalizer.scale.cast<double>().cwiseInverse();
   const Eigen::MatrixXd w_folded = w * inv_scale.asDiagonal();
   layers_[0].weight = w_folded.cast<float>();
-  layers_[0].bias = (params.layers[0].bias.cast<double>() -
-                     w_folded * normalizer.mean.cast<double>())
-                        .cast<float>();
+  layers_[0].bias =
+      (params.layers[0].bias.cast<double>() - w_folded * normalizer.mean.cast<double>())
+          .cast<float>();
   for (int width : spec_.hidden) max_width_ = std::max(max_width_, width);
   max_width_ = std::max(max_width_, spec_.output_dim);
 }
 
 InferenceMlp::Workspace InferenceMlp::MakeWorkspace(int max_batch) const {
-  SECURE_CHECK(max_batch > 0, "InferenceMlp::MakeWorkspace: max_batch = " << max_batch
-                                                                          << ", must be > 0");
+  SECURE_CHECK(max_batch > 0,
+               "InferenceMlp::MakeWorkspace: max_batch = " << max_batch << ", must be > 0");
   Workspace ws;
   ws.max_batch_ = max_batch;
   ws.a_.resize(max_width_, max_batch);
@@ -41,8 +40,8 @@ void InferenceMlp::Forward(const Eigen::Ref<const Eigen::MatrixXf>& inputs, Work
                            Eigen::Ref<Eigen::MatrixXf> outputs) const {
   const Eigen::Index n = inputs.cols();
   SECURE_CHECK(!layers_.empty(), "InferenceMlp::Forward: network is empty");
-  SECURE_CHECK(inputs.rows() == spec_.input_dim,
-               "InferenceMlp::Forward: inputs have " << inputs.rows() << " rows, expected "
+  SECURE_CHECK(inputs.rows() == spec_.input_dim, "InferenceMlp::Forward: inputs have "
+                                                     << inputs.rows() << " rows, expected "
                                                      << spec_.input_dim);
   SECURE_CHECK(outputs.rows() == spec_.output_dim && outputs.cols() == n,
                "InferenceMlp::Forward: outputs are " << outputs.rows() << " x " << outputs.cols()

@@ -30,16 +30,16 @@ long MlpSpec::MultiplyAddsPerSample() const {
 }
 
 bool MlpSpec::operator==(const MlpSpec& other) const {
-  return input_dim == other.input_dim && hidden == other.hidden &&
-         output_dim == other.output_dim && activation == other.activation;
+  return input_dim == other.input_dim && hidden == other.hidden && output_dim == other.output_dim &&
+         activation == other.activation;
 }
 
 void MlpParams::Validate(const std::string& what) const {
   spec.Validate();
   const auto widths = spec.Widths();
-  SECURE_CHECK(layers.size() + 1 == widths.size(),
-               what << ": has " << layers.size() << " layers, the architecture needs "
-                    << widths.size() - 1);
+  SECURE_CHECK(layers.size() + 1 == widths.size(), what << ": has " << layers.size()
+                                                        << " layers, the architecture needs "
+                                                        << widths.size() - 1);
   for (std::size_t i = 0; i < layers.size(); ++i) {
     const auto& layer = layers[i];
     SECURE_CHECK(layer.weight.rows() == widths[i + 1] && layer.weight.cols() == widths[i],
@@ -72,8 +72,8 @@ Normalizer Normalizer::Identity(int dim) {
 }
 
 void Normalizer::Validate(const std::string& what) const {
-  SECURE_CHECK(mean.size() == scale.size(), what << ": mean has " << mean.size()
-                                                 << " values but scale has " << scale.size());
+  SECURE_CHECK(mean.size() == scale.size(),
+               what << ": mean has " << mean.size() << " values but scale has " << scale.size());
   SECURE_CHECK(mean.allFinite(), what << ": mean has a non-finite value");
   for (int i = 0; i < scale.size(); ++i)
     SECURE_CHECK(std::isfinite(scale[i]) && scale[i] > 0,

@@ -32,7 +32,7 @@ struct NamedTensor {
 };
 
 struct ModelFile {
-  std::string kind;           // e.g. "barrier_mlp", "gaussian_policy"
+  std::string kind;  // e.g. "barrier_mlp", "gaussian_policy"
   nlohmann::json metadata = nlohmann::json::object();
   std::vector<NamedTensor> tensors;
 

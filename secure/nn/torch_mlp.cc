@@ -8,8 +8,8 @@ TorchMlpImpl::TorchMlpImpl(const MlpSpec& spec) : spec_(spec) {
   spec_.Validate();
   const auto widths = spec_.Widths();
   for (std::size_t i = 0; i + 1 < widths.size(); ++i) {
-    layers_.push_back(register_module("layer" + std::to_string(i),
-                                      torch::nn::Linear(widths[i], widths[i + 1])));
+    layers_.push_back(
+        register_module("layer" + std::to_string(i), torch::nn::Linear(widths[i], widths[i + 1])));
   }
 }
 
@@ -47,15 +47,16 @@ void TorchMlpImpl::LoadParams(const MlpParams& params) {
   for (std::size_t i = 0; i < layers_.size(); ++i) {
     using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
     const RowMajor w = params.layers[i].weight;
-    layers_[i]->weight.copy_(torch::from_blob(const_cast<float*>(w.data()), {w.rows(), w.cols()},
-                                              torch::kFloat32));
+    layers_[i]->weight.copy_(
+        torch::from_blob(const_cast<float*>(w.data()), {w.rows(), w.cols()}, torch::kFloat32));
     layers_[i]->bias.copy_(torch::from_blob(const_cast<float*>(params.layers[i].bias.data()),
                                             {params.layers[i].bias.size()}, torch::kFloat32));
   }
 }
 
 torch::Tensor ToTensor(const Eigen::Ref<const Eigen::MatrixXf>& samples) {
-  const Eigen::MatrixXf dense = samples;  // contiguous column-major (dim x N) == row-major (N x dim)
+  const Eigen::MatrixXf dense =
+      samples;  // contiguous column-major (dim x N) == row-major (N x dim)
   return torch::from_blob(const_cast<float*>(dense.data()), {dense.cols(), dense.rows()},
                           torch::kFloat32)
       .clone();

@@ -34,8 +34,8 @@ fs::path TempDir() {
 // Runs `secure <args>`; stdout and stderr are captured through files.
 Result RunCli(const std::string& args) {
   const fs::path out = TempDir() / "stdout.txt", err = TempDir() / "stderr.txt";
-  const std::string cmd = std::string(SECURE_CLI) + " " + args + " >" + out.string() + " 2>" +
-                          err.string();
+  const std::string cmd =
+      std::string(SECURE_CLI) + " " + args + " >" + out.string() + " 2>" + err.string();
   const int status = std::system(cmd.c_str());
   auto slurp = [](const fs::path& p) {
     std::ifstream in(p);
@@ -80,8 +80,8 @@ TEST(CliTest, TrainFromFilesThenPredict) {
   WriteToyData();
   const std::string model = (TempDir() / "toy.model").string();
   Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
-                 " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
-                 " --features x,y --out " + model + kFastTrain + " --test-fraction 0.2 --json");
+                    " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                    " --features x,y --out " + model + kFastTrain + " --test-fraction 0.2 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["features"], nlohmann::json({"x", "y"}));
@@ -93,7 +93,7 @@ TEST(CliTest, TrainFromFilesThenPredict) {
   // predict picks the model's features by name, in any column order.
   const std::string h = (TempDir() / "h.csv").string();
   r = RunCli("cbf predict --model " + model + " --states " + (TempDir() / "nd.csv").string() +
-          " --out " + h + " --json");
+             " --out " + h + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto p = nlohmann::json::parse(r.out);
   EXPECT_EQ(p["rows"], 60);
@@ -111,8 +111,8 @@ TEST(CliTest, RejectsBadCsvWithFileLineColumnAndValue) {
   WriteToyData();
   const std::string bad = Write("bad.csv", "x,y\n1,2\n3,nan\n");
   const Result r = RunCli("cbf train --safe-states " + bad + " --near-dangerous-states " +
-                       (TempDir() / "nd.csv").string() + " --features x,y --out " +
-                       (TempDir() / "never.model").string());
+                          (TempDir() / "nd.csv").string() + " --features x,y --out " +
+                          (TempDir() / "never.model").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("bad.csv:3"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("'y'"), std::string::npos) << r.err;
@@ -123,17 +123,17 @@ TEST(CliTest, RejectsBadCsvWithFileLineColumnAndValue) {
 TEST(CliTest, RejectsAMissingFeatureColumn) {
   WriteToyData();
   const Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
-                       " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
-                       " --features x,z --out " + (TempDir() / "never.model").string());
+                          " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                          " --features x,z --out " + (TempDir() / "never.model").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("'z' not found"), std::string::npos) << r.err;
 }
 
 TEST(CliTest, RejectsACorruptModel) {
   const std::string model = Write("corrupt.model", "secure-model 1\n{\"kind\": \"barrier_mlp\"");
-  const Result r = RunCli("cbf predict --model " + model + " --states " +
-                       (TempDir() / "nd.csv").string() + " --out " +
-                       (TempDir() / "h2.csv").string());
+  const Result r =
+      RunCli("cbf predict --model " + model + " --states " + (TempDir() / "nd.csv").string() +
+             " --out " + (TempDir() / "h2.csv").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("corrupt.model"), std::string::npos) << r.err;
 }
@@ -160,12 +160,12 @@ TEST(CliTest, ConfigFileIsOverriddenByFlags) {
   WriteToyData();
   const std::string cfg = Write("cfg.yaml", "trainer:\n  max_epochs: 3\n  hidden: [4]\n");
   const Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
-                       " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
-                       " --features x,y --out " + (TempDir() / "cfg.model").string() +
-                       " --config " + cfg + " --epochs 2 --json");
+                          " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                          " --features x,y --out " + (TempDir() / "cfg.model").string() +
+                          " --config " + cfg + " --epochs 2 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
-  EXPECT_EQ(j["options"]["max_epochs"], 2);        // flag wins
+  EXPECT_EQ(j["options"]["max_epochs"], 2);                // flag wins
   EXPECT_EQ(j["options"]["hidden"], nlohmann::json({4}));  // from the file
   EXPECT_EQ(j["summary"]["epochs"], 2);
 }
@@ -173,10 +173,10 @@ TEST(CliTest, ConfigFileIsOverriddenByFlags) {
 TEST(CliTest, DoubleIntegratorTrainEvalAndTable1Json) {
   const std::string model = (TempDir() / "di.model").string();
   Result r = RunCli("cbf train --domain double-integrator --safe 100 --unsafe 100 --out " + model +
-                 kFastTrain + " --obstacle 3,7 --radius 1.2 --gamma 0.5");
+                    kFastTrain + " --obstacle 3,7 --radius 1.2 --gamma 0.5");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = RunCli("cbf eval --model " + model +
-          " --domain double-integrator --obstacle 3,7 --radius 1.2 --gamma 0.5 --json");
+             " --domain double-integrator --obstacle 3,7 --radius 1.2 --gamma 0.5 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto e = nlohmann::json::parse(r.out);
   EXPECT_EQ(e["states"], 9000000);
@@ -187,16 +187,41 @@ TEST(CliTest, DoubleIntegratorTrainEvalAndTable1Json) {
   r = RunCli("cbf table1 --seeds 2 --safe 60 --unsafe 60 --epochs 3 --hidden 8 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto t = nlohmann::json::parse(r.out);
-  for (const char* key : {"over_conservative", "under_conservative", "safe_correct",
-                          "unsafe_correct"}) {
+  for (const char* key :
+       {"over_conservative", "under_conservative", "safe_correct", "unsafe_correct"}) {
     const double mean = t[key]["mean"], std = t[key]["std"];
     EXPECT_GE(mean, 0.0) << key;
     EXPECT_LE(mean, 1.0) << key;
     EXPECT_GE(std, 0.0) << key;
   }
   EXPECT_EQ(t["per_seed"].size(), 2u);
-  EXPECT_NEAR(t["safe_correct"]["mean"].get<double>() + t["over_conservative"]["mean"].get<double>(),
-              1.0, 1e-12);
+  EXPECT_NEAR(
+      t["safe_correct"]["mean"].get<double>() + t["over_conservative"]["mean"].get<double>(), 1.0,
+      1e-12);
+}
+
+// The shipped configs parse, and configs/cbf_double_integrator.yaml states the built-in preset.
+TEST(CliTest, ShippedConfigsLoadAndTheDoubleIntegratorOneIsThePreset) {
+  const std::string cfg = std::string(SECURE_SOURCE_DIR) + "/configs/cbf_double_integrator.yaml";
+  const std::string base =
+      "cbf train --domain double-integrator --safe 20 --unsafe 20 --json --out " +
+      (TempDir() / "preset.model").string();
+  Result with = RunCli(base + " --config " + cfg);
+  ASSERT_EQ(with.exit_code, 0) << with.err;
+  Result without = RunCli(base);
+  ASSERT_EQ(without.exit_code, 0) << without.err;
+  EXPECT_EQ(nlohmann::json::parse(with.out)["options"],
+            nlohmann::json::parse(without.out)["options"]);
+
+  WriteToyData();
+  const Result panda = RunCli("cbf train --config " + std::string(SECURE_SOURCE_DIR) +
+                              "/configs/cbf_panda_push.yaml --epochs 2 --safe-states " +
+                              (TempDir() / "safe.csv").string() + " --near-dangerous-states " +
+                              (TempDir() / "nd.csv").string() + " --features x,y --out " +
+                              (TempDir() / "p.model").string() + " --json");
+  ASSERT_EQ(panda.exit_code, 0) << panda.err;
+  EXPECT_DOUBLE_EQ(nlohmann::json::parse(panda.out)["options"]["validation_fraction"].get<double>(),
+                   0.25);
 }
 
 }  // namespace

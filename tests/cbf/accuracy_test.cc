@@ -47,11 +47,12 @@ TEST(AccuracyTest, PandaHeldOutBalancedAccuracy) {
     options.validation_fraction = 0.25;  // 20% of the whole
     BarrierTrainingSummary summary;
     const BarrierNet net = TrainBarrier(options, safe_fit, nd_fit, &summary);
-    const ClassAccuracy test = EvaluateAccuracy(*net.MakeEvaluator(), safe_test.states, nd_test.states);
+    const ClassAccuracy test =
+        EvaluateAccuracy(*net.MakeEvaluator(), safe_test.states, nd_test.states);
     EXPECT_EQ(safe_test.size(), 49);
     EXPECT_EQ(nd_test.size(), 876);
-    EXPECT_GE(test.Balanced(), 0.93) << "seed " << seed << ": safe " << test.safe
-                                     << ", near-dangerous " << test.near_dangerous;
+    EXPECT_GE(test.Balanced(), 0.93)
+        << "seed " << seed << ": safe " << test.safe << ", near-dangerous " << test.near_dangerous;
   }
 }
 

@@ -110,7 +110,9 @@ TEST(BarrierNetTest, LoadRejectsACorruptFileNamingIt) {
 TEST(BarrierNetTest, CheckFeaturesNamesBothSides) {
   const BarrierNet net = MakeNet(2, {4}, nn::Activation::kTanh, 7);
   EXPECT_NO_THROW(net.CheckFeatures({"f0", "f1"}, "data.csv"));
-  const std::string msg = ErrorOf([&] { net.CheckFeatures({"f0", "x", "y"}, "data.csv", "m.bin"); });
+  const std::string msg = ErrorOf([&] {
+    net.CheckFeatures({"f0", "x", "y"}, "data.csv", "m.bin");
+  });
   EXPECT_NE(msg.find("data.csv has 3 features (f0, x, y)"), std::string::npos) << msg;
   EXPECT_NE(msg.find("m.bin expects 2 (f0, f1)"), std::string::npos) << msg;
 }

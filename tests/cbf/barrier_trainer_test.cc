@@ -135,8 +135,7 @@ TEST(BarrierTrainerTest, RejectsBadData) {
 TEST(BarrierTrainerOptionsTest, ValidateNamesFieldValueAndRule) {
   BarrierTrainerOptions o;
   o.batch_size = 0;
-  EXPECT_EQ(ErrorOf([&] { o.Validate(); }),
-            "BarrierTrainerOptions::batch_size = 0, must be > 0");
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }), "BarrierTrainerOptions::batch_size = 0, must be > 0");
   o = {};
   o.hidden = {64, 0};
   EXPECT_EQ(ErrorOf([&] { o.Validate(); }), "BarrierTrainerOptions::hidden[1] = 0, must be > 0");

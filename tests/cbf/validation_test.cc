@@ -17,7 +17,8 @@ class ConstantBarrier final : public Barrier {
   std::string Describe() const override { return "constant"; }
 
  protected:
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&, Eigen::Ref<Eigen::VectorXf> h) override {
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
     h.setConstant(value_);
   }
 
@@ -79,8 +80,9 @@ TEST(ValidateOnGridTest, CountsAgreeWithABruteForceLoop) {
       GridValidationOptions options;
       options.threads = threads;
       options.chunk = chunk;
-      const Confusion c = ValidateOnGrid(
-          [&] { return std::make_unique<DoubleIntegratorGroundTruth>(other); }, truth, grid, options);
+      const Confusion c =
+          ValidateOnGrid([&] { return std::make_unique<DoubleIntegratorGroundTruth>(other); },
+                         truth, grid, options);
       EXPECT_EQ(c.safe_as_safe, expected.safe_as_safe) << threads << " " << chunk;
       EXPECT_EQ(c.safe_as_unsafe, expected.safe_as_unsafe) << threads << " " << chunk;
       EXPECT_EQ(c.unsafe_as_safe, expected.unsafe_as_safe) << threads << " " << chunk;
@@ -98,7 +100,8 @@ TEST(ValidateOnGridTest, RejectsBarriersOfTheWrongDimension) {
     std::string Describe() const override { return "three-d"; }
 
    protected:
-    void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&, Eigen::Ref<Eigen::VectorXf>) override {}
+    void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&,
+                    Eigen::Ref<Eigen::VectorXf>) override {}
   };
   try {
     ValidateOnGrid([] { return std::make_unique<ThreeD>(); }, di::GroundTruth{}, SmallGrid());
@@ -107,6 +110,25 @@ TEST(ValidateOnGridTest, RejectsBarriersOfTheWrongDimension) {
     EXPECT_NE(std::string(e.what()).find("three-d takes 3-dimensional states"), std::string::npos)
         << e.what();
   }
+}
+
+TEST(ValidateOnGridTest, AnErrorInAWorkerThreadReachesTheCaller) {
+  class Failing final : public Barrier {
+   public:
+    int state_dim() const override { return 4; }
+    std::string Describe() const override { return "failing"; }
+
+   protected:
+    void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&,
+                    Eigen::Ref<Eigen::VectorXf>) override {
+      SECURE_THROW("evaluation failed");
+    }
+  };
+  GridValidationOptions options;
+  options.threads = 2;
+  EXPECT_THROW(ValidateOnGrid([] { return std::make_unique<Failing>(); }, di::GroundTruth{},
+                              SmallGrid(), options),
+               Error);
 }
 
 TEST(ConfusionTest, RatesAndJson) {

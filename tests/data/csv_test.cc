@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Core>
 #include <gtest/gtest.h>
+#include <Eigen/Core>
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"

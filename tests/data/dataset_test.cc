@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Core>
 #include <gtest/gtest.h>
+#include <Eigen/Core>
 
 #include "secure/common/error.h"
 #include "secure/common/rng.h"

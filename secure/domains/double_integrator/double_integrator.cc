@@ -56,8 +56,8 @@ LabelledStates SampleLabelled(const GroundTruth& truth, const StateBox& box, lon
     std::array<double, kStateDim> s;
     for (int d = 0; d < kStateDim; ++d) s[d] = rng.Uniform(box.lo[d], box.hi[d]);
     // Label the float state that is stored, so that labels and stored data agree exactly.
-    Eigen::Vector4f sf(static_cast<float>(s[0]), static_cast<float>(s[1]),
-                       static_cast<float>(s[2]), static_cast<float>(s[3]));
+    Eigen::Vector4f sf(static_cast<float>(s[0]), static_cast<float>(s[1]), static_cast<float>(s[2]),
+                       static_cast<float>(s[3]));
     const bool safe = truth.H(sf[0], sf[1], sf[2], sf[3]) >= 0.0;
     if (safe && have_safe < n_safe) out.safe.col(have_safe++) = sf;
     if (!safe && have_unsafe < n_unsafe) out.unsafe.col(have_unsafe++) = sf;
