@@ -1,4 +1,5 @@
 #include "secure/cbf/barrier_net.h"
+#include "tests/test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -29,14 +30,7 @@ BarrierNet MakeNet(int dim, std::vector<int> hidden, nn::Activation act, unsigne
   return net;
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
+using secure::test::ErrorOf;
 
 TEST(BarrierNetTest, EvaluatorMatchesDoublePrecisionReference) {
   const BarrierNet net = MakeNet(4, {16, 16}, nn::Activation::kTanh, 3);

@@ -1,4 +1,5 @@
 #include "secure/cbf/barrier_trainer.h"
+#include "tests/test_util.h"
 
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
@@ -36,14 +37,7 @@ BarrierTrainerOptions Fast() {
   return o;
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
+using secure::test::ErrorOf;
 
 TEST(BarrierTrainerTest, LearnsASeparableProblem) {
   BarrierTrainingSummary summary;

@@ -1,4 +1,5 @@
 #include "secure/common/atomic_file.h"
+#include "tests/test_util.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -17,21 +18,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The message of the secure::Error thrown by `fn`, or a failure if it does not throw one.
-template <typename Fn>
-std::string ErrorOf(Fn&& fn) {
-  try {
-    fn();
-  } catch (const secure::Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected secure::Error";
-  return "";
-}
-
-#define EXPECT_HAS(haystack, needle)                               \
-  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) \
-      << "message: " << (haystack) << "\nexpected to contain: " << (needle)
+using secure::test::ErrorOf;
 
 // A fresh empty directory per test, removed afterwards.
 class AtomicFileTest : public ::testing::Test {

@@ -1,4 +1,5 @@
 #include "secure/common/enum_strings.h"
+#include "tests/test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -13,21 +14,7 @@ namespace {
 using nn::Activation;
 using nn::kActivationNames;
 
-// The message of the secure::Error thrown by `fn`, or a failure if it does not throw one.
-template <typename Fn>
-std::string ErrorOf(Fn&& fn) {
-  try {
-    fn();
-  } catch (const secure::Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected secure::Error";
-  return "";
-}
-
-#define EXPECT_HAS(haystack, needle)                               \
-  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) \
-      << "message: " << (haystack) << "\nexpected to contain: " << (needle)
+using secure::test::ErrorOf;
 
 enum class Color { kRed, kGreen, kBlue };
 constexpr EnumTable<Color, 3> kColorNames{{

@@ -21,44 +21,16 @@
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
+#include "tests/test_util.h"
 
 namespace secure::data {
 namespace {
 
 namespace fs = std::filesystem;
 
-// A fresh directory per test, removed afterwards.
-class CsvTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::path(::testing::TempDir()) /
-           ("secure_csv_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+class CsvTest : public secure::test::TempDirTest {};
 
-  std::string Write(const std::string& name, const std::string& content) {
-    const std::string path = (dir_ / name).string();
-    std::ofstream(path, std::ios::binary) << content;
-    return path;
-  }
-  std::string PathOf(const std::string& name) const { return (dir_ / name).string(); }
-
-  fs::path dir_;
-};
-
-// The message of the secure::Error thrown by `fn`, or a failure if none is thrown.
-std::string ErrorOf(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected secure::Error";
-  return "";
-}
+using secure::test::ErrorOf;
 
 void ExpectContainsAll(const std::string& message, const std::vector<std::string>& parts) {
   for (const std::string& part : parts) {

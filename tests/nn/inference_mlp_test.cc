@@ -1,4 +1,6 @@
 #include "secure/nn/inference_mlp.h"
+#include "tests/nn/nn_test_util.h"
+#include "tests/test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -15,42 +17,10 @@
 namespace secure::nn {
 namespace {
 
-// The message of the secure::Error thrown by `fn`, or a failure if it does not throw one.
-template <typename Fn>
-std::string ErrorOf(Fn&& fn) {
-  try {
-    fn();
-  } catch (const secure::Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected secure::Error";
-  return "";
-}
-
-#define EXPECT_HAS(haystack, needle)                               \
-  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) \
-      << "message: " << (haystack) << "\nexpected to contain: " << (needle)
-
-MlpSpec Spec(int in, std::vector<int> hidden, int out, Activation a) {
-  MlpSpec spec;
-  spec.input_dim = in;
-  spec.hidden = std::move(hidden);
-  spec.output_dim = out;
-  spec.activation = a;
-  return spec;
-}
-
-const std::vector<int> kPandaHidden{32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
-
-// Inputs uniform in [lo, hi) per feature, seeded.
-Eigen::MatrixXf RandomInputs(int dim, int n, std::uint64_t seed, float lo = -3.0f,
-                             float hi = 3.0f) {
-  Rng rng(seed);
-  Eigen::MatrixXf x(dim, n);
-  for (int c = 0; c < n; ++c)
-    for (int r = 0; r < dim; ++r) x(r, c) = static_cast<float>(rng.Uniform(lo, hi));
-  return x;
-}
+using secure::test::ErrorOf;
+using test::kPandaHidden;
+using test::RandomInputs;
+using test::Spec;
 
 // A non-trivial normaliser: per-feature means in [-5, 5] and scales in [10^-max_log10_scale,
 // 10^max_log10_scale] (log-uniform).

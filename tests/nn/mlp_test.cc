@@ -1,4 +1,6 @@
 #include "secure/nn/mlp.h"
+#include "tests/nn/nn_test_util.h"
+#include "tests/test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -12,32 +14,9 @@
 namespace secure::nn {
 namespace {
 
-// The message of the secure::Error thrown by `fn`, or a failure if it does not throw one.
-template <typename Fn>
-std::string ErrorOf(Fn&& fn) {
-  try {
-    fn();
-  } catch (const secure::Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected secure::Error";
-  return "";
-}
-
-#define EXPECT_HAS(haystack, needle)                               \
-  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) \
-      << "message: " << (haystack) << "\nexpected to contain: " << (needle)
-
-MlpSpec Spec(int in, std::vector<int> hidden, int out = 1, Activation a = Activation::kTanh) {
-  MlpSpec spec;
-  spec.input_dim = in;
-  spec.hidden = std::move(hidden);
-  spec.output_dim = out;
-  spec.activation = a;
-  return spec;
-}
-
-const std::vector<int> kPandaHidden{32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
+using secure::test::ErrorOf;
+using test::kPandaHidden;
+using test::Spec;
 
 // ---------------------------------------------------------------------------------------------
 // MlpSpec
