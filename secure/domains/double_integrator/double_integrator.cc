@@ -56,11 +56,15 @@ LabelledStates SampleLabelled(const GroundTruth& truth, const StateBox& box, lon
     std::array<double, kStateDim> s;
     for (int d = 0; d < kStateDim; ++d) s[d] = rng.Uniform(box.lo[d], box.hi[d]);
     // Label the float state that is stored, so that labels and stored data agree exactly.
-    Eigen::Vector4f sf(static_cast<float>(s[0]), static_cast<float>(s[1]), static_cast<float>(s[2]),
-                       static_cast<float>(s[3]));
+    std::array<float, kStateDim> sf;
+    for (int d = 0; d < kStateDim; ++d) sf[d] = static_cast<float>(s[d]);
     const bool safe = truth.H(sf[0], sf[1], sf[2], sf[3]) >= 0.0;
-    if (safe && have_safe < n_safe) out.safe.col(have_safe++) = sf;
-    if (!safe && have_unsafe < n_unsafe) out.unsafe.col(have_unsafe++) = sf;
+    Eigen::MatrixXf* set = safe ? &out.safe : &out.unsafe;
+    long* have = safe ? &have_safe : &have_unsafe;
+    if (*have < set->cols()) {
+      for (int d = 0; d < kStateDim; ++d) (*set)(d, *have) = sf[d];
+      ++*have;
+    }
   }
   return out;
 }
@@ -100,6 +104,27 @@ void Grid::Fill(long first, long n, Eigen::Ref<Eigen::MatrixXf> out) const {
       if (++idx[d] < count[d]) break;
       idx[d] = 0;
     }
+  }
+}
+
+Dynamics::Dynamics(double dt) : dt_(dt) {
+  SECURE_CHECK(std::isfinite(dt) && dt > 0, "double integrator dt = " << dt << ", must be > 0");
+}
+
+std::string Dynamics::Describe() const {
+  return "double-integrator dynamics (dt = " + std::to_string(dt_) + ")";
+}
+
+void Dynamics::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+                      const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                      Eigen::Ref<Eigen::MatrixXf> next_states) const {
+  const float dt = static_cast<float>(dt_);
+  const float half_dt2 = 0.5f * dt * dt;
+  for (Eigen::Index i = 0; i < actions.cols(); ++i) {
+    next_states(0, i) = state[0] + state[2] * dt + actions(0, i) * half_dt2;
+    next_states(1, i) = state[1] + state[3] * dt + actions(1, i) * half_dt2;
+    next_states(2, i) = state[2] + actions(0, i) * dt;
+    next_states(3, i) = state[3] + actions(1, i) * dt;
   }
 }
 

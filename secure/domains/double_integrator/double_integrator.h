@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "secure/common/rng.h"
+#include "secure/domains/dynamics.h"
 
 namespace secure::domains::double_integrator {
 
@@ -69,6 +70,28 @@ struct Grid {
   void Fill(long first, long n, Eigen::Ref<Eigen::MatrixXf> out) const;
   /// The grid state with linear index `index`, in double precision.
   std::array<double, kStateDim> State(long index) const;
+};
+
+inline constexpr int kActionDim = 2;
+
+/// The exact zero-order-hold discretisation of the double integrator with acceleration action
+/// a = (ax, ay) held for dt:  p' = p + v dt + a dt^2 / 2,  v' = v + a dt.
+/// The action is not clipped here (a bound is the policy's or environment's business).
+class Dynamics final : public DynamicsModel {
+ public:
+  explicit Dynamics(double dt = 0.1);
+  int state_dim() const override { return kStateDim; }
+  int action_dim() const override { return kActionDim; }
+  std::string Describe() const override;
+  double dt() const { return dt_; }
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
+
+ private:
+  double dt_;
 };
 
 }  // namespace secure::domains::double_integrator

@@ -1,0 +1,327 @@
+#include "secure/shield/shield.h"
+
+#include <cmath>
+#include <limits>
+
+#include "secure/common/error.h"
+#include "secure/common/timer.h"
+
+namespace secure::shield {
+namespace {
+
+#define SECURE_SHIELD_OPTION_CHECK(cond, field, value, rule) \
+  SECURE_CHECK(cond, "ShieldOptions::" << field << " = " << value << ", must be " << rule)
+
+constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+
+}  // namespace
+
+void ShieldOptions::Validate() const {
+  SECURE_SHIELD_OPTION_CHECK(num_samples > 0, "num_samples", num_samples, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(safe_ratio) && safe_ratio >= 0 && safe_ratio < 1,
+                             "safe_ratio", safe_ratio, "in [0, 1)");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(dt) && dt > 0, "dt", dt, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(class_k_gain) && class_k_gain > 0, "class_k_gain",
+                             class_k_gain, "> 0 (alpha must be strictly increasing)");
+  SECURE_SHIELD_OPTION_CHECK(num_probes > 0, "num_probes", num_probes, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(probe_extent) && probe_extent > 0, "probe_extent",
+                             probe_extent, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(sigma_step) && sigma_step > 0, "sigma_step",
+                             sigma_step, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(max_iterations > 0, "max_iterations", max_iterations, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(time_budget_us) && time_budget_us >= 0,
+                             "time_budget_us", time_budget_us, ">= 0");
+}
+
+nlohmann::json ShieldOptions::ToJson() const {
+  return {{"num_samples", num_samples},
+          {"safe_ratio", safe_ratio},
+          {"dt", dt},
+          {"class_k", ToString(kClassKNames, class_k)},
+          {"class_k_gain", class_k_gain},
+          {"aggregation", ToString(kAggregationNames, aggregation)},
+          {"resampling", ToString(kResamplingNames, resampling)},
+          {"num_probes", num_probes},
+          {"probe_extent", probe_extent},
+          {"sigma_step", sigma_step},
+          {"max_iterations", max_iterations},
+          {"time_budget_us", time_budget_us},
+          {"seed", seed}};
+}
+
+nlohmann::json Decision::ToJson() const {
+  nlohmann::json a = nlohmann::json::array();
+  for (Eigen::Index i = 0; i < action.size(); ++i) a.push_back(action[i]);
+  return {{"status", ToString(kStatusNames, status)},
+          {"action", a},
+          {"g", g},
+          {"h", h},
+          {"iterations", iterations},
+          {"safe_ratio", safe_ratio},
+          {"intervened", intervened},
+          {"distance_to_mean", distance_to_mean},
+          {"fallback", ToString(kFallbackNames, fallback)},
+          {"seconds", seconds}};
+}
+
+double ClassKValue(const ShieldOptions& options, double h) {
+  switch (options.class_k) {
+    case ClassK::kLinear:
+      return options.class_k_gain * h;
+    case ClassK::kCubic:
+      return options.class_k_gain * h * h * h;
+  }
+  SECURE_INTERNAL_CHECK(false, "unknown class-K function");
+}
+
+Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
+               const domains::DynamicsModel& dynamics)
+    : options_(options),
+      barrier_(barrier),
+      dynamics_(dynamics),
+      state_dim_(dynamics.state_dim()),
+      action_dim_(dynamics.action_dim()),
+      rng_(options.seed) {
+  options_.Validate();
+  SECURE_CHECK(barrier.state_dim() == state_dim_,
+               "Shield: " << barrier.Describe() << " takes " << barrier.state_dim()
+                          << "-dimensional states, " << dynamics.Describe() << " produces "
+                          << state_dim_);
+  const int m = options_.num_samples, batch = std::max(options_.num_samples, options_.num_probes);
+  decision_.action = Eigen::VectorXf::Zero(action_dim_);
+  backup_ = Eigen::VectorXf::Zero(action_dim_);
+  mu_.resize(action_dim_);
+  sigma_.resize(action_dim_);
+  samples_.resize(action_dim_, m);
+  probes_.resize(action_dim_, options_.num_probes);
+  next_states_.resize(state_dim_, batch);
+  h_next_.resize(batch);
+  g_.resize(batch);
+  one_action_.resize(action_dim_, 1);
+  one_g_.resize(1);
+  best_action_.resize(action_dim_);
+  state_column_.resize(state_dim_, 1);
+  h_one_.resize(1);
+  d_sigma_.resize(action_dim_);
+}
+
+void Shield::SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action) {
+  SECURE_CHECK(action.size() == action_dim_,
+               "Shield: backup action has " << action.size() << " values, expected " << action_dim_);
+  SECURE_CHECK(action.allFinite(), "Shield: backup action has a non-finite value");
+  backup_ = action;
+  has_backup_ = true;
+}
+
+double Shield::EvaluateH(const Eigen::Ref<const Eigen::VectorXf>& state) {
+  state_column_.col(0) = state;
+  barrier_.Evaluate(state_column_, h_one_);
+  return h_one_[0];
+}
+
+void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
+                       const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                       Eigen::Ref<Eigen::VectorXd> g) {
+  const Eigen::Index k = actions.cols();
+  SECURE_CHECK(k <= next_states_.cols(), "Shield::EvaluateG: " << k << " actions exceed the "
+                                                               << next_states_.cols()
+                                                               << " the shield was sized for");
+  SECURE_CHECK(g.size() == k, "Shield::EvaluateG: g has " << g.size() << " entries for " << k
+                                                          << " actions");
+  auto next = next_states_.leftCols(k);
+  dynamics_.Step(state, actions, next);
+  barrier_.Evaluate(next, h_next_.head(k));
+  // g(a) = (h(T(s, a)) - h(s)) / dt + alpha(h(s)); a NaN h(T(s, a)) gives a NaN g, never safe.
+  const double alpha = ClassKValue(options_, h_state);
+  const double inv_dt = 1.0 / options_.dt;
+  for (Eigen::Index i = 0; i < k; ++i)
+    g[i] = (static_cast<double>(h_next_[i]) - h_state) * inv_dt + alpha;
+}
+
+int Shield::SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
+  const int m = options_.num_samples;
+  for (int c = 0; c < m; ++c)
+    for (int r = 0; r < action_dim_; ++r)
+      samples_(r, c) = mu_[r] + sigma_[r] * static_cast<float>(rng_.Normal());
+  EvaluateG(state, h_state, samples_, g_.head(m));
+  int num_safe = 0;
+  for (int i = 0; i < m; ++i) {
+    if (g_[i] >= 0.0) ++num_safe;
+    if (g_[i] > best_g_) {  // false for NaN
+      best_g_ = g_[i];
+      best_action_ = samples_.col(i);
+    }
+  }
+  return num_safe;
+}
+
+void Shield::AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
+                        const Eigen::Ref<const Eigen::VectorXf>& mu) {
+  const int n = options_.num_probes;
+  const double extent = options_.probe_extent;
+  for (int c = 0; c < n; ++c)
+    for (int r = 0; r < action_dim_; ++r)
+      probes_(r, c) = mu[r] + static_cast<float>(rng_.Uniform(-extent, extent));
+  // h(T(s, a_j)) for the probes; their g also competes for the fallback (they are evaluated).
+  EvaluateG(state, decision_.h, probes_, g_.head(n));
+  d_sigma_.setZero();
+  for (int j = 0; j < n; ++j) {
+    const double weight = std::max(0.0, -static_cast<double>(h_next_[j]));  // NaN -> 0
+    if (weight > 0) d_sigma_ += static_cast<float>(weight) * (probes_.col(j) - mu);
+    if (g_[j] > best_g_) {
+      best_g_ = g_[j];
+      best_action_ = probes_.col(j);
+    }
+  }
+  // d_sigma = |a_unsafe| / ||a_unsafe||_2; isotropic when no probe is unsafe.
+  const float norm = d_sigma_.norm();
+  if (norm > 0 && std::isfinite(norm)) {
+    d_sigma_ = d_sigma_.cwiseAbs() / norm;
+  } else {
+    d_sigma_.setConstant(1.0f / std::sqrt(static_cast<float>(action_dim_)));
+  }
+  sigma_ += static_cast<float>(options_.sigma_step) * d_sigma_;
+}
+
+void Shield::Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
+                       int num_safe) {
+  const int m = options_.num_samples;
+  if (options_.aggregation == Aggregation::kRandomSafe) {
+    // Ablation 1: one safe sample, uniformly at random.
+    long pick = static_cast<long>(rng_.UniformIndex(static_cast<std::uint64_t>(num_safe)));
+    for (int i = 0; i < m; ++i) {
+      if (g_[i] >= 0.0 && pick-- == 0) {
+        decision_.action = samples_.col(i);
+        decision_.g = g_[i];
+        return;
+      }
+    }
+    SECURE_INTERNAL_CHECK(false, "safe sample count does not match");
+  }
+  // Algorithm 1, lines 6-9: the mean of the safe samples, if it is safe itself ...
+  one_action_.setZero();
+  for (int i = 0; i < m; ++i)
+    if (g_[i] >= 0.0) one_action_.col(0) += samples_.col(i);
+  one_action_ /= static_cast<float>(num_safe);
+  // g_ holds the round's values; evaluating the mean reuses the shared buffers, so keep the
+  // nearest-sample search ahead of it.
+  int nearest = -1;
+  float nearest_distance = std::numeric_limits<float>::infinity();
+  for (int i = 0; i < m; ++i) {
+    if (!(g_[i] >= 0.0)) continue;
+    const float d = (samples_.col(i) - one_action_.col(0)).squaredNorm();
+    if (d < nearest_distance) {
+      nearest_distance = d;
+      nearest = i;
+    }
+  }
+  const double nearest_g = g_[nearest];
+  EvaluateG(state, h_state, one_action_, one_g_);
+  if (one_g_[0] >= 0.0) {
+    decision_.action = one_action_.col(0);
+    decision_.g = one_g_[0];
+  } else {
+    // ... else the safe sample nearest to the mean.
+    decision_.action = samples_.col(nearest);
+    decision_.g = nearest_g;
+  }
+}
+
+void Shield::FinishInvalid() {
+  decision_.status = Status::kInvalidInput;
+  if (has_backup_) {
+    decision_.action = backup_;
+  } else {
+    decision_.action.setZero();
+  }
+  decision_.g = std::numeric_limits<double>::quiet_NaN();
+}
+
+const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
+                               const Eigen::Ref<const Eigen::VectorXf>& mu,
+                               const Eigen::Ref<const Eigen::VectorXf>& sigma) {
+  const Stopwatch clock;
+  SECURE_CHECK(state.size() == state_dim_,
+               "Shield::Decide: state has " << state.size() << " values, expected " << state_dim_);
+  SECURE_CHECK(mu.size() == action_dim_,
+               "Shield::Decide: mu has " << mu.size() << " values, expected " << action_dim_);
+  SECURE_CHECK(sigma.size() == action_dim_,
+               "Shield::Decide: sigma has " << sigma.size() << " values, expected " << action_dim_);
+  decision_.status = Status::kInvalidInput;
+  decision_.g = 0.0;
+  decision_.h = std::numeric_limits<double>::quiet_NaN();
+  decision_.iterations = 0;
+  decision_.safe_ratio = 0.0;
+  decision_.intervened = false;
+  decision_.distance_to_mean = 0.0;
+  decision_.fallback = Fallback::kNone;
+
+  // NaN/Inf anywhere: report it, return a finite action, check nothing.
+  if (!state.allFinite() || !mu.allFinite() || !sigma.allFinite() || (sigma.array() < 0).any()) {
+    FinishInvalid();
+    decision_.seconds = clock.Seconds();
+    return decision_;
+  }
+  const double h_state = EvaluateH(state);
+  decision_.h = h_state;
+  if (!std::isfinite(h_state)) {
+    FinishInvalid();
+    decision_.seconds = clock.Seconds();
+    return decision_;
+  }
+
+  mu_ = mu;
+  sigma_ = sigma;
+  best_g_ = kNegInf;
+  best_action_ = mu;
+  const int m = options_.num_samples;
+  int num_safe = 0;
+  bool enough = false;
+  for (int iteration = 1; iteration <= options_.max_iterations; ++iteration) {
+    if (iteration > 1 && options_.resampling == Resampling::kAdaptive) AdaptSigma(state, mu);
+    num_safe = SampleRound(state, h_state);
+    decision_.iterations = iteration;
+    if (iteration == 1) decision_.intervened = !(g_[0] >= 0.0);  // the policy's own draw
+    decision_.safe_ratio = static_cast<double>(num_safe) / m;
+    if (decision_.safe_ratio > options_.safe_ratio) {
+      enough = true;
+      break;
+    }
+    if (options_.time_budget_us > 0 && clock.Microseconds() >= options_.time_budget_us) break;
+  }
+
+  if (!enough && options_.resampling == Resampling::kNone) {
+    // Ablation 2 at its limit: a random sample of the last round, unchecked. Its status follows
+    // its g, so an unsafe one is never reported as safe.
+    const int i = static_cast<int>(rng_.UniformIndex(static_cast<std::uint64_t>(m)));
+    decision_.action = samples_.col(i);
+    decision_.g = g_[i];
+    decision_.fallback = Fallback::kRandomSample;
+    decision_.status = g_[i] >= 0.0 ? Status::kSafeAfterResampling : Status::kNoSafeAction;
+  } else if (num_safe > 0) {
+    // Enough safe samples, or the budget ran out with some: aggregate the last round's.
+    Aggregate(state, h_state, num_safe);
+    decision_.status = decision_.iterations == 1 ? Status::kSafe : Status::kSafeAfterResampling;
+  } else {
+    // No safe sample in the last round: the best evaluated action (a sample or probe of any
+    // round), or the backup action if its g is larger.
+    decision_.action = best_action_;
+    decision_.g = best_g_;
+    decision_.fallback = Fallback::kBestSample;
+    if (has_backup_) {
+      one_action_.col(0) = backup_;
+      EvaluateG(state, h_state, one_action_, one_g_);
+      if (!(one_g_[0] <= best_g_)) {  // larger, or the best is -inf/NaN
+        decision_.action = backup_;
+        decision_.g = one_g_[0];
+        decision_.fallback = Fallback::kBackupAction;
+      }
+    }
+    decision_.status = decision_.g >= 0.0 ? Status::kSafeAfterResampling : Status::kNoSafeAction;
+  }
+  decision_.distance_to_mean = (decision_.action - mu).norm();
+  decision_.seconds = clock.Seconds();
+  return decision_;
+}
+
+}  // namespace secure::shield

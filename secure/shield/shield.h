@@ -1,0 +1,217 @@
+#pragma once
+// The CBF shield of SECURE (paper Section 4.2, Algorithm 1) with adaptive resampling (Section 4.3,
+// Algorithm 2). Given a state s, the policy's Gaussian N(mu, diag(sigma^2)), a barrier h and a
+// dynamics model T, it returns an action a whose discrete-time CBF condition
+//
+//   g(a) = (h(T(s, a)) - h(s)) / dt + alpha(h(s)) >= 0          (paper Eq. 5, requirement R3)
+//
+// holds, where alpha is a class-K function (strictly increasing, alpha(0) = 0). Algorithm 1:
+//   1. draw M actions from N(mu, sigma);
+//   2. while the safe ratio rho = #{g >= 0} / M is <= rho0: widen sigma along unsafe directions
+//      (Algorithm 2, below) and draw M new actions;
+//   3. a_bar = mean of the safe actions; return a_bar if g(a_bar) >= 0, else the safe action
+//      nearest to a_bar.
+// Algorithm 2: draw N probe actions uniformly in the box [-R, R]^n around mu, weight each by
+// max(0, -h(T(s, a_j))), a_unsafe = sum_j w_j (a_j - mu), d_sigma = |a_unsafe| / ||a_unsafe||_2
+// (element-wise absolute value), sigma <- sigma + alpha_sigma * d_sigma; mu stays unchanged.
+//
+// Deviations from the paper, each deliberate (docs/SHIELD.md has the full list):
+//  - a_bar averages over the safe actions (the paper's formula divides by M, which shrinks a_bar
+//    toward 0; its text and the authors' code average the safe ones);
+//  - a budget (iterations and/or wall time). When it runs out without a safe action the decision
+//    says kNoSafeAction and returns the fallback with the largest g (the best evaluated action,
+//    or the caller's backup action): an unchecked action is never reported as safe;
+//  - probes are centred on mu (so they explore the actions the policy is about to take; with a
+//    symmetric action box and mu = 0 this is the paper's origin-centred probe), and an isotropic
+//    step is taken when no probe is unsafe.
+//
+// Usage (one Shield per control loop; construct once, then Decide() allocates nothing):
+//   shield::ShieldOptions options;            // M = 64, rho0 = 0.1, alpha(h) = 1.0 h, dt = 0.1
+//   shield::Shield shield(options, barrier, dynamics);
+//   const shield::Decision& d = shield.Decide(state, mu, sigma);
+//   if (d.status == shield::Status::kInvalidInput) { ... }  else apply(d.action);
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "secure/cbf/barrier.h"
+#include "secure/common/enum_strings.h"
+#include "secure/common/rng.h"
+#include "secure/domains/dynamics.h"
+
+namespace secure::shield {
+
+/// The class-K function alpha(h).
+enum class ClassK {
+  kLinear,  // alpha(h) = k h
+  kCubic,   // alpha(h) = k h^3
+};
+inline constexpr EnumTable<ClassK, 2> kClassKNames{{
+    {ClassK::kLinear, "linear"},
+    {ClassK::kCubic, "cubic"},
+}};
+
+/// How the returned action is formed from the safe samples.
+enum class Aggregation {
+  kMean,        // Algorithm 1: mean of the safe samples, re-checked, else the nearest safe sample
+  kRandomSafe,  // ablation 1 (paper Section 6.2): one safe sample chosen at random
+};
+inline constexpr EnumTable<Aggregation, 2> kAggregationNames{{
+    {Aggregation::kMean, "mean"},
+    {Aggregation::kRandomSafe, "random-safe"},
+}};
+
+/// What happens while too few samples are safe.
+enum class Resampling {
+  kAdaptive,  // Algorithm 2: widen sigma along unsafe directions, then resample
+  kNone,      // ablation 2: resample with the policy's own sigma; at the iteration limit return a
+              // random sample of the last batch (unchecked, so reported as kNoSafeAction)
+};
+inline constexpr EnumTable<Resampling, 2> kResamplingNames{{
+    {Resampling::kAdaptive, "adaptive"},
+    {Resampling::kNone, "none"},
+}};
+
+struct ShieldOptions {
+  int num_samples = 64;         // M: actions drawn per iteration
+  double safe_ratio = 0.1;      // rho0: resample while #safe / M <= rho0
+  double dt = 0.1;              // dt in g(a)
+  ClassK class_k = ClassK::kLinear;
+  double class_k_gain = 1.0;    // k in alpha(h); keep alpha'(0) * dt < 1, else g >= 0 reduces
+                                // to the myopic h(T(s, a)) >= 0 (linear: k dt = 1 exactly)
+  Aggregation aggregation = Aggregation::kMean;
+  Resampling resampling = Resampling::kAdaptive;
+  int num_probes = 64;          // N: probe actions per adaptive step
+  double probe_extent = 1.0;    // R: probes are uniform in mu + [-R, R]^n
+  double sigma_step = 0.5;      // alpha_sigma: sigma <- sigma + alpha_sigma * d_sigma
+  int max_iterations = 20;      // K: sampling rounds per decision (the first one included)
+  double time_budget_us = 0.0;  // wall-time budget per decision; 0: none (iterations only)
+  std::uint64_t seed = 0;       // the shield's random stream (deterministic per seed)
+
+  /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
+  void Validate() const;
+  nlohmann::json ToJson() const;
+};
+
+enum class Status {
+  kSafe,                 // g(action) >= 0, found without resampling
+  kSafeAfterResampling,  // g(action) >= 0, found after one or more resampling rounds
+  kNoSafeAction,         // budget spent with no safe sample: `action` is the fallback
+  kInvalidInput,         // NaN/Inf in state, mu, sigma or h(s), or sigma < 0: `action` is the
+                         // backup action if one was given, else zeros; nothing was checked
+};
+inline constexpr EnumTable<Status, 4> kStatusNames{{
+    {Status::kSafe, "safe"},
+    {Status::kSafeAfterResampling, "safe_after_resampling"},
+    {Status::kNoSafeAction, "no_safe_action"},
+    {Status::kInvalidInput, "invalid_input"},
+}};
+
+/// Which action a kNoSafeAction decision returned.
+enum class Fallback {
+  kNone,            // not a fallback decision
+  kBestSample,      // the evaluated sample with the largest g
+  kBackupAction,    // the caller's backup action (its g was larger)
+  kRandomSample,    // ablation 2's random sample of the last batch
+};
+inline constexpr EnumTable<Fallback, 4> kFallbackNames{{
+    {Fallback::kNone, "none"},
+    {Fallback::kBestSample, "best_sample"},
+    {Fallback::kBackupAction, "backup_action"},
+    {Fallback::kRandomSample, "random_sample"},
+}};
+
+/// The outcome of one decision, with diagnostics. Owned by the Shield and overwritten by the
+/// next Decide() (no allocation).
+struct Decision {
+  Status status = Status::kInvalidInput;
+  Eigen::VectorXf action;     // (action_dim) the action to apply; never NaN
+  double g = 0.0;             // g(action) as evaluated (NaN only for kInvalidInput)
+  double h = 0.0;             // h(s)
+  int iterations = 0;         // sampling rounds used (1 = no resampling)
+  double safe_ratio = 0.0;    // #safe / M in the last round
+  bool intervened = false;    // the policy's own sample (the first draw) had g < 0
+  double distance_to_mean = 0.0;  // ||action - mu||_2
+  Fallback fallback = Fallback::kNone;
+  double seconds = 0.0;       // wall time of the decision
+
+  bool safe() const { return status == Status::kSafe || status == Status::kSafeAfterResampling; }
+  nlohmann::json ToJson() const;
+};
+
+/// alpha(h) for the given options.
+double ClassKValue(const ShieldOptions& options, double h);
+
+class Shield {
+ public:
+  /// `barrier` and `dynamics` must outlive the shield and agree on the state dimension; the
+  /// barrier is evaluated from this shield only (it owns scratch memory). Buffers for M samples
+  /// and N probes are allocated here.
+  Shield(const ShieldOptions& options, cbf::Barrier& barrier,
+         const domains::DynamicsModel& dynamics);
+
+  /// An action to return when nothing better is known (e.g. braking); it competes on g with the
+  /// best sample when no safe action is found. Must have action_dim entries, all finite.
+  void SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action);
+  void ClearBackupAction() { has_backup_ = false; }
+
+  /// Re-seeds the shield's random stream.
+  void Seed(std::uint64_t seed) { rng_.Seed(seed); }
+
+  /// One shielded decision. `mu` and `sigma` (action_dim) are the policy's Gaussian at `state`.
+  /// @throws secure::Error only on wrong dimensions (misuse); bad numbers give kInvalidInput.
+  const Decision& Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
+                         const Eigen::Ref<const Eigen::VectorXf>& mu,
+                         const Eigen::Ref<const Eigen::VectorXf>& sigma);
+
+  /// g for each column of `actions` (action_dim x K, K <= max(M, N)) at `state`, using h(s) =
+  /// `h_state`: the same computation Decide() uses, exposed for tests and tools.
+  void EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
+                 const Eigen::Ref<const Eigen::MatrixXf>& actions, Eigen::Ref<Eigen::VectorXd> g);
+
+  /// h(s) of one state.
+  double EvaluateH(const Eigen::Ref<const Eigen::VectorXf>& state);
+
+  const ShieldOptions& options() const { return options_; }
+  int action_dim() const { return action_dim_; }
+  int state_dim() const { return state_dim_; }
+
+ private:
+  // One round: draw M samples from N(mu, sigma_) into samples_, evaluate g_, count the safe ones.
+  int SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
+  // Algorithm 2: widen sigma_ along unsafe directions around mu.
+  void AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
+                  const Eigen::Ref<const Eigen::VectorXf>& mu);
+  // Aggregates the safe samples of the current round into decision_.action.
+  void Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, int num_safe);
+  void FinishInvalid();
+
+  ShieldOptions options_;
+  cbf::Barrier& barrier_;
+  const domains::DynamicsModel& dynamics_;
+  int state_dim_;
+  int action_dim_;
+  Rng rng_;
+  Decision decision_;
+  bool has_backup_ = false;
+  Eigen::VectorXf backup_;
+
+  // Preallocated scratch (sized in the constructor).
+  Eigen::VectorXf mu_, sigma_;           // the current sampling distribution
+  Eigen::MatrixXf samples_;              // (action_dim x M)
+  Eigen::MatrixXf probes_;               // (action_dim x N)
+  Eigen::MatrixXf next_states_;          // (state_dim x max(M, N))
+  Eigen::VectorXf h_next_;               // (max(M, N))
+  Eigen::VectorXd g_;                    // (max(M, N))
+  Eigen::MatrixXf one_action_;           // (action_dim x 1)
+  Eigen::VectorXd one_g_;                // (1)
+  Eigen::VectorXf best_action_;          // best (largest g) evaluated sample so far
+  double best_g_ = 0.0;
+  Eigen::MatrixXf state_column_;         // (state_dim x 1) for h(s)
+  Eigen::VectorXf h_one_;                // (1)
+  Eigen::VectorXf d_sigma_;              // (action_dim)
+};
+
+}  // namespace secure::shield
