@@ -1,5 +1,5 @@
 // secure: learn safe behaviour from demonstrations (SECURE, CBF shielding). main() only parses
-// and dispatches; see cbf_commands.cc.
+// and dispatches; see cbf_commands.cc and shield_commands.cc.
 #include <CLI/CLI.hpp>
 #include <iostream>
 
@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   try {
     const secure::cli::Config config = secure::cli::PreScanConfig(argc, argv);
     secure::cli::RegisterCbfCommands(app, config);
+    secure::cli::RegisterShieldCommands(app, config);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);

@@ -4,9 +4,9 @@
 // Immutable model + mutable workspace (as MuJoCo's mjModel/mjData): an InferenceMlp is built
 // once from trained parameters (input normalisation folded into the first layer) and can be
 // shared by threads; each thread or shield owns an InferenceMlp::Workspace sized for its largest
-// batch, which holds every activation buffer. Known gap: for layers 128 or more wide at batches
-// of 64 or more, Eigen's GEMM allocates its packing buffers (above EIGEN_STACK_ALLOCATION_LIMIT)
-// inside Forward(); nets up to 64 wide and batch-1 calls do not allocate.
+// batch, which holds every activation buffer; Eigen's GEMM packing buffers come from the stack
+// (EIGEN_STACK_ALLOCATION_LIMIT is raised to 1 MiB project-wide, see CMakeLists.txt), so Forward()
+// does not allocate. The calling thread needs about 1 MiB of stack for the widest layers.
 
 #include <Eigen/Core>
 #include <vector>

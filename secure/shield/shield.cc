@@ -26,11 +26,11 @@ void ShieldOptions::Validate() const {
   SECURE_SHIELD_OPTION_CHECK(num_probes > 0, "num_probes", num_probes, "> 0");
   SECURE_SHIELD_OPTION_CHECK(std::isfinite(probe_extent) && probe_extent > 0, "probe_extent",
                              probe_extent, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(sigma_step) && sigma_step > 0, "sigma_step",
-                             sigma_step, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(sigma_step) && sigma_step > 0, "sigma_step", sigma_step,
+                             "> 0");
   SECURE_SHIELD_OPTION_CHECK(max_iterations > 0, "max_iterations", max_iterations, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(time_budget_us) && time_budget_us >= 0,
-                             "time_budget_us", time_budget_us, ">= 0");
+  SECURE_SHIELD_OPTION_CHECK(std::isfinite(time_budget_us) && time_budget_us >= 0, "time_budget_us",
+                             time_budget_us, ">= 0");
 }
 
 nlohmann::json ShieldOptions::ToJson() const {
@@ -106,8 +106,9 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
 }
 
 void Shield::SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action) {
-  SECURE_CHECK(action.size() == action_dim_,
-               "Shield: backup action has " << action.size() << " values, expected " << action_dim_);
+  SECURE_CHECK(action.size() == action_dim_, "Shield: backup action has " << action.size()
+                                                                          << " values, expected "
+                                                                          << action_dim_);
   SECURE_CHECK(action.allFinite(), "Shield: backup action has a non-finite value");
   backup_ = action;
   has_backup_ = true;
@@ -126,8 +127,8 @@ void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
   SECURE_CHECK(k <= next_states_.cols(), "Shield::EvaluateG: " << k << " actions exceed the "
                                                                << next_states_.cols()
                                                                << " the shield was sized for");
-  SECURE_CHECK(g.size() == k, "Shield::EvaluateG: g has " << g.size() << " entries for " << k
-                                                          << " actions");
+  SECURE_CHECK(g.size() == k,
+               "Shield::EvaluateG: g has " << g.size() << " entries for " << k << " actions");
   auto next = next_states_.leftCols(k);
   dynamics_.Step(state, actions, next);
   barrier_.Evaluate(next, h_next_.head(k));
@@ -227,6 +228,10 @@ void Shield::Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
   }
 }
 
+Status Shield::SafeStatus() const {
+  return decision_.iterations == 1 ? Status::kSafe : Status::kSafeAfterResampling;
+}
+
 void Shield::FinishInvalid() {
   decision_.status = Status::kInvalidInput;
   if (has_backup_) {
@@ -297,11 +302,11 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     decision_.action = samples_.col(i);
     decision_.g = g_[i];
     decision_.fallback = Fallback::kRandomSample;
-    decision_.status = g_[i] >= 0.0 ? Status::kSafeAfterResampling : Status::kNoSafeAction;
+    decision_.status = g_[i] >= 0.0 ? SafeStatus() : Status::kNoSafeAction;
   } else if (num_safe > 0) {
     // Enough safe samples, or the budget ran out with some: aggregate the last round's.
     Aggregate(state, h_state, num_safe);
-    decision_.status = decision_.iterations == 1 ? Status::kSafe : Status::kSafeAfterResampling;
+    decision_.status = SafeStatus();
   } else {
     // No safe sample in the last round: the best evaluated action (a sample or probe of any
     // round), or the backup action if its g is larger.
@@ -311,13 +316,13 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     if (has_backup_) {
       one_action_.col(0) = backup_;
       EvaluateG(state, h_state, one_action_, one_g_);
-      if (!(one_g_[0] <= best_g_)) {  // larger, or the best is -inf/NaN
+      if (one_g_[0] > best_g_) {  // a NaN g never wins; best_g_ is -inf if nothing was finite
         decision_.action = backup_;
         decision_.g = one_g_[0];
         decision_.fallback = Fallback::kBackupAction;
       }
     }
-    decision_.status = decision_.g >= 0.0 ? Status::kSafeAfterResampling : Status::kNoSafeAction;
+    decision_.status = decision_.g >= 0.0 ? SafeStatus() : Status::kNoSafeAction;
   }
   decision_.distance_to_mean = (decision_.action - mu).norm();
   decision_.seconds = clock.Seconds();

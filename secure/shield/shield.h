@@ -67,7 +67,7 @@ inline constexpr EnumTable<Aggregation, 2> kAggregationNames{{
 enum class Resampling {
   kAdaptive,  // Algorithm 2: widen sigma along unsafe directions, then resample
   kNone,      // ablation 2: resample with the policy's own sigma; at the iteration limit return a
-              // random sample of the last batch (unchecked, so reported as kNoSafeAction)
+              // random sample of the last batch (its status follows its g: kNoSafeAction if g < 0)
 };
 inline constexpr EnumTable<Resampling, 2> kResamplingNames{{
     {Resampling::kAdaptive, "adaptive"},
@@ -75,12 +75,12 @@ inline constexpr EnumTable<Resampling, 2> kResamplingNames{{
 }};
 
 struct ShieldOptions {
-  int num_samples = 64;         // M: actions drawn per iteration
-  double safe_ratio = 0.1;      // rho0: resample while #safe / M <= rho0
-  double dt = 0.1;              // dt in g(a)
+  int num_samples = 64;     // M: actions drawn per iteration
+  double safe_ratio = 0.1;  // rho0: resample while #safe / M <= rho0
+  double dt = 0.1;          // dt in g(a)
   ClassK class_k = ClassK::kLinear;
-  double class_k_gain = 1.0;    // k in alpha(h); keep alpha'(0) * dt < 1, else g >= 0 reduces
-                                // to the myopic h(T(s, a)) >= 0 (linear: k dt = 1 exactly)
+  double class_k_gain = 1.0;  // k in alpha(h); keep alpha'(0) * dt < 1, else g >= 0 reduces
+                              // to the myopic h(T(s, a)) >= 0 (linear: k dt = 1 exactly)
   Aggregation aggregation = Aggregation::kMean;
   Resampling resampling = Resampling::kAdaptive;
   int num_probes = 64;          // N: probe actions per adaptive step
@@ -111,10 +111,10 @@ inline constexpr EnumTable<Status, 4> kStatusNames{{
 
 /// Which action a kNoSafeAction decision returned.
 enum class Fallback {
-  kNone,            // not a fallback decision
-  kBestSample,      // the evaluated sample with the largest g
-  kBackupAction,    // the caller's backup action (its g was larger)
-  kRandomSample,    // ablation 2's random sample of the last batch
+  kNone,          // not a fallback decision
+  kBestSample,    // the evaluated sample with the largest g
+  kBackupAction,  // the caller's backup action (its g was larger)
+  kRandomSample,  // ablation 2's random sample of the last batch
 };
 inline constexpr EnumTable<Fallback, 4> kFallbackNames{{
     {Fallback::kNone, "none"},
@@ -127,15 +127,15 @@ inline constexpr EnumTable<Fallback, 4> kFallbackNames{{
 /// next Decide() (no allocation).
 struct Decision {
   Status status = Status::kInvalidInput;
-  Eigen::VectorXf action;     // (action_dim) the action to apply; never NaN
-  double g = 0.0;             // g(action) as evaluated (NaN only for kInvalidInput)
-  double h = 0.0;             // h(s)
-  int iterations = 0;         // sampling rounds used (1 = no resampling)
-  double safe_ratio = 0.0;    // #safe / M in the last round
-  bool intervened = false;    // the policy's own sample (the first draw) had g < 0
+  Eigen::VectorXf action;         // (action_dim) the action to apply; never NaN
+  double g = 0.0;                 // g(action) as evaluated (NaN only for kInvalidInput)
+  double h = 0.0;                 // h(s)
+  int iterations = 0;             // sampling rounds used (1 = no resampling)
+  double safe_ratio = 0.0;        // #safe / M in the last round
+  bool intervened = false;        // the policy's own sample (the first draw) had g < 0
   double distance_to_mean = 0.0;  // ||action - mu||_2
   Fallback fallback = Fallback::kNone;
-  double seconds = 0.0;       // wall time of the decision
+  double seconds = 0.0;  // wall time of the decision
 
   bool safe() const { return status == Status::kSafe || status == Status::kSafeAfterResampling; }
   nlohmann::json ToJson() const;
@@ -187,6 +187,8 @@ class Shield {
   // Aggregates the safe samples of the current round into decision_.action.
   void Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, int num_safe);
   void FinishInvalid();
+  // kSafe after one round, kSafeAfterResampling after more.
+  Status SafeStatus() const;
 
   ShieldOptions options_;
   cbf::Barrier& barrier_;
@@ -199,19 +201,19 @@ class Shield {
   Eigen::VectorXf backup_;
 
   // Preallocated scratch (sized in the constructor).
-  Eigen::VectorXf mu_, sigma_;           // the current sampling distribution
-  Eigen::MatrixXf samples_;              // (action_dim x M)
-  Eigen::MatrixXf probes_;               // (action_dim x N)
-  Eigen::MatrixXf next_states_;          // (state_dim x max(M, N))
-  Eigen::VectorXf h_next_;               // (max(M, N))
-  Eigen::VectorXd g_;                    // (max(M, N))
-  Eigen::MatrixXf one_action_;           // (action_dim x 1)
-  Eigen::VectorXd one_g_;                // (1)
-  Eigen::VectorXf best_action_;          // best (largest g) evaluated sample so far
+  Eigen::VectorXf mu_, sigma_;   // the current sampling distribution
+  Eigen::MatrixXf samples_;      // (action_dim x M)
+  Eigen::MatrixXf probes_;       // (action_dim x N)
+  Eigen::MatrixXf next_states_;  // (state_dim x max(M, N))
+  Eigen::VectorXf h_next_;       // (max(M, N))
+  Eigen::VectorXd g_;            // (max(M, N))
+  Eigen::MatrixXf one_action_;   // (action_dim x 1)
+  Eigen::VectorXd one_g_;        // (1)
+  Eigen::VectorXf best_action_;  // best (largest g) evaluated sample so far
   double best_g_ = 0.0;
-  Eigen::MatrixXf state_column_;         // (state_dim x 1) for h(s)
-  Eigen::VectorXf h_one_;                // (1)
-  Eigen::VectorXf d_sigma_;              // (action_dim)
+  Eigen::MatrixXf state_column_;  // (state_dim x 1) for h(s)
+  Eigen::VectorXf h_one_;         // (1)
+  Eigen::VectorXf d_sigma_;       // (action_dim)
 };
 
 }  // namespace secure::shield

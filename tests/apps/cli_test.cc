@@ -10,6 +10,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "tests/test_util.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -222,6 +224,36 @@ TEST(CliTest, ShippedConfigsLoadAndTheDoubleIntegratorOneIsThePreset) {
   ASSERT_EQ(panda.exit_code, 0) << panda.err;
   EXPECT_DOUBLE_EQ(nlohmann::json::parse(panda.out)["options"]["validation_fraction"].get<double>(),
                    0.25);
+}
+
+TEST(CliTest, ShieldRunKeepsTheDoubleIntegratorOutOfTheObstacle) {
+  Result r = RunCli(
+      "shield run --domain double-integrator --barrier ground-truth --episodes 30 --seed 3 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["episodes"], 30);
+  EXPECT_EQ(j["dangerous_episodes"], 0);
+  EXPECT_GE(j["success_episodes"].get<int>(), 25);
+  EXPECT_EQ(j["no_safe_action_decisions"], 0);
+  EXPECT_GE(j["latency_us"]["p99"].get<double>(), j["latency_us"]["p50"].get<double>());
+  // The same task without the shield does collide: the check is not vacuous.
+  r = RunCli(
+      "shield run --domain double-integrator --barrier ground-truth --episodes 30 --seed 3 "
+      "--unshielded --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GT(nlohmann::json::parse(r.out)["dangerous_episodes"].get<int>(), 0);
+}
+
+TEST(CliTest, ShieldRunRejectsBadInput) {
+  Result r = RunCli("shield run --domain double-integrator --barrier /nonexistent.model");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "/nonexistent.model");
+  r = RunCli("shield run --domain double-integrator --barrier ground-truth --samples 0");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "num_samples = 0");
+  r = RunCli("shield run --domain double-integrator --barrier ground-truth --class-k quartic");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_HAS(r.err, "quartic");
 }
 
 }  // namespace

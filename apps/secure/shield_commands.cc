@@ -1,0 +1,157 @@
+// secure shield run: the closed-loop check of the CBF shield (eval/double_integrator_shield_run.h).
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cli_common.h"
+#include "commands.h"
+#include "secure/cbf/barrier.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/common/enum_strings.h"
+#include "secure/common/error.h"
+#include "secure/eval/double_integrator_shield_run.h"
+
+namespace secure::cli {
+namespace {
+
+namespace di = domains::double_integrator;
+
+constexpr const char* kDomainName = "double-integrator";
+constexpr const char* kGroundTruthBarrier = "ground-truth";
+
+// Warns on stderr when a model's recorded training geometry differs from the run's.
+void WarnOnGeometryMismatch(const cbf::BarrierNet& net, const di::GroundTruth& truth,
+                            const std::string& path) {
+  const auto it = net.provenance.find("double_integrator");
+  if (it == net.provenance.end() || !it->is_object()) return;
+  try {
+    const auto obstacle = it->at("obstacle").get<std::vector<double>>();
+    const double radius = it->at("radius").get<double>(), gamma = it->at("gamma").get<double>();
+    if (obstacle.size() == 2 && obstacle[0] == truth.obstacle_x &&
+        obstacle[1] == truth.obstacle_y && radius == truth.radius && gamma == truth.gamma)
+      return;
+    std::cerr << "secure: warning: " << path << " was trained for " << it->dump()
+              << ", the run uses obstacle (" << truth.obstacle_x << ", " << truth.obstacle_y
+              << "), radius " << truth.radius << ", gamma " << truth.gamma << "\n";
+  } catch (const nlohmann::json::exception&) {
+    // An unexpected provenance layout is not an error: the record is informational.
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+struct ShieldRunCommand {
+  eval::ShieldRunOptions options;
+  std::vector<double> obstacle, goal;
+  std::string domain, barrier;
+  std::string class_k = ToString(shield::kClassKNames, options.shield.class_k);
+  std::string aggregation = ToString(shield::kAggregationNames, options.shield.aggregation);
+  std::string resampling = ToString(shield::kResamplingNames, options.shield.resampling);
+  bool unshielded = false;
+  bool json = false;
+
+  void Register(CLI::App& app, const Config& config) {
+    CLI::App* cmd = app.add_subcommand(
+        "run",
+        "Closed-loop episodes of a noisy goal-seeking policy past an obstacle, with the CBF "
+        "shield in the loop (or --unshielded): collisions, successes, interventions, latency");
+    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+    AddConfigFlag(cmd, config);
+    cmd->add_option("--domain", domain, "domain: double-integrator")->required();
+    cmd->add_option("--barrier", barrier,
+                    "the shield's barrier: 'ground-truth' or a barrier model file")
+        ->required();
+    cmd->add_option("--episodes", options.episodes, "episodes")->capture_default_str();
+    cmd->add_option("--seed", options.seed, "seed for start states, shield and policy noise")
+        ->capture_default_str();
+    cmd->add_flag("--unshielded", unshielded,
+                  "apply the policy's sampled actions directly (the baseline)");
+    AddGroundTruthFlags(cmd, &options.truth, &obstacle);
+    std::ostringstream goal_default;
+    goal_default << options.goal_x << "," << options.goal_y;
+    cmd->add_option("--goal", goal, "goal X,Y")
+        ->delimiter(',')
+        ->expected(2)
+        ->default_str(goal_default.str());
+    cmd->add_option("--max-steps", options.max_steps, "steps per episode")->capture_default_str();
+    cmd->add_option("--policy-sigma", options.policy_sigma, "the policy's noise per axis")
+        ->capture_default_str();
+    cmd->add_option("--accel-bound", options.accel_bound,
+                    "per-component acceleration bound (environment and policy)")
+        ->capture_default_str();
+    // Shield options.
+    shield::ShieldOptions& so = options.shield;
+    cmd->add_option("--samples", so.num_samples, "M: actions drawn per round")
+        ->capture_default_str();
+    cmd->add_option("--safe-ratio", so.safe_ratio, "rho0: resample while #safe / M <= rho0")
+        ->capture_default_str();
+    cmd->add_option("--class-k", class_k, "class-K function: linear | cubic")
+        ->capture_default_str();
+    cmd->add_option("--class-k-gain", so.class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
+        ->capture_default_str();
+    cmd->add_option("--dt", options.dt, "control period (environment step and the shield's dt)")
+        ->capture_default_str();
+    cmd->add_option("--aggregation", aggregation, "mean | random-safe")->capture_default_str();
+    cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str();
+    cmd->add_option("--max-iterations", so.max_iterations, "sampling rounds per decision")
+        ->capture_default_str();
+    cmd->add_option("--time-budget-us", so.time_budget_us,
+                    "wall-time budget per decision in microseconds (0: none)")
+        ->capture_default_str();
+    cmd->add_option("--probes", so.num_probes, "N: probe actions per adaptive step")
+        ->capture_default_str();
+    cmd->add_option("--probe-extent", so.probe_extent, "R: probes are uniform in mu + [-R, R]^n")
+        ->capture_default_str();
+    cmd->add_option("--sigma-step", so.sigma_step, "alpha_sigma: sigma widening step")
+        ->capture_default_str();
+    cmd->add_flag("--json", json, "print the result as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    SECURE_CHECK(domain == kDomainName, "--domain = '" << domain << "', must be " << kDomainName);
+    FinishGroundTruth(obstacle, &options.truth);
+    if (goal.size() == 2) {
+      options.goal_x = goal[0];
+      options.goal_y = goal[1];
+    }
+    shield::ShieldOptions& so = options.shield;
+    so.class_k = FromString(shield::kClassKNames, class_k, "--class-k");
+    so.aggregation = FromString(shield::kAggregationNames, aggregation, "--aggregation");
+    so.resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
+    so.dt = options.dt;
+    options.Validate();
+
+    std::unique_ptr<cbf::Barrier> evaluator;
+    if (barrier == kGroundTruthBarrier) {
+      evaluator = std::make_unique<cbf::DoubleIntegratorGroundTruth>(options.truth);
+    } else {
+      const cbf::BarrierNet net = cbf::BarrierNet::Load(barrier);
+      net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", barrier);
+      WarnOnGeometryMismatch(net, options.truth, barrier);
+      evaluator = net.MakeEvaluator();
+    }
+    const eval::ShieldRunResult result =
+        eval::RunDoubleIntegratorShield(options, *evaluator, !unshielded);
+    if (json) {
+      nlohmann::json r = result.ToJson();
+      r["command"] = "shield run";
+      r["barrier_source"] = barrier;
+      PrintJson(r);
+    } else {
+      std::cout << result.Table();
+    }
+  }
+};
+
+}  // namespace
+
+void RegisterShieldCommands(CLI::App& app, const Config& config) {
+  CLI::App* group = app.add_subcommand("shield", "Run and check the CBF shield");
+  group->require_subcommand(1);
+  static ShieldRunCommand run;
+  run.Register(*group, config);
+}
+
+}  // namespace secure::cli

@@ -1,0 +1,192 @@
+#pragma once
+// The closed-loop check of the CBF shield on the double integrator: episodes in which a noisy
+// goal-seeking policy must pass an obstacle, with or without the shield in the loop.
+//
+// The task. Start states are drawn in the lower-left square [0.5, 3)^2 (at rest up to a small
+// velocity), the goal (8.5, 8.5) lies behind the obstacle (5, 5), r = 2 as seen from there, and
+// the nominal policy is a PD controller straight at the goal: a = kp (g - p) - kd v, clipped to
+// the acceleration bound, with Gaussian exploration N(a, sigma^2 I). Every straight line from the
+// start square to the goal passes within 0.91 of the obstacle centre, so without a shield the
+// policy drives into the obstacle; with a correct barrier the shield must steer it around.
+//
+// One step: mu = PD(s); the shield returns a = Decide(s, mu, sigma) (unshielded: a ~ N(mu,
+// sigma)); the environment clips a to [-a_max, a_max]^2 and applies the exact zero-order-hold
+// dynamics. The shield's model T is that same environment map (clip + exact step,
+// ClippedDoubleIntegrator below), so with the ground-truth barrier the checked next state is the
+// one that happens: h(s') >= (1 - k dt) h(s) >= 0 for the linear class-K alpha(h) = k h.
+//
+// An episode ends when the agent reaches the goal (success), enters the obstacle (a crash:
+// ||p - p_o|| < r), or after max_steps (timeout). Two safety counts are kept apart:
+//  - dangerous: the obstacle was entered (the physical failure the shield must prevent);
+//  - left the safe set: some state had ground-truth h(s) < 0 (the CBF's safe set is smaller than
+//    "outside the obstacle": h < 0 also flags states that will enter it unless they brake).
+//
+// Usage:
+//   eval::ShieldRunOptions options;  // the defaults below
+//   cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+//   eval::ShieldRunResult r = eval::RunDoubleIntegratorShield(options, barrier);
+//   std::cout << r.Table();
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "secure/cbf/barrier.h"
+#include "secure/domains/double_integrator/double_integrator.h"
+#include "secure/domains/dynamics.h"
+#include "secure/shield/shield.h"
+
+namespace secure::eval {
+
+struct ShieldRunOptions {
+  // The obstacle and the ground-truth CBF used to count unsafe states: the project's defaults
+  // (obstacle (5, 5), r = 2, gamma = 1), which the learned barriers are trained for.
+  domains::double_integrator::GroundTruth truth;
+
+  // Goal behind the obstacle as seen from the start square (both on the diagonal through the
+  // obstacle centre), inside the state box [0, 10)^2 the barriers are trained on, and 4.95 from
+  // the centre, i.e. 2.95 clear of the obstacle.
+  double goal_x = 8.5;
+  double goal_y = 8.5;
+  // Reached when ||p - goal|| < goal_radius: small against the obstacle and the distances
+  // travelled, large against the jitter the policy noise adds (sigma dt^2 / 2 per step).
+  double goal_radius = 0.3;
+
+  // Start positions uniform in [start_lo, start_hi)^2: the lower-left corner of the box, 0.83
+  // or more clear of the obstacle, so that the straight path to the goal crosses the obstacle.
+  double start_lo = 0.5;
+  double start_hi = 3.0;
+  // Each start velocity component uniform in [-start_speed, start_speed]: "almost at rest", so
+  // that episodes differ in more than position but start far inside the safe set.
+  double start_speed = 0.1;
+  // Start states must satisfy ||p - p_o|| >= r + start_clearance and h(s) >= 0 (rejection
+  // sampling): an episode must not start inside or touching the obstacle.
+  double start_clearance = 0.5;
+
+  long episodes = 1000;
+  // 30 s of simulated time; the unobstructed PD reaches the goal in about 11 s (110 steps), so
+  // a detour around the obstacle fits, and a stalled agent times out.
+  int max_steps = 300;
+  // Control period, the paper's dt; the shield must look ahead exactly one step (shield.dt ==
+  // dt is checked).
+  double dt = 0.1;
+  // Per-component acceleration bound, applied by the environment (it clips every action, also
+  // the shield's) and by the PD policy. 3 gives enough authority to brake from the speeds the
+  // PD reaches (|v| <= 1.5) within the ground-truth CBF's margin, so a safe action exists.
+  double accel_bound = 3.0;
+
+  // PD gains: critically damped (kd = 2 sqrt(kp)), so no overshoot at the goal; kp = 0.25
+  // keeps the peak speed at about 1.5 per component, inside the velocity range [-1.5, 1.5) the
+  // barriers are trained and validated on (a learned h is meaningless far outside it).
+  double kp = 0.25;
+  double kd = 1.0;
+  // Exploration noise of the policy, per axis (the sigma passed to the shield): 10 % of the
+  // acceleration bound, enough to break the symmetry of a head-on approach, and the source of
+  // the baseline's spread.
+  double policy_sigma = 0.3;
+  // The shield's backup action (its fallback competitor when no sampled action is safe) is
+  // braking, a = clip(-brake_gain v): 1 / dt stops the agent in one step whenever the bound
+  // allows, else brakes as hard as the bound allows.
+  double brake_gain = 10.0;
+
+  // The shield (defaults: M = 64, rho0 = 0.1, alpha(h) = 1.0 h with 1.0 * dt = 0.1 < 1, dt =
+  // 0.1). shield.seed is not used: each episode re-seeds the shield from its own stream.
+  shield::ShieldOptions shield;
+
+  // Everything random (start states, the shield's samples, the unshielded policy's noise) flows
+  // from this seed; episode i uses its own stream derived from (seed, i).
+  std::uint64_t seed = 0;
+
+  /// Throws secure::Error naming the field ("ShieldRunOptions::episodes = 0, must be > 0").
+  void Validate() const;
+  nlohmann::json ToJson() const;
+};
+
+/// Latency percentiles (nearest rank) of the shield's decisions, in microseconds.
+struct LatencySummary {
+  long count = 0;
+  double p50 = 0.0;
+  double p90 = 0.0;
+  double p99 = 0.0;
+  double max = 0.0;
+  double mean = 0.0;
+
+  /// From unsorted values (all zeros when there are none).
+  static LatencySummary Of(std::vector<double> values);
+  nlohmann::json ToJson() const;
+};
+
+/// The nearest-rank percentile (0 < percent <= 100) of `sorted` (ascending, non-empty): the
+/// smallest value with at least percent % of the values <= it.
+double NearestRankPercentile(const std::vector<double>& sorted, double percent);
+
+struct ShieldRunResult {
+  bool shielded = true;
+  std::string barrier;  // Describe() of the barrier, or "none" unshielded
+
+  long episodes = 0;
+  long dangerous_episodes = 0;      // entered the obstacle (the episode ends there)
+  long success_episodes = 0;        // reached the goal without entering the obstacle
+  long timeout_episodes = 0;        // neither within max_steps
+  long unsafe_state_episodes = 0;   // some state had ground-truth h < 0
+  long unsafe_state_steps = 0;      // states with ground-truth h < 0, over all episodes
+  long steps = 0;                   // environment steps, over all episodes
+  double mean_steps_to_goal = 0.0;  // over the successful episodes (0 if none)
+
+  // Shield decisions (all 0 unshielded).
+  long decisions = 0;
+  long interventions = 0;  // decisions whose policy draw had g < 0
+  double mean_interventions_per_episode = 0.0;
+  long resampled_decisions = 0;       // status kSafeAfterResampling
+  long no_safe_action_decisions = 0;  // status kNoSafeAction
+  long invalid_input_decisions = 0;   // status kInvalidInput
+  long backup_action_decisions = 0;   // the fallback was the braking backup action
+  LatencySummary latency_us;
+
+  double seconds = 0.0;  // wall time of the run
+  ShieldRunOptions options;
+
+  /// Keys: shielded, barrier, episodes, dangerous_episodes, success_episodes, timeout_episodes,
+  /// unsafe_state_episodes, unsafe_state_steps, steps, mean_steps_to_goal, decisions,
+  /// interventions, mean_interventions_per_episode, resampled_decisions,
+  /// no_safe_action_decisions, invalid_input_decisions, backup_action_decisions, latency_us
+  /// {count, p50, p90, p99, max, mean}, seconds, options.
+  nlohmann::json ToJson() const;
+  /// A Markdown table of the counts and latencies.
+  std::string Table() const;
+};
+
+/// The environment's transition as a DynamicsModel: clip each action component to
+/// [-accel_bound, accel_bound], then the exact double-integrator step. Step() allocates nothing
+/// (batches are clipped in chunks through a preallocated buffer), which makes the object
+/// usable from one thread at a time only.
+class ClippedDoubleIntegrator final : public domains::DynamicsModel {
+ public:
+  ClippedDoubleIntegrator(double dt, double accel_bound);
+  int state_dim() const override { return domains::double_integrator::kStateDim; }
+  int action_dim() const override { return domains::double_integrator::kActionDim; }
+  std::string Describe() const override;
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
+
+ private:
+  static constexpr int kChunk = 64;
+  domains::double_integrator::Dynamics exact_;
+  float bound_;
+  mutable Eigen::MatrixXf clipped_;  // (action_dim x kChunk) scratch
+};
+
+/// Runs options.episodes episodes. shielded: each action comes from a Shield over `barrier` and
+/// the environment model; else from N(mu, sigma) directly (the unshielded baseline; `barrier`
+/// is not evaluated). Deterministic per options.seed apart from latencies (and, with a
+/// shield time budget, the decisions that budget cuts short).
+/// @throws secure::Error if the options are invalid or `barrier` does not take 4-D states.
+ShieldRunResult RunDoubleIntegratorShield(const ShieldRunOptions& options, cbf::Barrier& barrier,
+                                          bool shielded = true);
+
+}  // namespace secure::eval
