@@ -8,6 +8,7 @@
 // project: Debian 12).
 
 #include "secure/shield/shield.h"
+#include "tests/shield/shield_test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -169,33 +170,8 @@ std::string Describe(const Allocations& a) {
          std::to_string(a.mallocs) + " malloc-family)";
 }
 
-Eigen::VectorXf Vec(std::initializer_list<float> values) {
-  Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
-  Eigen::Index i = 0;
-  for (float x : values) v[i++] = x;
-  return v;
-}
-
-/// x' = x + a dt in `dim` dimensions; allocation-free.
-class IntegratorDynamics final : public domains::DynamicsModel {
- public:
-  IntegratorDynamics(int dim, double dt) : dim_(dim), dt_(static_cast<float>(dt)) {}
-  int state_dim() const override { return dim_; }
-  int action_dim() const override { return dim_; }
-  std::string Describe() const override { return "integrator-" + std::to_string(dim_) + "d"; }
-
- protected:
-  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-              const Eigen::Ref<const Eigen::MatrixXf>& actions,
-              Eigen::Ref<Eigen::MatrixXf> next_states) const override {
-    for (Eigen::Index i = 0; i < actions.cols(); ++i)
-      next_states.col(i) = state + dt_ * actions.col(i);
-  }
-
- private:
-  int dim_;
-  float dt_;
-};
+using test::IntegratorDynamics;
+using test::Vec;
 
 /// h(s) = inner(s) + slope * (s[row] - offset): a (random) barrier network tilted so that one
 /// action direction is unsafe, which makes the resampling and fallback paths reachable. The

@@ -3,6 +3,7 @@
 // random barrier networks.
 
 #include "secure/shield/shield.h"
+#include "tests/shield/shield_test_util.h"
 
 #include <gtest/gtest.h>
 #include <rapidcheck.h>
@@ -23,6 +24,8 @@
 
 namespace secure::shield {
 namespace {
+
+using test::IndependentG;
 
 namespace di = domains::double_integrator;
 
@@ -73,19 +76,6 @@ ShieldOptions RandomOptions() {
   o.max_iterations = *rc::gen::resize(100, rc::gen::inRange(1, 11));
   o.seed = *rc::gen::arbitrary<std::uint64_t>();
   return o;
-}
-
-/// g(action) from the barrier and the dynamics directly (no shield involved).
-double FormulaG(cbf::Barrier& barrier, const domains::DynamicsModel& dynamics,
-                const ShieldOptions& options, const Eigen::VectorXf& state,
-                const Eigen::VectorXf& action) {
-  Eigen::MatrixXf s = state;
-  Eigen::VectorXf h_s(1), h_next(1);
-  barrier.Evaluate(s, h_s);
-  Eigen::MatrixXf next(dynamics.state_dim(), 1);
-  dynamics.Step(state, action, next);
-  barrier.Evaluate(next, h_next);
-  return (static_cast<double>(h_next[0]) - h_s[0]) / options.dt + ClassKValue(options, h_s[0]);
 }
 
 bool CloseRelative(double a, double b, double tolerance) {
@@ -179,7 +169,8 @@ RC_GTEST_PROP(ShieldProperty, SafeDecisionsSatisfyTheCbfConditionIndependently, 
   } else {
     RC_ASSERT(g[0] >= 0.0);
   }
-  const double formula = FormulaG(*barriers.independent, dynamics, p.options, p.state, d.action);
+  const double formula =
+      IndependentG(*barriers.independent, dynamics, p.options, p.state, d.action);
   RC_ASSERT(std::abs(formula - d.g) <= tolerance);
   RC_ASSERT(formula >= (p.learned ? -tolerance : 0.0));
 }

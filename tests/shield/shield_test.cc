@@ -1,4 +1,5 @@
 #include "secure/shield/shield.h"
+#include "tests/shield/shield_test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -38,71 +39,13 @@ constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
 // ------------------------------------------------------------------------------------------------
-// Hand-made systems with analytically known safe sets.
+// Hand-made systems with analytically known safe sets (IntegratorDynamics, FunctionBarrier:
+// tests/shield/shield_test_util.h).
 
-/// x' = x + a * dt in `dim` dimensions (state_dim == action_dim == dim).
-class IntegratorDynamics final : public domains::DynamicsModel {
- public:
-  IntegratorDynamics(int dim, double dt) : dim_(dim), dt_(dt) {}
-  int state_dim() const override { return dim_; }
-  int action_dim() const override { return dim_; }
-  std::string Describe() const override { return "integrator-" + std::to_string(dim_) + "d"; }
-
- protected:
-  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-              const Eigen::Ref<const Eigen::MatrixXf>& actions,
-              Eigen::Ref<Eigen::MatrixXf> next_states) const override {
-    const float dt = static_cast<float>(dt_);
-    for (Eigen::Index i = 0; i < actions.cols(); ++i)
-      next_states.col(i) = state + dt * actions.col(i);
-  }
-
- private:
-  int dim_;
-  double dt_;
-};
-
-/// h(s) = fn(s), evaluated column by column.
-class FunctionBarrier final : public cbf::Barrier {
- public:
-  using Fn = std::function<double(const Eigen::Ref<const Eigen::VectorXf>&)>;
-  FunctionBarrier(int dim, std::string name, Fn fn)
-      : dim_(dim), name_(std::move(name)), fn_(std::move(fn)) {}
-  int state_dim() const override { return dim_; }
-  std::string Describe() const override { return name_; }
-
- protected:
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                  Eigen::Ref<Eigen::VectorXf> h) override {
-    for (Eigen::Index i = 0; i < states.cols(); ++i) h[i] = static_cast<float>(fn_(states.col(i)));
-  }
-
- private:
-  int dim_;
-  std::string name_;
-  Fn fn_;
-};
-
-Eigen::VectorXf Vec(std::initializer_list<float> values) {
-  Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
-  Eigen::Index i = 0;
-  for (float x : values) v[i++] = x;
-  return v;
-}
-
-/// g(action) computed outside the shield, from the barrier and the dynamics (same float path).
-double IndependentG(cbf::Barrier& barrier, const domains::DynamicsModel& dynamics,
-                    const ShieldOptions& options, const Eigen::VectorXf& state,
-                    const Eigen::VectorXf& action) {
-  Eigen::MatrixXf s = state;
-  Eigen::VectorXf h_s(1), h_next(1);
-  barrier.Evaluate(s, h_s);
-  Eigen::MatrixXf next(dynamics.state_dim(), 1);
-  dynamics.Step(state, action, next);
-  barrier.Evaluate(next, h_next);
-  return (static_cast<double>(h_next[0]) - h_s[0]) * (1.0 / options.dt) +
-         ClassKValue(options, h_s[0]);
-}
+using test::FunctionBarrier;
+using test::IndependentG;
+using test::IntegratorDynamics;
+using test::Vec;
 
 /// Replicates the shield's sampling: `rounds` consecutive rounds of M actions drawn column by
 /// column from N(mu, sigma) with the shield's generator (valid while no probe is drawn between

@@ -1,0 +1,79 @@
+#pragma once
+// Small systems and helpers shared by the shield tests.
+
+#include <Eigen/Core>
+#include <functional>
+#include <initializer_list>
+#include <string>
+#include <utility>
+
+#include "secure/cbf/barrier.h"
+#include "secure/domains/dynamics.h"
+#include "secure/shield/shield.h"
+
+namespace secure::shield::test {
+
+/// x' = x + a * dt in `dim` dimensions (state_dim == action_dim == dim); allocation-free.
+class IntegratorDynamics final : public domains::DynamicsModel {
+ public:
+  IntegratorDynamics(int dim, double dt) : dim_(dim), dt_(static_cast<float>(dt)) {}
+  int state_dim() const override { return dim_; }
+  int action_dim() const override { return dim_; }
+  std::string Describe() const override { return "integrator-" + std::to_string(dim_) + "d"; }
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override {
+    for (Eigen::Index i = 0; i < actions.cols(); ++i)
+      next_states.col(i) = state + dt_ * actions.col(i);
+  }
+
+ private:
+  int dim_;
+  float dt_;
+};
+
+/// h(s) = fn(s), evaluated column by column.
+class FunctionBarrier final : public cbf::Barrier {
+ public:
+  using Fn = std::function<double(const Eigen::Ref<const Eigen::VectorXf>&)>;
+  FunctionBarrier(int dim, std::string name, Fn fn)
+      : dim_(dim), name_(std::move(name)), fn_(std::move(fn)) {}
+  int state_dim() const override { return dim_; }
+  std::string Describe() const override { return name_; }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
+    for (Eigen::Index i = 0; i < states.cols(); ++i) h[i] = static_cast<float>(fn_(states.col(i)));
+  }
+
+ private:
+  int dim_;
+  std::string name_;
+  Fn fn_;
+};
+
+inline Eigen::VectorXf Vec(std::initializer_list<float> values) {
+  Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
+  Eigen::Index i = 0;
+  for (float x : values) v[i++] = x;
+  return v;
+}
+
+/// g(action) computed outside the shield, from the barrier and the dynamics (same float path).
+inline double IndependentG(cbf::Barrier& barrier, const domains::DynamicsModel& dynamics,
+                           const ShieldOptions& options, const Eigen::VectorXf& state,
+                           const Eigen::VectorXf& action) {
+  Eigen::MatrixXf s = state;
+  Eigen::VectorXf h_s(1), h_next(1);
+  barrier.Evaluate(s, h_s);
+  Eigen::MatrixXf next(dynamics.state_dim(), 1);
+  dynamics.Step(state, action, next);
+  barrier.Evaluate(next, h_next);
+  return (static_cast<double>(h_next[0]) - h_s[0]) * (1.0 / options.dt) +
+         ClassKValue(options, h_s[0]);
+}
+
+}  // namespace secure::shield::test
