@@ -23,8 +23,6 @@ namespace {
 
 namespace di = domains::double_integrator;
 
-constexpr const char* kDomainName = "double-integrator";
-
 // Flags for BarrierTrainerOptions fields (shared by train, table1 and demo). Values land in
 // `parsed`; ApplyTo() copies only the flags that were given onto a base (the general defaults or a
 // domain preset, with the YAML config applied), so the precedence is base < config < flags.
@@ -138,7 +136,7 @@ struct TrainCommand {
                  "cbf train: give either --domain or both --safe-states and "
                  "--near-dangerous-states");
     if (from_domain) {
-      SECURE_CHECK(domain == kDomainName, "--domain = '" << domain << "', must be " << kDomainName);
+      CheckDoubleIntegratorDomain(domain);
       FinishGroundTruth(obstacle, &truth);
       auto sampled = cbf::SampleDoubleIntegratorData(truth, di::StateBox{}, n_safe, n_unsafe, seed);
       safe = std::move(sampled.safe);
@@ -226,7 +224,7 @@ struct EvalCommand {
   }
 
   void Run() {
-    SECURE_CHECK(domain == kDomainName, "--domain = '" << domain << "', must be " << kDomainName);
+    CheckDoubleIntegratorDomain(domain);
     FinishGroundTruth(obstacle, &truth);
     const cbf::BarrierNet net = cbf::BarrierNet::Load(model);
     net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", model);

@@ -43,6 +43,11 @@ void AddConfigFlag(CLI::App* cmd, const Config& config) {
       ->check(CLI::ExistingFile);
 }
 
+void CheckDoubleIntegratorDomain(const std::string& domain) {
+  SECURE_CHECK(domain == kDoubleIntegratorDomain,
+               "--domain = '" << domain << "', must be " << kDoubleIntegratorDomain);
+}
+
 void AddGroundTruthFlags(CLI::App* cmd, domains::double_integrator::GroundTruth* truth,
                          std::vector<double>* obstacle) {
   cmd->add_option("--obstacle", *obstacle, "obstacle centre X,Y")

@@ -25,6 +25,11 @@ Config PreScanConfig(int argc, char** argv);
 /// Adds --config (for help and validation; the file is read by PreScanConfig).
 void AddConfigFlag(CLI::App* cmd, const Config& config);
 
+/// The one domain with a ground truth so far, as named by --domain.
+inline constexpr const char* kDoubleIntegratorDomain = "double-integrator";
+/// Throws unless `domain` is kDoubleIntegratorDomain ("--domain = 'x', must be double-integrator").
+void CheckDoubleIntegratorDomain(const std::string& domain);
+
 /// --obstacle X,Y --radius R --gamma G bound to `truth`.
 void AddGroundTruthFlags(CLI::App* cmd, domains::double_integrator::GroundTruth* truth,
                          std::vector<double>* obstacle);

@@ -18,7 +18,6 @@ namespace {
 
 namespace di = domains::double_integrator;
 
-constexpr const char* kDomainName = "double-integrator";
 constexpr const char* kGroundTruthBarrier = "ground-truth";
 
 // Warns on stderr when a model's recorded training geometry differs from the run's.
@@ -110,7 +109,7 @@ struct ShieldRunCommand {
   }
 
   void Run() {
-    SECURE_CHECK(domain == kDomainName, "--domain = '" << domain << "', must be " << kDomainName);
+    CheckDoubleIntegratorDomain(domain);
     FinishGroundTruth(obstacle, &options.truth);
     if (goal.size() == 2) {
       options.goal_x = goal[0];

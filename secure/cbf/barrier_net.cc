@@ -3,16 +3,11 @@
 #include <sstream>
 
 #include "secure/common/error.h"
+#include "secure/common/strings.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::cbf {
 namespace {
-
-std::string JoinNames(const std::vector<std::string>& names) {
-  std::string out;
-  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
-  return out;
-}
 
 std::string DescribeSpec(const nn::MlpSpec& spec) {
   std::ostringstream t;
@@ -41,9 +36,9 @@ void BarrierNet::Validate(const std::string& what) const {
 void BarrierNet::CheckFeatures(const std::vector<std::string>& data_features,
                                const std::string& source, const std::string& model_name) const {
   if (data_features == features) return;
-  SECURE_THROW(source << " has " << data_features.size() << " features ("
-                      << JoinNames(data_features) << "); " << model_name << " expects "
-                      << features.size() << " (" << JoinNames(features) << ")");
+  SECURE_THROW(source << " has " << data_features.size() << " features (" << Join(data_features)
+                      << "); " << model_name << " expects " << features.size() << " ("
+                      << Join(features) << ")");
 }
 
 void BarrierNet::Save(const std::string& path) const {

@@ -20,6 +20,7 @@
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/strings.h"
 
 namespace secure::data {
 namespace {
@@ -123,15 +124,6 @@ std::string_view NextLine(std::string_view& rest) {
   return line;
 }
 
-std::string JoinNames(const std::vector<std::string>& names) {
-  std::string joined;
-  for (std::size_t i = 0; i < names.size(); ++i) {
-    if (i > 0) joined += ", ";
-    joined += names[i];
-  }
-  return joined;
-}
-
 }  // namespace
 
 NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& select) {
@@ -180,9 +172,8 @@ NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& se
     table.columns = select;
     for (const std::string& name : select) {
       const auto it = index_of.find(name);
-      SECURE_CHECK(
-          it != index_of.end(),
-          path << ": column '" << name << "' not found; the header has: " << JoinNames(header));
+      SECURE_CHECK(it != index_of.end(),
+                   path << ": column '" << name << "' not found; the header has: " << Join(header));
       selected.push_back(it->second);
     }
   }
