@@ -1,5 +1,4 @@
-// secure cbf train | eval | predict | table1, and secure demo (the Table 1 reproduction until the
-// full pipeline lands).
+// secure cbf train | eval | predict | table1.
 #include <cstdio>
 #include <functional>
 #include <iostream>
@@ -23,7 +22,7 @@ namespace {
 
 namespace di = domains::double_integrator;
 
-// Flags for BarrierTrainerOptions fields (shared by train, table1 and demo). Values land in
+// Flags for BarrierTrainerOptions fields (shared by train and table1). Values land in
 // `parsed`; ApplyTo() copies only the flags that were given onto a base (the general defaults or a
 // domain preset, with the YAML config applied), so the precedence is base < config < flags.
 class TrainerFlags {
@@ -348,15 +347,12 @@ void RegisterCbfCommands(CLI::App& app, const Config& config) {
   static EvalCommand eval;
   static PredictCommand predict;
   static Table1Command table1;
-  static Table1Command demo;
   train.Register(*cbf, config);
   eval.Register(*cbf, config);
   predict.Register(*cbf, config);
   table1.Register(*cbf, config, "table1",
                   "The paper's Table 1: learn the double-integrator CBF over seeds, validate on "
                   "the 9M-state grid");
-  demo.Register(app, config, "demo",
-                "The main job (for now the Table 1 reproduction with default settings)");
 }
 
 }  // namespace secure::cli

@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "secure/common/build_info.h"
+#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 
 namespace secure::cli {
@@ -41,6 +42,38 @@ Config PreScanConfig(int argc, char** argv) {
 void AddConfigFlag(CLI::App* cmd, const Config& config) {
   cmd->add_option("--config", "YAML file with option sections; command-line flags override it")
       ->check(CLI::ExistingFile);
+}
+
+void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
+  class_k = ToString(shield::kClassKNames, so->class_k);
+  aggregation = ToString(shield::kAggregationNames, so->aggregation);
+  resampling = ToString(shield::kResamplingNames, so->resampling);
+  cmd->add_option("--samples", so->num_samples, "M: actions drawn per round")
+      ->capture_default_str();
+  cmd->add_option("--safe-ratio", so->safe_ratio, "rho0: resample while #safe / M <= rho0")
+      ->capture_default_str();
+  cmd->add_option("--class-k", class_k, "class-K function: linear | cubic")->capture_default_str();
+  cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
+      ->capture_default_str();
+  cmd->add_option("--aggregation", aggregation, "mean | random-safe")->capture_default_str();
+  cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str();
+  cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
+      ->capture_default_str();
+  cmd->add_option("--time-budget-us", so->time_budget_us,
+                  "wall-time budget per decision in microseconds (0: none)")
+      ->capture_default_str();
+  cmd->add_option("--probes", so->num_probes, "N: probe actions per adaptive step")
+      ->capture_default_str();
+  cmd->add_option("--probe-extent", so->probe_extent, "R: probes are uniform in mu + [-R, R]^n")
+      ->capture_default_str();
+  cmd->add_option("--sigma-step", so->sigma_step, "alpha_sigma: sigma widening step")
+      ->capture_default_str();
+}
+
+void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
+  so->class_k = FromString(shield::kClassKNames, class_k, "--class-k");
+  so->aggregation = FromString(shield::kAggregationNames, aggregation, "--aggregation");
+  so->resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
 }
 
 void CheckDoubleIntegratorDomain(const std::string& domain) {

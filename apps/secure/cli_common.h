@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "secure/domains/double_integrator/double_integrator.h"
+#include "secure/shield/shield.h"
 
 namespace secure::cli {
 
@@ -39,6 +40,14 @@ void ApplyGroundTruthYaml(const YAML::Node& node, const std::string& source,
 /// Copies a parsed --obstacle X,Y into truth (no-op when the flag was not given).
 void FinishGroundTruth(const std::vector<double>& obstacle,
                        domains::double_integrator::GroundTruth* truth);
+
+/// Flags for the shield's options (--samples, --safe-ratio, --class-k, ...), bound to `options`;
+/// the enum-valued ones are parsed by ApplyTo() after CLI parsing.
+struct ShieldFlags {
+  std::string class_k, aggregation, resampling;
+  void Add(CLI::App* cmd, shield::ShieldOptions* options);
+  void ApplyTo(shield::ShieldOptions* options) const;
+};
 
 /// Prints `result` (with the build context added) as one JSON document on stdout.
 void PrintJson(nlohmann::json result);

@@ -4,8 +4,10 @@
 #include "cli_common.h"
 
 namespace secure::cli {
-/// secure cbf ... and secure demo.
+/// secure cbf ...
 void RegisterCbfCommands(CLI::App& app, const Config& config);
 /// secure shield run.
 void RegisterShieldCommands(CLI::App& app, const Config& config);
+/// secure demo, secure demos generate, secure policy train, secure eval.
+void RegisterPipelineCommands(CLI::App& app, const Config& config);
 }  // namespace secure::cli

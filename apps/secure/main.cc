@@ -1,5 +1,5 @@
 // secure: learn safe behaviour from demonstrations (SECURE, CBF shielding). main() only parses
-// and dispatches; see cbf_commands.cc and shield_commands.cc.
+// and dispatches; see cbf_commands.cc, shield_commands.cc and pipeline_commands.cc.
 #include <CLI/CLI.hpp>
 #include <iostream>
 
@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
     const secure::cli::Config config = secure::cli::PreScanConfig(argc, argv);
     secure::cli::RegisterCbfCommands(app, config);
     secure::cli::RegisterShieldCommands(app, config);
+    secure::cli::RegisterPipelineCommands(app, config);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);

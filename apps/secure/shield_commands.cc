@@ -44,9 +44,7 @@ struct ShieldRunCommand {
   eval::ShieldRunOptions options;
   std::vector<double> obstacle, goal;
   std::string domain, barrier;
-  std::string class_k = ToString(shield::kClassKNames, options.shield.class_k);
-  std::string aggregation = ToString(shield::kAggregationNames, options.shield.aggregation);
-  std::string resampling = ToString(shield::kResamplingNames, options.shield.resampling);
+  ShieldFlags shield_flags;
   bool unshielded = false;
   bool json = false;
 
@@ -79,30 +77,8 @@ struct ShieldRunCommand {
     cmd->add_option("--accel-bound", options.accel_bound,
                     "per-component acceleration bound (environment and policy)")
         ->capture_default_str();
-    // Shield options.
-    shield::ShieldOptions& so = options.shield;
-    cmd->add_option("--samples", so.num_samples, "M: actions drawn per round")
-        ->capture_default_str();
-    cmd->add_option("--safe-ratio", so.safe_ratio, "rho0: resample while #safe / M <= rho0")
-        ->capture_default_str();
-    cmd->add_option("--class-k", class_k, "class-K function: linear | cubic")
-        ->capture_default_str();
-    cmd->add_option("--class-k-gain", so.class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
-        ->capture_default_str();
+    shield_flags.Add(cmd, &options.shield);
     cmd->add_option("--dt", options.dt, "control period (environment step and the shield's dt)")
-        ->capture_default_str();
-    cmd->add_option("--aggregation", aggregation, "mean | random-safe")->capture_default_str();
-    cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str();
-    cmd->add_option("--max-iterations", so.max_iterations, "sampling rounds per decision")
-        ->capture_default_str();
-    cmd->add_option("--time-budget-us", so.time_budget_us,
-                    "wall-time budget per decision in microseconds (0: none)")
-        ->capture_default_str();
-    cmd->add_option("--probes", so.num_probes, "N: probe actions per adaptive step")
-        ->capture_default_str();
-    cmd->add_option("--probe-extent", so.probe_extent, "R: probes are uniform in mu + [-R, R]^n")
-        ->capture_default_str();
-    cmd->add_option("--sigma-step", so.sigma_step, "alpha_sigma: sigma widening step")
         ->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] { Run(); });
@@ -116,9 +92,7 @@ struct ShieldRunCommand {
       options.goal_y = goal[1];
     }
     shield::ShieldOptions& so = options.shield;
-    so.class_k = FromString(shield::kClassKNames, class_k, "--class-k");
-    so.aggregation = FromString(shield::kAggregationNames, aggregation, "--aggregation");
-    so.resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
+    shield_flags.ApplyTo(&so);
     so.dt = options.dt;
     options.Validate();
 

@@ -113,7 +113,6 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
                                << near_dangerous.source << ") have different features");
   const Stopwatch clock;
   TorchThreadsGuard threads(options.threads);
-  torch::manual_seed(options.seed);
   Rng rng(options.seed);
 
   // Stratified split; validation only if both classes contribute.
@@ -152,7 +151,15 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   spec.hidden = options.hidden;
   spec.output_dim = 1;
   spec.activation = options.activation;
-  nn::TorchMlp model(spec);
+  // The initial weights come from LibTorch's global generator (seeded here; nothing else in
+  // training draws from it): the lock makes concurrent trainings in several threads safe and
+  // each one's initialisation a function of its own seed only.
+  nn::TorchMlp model = [&] {
+    static std::mutex mutex;
+    const std::lock_guard<std::mutex> lock(mutex);
+    torch::manual_seed(options.seed);
+    return nn::TorchMlp(spec);
+  }();
   torch::optim::Adam optimizer(
       model->parameters(),
       torch::optim::AdamOptions(options.learning_rate).weight_decay(options.weight_decay));

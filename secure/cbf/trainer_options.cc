@@ -9,6 +9,7 @@
 
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/common/error.h"
+#include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
 namespace {
@@ -16,19 +17,6 @@ namespace {
 #define SECURE_OPTION_CHECK(cond, field, value, rule) \
   SECURE_CHECK(cond, "BarrierTrainerOptions::" << field << " = " << value << ", must be " << rule)
 
-template <typename T>
-T YamlValue(const YAML::Node& node, const std::string& key, const std::string& source) {
-  try {
-    return node.as<T>();
-  } catch (const YAML::Exception&) {
-    SECURE_THROW(source << ": field '" << key << "' has value '" << YAML::Dump(node)
-                        << "', which is not a valid "
-                        << (std::is_same_v<T, bool>       ? "boolean"
-                            : std::is_integral_v<T>       ? "integer"
-                            : std::is_floating_point_v<T> ? "number"
-                                                          : "value"));
-  }
-}
 
 }  // namespace
 

@@ -73,6 +73,23 @@ TrajectorySet ReadTrajectories(const std::string& path,
                                const std::vector<std::string>& action_features,
                                const std::string& episode_column = "episode");
 
+/// Writes `set` as a CSV file (columns: the feature names; one row per state), atomically (via
+/// WriteCsv). Reads back bit-exactly with ReadStateSet.
+/// @throws secure::Error if the set holds no states, its matrix and feature names disagree, a
+///   feature name is unusable as a CSV column (see WriteCsv) or repeated, or a value is not finite.
+void WriteStateSet(const std::string& path, const StateSet& set);
+
+/// Writes trajectories as a CSV file, atomically (via WriteCsv), with the columns
+///   <episode_column>, step, <state features...>, <action features...>
+/// one row per step: episode k (0-based, in order) holds the columns [episode_begin[k],
+/// episode_begin[k + 1]) and step counts 0, 1, ... within it. Reads back bit-exactly with
+/// ReadTrajectories(path, state_features, action_features, episode_column).
+/// @throws secure::Error if there are no steps, the matrices, feature names and episode_begin
+///   disagree (episode_begin must run strictly increasing from 0 to num_steps(): an empty episode
+///   would not read back), a column name is repeated or unusable, or a value is not finite.
+void WriteTrajectories(const std::string& path, const TrajectorySet& set,
+                       const std::string& episode_column = "episode");
+
 /// Checks that a set has at least one state and only finite values; `what` names it in the
 /// message ("near-dangerous states (file.csv): 0 states; each class needs at least one").
 void CheckNonEmptyFinite(const StateSet& set, const std::string& what);

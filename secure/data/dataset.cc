@@ -44,6 +44,16 @@ Eigen::MatrixXf ToFloatRows(const NumericTable& table, Eigen::Index first, Eigen
   return out;
 }
 
+// A header with a repeated name would not read back (ReadCsv rejects it).
+void CheckDistinct(const std::string& path, const std::vector<std::string>& columns) {
+  std::unordered_map<std::string, std::size_t> first_of;
+  for (std::size_t j = 0; j < columns.size(); ++j) {
+    const auto [it, inserted] = first_of.emplace(columns[j], j);
+    SECURE_CHECK(inserted, "cannot write '" << path << "': column " << j + 1 << " '" << columns[j]
+                                            << "' repeats column " << it->second + 1);
+  }
+}
+
 }  // namespace
 
 StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features) {
@@ -103,6 +113,66 @@ TrajectorySet ReadTrajectories(const std::string& path,
   }
   set.episode_begin.push_back(num_rows);
   return set;
+}
+
+void WriteStateSet(const std::string& path, const StateSet& set) {
+  SECURE_CHECK(set.states.rows() == set.dim(), "cannot write '" << path << "': the states have "
+                                                                << set.states.rows() << " rows but "
+                                                                << set.dim() << " feature names");
+  SECURE_CHECK(set.size() > 0, "cannot write '" << path << "': 0 states (would not read back)");
+  CheckDistinct(path, set.features);
+  WriteCsv(path, set.features, set.states.cast<double>());
+}
+
+void WriteTrajectories(const std::string& path, const TrajectorySet& set,
+                       const std::string& episode_column) {
+  const auto state_dim = static_cast<Eigen::Index>(set.state_features.size());
+  const auto action_dim = static_cast<Eigen::Index>(set.action_features.size());
+  const Eigen::Index steps = set.states.cols();
+  SECURE_CHECK(state_dim > 0, "cannot write '" << path << "': no state features");
+  SECURE_CHECK(set.states.rows() == state_dim,
+               "cannot write '" << path << "': the states have " << set.states.rows()
+                                << " rows but " << state_dim << " state feature names");
+  SECURE_CHECK(set.actions.rows() == action_dim,
+               "cannot write '" << path << "': the actions have " << set.actions.rows()
+                                << " rows but " << action_dim << " action feature names");
+  SECURE_CHECK(set.actions.cols() == steps, "cannot write '" << path << "': " << steps
+                                                             << " states but " << set.actions.cols()
+                                                             << " actions");
+  SECURE_CHECK(steps > 0, "cannot write '" << path << "': 0 steps (would not read back)");
+  const std::vector<long>& begin = set.episode_begin;
+  SECURE_CHECK(begin.size() >= 2 && begin.front() == 0 && begin.back() == steps,
+               "cannot write '" << path << "': episode_begin must start at 0 and end at " << steps
+                                << " (the number of steps); it has " << begin.size() << " entries"
+                                << (begin.empty() ? std::string()
+                                                  : ", from " + std::to_string(begin.front()) +
+                                                        " to " + std::to_string(begin.back())));
+  for (std::size_t k = 0; k + 1 < begin.size(); ++k) {
+    SECURE_CHECK(begin[k] < begin[k + 1],
+                 "cannot write '" << path << "': episode " << k << " is empty or reversed ("
+                                  << "episode_begin[" << k << "] = " << begin[k]
+                                  << ", episode_begin[" << k + 1 << "] = " << begin[k + 1]
+                                  << "); empty episodes would not read back");
+  }
+
+  std::vector<std::string> columns;
+  columns.reserve(static_cast<std::size_t>(2 + state_dim + action_dim));
+  columns.push_back(episode_column);
+  columns.push_back("step");
+  columns.insert(columns.end(), set.state_features.begin(), set.state_features.end());
+  columns.insert(columns.end(), set.action_features.begin(), set.action_features.end());
+  CheckDistinct(path, columns);
+
+  Eigen::MatrixXd values(static_cast<Eigen::Index>(columns.size()), steps);
+  for (std::size_t k = 0; k + 1 < begin.size(); ++k) {
+    for (long t = begin[k]; t < begin[k + 1]; ++t) {
+      values(0, t) = static_cast<double>(k);
+      values(1, t) = static_cast<double>(t - begin[k]);
+    }
+  }
+  values.middleRows(2, state_dim) = set.states.cast<double>();
+  if (action_dim > 0) values.bottomRows(action_dim) = set.actions.cast<double>();
+  WriteCsv(path, columns, values);
 }
 
 void CheckNonEmptyFinite(const StateSet& set, const std::string& what) {

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "secure/common/error.h"
+#include "secure/domains/double_integrator/reach_avoid.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 
@@ -18,10 +19,6 @@ namespace di = domains::double_integrator;
 #define SECURE_RUN_OPTION_CHECK(cond, field, value, rule) \
   SECURE_CHECK(cond, "ShieldRunOptions::" << field << " = " << value << ", must be " << rule)
 
-// Start states are drawn by rejection; give up after this many draws per episode (the default
-// start square never rejects).
-constexpr int kMaxStartDraws = 10000;
-
 // Episode i's stream: the seed and the index mixed (Rng::Seed runs splitmix64 over the result).
 Rng EpisodeRng(std::uint64_t seed, long episode) {
   return Rng(seed ^ (0xd1b54a32d192ed03ULL * static_cast<std::uint64_t>(episode + 1)));
@@ -31,22 +28,15 @@ float Clip(double value, double bound) {
   return static_cast<float>(std::clamp(value, -bound, bound));
 }
 
-// A start state: position uniform in the start square, small random velocity, clear of the
-// obstacle and safe under the ground truth.
+// A start state: the reach-avoid task's start distribution with this run's start region.
 Eigen::Vector4f DrawStart(const ShieldRunOptions& o, Rng& rng) {
-  const di::GroundTruth& t = o.truth;
-  for (int draw = 0; draw < kMaxStartDraws; ++draw) {
-    Eigen::Vector4f s;
-    s[0] = static_cast<float>(rng.Uniform(o.start_lo, o.start_hi));
-    s[1] = static_cast<float>(rng.Uniform(o.start_lo, o.start_hi));
-    s[2] = static_cast<float>(rng.Uniform(-o.start_speed, o.start_speed));
-    s[3] = static_cast<float>(rng.Uniform(-o.start_speed, o.start_speed));
-    const double distance = std::hypot(s[0] - t.obstacle_x, s[1] - t.obstacle_y);
-    if (distance >= t.radius + o.start_clearance && t.H(s[0], s[1], s[2], s[3]) >= 0.0) return s;
-  }
-  SECURE_THROW("ShieldRunOptions: no start state in ["
-               << o.start_lo << ", " << o.start_hi << ")^2 is " << o.start_clearance
-               << " clear of the obstacle and safe (" << kMaxStartDraws << " draws)");
+  di::ReachAvoidOptions task;
+  task.truth = o.truth;
+  task.start_lo = o.start_lo;
+  task.start_hi = o.start_hi;
+  task.start_speed = o.start_speed;
+  task.start_clearance = o.start_clearance;
+  return di::DrawStartState(task, rng);
 }
 
 }  // namespace
@@ -209,35 +199,12 @@ std::string ShieldRunResult::Table() const {
 }
 
 // ---------------------------------------------------------------------------------------------
-ClippedDoubleIntegrator::ClippedDoubleIntegrator(double dt, double accel_bound)
-    : exact_(dt), bound_(static_cast<float>(accel_bound)), clipped_(di::kActionDim, kChunk) {
-  SECURE_CHECK(std::isfinite(accel_bound) && accel_bound > 0,
-               "ClippedDoubleIntegrator: accel_bound = " << accel_bound << ", must be > 0");
-}
-
-std::string ClippedDoubleIntegrator::Describe() const {
-  std::ostringstream s;
-  s << exact_.Describe() << ", actions clipped to [-" << bound_ << ", " << bound_ << "]";
-  return s.str();
-}
-
-void ClippedDoubleIntegrator::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-                                     const Eigen::Ref<const Eigen::MatrixXf>& actions,
-                                     Eigen::Ref<Eigen::MatrixXf> next_states) const {
-  for (Eigen::Index first = 0; first < actions.cols(); first += kChunk) {
-    const Eigen::Index n = std::min<Eigen::Index>(kChunk, actions.cols() - first);
-    clipped_.leftCols(n) = actions.middleCols(first, n).cwiseMax(-bound_).cwiseMin(bound_);
-    exact_.Step(state, clipped_.leftCols(n), next_states.middleCols(first, n));
-  }
-}
-
-// ---------------------------------------------------------------------------------------------
 ShieldRunResult RunDoubleIntegratorShield(const ShieldRunOptions& options, cbf::Barrier& barrier,
                                           bool shielded) {
   options.Validate();
   const Stopwatch clock;
   const di::GroundTruth& truth = options.truth;
-  const ClippedDoubleIntegrator environment(options.dt, options.accel_bound);
+  const di::ClippedDoubleIntegrator environment(options.dt, options.accel_bound);
   std::optional<shield::Shield> shield;
   if (shielded) shield.emplace(options.shield, barrier, environment);
 

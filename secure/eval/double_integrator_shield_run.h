@@ -12,8 +12,9 @@
 // One step: mu = PD(s); the shield returns a = Decide(s, mu, sigma) (unshielded: a ~ N(mu,
 // sigma)); the environment clips a to [-a_max, a_max]^2 and applies the exact zero-order-hold
 // dynamics. The shield's model T is that same environment map (clip + exact step,
-// ClippedDoubleIntegrator below), so with the ground-truth barrier the checked next state is the
-// one that happens: h(s') >= (1 - k dt) h(s) >= 0 for the linear class-K alpha(h) = k h.
+// domains::double_integrator::ClippedDoubleIntegrator), so with the ground-truth barrier the
+// checked next state is the one that happens: h(s') >= (1 - k dt) h(s) >= 0 for the linear
+// class-K alpha(h) = k h.
 //
 // An episode ends when the agent reaches the goal (success), enters the obstacle (a crash:
 // ||p - p_o|| < r), or after max_steps (timeout). Two safety counts are kept apart:
@@ -156,29 +157,6 @@ struct ShieldRunResult {
   nlohmann::json ToJson() const;
   /// A Markdown table of the counts and latencies.
   std::string Table() const;
-};
-
-/// The environment's transition as a DynamicsModel: clip each action component to
-/// [-accel_bound, accel_bound], then the exact double-integrator step. Step() allocates nothing
-/// (batches are clipped in chunks through a preallocated buffer), which makes the object
-/// usable from one thread at a time only.
-class ClippedDoubleIntegrator final : public domains::DynamicsModel {
- public:
-  ClippedDoubleIntegrator(double dt, double accel_bound);
-  int state_dim() const override { return domains::double_integrator::kStateDim; }
-  int action_dim() const override { return domains::double_integrator::kActionDim; }
-  std::string Describe() const override;
-
- protected:
-  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-              const Eigen::Ref<const Eigen::MatrixXf>& actions,
-              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
-
- private:
-  static constexpr int kChunk = 64;
-  domains::double_integrator::Dynamics exact_;
-  float bound_;
-  mutable Eigen::MatrixXf clipped_;  // (action_dim x kChunk) scratch
 };
 
 /// Runs options.episodes episodes. shielded: each action comes from a Shield over `barrier` and

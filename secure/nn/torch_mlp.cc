@@ -1,4 +1,7 @@
 #include "secure/nn/torch_mlp.h"
+#include "secure/nn/torch_threads.h"
+
+#include <dlfcn.h>
 
 #include "secure/common/error.h"
 
@@ -67,5 +70,20 @@ Eigen::MatrixXf ToEigen(const torch::Tensor& tensor) {
   const torch::Tensor t = tensor.detach().to(torch::kFloat32).contiguous();
   return Eigen::Map<const Eigen::MatrixXf>(t.data_ptr<float>(), t.size(1), t.size(0));
 }
+
+void SetTorchThreads(int threads) {
+  SECURE_CHECK(threads > 0, "SetTorchThreads: threads = " << threads << ", must be > 0");
+  torch::set_num_threads(threads);
+  // LibTorch's CPU matrix products go to the system BLAS, which keeps its own thread pool:
+  // torch::set_num_threads does not limit it, and two trainers on two threads would each start
+  // a BLAS pool per call and fight over the cores (measured: 10-20x slower). OpenBLAS is found
+  // at run time, so that the reference BLAS (no such symbol) still works.
+  using SetBlasThreads = void (*)(int);
+  static const auto set_blas_threads =
+      reinterpret_cast<SetBlasThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+  if (set_blas_threads != nullptr) set_blas_threads(threads);
+}
+
+int TorchThreads() { return torch::get_num_threads(); }
 
 }  // namespace secure::nn

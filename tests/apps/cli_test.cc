@@ -256,4 +256,85 @@ TEST(CliTest, ShieldRunRejectsBadInput) {
   EXPECT_HAS(r.err, "quartic");
 }
 
+// ------------------------------------------------------------------------------------------
+// The SECURE pipeline and its stages.
+
+TEST(CliTest, DemoQuickPrintsTheResultDocument) {
+  const Result r = RunCli("demo --quick --seeds 2 --episodes 6 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.err, "[seed 1]");  // progress on stderr
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["command"], "demo");
+  for (const char* method : {"bc", "airl", "secure", "secure-random-safe", "secure-no-resampling",
+                             "bc+shield"}) {
+    ASSERT_TRUE(j["methods"].contains(method)) << method;
+    for (const char* metric : {"success_rate", "dangerous_rate"}) {
+      const auto& m = j["methods"][method][metric];
+      EXPECT_EQ(m["per_seed"].size(), 2u) << method;
+      EXPECT_GE(m["mean"].get<double>(), 0.0);
+      EXPECT_LE(m["mean"].get<double>(), 1.0);
+      EXPECT_GE(m["std"].get<double>(), 0.0);
+    }
+  }
+  EXPECT_TRUE(j["comparisons"]["secure_vs_airl"].contains("success_tost"));
+}
+
+TEST(CliTest, EveryStageRunsFromFiles) {
+  const std::string dir = (TempDir() / "stages").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 12 --out " + dir +
+                    " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["demonstrations"], 12);
+  for (const char* f : {"/demos.csv", "/safe.csv", "/near_dangerous.csv"})
+    EXPECT_TRUE(fs::exists(dir + f)) << f;
+  r = RunCli("policy train --algo bc --demos " + dir + "/demos.csv --out " + dir +
+             "/bc.model --epochs 3 --curve " + dir + "/bc_curve.csv --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir + "/bc_curve.csv"));
+  r = RunCli("policy train --algo airl --demos " + dir + "/demos.csv --out " + dir +
+             "/airl.model --iterations 2 --warm-start " + dir + "/bc.model --checkpoint " + dir +
+             "/airl.ckpt --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir + "/airl.ckpt"));
+  r = RunCli("cbf train --safe-states " + dir + "/safe.csv --near-dangerous-states " + dir +
+             "/near_dangerous.csv --out " + dir + "/barrier.model" + kFastTrain);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("eval --domain double-integrator --bc " + dir + "/bc.model --airl " + dir +
+             "/airl.model --barrier " + dir + "/barrier.model --seeds 2 --episodes 3 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["methods"].size(), 6u);
+  EXPECT_EQ(j["methods"]["bc+shield"]["success_rate"]["per_seed"].size(), 2u);
+  // The ground-truth barrier and a method subset.
+  r = RunCli("eval --domain double-integrator --bc " + dir +
+             "/bc.model --barrier ground-truth --methods bc+shield --seeds 1 --episodes 3 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["methods"].size(), 1u);
+}
+
+TEST(CliTest, PipelineStagesRejectBadInput) {
+  Result r = RunCli("policy train --algo gail --demos x.csv --out y.model");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--algo = 'gail'");
+  r = RunCli("policy train --algo bc --demos /nonexistent/demos.csv --out y.model");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "/nonexistent/demos.csv");
+  const std::string bad = Write("bad_demos.csv", "episode,step,x,y,vx,vy,ax,ay\n0,0,1,2,3,nan,0,0\n");
+  r = RunCli("policy train --algo bc --demos " + bad + " --out y.model");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "vy");
+  r = RunCli("eval --domain double-integrator");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--run DIR");
+  r = RunCli("eval --domain double-integrator --bc /nonexistent.model --methods bc");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "/nonexistent.model");
+  r = RunCli("demo --quick --methods bc,foo");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "'foo'");
+  r = RunCli("demos generate --domain panda --out x");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--domain = 'panda'");
+}
+
 }  // namespace

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -135,6 +136,131 @@ TEST_F(DatasetTest, ReadTrajectoriesRejectsBadStateCell) {
   const std::string path = Write("demos.csv", "episode,s,a\n0,1,2\n0,oops,2\n");
   ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"s"}, {"a"}); }),
                     {path + ":3:", "column 's'", "value 'oops'"});
+}
+
+// ---------------------------------------------------------------------------------------------
+// WriteStateSet and WriteTrajectories
+
+// Values that need all of a float's digits, plus extremes of its range.
+Eigen::MatrixXf AwkwardFloats(Eigen::Index rows, Eigen::Index cols, std::uint64_t seed) {
+  Rng rng(seed);
+  Eigen::MatrixXf m(rows, cols);
+  for (Eigen::Index i = 0; i < m.size(); ++i)
+    m(i) = static_cast<float>(rng.Uniform(-10.0, 10.0)) / 3.0f;
+  m(0) = std::numeric_limits<float>::max();
+  m(m.size() - 1) = std::numeric_limits<float>::denorm_min();
+  return m;
+}
+
+TEST_F(DatasetTest, WriteStateSetRoundTripsBitExactly) {
+  StateSet set{"", {"x", "y", "vx"}, AwkwardFloats(3, 17, 1)};
+  const std::string path = PathOf("states.csv");
+  WriteStateSet(path, set);
+  const StateSet back = ReadStateSet(path);
+  EXPECT_EQ(back.source, path);
+  EXPECT_EQ(back.features, set.features);
+  EXPECT_EQ(back.states, set.states);
+}
+
+TEST_F(DatasetTest, WriteStateSetRejectsBadSets) {
+  const std::string path = PathOf("states.csv");
+  ExpectContainsAll(ErrorOf([&] {
+                      WriteStateSet(path, StateSet{"", {"x"}, Eigen::MatrixXf(1, 0)});
+                    }),
+                    {path, "0 states"});
+  ExpectContainsAll(ErrorOf([&] {
+                      WriteStateSet(path, StateSet{"", {"x"}, Eigen::MatrixXf::Zero(2, 3)});
+                    }),
+                    {path, "2 rows but 1 feature names"});
+  ExpectContainsAll(ErrorOf([&] {
+                      WriteStateSet(path, StateSet{"", {"x", "x"}, Eigen::MatrixXf::Zero(2, 3)});
+                    }),
+                    {path, "column 2 'x' repeats column 1"});
+  StateSet nan{"", {"x", "y"}, Eigen::MatrixXf::Zero(2, 3)};
+  nan.states(1, 2) = std::numeric_limits<float>::quiet_NaN();
+  ExpectContainsAll(ErrorOf([&] { WriteStateSet(path, nan); }), {path, "column 'y'", "row 2"});
+  EXPECT_FALSE(fs::exists(path));  // nothing half-written
+}
+
+TrajectorySet ThreeEpisodes() {
+  TrajectorySet set;
+  set.state_features = {"x", "y"};
+  set.action_features = {"ax"};
+  set.states = AwkwardFloats(2, 6, 2);
+  set.actions = AwkwardFloats(1, 6, 3);
+  set.episode_begin = {0, 3, 4, 6};
+  return set;
+}
+
+TEST_F(DatasetTest, WriteTrajectoriesRoundTripsBitExactly) {
+  const TrajectorySet set = ThreeEpisodes();
+  const std::string path = PathOf("demos.csv");
+  WriteTrajectories(path, set);
+  const TrajectorySet back = ReadTrajectories(path, set.state_features, set.action_features);
+  EXPECT_EQ(back.source, path);
+  EXPECT_EQ(back.state_features, set.state_features);
+  EXPECT_EQ(back.action_features, set.action_features);
+  EXPECT_EQ(back.states, set.states);
+  EXPECT_EQ(back.actions, set.actions);
+  EXPECT_EQ(back.episode_begin, set.episode_begin);
+
+  // The layout: episode, step, states, actions; steps count within each episode.
+  const NumericTable table = ReadCsv(path);
+  EXPECT_EQ(table.columns, (std::vector<std::string>{"episode", "step", "x", "y", "ax"}));
+  EXPECT_EQ(Eigen::RowVectorXd(table.values.row(0)),
+            (Eigen::RowVectorXd(6) << 0, 0, 0, 1, 2, 2).finished());
+  EXPECT_EQ(Eigen::RowVectorXd(table.values.row(1)),
+            (Eigen::RowVectorXd(6) << 0, 1, 2, 0, 0, 1).finished());
+}
+
+TEST_F(DatasetTest, WriteTrajectoriesUsesTheGivenEpisodeColumnAndAllowsNoActions) {
+  TrajectorySet set = ThreeEpisodes();
+  set.action_features.clear();
+  set.actions.resize(0, 6);
+  const std::string path = PathOf("demos.csv");
+  WriteTrajectories(path, set, "run");
+  const TrajectorySet back = ReadTrajectories(path, {"x", "y"}, {}, "run");
+  EXPECT_EQ(back.states, set.states);
+  EXPECT_EQ(back.episode_begin, set.episode_begin);
+}
+
+TEST_F(DatasetTest, WriteTrajectoriesRejectsInconsistentSets) {
+  const std::string path = PathOf("demos.csv");
+  const auto error_of = [&](const std::function<void(TrajectorySet&)>& breaker) {
+    TrajectorySet set = ThreeEpisodes();
+    breaker(set);
+    return ErrorOf([&] { WriteTrajectories(path, set); });
+  };
+  ExpectContainsAll(error_of([](TrajectorySet& s) {
+                      s.episode_begin = {0, 3, 3, 6};
+                    }),
+                    {path, "episode 1 is empty", "episode_begin[1] = 3"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) {
+                      s.episode_begin = {0, 3, 5};
+                    }),
+                    {path, "episode_begin must start at 0 and end at 6", "from 0 to 5"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) { s.episode_begin.clear(); }),
+                    {path, "episode_begin must start at 0", "0 entries"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) { s.actions.resize(1, 5); }),
+                    {path, "6 states but 5 actions"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) { s.state_features = {"x"}; }),
+                    {path, "2 rows but 1 state feature names"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) { s.action_features = {"x"}; }),
+                    {path, "column 5 'x' repeats column 3"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) {
+                      s.state_features = {"step", "y"};
+                    }),
+                    {path, "column 3 'step' repeats column 2"});
+  ExpectContainsAll(error_of([](TrajectorySet& s) {
+                      s.states.resize(2, 0);
+                      s.actions.resize(1, 0);
+                      s.episode_begin = {0};
+                    }),
+                    {path, "0 steps"});
+  ExpectContainsAll(
+      error_of([](TrajectorySet& s) { s.actions(0, 4) = std::numeric_limits<float>::infinity(); }),
+      {path, "column 'ax'", "row 4"});
+  EXPECT_FALSE(fs::exists(path));
 }
 
 TEST_F(DatasetTest, ReadsRealTaskDemos) {

@@ -184,22 +184,6 @@ TEST(DoubleIntegratorShieldRunTest, BarrierOfTheWrongDimensionIsAnError) {
   EXPECT_EQ(RunDoubleIntegratorShield(FastOptions(1), *barrier, false).episodes, 1);
 }
 
-TEST(ClippedDoubleIntegratorTest, ClipsThenStepsExactly) {
-  const ClippedDoubleIntegrator env(0.1, 3.0);
-  const domains::double_integrator::Dynamics exact(0.1);
-  const Eigen::Vector4f s(1.0f, 2.0f, 0.5f, -0.5f);
-  // 150 columns: more than one internal chunk.
-  Eigen::MatrixXf actions = Eigen::MatrixXf::Random(2, 150) * 6.0f;
-  Eigen::MatrixXf clipped = actions.cwiseMax(-3.0f).cwiseMin(3.0f);
-  Eigen::MatrixXf got(4, 150), want(4, 150);
-  env.Step(s, actions, got);
-  exact.Step(s, clipped, want);
-  EXPECT_EQ(got, want);
-  EXPECT_NE(clipped, actions);  // some were clipped
-  EXPECT_HAS(env.Describe(), "clipped");
-  EXPECT_HAS(ErrorOf([] { ClippedDoubleIntegrator(0.1, 0.0); }), "accel_bound = 0");
-}
-
 TEST(LatencySummaryTest, NearestRank) {
   std::vector<double> values;
   for (int i = 100; i >= 1; --i) values.push_back(i);  // unsorted on purpose

@@ -1,6 +1,8 @@
 #include "secure/domains/double_integrator/double_integrator.h"
 
+#include <algorithm>
 #include <cmath>
+#include <sstream>
 
 #include "secure/common/error.h"
 
@@ -125,6 +127,28 @@ void Dynamics::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
     next_states(1, i) = state[1] + state[3] * dt + actions(1, i) * half_dt2;
     next_states(2, i) = state[2] + actions(0, i) * dt;
     next_states(3, i) = state[3] + actions(1, i) * dt;
+  }
+}
+
+ClippedDoubleIntegrator::ClippedDoubleIntegrator(double dt, double accel_bound)
+    : exact_(dt), bound_(static_cast<float>(accel_bound)), clipped_(kActionDim, kChunk) {
+  SECURE_CHECK(std::isfinite(accel_bound) && accel_bound > 0,
+               "ClippedDoubleIntegrator: accel_bound = " << accel_bound << ", must be > 0");
+}
+
+std::string ClippedDoubleIntegrator::Describe() const {
+  std::ostringstream s;
+  s << exact_.Describe() << ", actions clipped to [-" << bound_ << ", " << bound_ << "]";
+  return s.str();
+}
+
+void ClippedDoubleIntegrator::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                     const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                                     Eigen::Ref<Eigen::MatrixXf> next_states) const {
+  for (Eigen::Index first = 0; first < actions.cols(); first += kChunk) {
+    const Eigen::Index n = std::min<Eigen::Index>(kChunk, actions.cols() - first);
+    clipped_.leftCols(n) = actions.middleCols(first, n).cwiseMax(-bound_).cwiseMin(bound_);
+    exact_.Step(state, clipped_.leftCols(n), next_states.middleCols(first, n));
   }
 }
 

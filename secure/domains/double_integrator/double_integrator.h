@@ -94,4 +94,31 @@ class Dynamics final : public DynamicsModel {
   double dt_;
 };
 
+/// The transition of an environment with bounded acceleration as a DynamicsModel: clip each
+/// action component to [-accel_bound, accel_bound], then the exact step of Dynamics. A shield
+/// given this model checks exactly the next state that will happen. Step() allocates nothing
+/// (batches are clipped in chunks through a preallocated buffer), which makes an object usable
+/// from one thread at a time only.
+class ClippedDoubleIntegrator final : public DynamicsModel {
+ public:
+  /// @throws secure::Error unless dt > 0 and accel_bound > 0 (both finite).
+  ClippedDoubleIntegrator(double dt, double accel_bound);
+  int state_dim() const override { return kStateDim; }
+  int action_dim() const override { return kActionDim; }
+  std::string Describe() const override;
+  double dt() const { return exact_.dt(); }
+  double accel_bound() const { return bound_; }
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
+
+ private:
+  static constexpr int kChunk = 64;
+  Dynamics exact_;
+  float bound_;
+  mutable Eigen::MatrixXf clipped_;  // (action_dim x kChunk) scratch
+};
+
 }  // namespace secure::domains::double_integrator

@@ -1,0 +1,424 @@
+// The SECURE pipeline and its stages as commands:
+//   secure demo                   the whole pipeline on the double integrator (the main job)
+//   secure demos generate         expert demonstrations + safe and near-dangerous states
+//   secure policy train           BC or AIRL from a demonstrations CSV
+//   secure eval                   bc / airl / secure / ablations / bc+shield over seeds
+// Every stage reads and writes files, so users can bring their own data at any stage.
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cli_common.h"
+#include "commands.h"
+#include "secure/cbf/barrier.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/common/enum_strings.h"
+#include "secure/common/error.h"
+#include "secure/common/timer.h"
+#include "secure/data/data.h"
+#include "secure/domains/double_integrator/expert.h"
+#include "secure/domains/double_integrator/reach_avoid.h"
+#include "secure/eval/policy_eval.h"
+#include "secure/experiments/double_integrator_pipeline.h"
+#include "secure/nn/torch_threads.h"
+#include "secure/policy/airl_trainer.h"
+#include "secure/policy/bc_trainer.h"
+
+namespace secure::cli {
+namespace {
+
+namespace di = domains::double_integrator;
+
+// ------------------------------------------------------------------------------------------
+struct DemoCommand {
+  bool quick = false;
+  bool json = false;
+  int seeds = 0;
+  long episodes = 0;
+  std::uint64_t first_seed = 0;
+  int threads = 2;
+  std::string out;
+  std::string methods;
+  YAML::Node config_section;
+  std::string config_path;
+
+  void Register(CLI::App& app, const Config& config) {
+    CLI::App* cmd = app.add_subcommand(
+        "demo",
+        "The main job: the complete SECURE pipeline on the double-integrator reach-avoid task "
+        "(demonstrations, learned barrier, BC and AIRL, shielded evaluation over seeds) and "
+        "its results table");
+    config_section = config.Section("pipeline");
+    config_path = config.path;
+    AddConfigFlag(cmd, config);
+    cmd->add_flag("--quick", quick, "a small profile (2 seeds x 20 episodes, short training)");
+    cmd->add_option("--seeds", seeds, "seeds (default: 10; --quick: 2)");
+    cmd->add_option("--episodes", episodes, "episodes per method and seed (default: 100)");
+    cmd->add_option("--first-seed", first_seed, "seeds first-seed, first-seed + 1, ...")
+        ->capture_default_str();
+    cmd->add_option("--threads", threads, "seeds run in parallel")->capture_default_str();
+    cmd->add_option("--methods", methods,
+                    "comma-separated subset of bc, airl, secure, secure-random-safe, "
+                    "secure-no-resampling, bc+shield (default: all)");
+    cmd->add_option("--out", out,
+                    "directory for the data, per-seed models and learning curves, result.json");
+    cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    experiments::PipelineOptions options =
+        quick ? experiments::PipelineOptions::Quick() : experiments::PipelineOptions::Default();
+    if (config_section.IsMap()) options.ApplyYaml(config_section, config_path + " [pipeline]");
+    if (seeds != 0) options.seeds = seeds;
+    if (episodes != 0) options.episodes = episodes;
+    if (!methods.empty()) options.methods = eval::ParseMethods(methods);
+    options.first_seed = first_seed;
+    options.threads = threads;
+    options.output_dir = out;
+    std::cerr << "secure demo: " << options.seeds << " seeds x " << options.episodes
+              << " episodes per method on " << options.threads << " threads"
+              << (out.empty() ? "" : ", writing to " + out) << "\n";
+    const experiments::PipelineResult result =
+        experiments::RunDoubleIntegratorPipeline(options, &std::cerr);
+    if (json) {
+      nlohmann::json r = result.ToJson();
+      r["command"] = "demo";
+      PrintJson(r);
+    } else {
+      std::cout << "\nSECURE on the double-integrator reach-avoid task (barrier learned from "
+                << result.safe_states << " safe + " << result.near_dangerous_states
+                << " near-dangerous states; " << result.demonstrations
+                << " expert demonstrations)\n\n"
+                << result.evaluation.Table() << "\nTotal " << result.seconds << " s.\n";
+    }
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+struct DemosGenerateCommand {
+  std::string domain, out;
+  di::ReachAvoidOptions task;
+  di::ExpertOptions expert;
+  di::DemonstrationOptions demos;
+  di::NearDangerousOptions near_dangerous;
+  long safe_states = 20000;
+  int slowed_copies = 1;
+  std::uint64_t seed = 1000;
+  bool json = false;
+
+  void Register(CLI::App& parent) {
+    CLI::App* cmd = parent.add_subcommand(
+        "generate",
+        "Expert task demonstrations (collisions discarded) and safety demonstrations: "
+        "demos.csv, safe.csv, near_dangerous.csv in --out");
+    cmd->add_option("--domain", domain, "domain: double-integrator")->required();
+    cmd->add_option("--out", out, "output directory")->required();
+    cmd->add_option("--episodes", demos.episodes, "expert episodes to attempt")
+        ->capture_default_str();
+    cmd->add_option("--safe-states", safe_states,
+                    "demonstration states (up to the goal) kept as safe states, at random")
+        ->capture_default_str();
+    cmd->add_option("--slowed-copies", slowed_copies,
+                    "safe-state augmentation: copies of each safe state with its velocity scaled "
+                    "by U[0, 1)")
+        ->capture_default_str();
+    cmd->add_option("--near-dangerous", near_dangerous.count, "near-dangerous states")
+        ->capture_default_str();
+    cmd->add_option("--rho-min", near_dangerous.rho_min,
+                    "near-dangerous band: from this distance to the obstacle's edge (negative: "
+                    "inside)")
+        ->capture_default_str();
+    cmd->add_option("--rho-max", near_dangerous.rho_max, "near-dangerous band: to this distance")
+        ->capture_default_str();
+    cmd->add_flag("--stop-at-goal", demos.stop_at_goal,
+                  "end each demonstration at the goal (default: run the full horizon)");
+    cmd->add_option("--seed", seed, "seed of all the data")->capture_default_str();
+    cmd->add_flag("--json", json, "print counts as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    CheckDoubleIntegratorDomain(domain);
+    SECURE_CHECK(safe_states > 0, "--safe-states = " << safe_states << ", must be > 0");
+    demos.seed = seed;
+    const di::Demonstrations d = di::GenerateDemonstrations(task, expert, demos);
+    Rng rng(seed + 1);
+    const data::StateSet safe = di::WithSlowedCopies(
+        di::SafeStatesFromDemonstrations(di::UntilGoal(d), safe_states, rng), slowed_copies, rng);
+    const data::StateSet nd = di::GenerateNearDangerous(task, near_dangerous, rng);
+    std::filesystem::create_directories(out);
+    data::WriteTrajectories(out + "/demos.csv", d.trajectories);
+    data::WriteStateSet(out + "/safe.csv", safe);
+    data::WriteStateSet(out + "/near_dangerous.csv", nd);
+    const nlohmann::json r = {
+        {"command", "demos generate"},
+        {"demonstrations", d.trajectories.num_episodes()},
+        {"steps", d.trajectories.num_steps()},
+        {"attempted", d.attempted},
+        {"discarded_collisions", d.discarded_collisions},
+        {"discarded_no_goal", d.discarded_no_goal},
+        {"safe_states", safe.size()},
+        {"near_dangerous_states", nd.size()},
+        {"files", {out + "/demos.csv", out + "/safe.csv", out + "/near_dangerous.csv"}},
+        {"task", task.ToJson()},
+        {"expert", expert.ToJson()}};
+    if (json) {
+      PrintJson(r);
+    } else {
+      std::cout << d.trajectories.num_episodes() << " demonstrations (" << d.attempted
+                << " attempted, " << d.discarded_collisions << " discarded for a collision, "
+                << d.discarded_no_goal << " for not reaching the goal), "
+                << d.trajectories.num_steps() << " steps -> " << out << "/demos.csv\n"
+                << safe.size() << " safe states -> " << out << "/safe.csv\n"
+                << nd.size() << " near-dangerous states -> " << out << "/near_dangerous.csv\n";
+    }
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+struct PolicyTrainCommand {
+  std::string algo, demos_path, out, domain = kDoubleIntegratorDomain, warm_start, reward;
+  std::string state_features, action_features;
+  policy::BcOptions bc;
+  policy::AirlOptions airl;
+  di::ReachAvoidOptions task;
+  bool json = false;
+  YAML::Node bc_yaml, airl_yaml;
+  std::string config_path;
+
+  void Register(CLI::App& parent, const Config& config) {
+    CLI::App* cmd = parent.add_subcommand(
+        "train", "Train a Gaussian policy from demonstrations: behaviour cloning or AIRL (PPO)");
+    bc_yaml = config.Section("bc");
+    airl_yaml = config.Section("airl");
+    config_path = config.path;
+    AddConfigFlag(cmd, config);
+    cmd->add_option("--algo", algo, "bc | airl")->required();
+    cmd->add_option("--demos", demos_path, "demonstrations CSV (episode, state and action columns)")
+        ->required();
+    cmd->add_option("--out", out, "output policy model file")->required();
+    cmd->add_option("--domain", domain,
+                    "domain the demonstrations come from (AIRL rolls out in it): "
+                    "double-integrator")
+        ->capture_default_str();
+    cmd->add_option("--state-features", state_features,
+                    "BC only: comma-separated state columns (default: the domain's)");
+    cmd->add_option("--action-features", action_features,
+                    "BC only: comma-separated action columns (default: the domain's)");
+    cmd->add_option("--seed", bc.seed, "seed of the training")->capture_default_str();
+    cmd->add_option("--epochs", bc.epochs, "BC: epochs")->capture_default_str();
+    cmd->add_option("--iterations", airl.iterations, "AIRL: iterations")->capture_default_str();
+    reward = ToString(policy::kAirlRewardNames, airl.reward);
+    cmd->add_option("--reward", reward,
+                    "AIRL policy reward: logit-d (log D - log(1-D), the paper) | state-reward "
+                    "(g(s), the released code)")
+        ->capture_default_str();
+    cmd->add_option("--warm-start", warm_start, "AIRL: initialise the policy from this model");
+    cmd->add_option("--curve", bc.curve_path, "write the learning curve to this CSV");
+    cmd->add_option("--checkpoint", airl.checkpoint_path, "AIRL: checkpoint path");
+    cmd->add_option("--checkpoint-every", airl.checkpoint_every, "AIRL: iterations between "
+                                                                 "checkpoints")
+        ->capture_default_str();
+    cmd->add_flag("--resume", airl.resume, "AIRL: continue from --checkpoint");
+    cmd->add_flag("--json", json, "print the training summary as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    CheckDoubleIntegratorDomain(domain);
+    SECURE_CHECK(algo == "bc" || algo == "airl", "--algo = '" << algo << "', must be bc or airl");
+    nn::SetTorchThreads(1);
+    const di::ReachAvoidEnv env(task);
+    std::vector<std::string> states = env.ObservationFeatures(), actions = env.ActionFeatures();
+    if (!state_features.empty()) states = data::SplitList(state_features);
+    if (!action_features.empty()) actions = data::SplitList(action_features);
+    const data::TrajectorySet demos = data::ReadTrajectories(demos_path, states, actions);
+    const Stopwatch clock;
+    nlohmann::json summary_json;
+    std::string brief;
+    policy::GaussianPolicy trained;
+    if (algo == "bc") {
+      if (bc_yaml.IsMap()) ApplyYamlKeepingFlags(bc_yaml);
+      bc.verbose = !json;
+      policy::BcSummary summary;
+      trained = policy::TrainBc(bc, demos, &summary);
+      summary_json = summary.ToJson();
+      brief = summary.BriefReport();
+    } else {
+      SECURE_CHECK(state_features.empty() && action_features.empty(),
+                   "--state-features/--action-features apply to BC only: AIRL uses the "
+                   "domain's features");
+      if (airl_yaml.IsMap()) airl.ApplyYaml(airl_yaml, config_path + " [airl]");
+      airl.seed = bc.seed;
+      airl.curve_path = bc.curve_path;
+      airl.reward = FromString(policy::kAirlRewardNames, reward, "--reward");
+      airl.verbose = !json;
+      std::optional<policy::GaussianPolicy> start;
+      if (!warm_start.empty()) start = policy::GaussianPolicy::Load(warm_start);
+      policy::AirlSummary summary;
+      trained = policy::TrainAirl(airl, demos, env, start ? &*start : nullptr, &summary);
+      summary_json = summary.ToJson();
+      brief = summary.BriefReport();
+    }
+    trained.Save(out);
+    if (json) {
+      PrintJson({{"command", "policy train"},
+                 {"algo", algo},
+                 {"demos", demos_path},
+                 {"out", out},
+                 {"summary", summary_json},
+                 {"seconds", clock.Seconds()}});
+    } else {
+      std::cout << algo << ": " << brief << "\nsaved " << out << "\n";
+    }
+  }
+
+  // The YAML bc section, with flags given on the command line taking precedence over it.
+  void ApplyYamlKeepingFlags(const YAML::Node& node) {
+    const policy::BcOptions from_flags = bc;
+    bc.ApplyYaml(node, config_path + " [bc]");
+    const policy::BcOptions defaults;
+    if (from_flags.epochs != defaults.epochs) bc.epochs = from_flags.epochs;
+    if (from_flags.seed != defaults.seed) bc.seed = from_flags.seed;
+    if (!from_flags.curve_path.empty()) bc.curve_path = from_flags.curve_path;
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+struct EvalCommand {
+  std::string domain, run_dir, airl_path, bc_path, barrier_path, methods;
+  int seeds = 10;
+  long episodes = 100;
+  std::uint64_t first_seed = 0;
+  shield::ShieldOptions shield;
+  ShieldFlags shield_flags;
+  di::ReachAvoidOptions task;
+  double tost_bound = 0.10;
+  bool json = false;
+
+  void Register(CLI::App& app) {
+    CLI::App* cmd = app.add_subcommand(
+        "eval",
+        "Evaluate bc, airl, secure, the shield ablations and bc+shield: success and dangerous "
+        "rates over seeds, Mann-Whitney U and TOST of SECURE vs AIRL, Kruskal-Wallis + Dunn "
+        "across the ablations");
+    cmd->add_option("--domain", domain, "domain: double-integrator")->required();
+    cmd->add_option("--run", run_dir,
+                    "a `secure demo --out` directory: seed-<k>/{bc,airl,barrier}.model per "
+                    "training seed (the paper's protocol: a seed covers training)");
+    cmd->add_option("--airl", airl_path, "AIRL policy model (instead of --run)");
+    cmd->add_option("--bc", bc_path, "BC policy model (instead of --run)");
+    cmd->add_option("--barrier", barrier_path,
+                    "barrier model, or 'ground-truth' (instead of / overriding --run)");
+    cmd->add_option("--methods", methods, "comma-separated methods (default: those whose models "
+                                          "are given)");
+    cmd->add_option("--seeds", seeds,
+                    "evaluation seeds (with --run: the number of seed-<k> directories used)")
+        ->capture_default_str();
+    cmd->add_option("--first-seed", first_seed, "first seed")->capture_default_str();
+    cmd->add_option("--episodes", episodes, "episodes per method and seed")->capture_default_str();
+    cmd->add_option("--tost-bound", tost_bound, "TOST equivalence bound (fraction)")
+        ->capture_default_str();
+    shield_flags.Add(cmd, &shield);
+    cmd->add_flag("--json", json, "print every number as JSON");
+    cmd->callback([this] { Run(); });
+  }
+
+  std::string ModelPath(const std::string& explicit_path, const std::string& name,
+                        std::uint64_t seed) const {
+    if (!explicit_path.empty() || run_dir.empty()) return explicit_path;
+    return run_dir + "/seed-" + std::to_string(seed) + "/" + name + ".model";
+  }
+
+  void Run() {
+    CheckDoubleIntegratorDomain(domain);
+    shield_flags.ApplyTo(&shield);
+    SECURE_CHECK(seeds > 0, "--seeds = " << seeds << ", must be > 0");
+    SECURE_CHECK(!run_dir.empty() || !airl_path.empty() || !bc_path.empty(),
+                 "give --run DIR or at least one of --airl, --bc");
+    std::vector<eval::Method> list;
+    if (!methods.empty()) {
+      list = eval::ParseMethods(methods);
+    } else {
+      const bool has_barrier = !barrier_path.empty() || !run_dir.empty();
+      for (eval::Method m : eval::AllMethods()) {
+        const bool has_policy = eval::UsesBcPolicy(m) ? (!bc_path.empty() || !run_dir.empty())
+                                                      : (!airl_path.empty() || !run_dir.empty());
+        if (has_policy && (!eval::IsShielded(m) || has_barrier)) list.push_back(m);
+      }
+    }
+    const di::ReachAvoidEnv env(task);
+    eval::Evaluation evaluation(eval::EvaluationOptions{tost_bound, 0.05});
+    for (int k = 0; k < seeds; ++k) {
+      const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(k);
+      std::optional<policy::GaussianPolicy> bc, airl;
+      std::optional<cbf::BarrierNet> net;
+      bool need_bc = false, need_airl = false, need_barrier = false;
+      for (eval::Method m : list) {
+        (eval::UsesBcPolicy(m) ? need_bc : need_airl) = true;
+        need_barrier = need_barrier || eval::IsShielded(m);
+      }
+      if (need_bc) bc = LoadPolicy(ModelPath(bc_path, "bc", seed), env);
+      if (need_airl) airl = LoadPolicy(ModelPath(airl_path, "airl", seed), env);
+      eval::SeedModels models;
+      models.bc = bc ? &*bc : nullptr;
+      models.airl = airl ? &*airl : nullptr;
+      if (need_barrier) {
+        const std::string path = ModelPath(barrier_path, "barrier", seed);
+        SECURE_CHECK(!path.empty(), "the shielded methods need --barrier or --run");
+        if (path == "ground-truth") {
+          models.make_barrier = [this] {
+            return std::make_unique<cbf::DoubleIntegratorGroundTruth>(task.truth);
+          };
+        } else {
+          net = cbf::BarrierNet::Load(path);
+          net->CheckFeatures(env.ObservationFeatures(), "the double-integrator domain", path);
+          models.make_barrier = [&net] { return net->MakeEvaluator(256); };
+        }
+      }
+      const auto results = eval::EvaluateMethods(env, list, models, shield, episodes,
+                                                 seed ^ 0x5ec07e5eed5ULL);
+      for (const auto& [method, r] : results) evaluation.Add(method, r);
+      if (!json) std::cerr << "seed " << seed << " evaluated\n";
+    }
+    evaluation.Finish();
+    if (json) {
+      nlohmann::json r = evaluation.ToJson();
+      r["command"] = "eval";
+      PrintJson(r);
+    } else {
+      std::cout << evaluation.Table();
+    }
+  }
+
+  static policy::GaussianPolicy LoadPolicy(const std::string& path,
+                                           const domains::Environment& env) {
+    policy::GaussianPolicy p = policy::GaussianPolicy::Load(path);
+    SECURE_CHECK(p.observation_features == env.ObservationFeatures() &&
+                     p.action_features == env.ActionFeatures(),
+                 path << ": the policy's features do not match the double-integrator domain's");
+    return p;
+  }
+};
+
+}  // namespace
+
+void RegisterPipelineCommands(CLI::App& app, const Config& config) {
+  static DemoCommand demo;
+  static DemosGenerateCommand generate;
+  static PolicyTrainCommand train;
+  static EvalCommand evaluate;
+  demo.Register(app, config);
+  CLI::App* demos = app.add_subcommand("demos", "Generate demonstrations");
+  demos->require_subcommand(1);
+  generate.Register(*demos);
+  CLI::App* policy = app.add_subcommand("policy", "Learn policies from demonstrations");
+  policy->require_subcommand(1);
+  train.Register(*policy, config);
+  evaluate.Register(app);
+}
+
+}  // namespace secure::cli

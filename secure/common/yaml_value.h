@@ -1,0 +1,28 @@
+#pragma once
+// Typed reads of YAML scalars with errors that name the source file, the field and the value
+// ("run.yaml [airl]: field 'iterations' has value 'many', which is not a valid integer").
+// Header-only; a target that includes it links yaml-cpp (secure::common itself does not).
+#include <yaml-cpp/yaml.h>
+
+#include <string>
+#include <type_traits>
+
+#include "secure/common/error.h"
+
+namespace secure {
+
+template <typename T>
+T YamlValue(const YAML::Node& node, const std::string& key, const std::string& source) {
+  try {
+    return node.as<T>();
+  } catch (const YAML::Exception&) {
+    SECURE_THROW(source << ": field '" << key << "' has value '" << YAML::Dump(node)
+                        << "', which is not a valid "
+                        << (std::is_same_v<T, bool>       ? "boolean"
+                            : std::is_integral_v<T>       ? "integer"
+                            : std::is_floating_point_v<T> ? "number"
+                                                          : "value"));
+  }
+}
+
+}  // namespace secure

@@ -1,0 +1,71 @@
+#pragma once
+// A task environment for learning and evaluating policies: episodes of observations, actions and
+// the two outcomes SECURE measures (paper Section 6): reaching the goal (success) and touching
+// an obstacle (a dangerous event).
+//
+// Conventions:
+//  - the observation is what the policy sees; for the double integrator it equals the state,
+//    other domains may add or rearrange features (Demolition Derby: nearest cars and the goal);
+//  - Step() applies the action as the real system would (clipping it to the actuator bounds)
+//    and never ends the episode itself: whether an episode stops at the goal, at a collision or
+//    only at max_steps() is the caller's choice (evaluation stops at the goal; adversarial IRL
+//    runs fixed-horizon episodes, so that no termination bias enters the learned reward);
+//  - everything random in an episode comes from the Rng passed to Reset(), so an episode is
+//    replayed exactly from the same Rng state.
+//
+// Implementations must not allocate in Step() and are used from one thread at a time; make one
+// environment per thread (Clone()).
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "secure/common/rng.h"
+#include "secure/domains/dynamics.h"
+
+namespace secure::domains {
+
+/// What happened in one step.
+struct StepOutcome {
+  bool reached_goal = false;  // the new state is within the goal region
+  bool collided = false;      // the new state is inside an obstacle (a dangerous event)
+  int collisions = 0;         // dangerous events in this step (e.g. cars touched; >= collided)
+};
+
+class Environment {
+ public:
+  virtual ~Environment() = default;
+
+  virtual int observation_dim() const = 0;
+  virtual int action_dim() const = 0;
+  /// Column names of observations and actions in CSV files and model files.
+  virtual std::vector<std::string> ObservationFeatures() const = 0;
+  virtual std::vector<std::string> ActionFeatures() const = 0;
+  /// The step limit of an episode.
+  virtual int max_steps() const = 0;
+  /// One line naming the task and its main constants.
+  virtual std::string Describe() const = 0;
+
+  /// Starts an episode drawn from `rng`; writes the first observation.
+  virtual void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) = 0;
+  /// Applies `action` (action_dim; clipped to the actuator bounds) and writes the next
+  /// observation. @throws secure::Error on a wrong dimension or a non-finite action.
+  virtual StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
+                           Eigen::Ref<Eigen::VectorXf> observation) = 0;
+
+  /// The model a shield may use to look one step ahead from an observation: T(o, a) without
+  /// privileged information (for the double integrator: the exact clipped dynamics).
+  virtual const DynamicsModel& ShieldModel() const = 0;
+
+  /// A safe action to fall back on at `observation` (e.g. braking), the shield's backup
+  /// competitor when no sampled action is safe. Returns false if the domain has none.
+  virtual bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
+                            Eigen::Ref<Eigen::VectorXf> action) const {
+    return false;
+  }
+
+  /// A fresh environment with the same options (for another thread).
+  virtual std::unique_ptr<Environment> Clone() const = 0;
+};
+
+}  // namespace secure::domains

@@ -1,0 +1,389 @@
+#include "secure/eval/policy_eval.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "secure/common/error.h"
+#include "secure/common/strings.h"
+#include "secure/common/timer.h"
+#include "secure/data/data.h"
+
+namespace secure::eval {
+
+const std::vector<Method>& AllMethods() {
+  static const std::vector<Method> methods = {Method::kBc,
+                                              Method::kAirl,
+                                              Method::kSecure,
+                                              Method::kSecureRandomSafe,
+                                              Method::kSecureNoResampling,
+                                              Method::kBcShield};
+  return methods;
+}
+
+bool IsShielded(Method method) { return method != Method::kBc && method != Method::kAirl; }
+
+bool UsesBcPolicy(Method method) { return method == Method::kBc || method == Method::kBcShield; }
+
+shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOptions& base) {
+  shield::ShieldOptions options = base;
+  if (method == Method::kSecureRandomSafe) options.aggregation = shield::Aggregation::kRandomSafe;
+  if (method == Method::kSecureNoResampling) options.resampling = shield::Resampling::kNone;
+  return options;
+}
+
+std::vector<Method> ParseMethods(const std::string& list) {
+  std::vector<Method> methods;
+  for (const std::string& name : data::SplitList(list)) {
+    const Method method = FromString(kMethodNames, name, "method");
+    SECURE_CHECK(std::find(methods.begin(), methods.end(), method) == methods.end(),
+                 "method '" << name << "' is listed twice in '" << list << "'");
+    methods.push_back(method);
+  }
+  SECURE_CHECK(!methods.empty(), "methods = '" << list << "': no method given");
+  return methods;
+}
+
+// ---------------------------------------------------------------------------------------------
+nlohmann::json SeedResult::ToJson() const {
+  return {{"episodes", episodes},
+          {"successes", successes},
+          {"dangerous", dangerous},
+          {"success_rate", success_rate()},
+          {"dangerous_rate", dangerous_rate()},
+          {"collision_events", collision_events},
+          {"steps", steps},
+          {"mean_steps_to_goal", mean_steps_to_goal},
+          {"decisions", decisions},
+          {"interventions", interventions},
+          {"interventions_per_episode", interventions_per_episode()},
+          {"resampled_decisions", resampled_decisions},
+          {"no_safe_action_decisions", no_safe_action_decisions},
+          {"invalid_input_decisions", invalid_input_decisions},
+          {"mean_iterations", mean_iterations},
+          {"latency_us", latency_us.ToJson()},
+          {"seconds", seconds}};
+}
+
+EpisodeRunner::EpisodeRunner(domains::Environment& env)
+    : env_(env),
+      observation_(env.observation_dim()),
+      mu_(env.action_dim()),
+      action_(env.action_dim()),
+      backup_(env.action_dim()) {}
+
+std::uint64_t EpisodeSeed(std::uint64_t seed, long episode) {
+  // Mixed once more by Rng::Seed (splitmix64), so neighbouring indices give unrelated streams.
+  return seed ^ (0x9e3779b97f4a7c15ULL * static_cast<std::uint64_t>(episode + 1));
+}
+
+SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* shield,
+                              long episodes, std::uint64_t seed) {
+  SECURE_CHECK(episodes > 0, "EpisodeRunner::Run: episodes = " << episodes << ", must be > 0");
+  SECURE_CHECK(policy.observation_dim() == env_.observation_dim() &&
+                   policy.action_dim() == env_.action_dim(),
+               "EpisodeRunner: the policy maps " << policy.observation_dim() << " -> "
+                                                 << policy.action_dim()
+                                                 << " but the environment has observations of "
+                                                 << env_.observation_dim() << " and actions of "
+                                                 << env_.action_dim());
+  if (shield != nullptr) {
+    SECURE_CHECK(shield->state_dim() == env_.observation_dim() &&
+                     shield->action_dim() == env_.action_dim(),
+                 "EpisodeRunner: the shield takes states of "
+                     << shield->state_dim() << " and actions of " << shield->action_dim()
+                     << " but the environment has observations of " << env_.observation_dim()
+                     << " and actions of " << env_.action_dim());
+  }
+  const Stopwatch clock;
+  SeedResult result;
+  result.episodes = episodes;
+  std::vector<double> latencies_us;
+  latencies_us.reserve(static_cast<std::size_t>(episodes) * 64);
+  long steps_to_goal_sum = 0;
+  long iterations_sum = 0;
+  const Eigen::VectorXf& sigma = policy.sigma();
+  for (long episode = 0; episode < episodes; ++episode) {
+    Rng rng(EpisodeSeed(seed, episode));
+    env_.Reset(rng, observation_);
+    if (shield != nullptr) shield->Seed(rng.NextU64());
+    bool collided = false;
+    for (int step = 0; step < env_.max_steps(); ++step) {
+      const Stopwatch decision_clock;
+      if (shield != nullptr) {
+        policy.Mean(observation_, mu_);
+        if (env_.BackupAction(observation_, backup_)) {
+          shield->SetBackupAction(backup_);
+        } else {
+          shield->ClearBackupAction();
+        }
+        const shield::Decision& d = shield->Decide(observation_, mu_, sigma);
+        latencies_us.push_back(decision_clock.Microseconds());
+        action_ = d.action;
+        ++result.decisions;
+        iterations_sum += d.iterations;
+        if (d.intervened) ++result.interventions;
+        switch (d.status) {
+          case shield::Status::kSafeAfterResampling: ++result.resampled_decisions; break;
+          case shield::Status::kNoSafeAction: ++result.no_safe_action_decisions; break;
+          case shield::Status::kInvalidInput: ++result.invalid_input_decisions; break;
+          case shield::Status::kSafe: break;
+        }
+      } else {
+        policy.Sample(observation_, rng, action_);
+        latencies_us.push_back(decision_clock.Microseconds());
+      }
+      const domains::StepOutcome outcome = env_.Step(action_, observation_);
+      ++result.steps;
+      if (outcome.collided) {
+        collided = true;
+        result.collision_events += std::max(1, outcome.collisions);
+      }
+      if (outcome.reached_goal) {
+        ++result.successes;
+        steps_to_goal_sum += step + 1;
+        break;
+      }
+    }
+    if (collided) ++result.dangerous;
+  }
+  if (result.successes > 0) {
+    result.mean_steps_to_goal = double(steps_to_goal_sum) / double(result.successes);
+  }
+  if (result.decisions > 0) result.mean_iterations = double(iterations_sum) / double(result.decisions);
+  result.latency_us = LatencySummary::Of(std::move(latencies_us));
+  result.seconds = clock.Seconds();
+  return result;
+}
+
+std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
+                                             const std::vector<Method>& methods,
+                                             const SeedModels& models,
+                                             const shield::ShieldOptions& shield_options,
+                                             long episodes, std::uint64_t seed) {
+  std::unique_ptr<domains::Environment> local_env = env.Clone();
+  EpisodeRunner runner(*local_env);
+  std::map<Method, SeedResult> results;
+  for (Method method : methods) {
+    const std::string name = ToString(kMethodNames, method);
+    const policy::GaussianPolicy* policy = UsesBcPolicy(method) ? models.bc : models.airl;
+    SECURE_CHECK(policy != nullptr, "method '" << name << "' needs a "
+                                               << (UsesBcPolicy(method) ? "BC" : "AIRL")
+                                               << " policy, and none was given");
+    policy::PolicyEvaluator evaluator(*policy);
+    if (!IsShielded(method)) {
+      results[method] = runner.Run(evaluator, nullptr, episodes, seed);
+      continue;
+    }
+    SECURE_CHECK(models.make_barrier != nullptr,
+                 "method '" << name << "' needs a barrier, and none was given");
+    std::unique_ptr<cbf::Barrier> barrier = models.make_barrier();
+    shield::Shield shield(ShieldOptionsFor(method, shield_options), *barrier,
+                          local_env->ShieldModel());
+    results[method] = runner.Run(evaluator, &shield, episodes, seed);
+  }
+  return results;
+}
+
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+nlohmann::json RateJson(const stats::SampleSummary& summary, const std::vector<double>& per_seed) {
+  return {{"mean", summary.mean}, {"std", summary.std}, {"per_seed", per_seed}};
+}
+
+template <typename F>
+std::vector<double> PerSeed(const MethodSummary& m, F value) {
+  std::vector<double> out;
+  out.reserve(m.per_seed.size());
+  for (const SeedResult& r : m.per_seed) out.push_back(value(r));
+  return out;
+}
+
+std::vector<double> Successes(const MethodSummary& m) {
+  return PerSeed(m, [](const SeedResult& r) { return r.success_rate(); });
+}
+std::vector<double> Dangers(const MethodSummary& m) {
+  return PerSeed(m, [](const SeedResult& r) { return r.dangerous_rate(); });
+}
+
+// Mann–Whitney U is undefined when both samples hold one repeated value (e.g. 0 % dangerous for
+// both methods on every seed): then the samples do not differ, reported as p = 1.
+nlohmann::json MannWhitneyJson(const std::vector<double>& a, const std::vector<double>& b) {
+  const bool all_equal =
+      std::all_of(a.begin(), a.end(), [&](double v) { return v == a.front(); }) &&
+      std::all_of(b.begin(), b.end(), [&](double v) { return v == a.front(); });
+  if (all_equal) {
+    const double u = 0.5 * double(a.size()) * double(b.size());
+    return {{"u", u}, {"p_value", 1.0}, {"method", "all values equal"}};
+  }
+  return stats::MannWhitneyU(a, b).ToJson();
+}
+
+std::string Percent(double fraction) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.1f", 100.0 * fraction);
+  return buffer;
+}
+
+std::string MeanStd(const stats::SampleSummary& s) {
+  return Percent(s.mean) + " (" + Percent(s.std) + ")";
+}
+
+std::string Number(double value, const char* format = "%.3g") {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, format, value);
+  return buffer;
+}
+
+}  // namespace
+
+nlohmann::json MethodSummary::ToJson() const {
+  nlohmann::json seeds = nlohmann::json::array();
+  for (const SeedResult& r : per_seed) seeds.push_back(r.ToJson());
+  return {{"success_rate", RateJson(success_rate, Successes(*this))},
+          {"dangerous_rate", RateJson(dangerous_rate, Dangers(*this))},
+          {"interventions_per_episode",
+           RateJson(interventions_per_episode,
+                    PerSeed(*this, [](const SeedResult& r) { return r.interventions_per_episode(); }))},
+          {"seeds", std::move(seeds)}};
+}
+
+void Evaluation::Add(Method method, const SeedResult& result) {
+  SECURE_CHECK(!finished_, "Evaluation::Add after Finish()");
+  methods_[method].per_seed.push_back(result);
+}
+
+void Evaluation::Finish() {
+  SECURE_CHECK(!methods_.empty(), "Evaluation::Finish: no results were added");
+  const std::size_t seeds = methods_.begin()->second.per_seed.size();
+  for (auto& [method, summary] : methods_) {
+    SECURE_CHECK(summary.per_seed.size() == seeds,
+                 "Evaluation::Finish: method '" << ToString(kMethodNames, method) << "' has "
+                                                << summary.per_seed.size() << " seeds, '"
+                                                << ToString(kMethodNames, methods_.begin()->first)
+                                                << "' has " << seeds);
+    summary.success_rate = stats::Summarize(Successes(summary));
+    summary.dangerous_rate = stats::Summarize(Dangers(summary));
+    summary.interventions_per_episode = stats::Summarize(
+        PerSeed(summary, [](const SeedResult& r) { return r.interventions_per_episode(); }));
+  }
+  comparisons_ = nlohmann::json::object();
+  const auto secure = methods_.find(Method::kSecure);
+  const auto airl = methods_.find(Method::kAirl);
+  if (secure != methods_.end() && airl != methods_.end() && seeds >= 2) {
+    const std::vector<double> s_success = Successes(secure->second);
+    const std::vector<double> a_success = Successes(airl->second);
+    comparisons_["secure_vs_airl"] = {
+        {"success_mann_whitney", MannWhitneyJson(s_success, a_success)},
+        {"dangerous_mann_whitney",
+         MannWhitneyJson(Dangers(secure->second), Dangers(airl->second))},
+        {"success_tost", stats::TostWelch(s_success, a_success, options_.tost_bound).ToJson()},
+    };
+  }
+  // Figure 9: SECURE and its two ablations, Kruskal–Wallis and Dunn on each metric.
+  std::vector<Method> group_methods;
+  for (Method m : {Method::kSecure, Method::kSecureRandomSafe, Method::kSecureNoResampling}) {
+    if (methods_.count(m) != 0) group_methods.push_back(m);
+  }
+  if (group_methods.size() >= 2 && seeds >= 2) {
+    nlohmann::json ablations = {{"methods", nlohmann::json::array()}};
+    for (Method m : group_methods) ablations["methods"].push_back(ToString(kMethodNames, m));
+    for (const char* metric : {"success_rate", "dangerous_rate"}) {
+      std::vector<std::vector<double>> groups;
+      for (Method m : group_methods) {
+        groups.push_back(std::string(metric) == "success_rate" ? Successes(methods_.at(m))
+                                                               : Dangers(methods_.at(m)));
+      }
+      std::vector<double> all;
+      for (const auto& g : groups) all.insert(all.end(), g.begin(), g.end());
+      if (std::all_of(all.begin(), all.end(), [&](double v) { return v == all.front(); })) {
+        ablations[metric] = {{"note", "all values equal; no test"}};
+        continue;
+      }
+      ablations[metric] = {{"kruskal_wallis", stats::KruskalWallis(groups).ToJson()},
+                           {"dunn", stats::Dunn(groups).ToJson()}};
+    }
+    comparisons_["ablations"] = std::move(ablations);
+  }
+  finished_ = true;
+}
+
+nlohmann::json Evaluation::ToJson() const {
+  SECURE_CHECK(finished_, "Evaluation::ToJson before Finish()");
+  nlohmann::json methods = nlohmann::json::object();
+  for (const auto& [method, summary] : methods_) {
+    methods[ToString(kMethodNames, method)] = summary.ToJson();
+  }
+  return {{"methods", std::move(methods)},
+          {"comparisons", comparisons_},
+          {"options", {{"tost_bound", options_.tost_bound}, {"alpha", options_.alpha}}}};
+}
+
+std::string Evaluation::Table() const {
+  SECURE_CHECK(finished_, "Evaluation::Table before Finish()");
+  std::ostringstream out;
+  const std::size_t seeds = methods_.begin()->second.per_seed.size();
+  const long episodes = methods_.begin()->second.per_seed.front().episodes;
+  out << "Success and dangerous rate, % mean (std) over " << seeds << " seeds x " << episodes
+      << " episodes\n\n";
+  out << "| method | success % | dangerous % | interventions / episode | no-safe-action | "
+         "decision p50 / p99 (us) |\n";
+  out << "|---|---|---|---|---|---|\n";
+  for (const auto& [method, s] : methods_) {
+    long no_safe = 0;
+    std::vector<double> p50, p99;
+    for (const SeedResult& r : s.per_seed) {
+      no_safe += r.no_safe_action_decisions;
+      p50.push_back(r.latency_us.p50);
+      p99.push_back(r.latency_us.p99);
+    }
+    std::sort(p50.begin(), p50.end());
+    std::sort(p99.begin(), p99.end());
+    const bool shielded = IsShielded(method);
+    out << "| " << ToString(kMethodNames, method) << " | " << MeanStd(s.success_rate) << " | "
+        << MeanStd(s.dangerous_rate) << " | "
+        << (shielded ? Number(s.interventions_per_episode.mean, "%.2f") : "-") << " | "
+        << (shielded ? std::to_string(no_safe) : "-") << " | "
+        << Number(p50[p50.size() / 2], "%.1f") << " / " << Number(p99[p99.size() / 2], "%.1f")
+        << " |\n";
+  }
+  if (comparisons_.contains("secure_vs_airl")) {
+    const nlohmann::json& c = comparisons_["secure_vs_airl"];
+    const nlohmann::json& tost = c["success_tost"];
+    out << "\nSECURE vs AIRL: success Mann-Whitney U = " << Number(c["success_mann_whitney"]["u"].get<double>())
+        << ", p = " << Number(c["success_mann_whitney"]["p_value"].get<double>())
+        << "; dangerous Mann-Whitney U = " << Number(c["dangerous_mann_whitney"]["u"].get<double>())
+        << ", p = " << Number(c["dangerous_mann_whitney"]["p_value"].get<double>())
+        << "; success TOST (bound " << Percent(options_.tost_bound)
+        << " points): difference " << Percent(tost["difference"].get<double>())
+        << " points, p = " << Number(tost["p_value"].get<double>()) << " ("
+        << (tost["p_value"].get<double>() < options_.alpha ? "equivalent" : "not shown equivalent")
+        << " at alpha " << options_.alpha << ")\n";
+  }
+  if (comparisons_.contains("ablations")) {
+    const nlohmann::json& a = comparisons_["ablations"];
+    for (const char* metric : {"success_rate", "dangerous_rate"}) {
+      if (!a.contains(metric)) continue;
+      out << "\nAblations, " << metric << ": ";
+      if (!a[metric].contains("kruskal_wallis")) {
+        out << a[metric]["note"].get<std::string>() << "\n";
+        continue;
+      }
+      const nlohmann::json& kw = a[metric]["kruskal_wallis"];
+      out << "Kruskal-Wallis H = " << Number(kw["h"].get<double>())
+          << ", p = " << Number(kw["p_value"].get<double>()) << "; Dunn (Bonferroni):";
+      for (const nlohmann::json& pair : a[metric]["dunn"]["pairs"]) {
+        const int i = pair["i"].get<int>(), j = pair["j"].get<int>();
+        out << " " << a["methods"][i].get<std::string>() << " vs "
+            << a["methods"][j].get<std::string>()
+            << " p = " << Number(pair["p_adjusted"].get<double>()) << ";";
+      }
+      out << "\n";
+    }
+  }
+  return out.str();
+}
+
+}  // namespace secure::eval

@@ -1,0 +1,179 @@
+#pragma once
+// The evaluation harness of the paper's Section 6: learned policies run in closed loop, with or
+// without the CBF shield, over N episodes per seed and S seeds; per seed the success rate, the
+// dangerous rate, the shield's interventions and decision latencies; across seeds mean (std)
+// and the paper's statistical tests (Mann–Whitney U, TOST, Kruskal–Wallis + Dunn).
+//
+// The methods (Table 3 and Figure 9 of the paper):
+//   bc                    behaviour cloning, actions sampled from its Gaussian
+//   airl                  AIRL, actions sampled from its Gaussian
+//   secure                AIRL policy + learned barrier + shield (Algorithms 1 and 2)
+//   secure-random-safe    ablation 1: the shield returns one random safe sample, not the mean
+//   secure-no-resampling  ablation 2: no adaptive resampling (the policy's own sigma)
+//   bc+shield             the BC policy under the same shield
+// Unshielded methods sample a ~ N(mu(o), sigma) as the authors' evaluation does; shielded ones
+// pass (mu, sigma) to the shield and apply its action.
+//
+// One episode: Reset(), then up to env.max_steps() steps; it ends early when the goal is
+// reached (success). Dangerous = at least one collision in the episode (the number of events is
+// kept too); the episode continues after a collision, which is how "at least once" is counted.
+//
+//   eval::EpisodeRunner runner(env);                       // one per thread
+//   eval::SeedResult r = runner.Run(policy, &shield, 100, rng);   // shield = nullptr: unshielded
+//   eval::Evaluation ev;  ev.Add(Method::kSecure, r);  ...  ev.Finish();
+//   std::cout << ev.Table();  nlohmann::json j = ev.ToJson();
+#include <Eigen/Core>
+#include <functional>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "secure/common/enum_strings.h"
+#include "secure/cbf/barrier.h"
+#include "secure/common/rng.h"
+#include "secure/domains/environment.h"
+#include "secure/eval/double_integrator_shield_run.h"
+#include "secure/policy/gaussian_policy.h"
+#include "secure/shield/shield.h"
+#include "secure/stats/statistics.h"
+
+namespace secure::eval {
+
+enum class Method {
+  kBc,
+  kAirl,
+  kSecure,
+  kSecureRandomSafe,
+  kSecureNoResampling,
+  kBcShield,
+};
+inline constexpr EnumTable<Method, 6> kMethodNames{{
+    {Method::kBc, "bc"},
+    {Method::kAirl, "airl"},
+    {Method::kSecure, "secure"},
+    {Method::kSecureRandomSafe, "secure-random-safe"},
+    {Method::kSecureNoResampling, "secure-no-resampling"},
+    {Method::kBcShield, "bc+shield"},
+}};
+
+/// All methods, in table order.
+const std::vector<Method>& AllMethods();
+/// Whether the method runs the shield, and whether it uses the BC (else the AIRL) policy.
+bool IsShielded(Method method);
+bool UsesBcPolicy(Method method);
+/// The shield options of a method: `base` with the method's ablation applied (aggregation
+/// random-safe for kSecureRandomSafe, resampling none for kSecureNoResampling).
+shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOptions& base);
+/// "bc,airl,secure" -> methods; throws naming the unknown name and listing the valid ones.
+std::vector<Method> ParseMethods(const std::string& list);
+
+/// The outcome of N episodes of one method with one seed.
+struct SeedResult {
+  long episodes = 0;
+  long successes = 0;         // episodes that reached the goal
+  long dangerous = 0;         // episodes with at least one collision
+  long collision_events = 0;  // collisions summed over steps and episodes
+  long steps = 0;             // environment steps over all episodes
+  double mean_steps_to_goal = 0.0;  // over successful episodes (0 if none)
+  // Shield statistics (zero for unshielded methods).
+  long decisions = 0;
+  long interventions = 0;            // decisions whose policy draw had g < 0
+  long resampled_decisions = 0;      // kSafeAfterResampling
+  long no_safe_action_decisions = 0;
+  long invalid_input_decisions = 0;
+  double mean_iterations = 0.0;      // sampling rounds per decision
+  LatencySummary latency_us;         // decision latency (shielded) or policy query (unshielded)
+  double seconds = 0.0;
+
+  double success_rate() const { return episodes ? double(successes) / double(episodes) : 0.0; }
+  double dangerous_rate() const { return episodes ? double(dangerous) / double(episodes) : 0.0; }
+  double interventions_per_episode() const {
+    return episodes ? double(interventions) / double(episodes) : 0.0;
+  }
+  nlohmann::json ToJson() const;
+};
+
+/// Runs episodes in one environment (not thread-safe; one runner per thread).
+class EpisodeRunner {
+ public:
+  /// `env` must outlive the runner.
+  explicit EpisodeRunner(domains::Environment& env);
+
+  /// `episodes` episodes of `policy`, shielded by `shield` if non-null (its Decide() is used with
+  /// the policy's mu and sigma; its backup action is set per step from env.BackupAction()).
+  /// Episode i draws everything (its start first, then policy noise and the shield's samples)
+  /// from its own stream EpisodeSeed(seed, i): every method sees the same start states for the
+  /// same seed (common random numbers), and any episode can be replayed alone.
+  /// @throws secure::Error if the policy's or shield's dimensions disagree with the environment.
+  SeedResult Run(policy::PolicyEvaluator& policy, shield::Shield* shield, long episodes,
+                 std::uint64_t seed);
+
+ private:
+  domains::Environment& env_;
+  Eigen::VectorXf observation_, mu_, action_, backup_;
+};
+
+/// The random stream of episode `episode` of an evaluation with `seed`.
+std::uint64_t EpisodeSeed(std::uint64_t seed, long episode);
+
+/// What one seed's evaluation needs: the two policies (either may be null when no listed method
+/// uses it) and a barrier factory (one evaluator per shield; null when no method is shielded).
+struct SeedModels {
+  const policy::GaussianPolicy* bc = nullptr;
+  const policy::GaussianPolicy* airl = nullptr;
+  std::function<std::unique_ptr<cbf::Barrier>()> make_barrier;
+};
+
+/// Runs every method of `methods` for `episodes` episodes with evaluation seed `seed` in a clone
+/// of `env`. Shielded methods use ShieldOptionsFor(method, shield_options) and the environment's
+/// ShieldModel(). @throws secure::Error if a method's model is missing.
+std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
+                                             const std::vector<Method>& methods,
+                                             const SeedModels& models,
+                                             const shield::ShieldOptions& shield_options,
+                                             long episodes, std::uint64_t seed);
+
+/// Per-method results over seeds, and the comparisons of the paper.
+struct MethodSummary {
+  std::vector<SeedResult> per_seed;
+  stats::SampleSummary success_rate;
+  stats::SampleSummary dangerous_rate;
+  stats::SampleSummary interventions_per_episode;
+  nlohmann::json ToJson() const;
+};
+
+struct EvaluationOptions {
+  // TOST equivalence bound for SECURE vs AIRL success rates, as a fraction (the paper: 10
+  // points).
+  double tost_bound = 0.10;
+  double alpha = 0.05;  // significance level used in the table's verdicts
+};
+
+class Evaluation {
+ public:
+  explicit Evaluation(EvaluationOptions options = {}) : options_(options) {}
+  /// Adds one seed's result of `method` (seeds in order).
+  void Add(Method method, const SeedResult& result);
+  /// Computes the summaries and tests. Needs the same number of seeds for every method.
+  void Finish();
+
+  const std::map<Method, MethodSummary>& methods() const { return methods_; }
+  /// {"methods": {name: {"success_rate": {"mean","std","per_seed"}, "dangerous_rate": {...},
+  ///   "interventions_per_episode": {...}, "seeds": [SeedResult...]}},
+  ///  "comparisons": {"secure_vs_airl": {...}, "ablations": {...}}, "options": {...}}
+  /// Rates are fractions in [0, 1].
+  nlohmann::json ToJson() const;
+  /// A Table-3-style Markdown table (percent, mean (std)) plus the tests.
+  std::string Table() const;
+
+ private:
+  EvaluationOptions options_;
+  std::map<Method, MethodSummary> methods_;
+  nlohmann::json comparisons_ = nlohmann::json::object();
+  bool finished_ = false;
+};
+
+}  // namespace secure::eval

@@ -1,0 +1,276 @@
+// AirlOptions, AirlIterationStats and AirlSummary: validation, YAML, JSON and reports
+// (no LibTorch here).
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "secure/common/error.h"
+#include "secure/policy/airl_trainer.h"
+#include "secure/policy/internal/options_util.h"
+
+namespace secure::policy {
+namespace {
+
+#define AIRL_CHECK(cond, field, value, rule) \
+  SECURE_POLICY_OPTION_CHECK(cond, "AirlOptions", field, value, rule)
+
+void CheckWidths(const std::vector<int>& widths, const char* field) {
+  AIRL_CHECK(!widths.empty(), field, "[]", "a non-empty list of layer widths");
+  for (std::size_t i = 0; i < widths.size(); ++i)
+    AIRL_CHECK(widths[i] > 0, field << "[" << i << "]", widths[i], "> 0");
+}
+
+void CheckPositive(double x, const char* field) {
+  AIRL_CHECK(std::isfinite(x) && x > 0, field, x, "> 0");
+}
+
+}  // namespace
+
+void AirlOptions::Validate() const {
+  CheckWidths(policy_hidden, "policy_hidden");
+  CheckWidths(value_hidden, "value_hidden");
+  CheckWidths(reward_hidden, "reward_hidden");
+  CheckWidths(shaping_hidden, "shaping_hidden");
+  AIRL_CHECK(std::isfinite(init_log_std), "init_log_std", init_log_std, "finite");
+  AIRL_CHECK(std::isfinite(min_log_std) && min_log_std <= init_log_std, "min_log_std", min_log_std,
+             "finite and <= init_log_std (" << init_log_std << ")");
+  AIRL_CHECK(iterations > 0, "iterations", iterations, "> 0");
+  AIRL_CHECK(steps_per_iteration > 0, "steps_per_iteration", steps_per_iteration, "> 0");
+  AIRL_CHECK(std::isfinite(gamma) && gamma > 0 && gamma <= 1, "gamma", gamma, "in (0, 1]");
+  AIRL_CHECK(std::isfinite(gae_lambda) && gae_lambda >= 0 && gae_lambda <= 1, "gae_lambda",
+             gae_lambda, "in [0, 1]");
+  AIRL_CHECK(std::isfinite(clip) && clip > 0 && clip < 1, "clip", clip, "in (0, 1)");
+  AIRL_CHECK(ppo_epochs > 0, "ppo_epochs", ppo_epochs, "> 0");
+  AIRL_CHECK(minibatch_size > 0, "minibatch_size", minibatch_size, "> 0");
+  CheckPositive(policy_lr, "policy_lr");
+  CheckPositive(value_lr, "value_lr");
+  AIRL_CHECK(std::isfinite(entropy_coef) && entropy_coef >= 0, "entropy_coef", entropy_coef,
+             ">= 0");
+  AIRL_CHECK(std::isfinite(max_grad_norm) && max_grad_norm >= 0, "max_grad_norm", max_grad_norm,
+             ">= 0 (0: no clipping)");
+  CheckPositive(discriminator_lr, "discriminator_lr");
+  AIRL_CHECK(discriminator_updates >= 0, "discriminator_updates", discriminator_updates, ">= 0");
+  AIRL_CHECK(discriminator_batch > 0, "discriminator_batch", discriminator_batch, "> 0");
+  AIRL_CHECK(std::isfinite(discriminator_discount) && discriminator_discount >= 0 &&
+                 discriminator_discount <= 1,
+             "discriminator_discount", discriminator_discount, "in [0, 1]");
+  AIRL_CHECK(checkpoint_every > 0, "checkpoint_every", checkpoint_every, "> 0");
+  AIRL_CHECK(stop_after_iterations >= 0, "stop_after_iterations", stop_after_iterations,
+             ">= 0 (0: off)");
+  AIRL_CHECK(!resume || !checkpoint_path.empty(), "resume", "true",
+             "false when checkpoint_path is empty");
+}
+
+void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  using internal::YamlValue;
+  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of AIRL options");
+  static const std::set<std::string> known = {"policy_hidden",
+                                              "value_hidden",
+                                              "reward_hidden",
+                                              "shaping_hidden",
+                                              "init_log_std",
+                                              "min_log_std",
+                                              "iterations",
+                                              "steps_per_iteration",
+                                              "gamma",
+                                              "gae_lambda",
+                                              "clip",
+                                              "ppo_epochs",
+                                              "minibatch_size",
+                                              "policy_lr",
+                                              "value_lr",
+                                              "entropy_coef",
+                                              "max_grad_norm",
+                                              "normalize_rewards",
+                                              "discriminator_lr",
+                                              "discriminator_updates",
+                                              "discriminator_batch",
+                                              "discriminator_discount",
+                                              "reward",
+                                              "seed",
+                                              "verbose",
+                                              "curve_path",
+                                              "checkpoint_path",
+                                              "checkpoint_every",
+                                              "resume",
+                                              "stop_after_iterations"};
+  for (const auto& item : node) {
+    const std::string key = item.first.as<std::string>();
+    SECURE_CHECK(known.count(key), source << ": unknown field '" << key << "' in the AIRL options");
+    const YAML::Node& v = item.second;
+    auto dbl = [&] { return YamlValue<double>(v, key, source); };
+    auto integer = [&] { return YamlValue<int>(v, key, source); };
+    if (key == "policy_hidden")
+      policy_hidden = internal::YamlWidths(v, key, source);
+    else if (key == "value_hidden")
+      value_hidden = internal::YamlWidths(v, key, source);
+    else if (key == "reward_hidden")
+      reward_hidden = internal::YamlWidths(v, key, source);
+    else if (key == "shaping_hidden")
+      shaping_hidden = internal::YamlWidths(v, key, source);
+    else if (key == "init_log_std")
+      init_log_std = dbl();
+    else if (key == "min_log_std")
+      min_log_std = dbl();
+    else if (key == "iterations")
+      iterations = integer();
+    else if (key == "steps_per_iteration")
+      steps_per_iteration = integer();
+    else if (key == "gamma")
+      gamma = dbl();
+    else if (key == "gae_lambda")
+      gae_lambda = dbl();
+    else if (key == "clip")
+      clip = dbl();
+    else if (key == "ppo_epochs")
+      ppo_epochs = integer();
+    else if (key == "minibatch_size")
+      minibatch_size = integer();
+    else if (key == "policy_lr")
+      policy_lr = dbl();
+    else if (key == "value_lr")
+      value_lr = dbl();
+    else if (key == "entropy_coef")
+      entropy_coef = dbl();
+    else if (key == "max_grad_norm")
+      max_grad_norm = dbl();
+    else if (key == "normalize_rewards")
+      normalize_rewards = YamlValue<bool>(v, key, source);
+    else if (key == "discriminator_lr")
+      discriminator_lr = dbl();
+    else if (key == "discriminator_updates")
+      discriminator_updates = integer();
+    else if (key == "discriminator_batch")
+      discriminator_batch = integer();
+    else if (key == "discriminator_discount")
+      discriminator_discount = dbl();
+    else if (key == "reward")
+      reward =
+          FromString(kAirlRewardNames, YamlValue<std::string>(v, key, source), source + ": reward");
+    else if (key == "seed")
+      seed = YamlValue<std::uint64_t>(v, key, source);
+    else if (key == "verbose")
+      verbose = YamlValue<bool>(v, key, source);
+    else if (key == "curve_path")
+      curve_path = YamlValue<std::string>(v, key, source);
+    else if (key == "checkpoint_path")
+      checkpoint_path = YamlValue<std::string>(v, key, source);
+    else if (key == "checkpoint_every")
+      checkpoint_every = integer();
+    else if (key == "resume")
+      resume = YamlValue<bool>(v, key, source);
+    else if (key == "stop_after_iterations")
+      stop_after_iterations = integer();
+  }
+}
+
+nlohmann::json AirlOptions::ToJson() const {
+  return {{"policy_hidden", policy_hidden},
+          {"value_hidden", value_hidden},
+          {"reward_hidden", reward_hidden},
+          {"shaping_hidden", shaping_hidden},
+          {"init_log_std", init_log_std},
+          {"min_log_std", min_log_std},
+          {"iterations", iterations},
+          {"steps_per_iteration", steps_per_iteration},
+          {"gamma", gamma},
+          {"gae_lambda", gae_lambda},
+          {"clip", clip},
+          {"ppo_epochs", ppo_epochs},
+          {"minibatch_size", minibatch_size},
+          {"policy_lr", policy_lr},
+          {"value_lr", value_lr},
+          {"entropy_coef", entropy_coef},
+          {"max_grad_norm", max_grad_norm},
+          {"normalize_rewards", normalize_rewards},
+          {"discriminator_lr", discriminator_lr},
+          {"discriminator_updates", discriminator_updates},
+          {"discriminator_batch", discriminator_batch},
+          {"discriminator_discount", discriminator_discount},
+          {"reward", ToString(kAirlRewardNames, reward)},
+          {"seed", seed},
+          {"curve_path", curve_path},
+          {"checkpoint_path", checkpoint_path},
+          {"checkpoint_every", checkpoint_every},
+          {"resume", resume},
+          {"stop_after_iterations", stop_after_iterations}};
+}
+
+std::vector<std::string> AirlIterationStats::Columns() {
+  return {"iteration",       "env_steps",  "episodes", "success_rate",       "collision_rate",
+          "mean_collisions", "d_expert",   "d_policy", "discriminator_loss", "mean_reward",
+          "policy_loss",     "value_loss", "entropy",  "mean_sigma",         "approx_kl",
+          "clip_fraction",   "seconds"};
+}
+
+std::vector<double> AirlIterationStats::Values() const {
+  return {static_cast<double>(iteration),
+          static_cast<double>(env_steps),
+          static_cast<double>(episodes),
+          success_rate,
+          collision_rate,
+          mean_collisions,
+          d_expert,
+          d_policy,
+          discriminator_loss,
+          mean_reward,
+          policy_loss,
+          value_loss,
+          entropy,
+          mean_sigma,
+          approx_kl,
+          clip_fraction,
+          seconds};
+}
+
+nlohmann::json AirlIterationStats::ToJson() const {
+  nlohmann::json j = nlohmann::json::object();
+  const auto columns = Columns();
+  const auto values = Values();
+  for (std::size_t i = 0; i < columns.size(); ++i) {
+    if (!std::isfinite(values[i])) {
+      j[columns[i]] = nullptr;
+    } else if (i < 3) {
+      j[columns[i]] = static_cast<long>(values[i]);
+    } else {
+      j[columns[i]] = values[i];
+    }
+  }
+  return j;
+}
+
+std::string AirlSummary::BriefReport() const {
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "AIRL: %d iterations (%s%s), %ld env steps, success %.3f, collisions %.3f, "
+                "D expert %.3f policy %.3f, entropy %.3f, %.2f s (%.2f it/s, %.0f steps/s; "
+                "rollout %.1f s, discriminator %.1f s, PPO %.1f s)",
+                iterations, stop_reason.c_str(), resumed ? ", resumed" : "", env_steps,
+                last.success_rate, last.collision_rate, last.d_expert, last.d_policy, last.entropy,
+                wall_seconds, iterations_per_second, env_steps_per_second, rollout_seconds,
+                discriminator_seconds, ppo_seconds);
+  return line;
+}
+
+nlohmann::json AirlSummary::ToJson() const {
+  return {{"iterations", iterations},
+          {"start_iteration", start_iteration},
+          {"env_steps", env_steps},
+          {"episodes_per_iteration", episodes_per_iteration},
+          {"steps_per_iteration", steps_per_iteration},
+          {"horizon", horizon},
+          {"expert_transitions", expert_transitions},
+          {"warm_started", warm_started},
+          {"resumed", resumed},
+          {"checkpoints_written", checkpoints_written},
+          {"stop_reason", stop_reason},
+          {"last", last.ToJson()},
+          {"wall_seconds", wall_seconds},
+          {"rollout_seconds", rollout_seconds},
+          {"discriminator_seconds", discriminator_seconds},
+          {"ppo_seconds", ppo_seconds},
+          {"iterations_per_second", iterations_per_second},
+          {"env_steps_per_second", env_steps_per_second}};
+}
+
+}  // namespace secure::policy

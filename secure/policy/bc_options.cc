@@ -1,0 +1,157 @@
+// BcOptions, BcSummary and CheckDemos: validation, YAML, JSON and reports (no LibTorch here).
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "secure/common/error.h"
+#include "secure/policy/bc_trainer.h"
+#include "secure/policy/internal/options_util.h"
+
+namespace secure::policy {
+namespace {
+
+#define BC_CHECK(cond, field, value, rule) \
+  SECURE_POLICY_OPTION_CHECK(cond, "BcOptions", field, value, rule)
+
+nlohmann::json NumberOrNull(double x) { return std::isfinite(x) ? nlohmann::json(x) : nullptr; }
+
+}  // namespace
+
+void BcOptions::Validate() const {
+  BC_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
+  for (std::size_t i = 0; i < hidden.size(); ++i)
+    BC_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
+  BC_CHECK(std::isfinite(learning_rate) && learning_rate > 0, "learning_rate", learning_rate,
+           "> 0");
+  BC_CHECK(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
+               final_learning_rate <= learning_rate,
+           "final_learning_rate", final_learning_rate, "in (0, learning_rate]");
+  BC_CHECK(epochs > 0, "epochs", epochs, "> 0");
+  BC_CHECK(batch_size > 0, "batch_size", batch_size, "> 0");
+  BC_CHECK(std::isfinite(weight_decay) && weight_decay >= 0, "weight_decay", weight_decay, ">= 0");
+  BC_CHECK(
+      std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
+      "validation_fraction", validation_fraction, "in [0, 1)");
+  BC_CHECK(std::isfinite(min_log_std), "min_log_std", min_log_std, "finite");
+}
+
+void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  using internal::YamlValue;
+  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of behaviour cloning options");
+  static const std::set<std::string> known = {
+      "hidden",      "activation", "learning_rate", "final_learning_rate",
+      "epochs",      "batch_size", "weight_decay",  "validation_fraction",
+      "min_log_std", "seed",       "verbose",       "curve_path"};
+  for (const auto& item : node) {
+    const std::string key = item.first.as<std::string>();
+    SECURE_CHECK(known.count(key),
+                 source << ": unknown field '" << key << "' in the behaviour cloning options");
+    const YAML::Node& v = item.second;
+    if (key == "hidden") {
+      hidden = internal::YamlWidths(v, key, source);
+    } else if (key == "activation") {
+      activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
+                              source + ": activation");
+    } else if (key == "learning_rate") {
+      learning_rate = YamlValue<double>(v, key, source);
+    } else if (key == "final_learning_rate") {
+      final_learning_rate = YamlValue<double>(v, key, source);
+    } else if (key == "epochs") {
+      epochs = YamlValue<int>(v, key, source);
+    } else if (key == "batch_size") {
+      batch_size = YamlValue<int>(v, key, source);
+    } else if (key == "weight_decay") {
+      weight_decay = YamlValue<double>(v, key, source);
+    } else if (key == "validation_fraction") {
+      validation_fraction = YamlValue<double>(v, key, source);
+    } else if (key == "min_log_std") {
+      min_log_std = YamlValue<double>(v, key, source);
+    } else if (key == "seed") {
+      seed = YamlValue<std::uint64_t>(v, key, source);
+    } else if (key == "verbose") {
+      verbose = YamlValue<bool>(v, key, source);
+    } else if (key == "curve_path") {
+      curve_path = YamlValue<std::string>(v, key, source);
+    }
+  }
+}
+
+nlohmann::json BcOptions::ToJson() const {
+  return {{"hidden", hidden},
+          {"activation", ToString(nn::kActivationNames, activation)},
+          {"learning_rate", learning_rate},
+          {"final_learning_rate", final_learning_rate},
+          {"epochs", epochs},
+          {"batch_size", batch_size},
+          {"weight_decay", weight_decay},
+          {"validation_fraction", validation_fraction},
+          {"min_log_std", min_log_std},
+          {"seed", seed},
+          {"curve_path", curve_path}};
+}
+
+std::string BcSummary::BriefReport() const {
+  std::string sig;
+  for (std::size_t i = 0; i < sigma.size(); ++i) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%s%.4g", i ? " " : "", sigma[i]);
+    sig += b;
+  }
+  char line[400];
+  std::snprintf(line, sizeof line,
+                "BC: %d epochs (best %d), %ld steps, %ld+%ld pairs (%ld+%ld episodes), NLL train "
+                "%.4f val %.4f, action MSE train %.5f val %.5f, sigma [%s], %.2f s",
+                epochs, best_epoch, optimizer_steps, train_pairs, validation_pairs, train_episodes,
+                validation_episodes, train_nll, validation_nll, train_action_mse,
+                validation_action_mse, sig.c_str(), wall_seconds);
+  return line;
+}
+
+nlohmann::json BcSummary::ToJson() const {
+  return {{"epochs", epochs},
+          {"best_epoch", best_epoch},
+          {"optimizer_steps", optimizer_steps},
+          {"train_episodes", train_episodes},
+          {"validation_episodes", validation_episodes},
+          {"train_pairs", train_pairs},
+          {"validation_pairs", validation_pairs},
+          {"train_nll", NumberOrNull(train_nll)},
+          {"validation_nll", NumberOrNull(validation_nll)},
+          {"train_action_mse", NumberOrNull(train_action_mse)},
+          {"validation_action_mse", NumberOrNull(validation_action_mse)},
+          {"sigma", sigma},
+          {"wall_seconds", wall_seconds}};
+}
+
+void CheckDemos(const data::TrajectorySet& demos, int min_episode_rows) {
+  const std::string name = "demonstrations (" + demos.source + ")";
+  SECURE_CHECK(!demos.state_features.empty(), name << ": no state features");
+  SECURE_CHECK(!demos.action_features.empty(), name << ": no action features");
+  SECURE_CHECK(demos.states.rows() == static_cast<Eigen::Index>(demos.state_features.size()),
+               name << ": states have " << demos.states.rows() << " rows for "
+                    << demos.state_features.size() << " state features");
+  SECURE_CHECK(demos.actions.rows() == static_cast<Eigen::Index>(demos.action_features.size()),
+               name << ": actions have " << demos.actions.rows() << " rows for "
+                    << demos.action_features.size() << " action features");
+  SECURE_CHECK(
+      demos.actions.cols() == demos.states.cols(),
+      name << ": " << demos.states.cols() << " states but " << demos.actions.cols() << " actions");
+  SECURE_CHECK(demos.num_episodes() >= 1 && demos.num_steps() > 0,
+               name << ": no episodes (at least one is needed)");
+  SECURE_CHECK(demos.episode_begin.front() == 0 && demos.episode_begin.back() == demos.num_steps(),
+               name << ": episode boundaries do not cover the " << demos.num_steps() << " steps");
+  for (long e = 0; e < demos.num_episodes(); ++e) {
+    const long rows = demos.episode_begin[e + 1] - demos.episode_begin[e];
+    SECURE_CHECK(rows >= min_episode_rows, name << ": episode " << e << " has " << rows
+                                                << " rows, at least " << min_episode_rows
+                                                << " are needed");
+  }
+  for (Eigen::Index c = 0; c < demos.states.cols(); ++c) {
+    SECURE_CHECK(demos.states.col(c).allFinite(),
+                 name << ": state " << c << " has a non-finite value");
+    SECURE_CHECK(demos.actions.col(c).allFinite(),
+                 name << ": action " << c << " has a non-finite value");
+  }
+}
+
+}  // namespace secure::policy

@@ -1,0 +1,224 @@
+#include "secure/policy/bc_trainer.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <numeric>
+
+#include "secure/common/atomic_file.h"
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+#include "secure/common/timer.h"
+#include "secure/policy/internal/torch_policy.h"
+
+namespace secure::policy {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+struct Split {
+  std::vector<long> train_columns, validation_columns;
+  long train_episodes = 0, validation_episodes = 0;
+};
+
+// Whole episodes go to validation: round(fraction * E), at least 1 and at most E - 1.
+Split SplitEpisodes(const data::TrajectorySet& demos, double fraction, Rng& rng) {
+  const long episodes = demos.num_episodes();
+  long n_val = 0;
+  if (fraction > 0 && episodes >= 2)
+    n_val = std::clamp(std::lround(fraction * static_cast<double>(episodes)), 1L, episodes - 1);
+  std::vector<long> order(episodes);
+  std::iota(order.begin(), order.end(), 0L);
+  Shuffle(order.begin(), order.end(), rng);
+  std::vector<bool> is_val(episodes, false);
+  for (long i = 0; i < n_val; ++i) is_val[order[i]] = true;
+  Split split;
+  for (long e = 0; e < episodes; ++e) {
+    auto& columns = is_val[e] ? split.validation_columns : split.train_columns;
+    for (long c = demos.episode_begin[e]; c < demos.episode_begin[e + 1]; ++c) columns.push_back(c);
+    ++(is_val[e] ? split.validation_episodes : split.train_episodes);
+  }
+  return split;
+}
+
+struct Pairs {
+  torch::Tensor x, a;  // normalised states (N x d_s), actions (N x d_a)
+  long size() const { return x.defined() ? x.size(0) : 0; }
+};
+
+Pairs MakePairs(const data::TrajectorySet& demos, const std::vector<long>& columns,
+                const nn::Normalizer& normalizer) {
+  if (columns.empty()) return {};
+  return {nn::ToTensor(normalizer.Apply(data::SelectColumns(demos.states, columns))),
+          nn::ToTensor(data::SelectColumns(demos.actions, columns))};
+}
+
+struct Score {
+  double nll = kNaN, mse = kNaN;
+};
+
+Score Evaluate(internal::TorchGaussian& model, const Pairs& pairs) {
+  if (pairs.size() == 0) return {};
+  torch::NoGradGuard no_grad;
+  const torch::Tensor mu = model->Mean(pairs.x);
+  Score s;
+  s.nll = -internal::GaussianLogProb(mu, model->LogStd(), pairs.a).mean().item<double>();
+  s.mse = (mu - pairs.a).pow(2).mean().item<double>();
+  return s;
+}
+
+std::string CurveCsv(const std::vector<std::array<double, 5>>& rows) {
+  std::string out = "epoch,train_nll,validation_nll,action_mse,seconds\n";
+  char buf[64];
+  for (const auto& row : rows) {
+    for (int i = 0; i < 5; ++i) {
+      if (i > 0) out += ',';
+      if (i == 0) {
+        std::snprintf(buf, sizeof buf, "%d", static_cast<int>(row[i]));
+      } else if (std::isfinite(row[i])) {
+        std::snprintf(buf, sizeof buf, "%.9g", row[i]);
+      } else {
+        buf[0] = '\0';  // no validation split: empty cell
+      }
+      out += buf;
+    }
+    out += '\n';
+  }
+  return out;
+}
+
+}  // namespace
+
+GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demos,
+                       BcSummary* summary) {
+  options.Validate();
+  CheckDemos(demos, 1);
+  const Stopwatch clock;
+  Rng rng(internal::DeriveSeed(options.seed, 0));
+
+  const Split split = SplitEpisodes(demos, options.validation_fraction, rng);
+  const bool has_validation = !split.validation_columns.empty();
+  const nn::Normalizer normalizer =
+      nn::Normalizer::Fit(data::SelectColumns(demos.states, split.train_columns));
+  const Pairs train = MakePairs(demos, split.train_columns, normalizer);
+  const Pairs val = MakePairs(demos, split.validation_columns, normalizer);
+
+  // Initial weights from secure::Rng; log sigma starts at the spread of the demo actions.
+  const int obs_dim = static_cast<int>(demos.state_features.size());
+  const int act_dim = static_cast<int>(demos.action_features.size());
+  const nn::MlpSpec spec{obs_dim, options.hidden, act_dim, options.activation};
+  const Eigen::MatrixXf train_actions = data::SelectColumns(demos.actions, split.train_columns);
+  Eigen::VectorXf log_std(act_dim);
+  for (int i = 0; i < act_dim; ++i) {
+    const Eigen::ArrayXd row = train_actions.row(i).cast<double>().transpose().array();
+    const double sd = std::sqrt((row - row.mean()).square().mean());
+    log_std[i] = static_cast<float>(std::max(options.min_log_std, sd > 0 ? std::log(sd) : 0.0));
+  }
+  internal::TorchGaussian model(
+      internal::InitialParams(spec, internal::DeriveSeed(options.seed, 1)), log_std,
+      options.min_log_std);
+  // Weight decay on the mean network only, not on log sigma.
+  std::vector<torch::optim::OptimizerParamGroup> groups;
+  groups.emplace_back(
+      model->mean->parameters(),
+      std::make_unique<torch::optim::AdamOptions>(
+          torch::optim::AdamOptions(options.learning_rate).weight_decay(options.weight_decay)));
+  groups.emplace_back(std::vector<torch::Tensor>{model->log_std},
+                      std::make_unique<torch::optim::AdamOptions>(
+                          torch::optim::AdamOptions(options.learning_rate)));
+  torch::optim::Adam optimizer(std::move(groups), torch::optim::AdamOptions(options.learning_rate));
+
+  BcSummary s;
+  s.train_episodes = split.train_episodes;
+  s.validation_episodes = split.validation_episodes;
+  s.train_pairs = train.size();
+  s.validation_pairs = val.size();
+  std::vector<std::array<double, 5>> curve;
+  double best_nll = std::numeric_limits<double>::infinity();
+  GaussianPolicy best = model->Export(normalizer);
+
+  const long n = train.size();
+  std::vector<std::int64_t> order(n);
+  std::iota(order.begin(), order.end(), std::int64_t{0});
+  const int report_every = std::max(1, options.epochs / 10);
+  for (int epoch = 1; epoch <= options.epochs; ++epoch) {
+    const double progress = static_cast<double>(epoch - 1) / std::max(1, options.epochs - 1);
+    internal::SetLearningRate(
+        optimizer,
+        options.final_learning_rate + 0.5 * (options.learning_rate - options.final_learning_rate) *
+                                          (1.0 + std::cos(M_PI * progress)));
+    Shuffle(order.begin(), order.end(), rng);
+    const torch::Tensor perm = torch::from_blob(order.data(), {n}, torch::kInt64);
+    double epoch_nll = 0.0;
+    for (long first = 0; first < n; first += options.batch_size) {
+      const long m = std::min<long>(options.batch_size, n - first);
+      const torch::Tensor idx = perm.slice(0, first, first + m);
+      const torch::Tensor loss =
+          -model->LogProb(train.x.index_select(0, idx), train.a.index_select(0, idx)).mean();
+      optimizer.zero_grad();
+      loss.backward();
+      optimizer.step();
+      epoch_nll += loss.item<double>() * static_cast<double>(m);
+      ++s.optimizer_steps;
+    }
+    epoch_nll /= static_cast<double>(n);
+    s.epochs = epoch;
+
+    const Score val_score = has_validation ? Evaluate(model, val) : Score{};
+    const double action_mse = has_validation ? val_score.mse : Evaluate(model, train).mse;
+    curve.push_back(
+        {static_cast<double>(epoch), epoch_nll, val_score.nll, action_mse, clock.Seconds()});
+    // Best epoch by validation NLL; without validation, the last epoch.
+    if (!has_validation || val_score.nll < best_nll) {
+      best_nll = has_validation ? val_score.nll : best_nll;
+      best = model->Export(normalizer);
+      s.best_epoch = epoch;
+    }
+    if (options.verbose && (epoch % report_every == 0 || epoch == options.epochs)) {
+      std::fprintf(stderr,
+                   "[bc] epoch %d/%d train NLL %.4f val NLL %.4f action MSE %.5f (best %d) "
+                   "%.1f s\n",
+                   epoch, options.epochs, epoch_nll, val_score.nll, action_mse, s.best_epoch,
+                   clock.Seconds());
+    }
+  }
+
+  // Score the kept weights.
+  {
+    torch::NoGradGuard no_grad;
+    model->mean->LoadParams(best.mean);
+    model->log_std.copy_(torch::from_blob(best.log_std.data(), {act_dim}, torch::kFloat32));
+  }
+  const Score train_score = Evaluate(model, train);
+  const Score val_score = Evaluate(model, val);
+  s.train_nll = train_score.nll;
+  s.train_action_mse = train_score.mse;
+  s.validation_nll = val_score.nll;
+  s.validation_action_mse = val_score.mse;
+  for (int i = 0; i < act_dim; ++i) s.sigma.push_back(std::exp(double{best.log_std[i]}));
+  s.wall_seconds = clock.Seconds();
+
+  if (!options.curve_path.empty()) {
+    const std::filesystem::path parent = std::filesystem::path(options.curve_path).parent_path();
+    if (!parent.empty()) std::filesystem::create_directories(parent);
+    WriteFileAtomically(options.curve_path, CurveCsv(curve));
+  }
+
+  best.observation_features = demos.state_features;
+  best.action_features = demos.action_features;
+  best.provenance = {{"trainer", "secure::policy::TrainBc (Gaussian maximum likelihood)"},
+                     {"options", options.ToJson()},
+                     {"summary", s.ToJson()},
+                     {"demonstrations",
+                      {{"source", demos.source},
+                       {"episodes", demos.num_episodes()},
+                       {"steps", demos.num_steps()}}}};
+  best.Validate("BC policy");
+  if (summary != nullptr) *summary = s;
+  return best;
+}
+
+}  // namespace secure::policy

@@ -1,0 +1,37 @@
+#pragma once
+// Helpers shared by the policy trainers' option files (bc_options.cc, airl_options.cc): typed
+// YAML values with messages naming the source, the field and the value. No LibTorch.
+#include <yaml-cpp/yaml.h>
+
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "secure/common/error.h"
+#include "secure/common/yaml_value.h"
+
+namespace secure::policy::internal {
+
+using secure::YamlValue;
+
+
+inline std::vector<int> YamlWidths(const YAML::Node& node, const std::string& key,
+                                   const std::string& source) {
+  SECURE_CHECK(node.IsSequence(),
+               source << ": field '" << key << "' must be a list of layer widths");
+  std::vector<int> widths;
+  for (const auto& w : node) widths.push_back(YamlValue<int>(w, key, source));
+  return widths;
+}
+
+inline std::string WidthsString(const std::vector<int>& widths) {
+  std::string s = "[";
+  for (std::size_t i = 0; i < widths.size(); ++i) s += (i ? ", " : "") + std::to_string(widths[i]);
+  return s + "]";
+}
+
+}  // namespace secure::policy::internal
+
+/// SECURE_CHECK for an option: "<Struct>::<field> = <value>, must be <rule>".
+#define SECURE_POLICY_OPTION_CHECK(cond, type, field, value, rule) \
+  SECURE_CHECK(cond, type "::" << field << " = " << value << ", must be " << rule)

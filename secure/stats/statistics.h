@@ -1,0 +1,174 @@
+#pragma once
+// Statistics for comparing methods over seeds (the paper's Section 6 runs every method with 10
+// seeds): summaries, the Mann–Whitney U test, a TOST equivalence test (two one-sided Welch
+// t-tests), the Kruskal–Wallis H test and Dunn's post-hoc test. Results are plain structs with
+// documented fields and ToJson(), so the evaluation harness can store them next to its metrics.
+//
+//   using namespace secure::stats;
+//   const std::vector<double> secure_rate = {...}, bc_rate = {...};   // one value per seed
+//   const SampleSummary s = Summarize(secure_rate);                   // mean ± std (ddof = 1)
+//   const MannWhitneyResult mw = MannWhitneyU(secure_rate, bc_rate);  // do they differ?
+//   const TostResult tost = TostWelch(secure_rate, bc_rate, 0.05);    // are they within ±0.05?
+//   if (tost.equivalent()) ...
+//   const DunnResult dunn = Dunn({secure_rate, bc_rate, airl_rate});  // which pairs differ?
+//
+// Conventions (chosen to match SciPy, so numbers can be checked against scipy.stats):
+//   - Ranks are 1-based, and tied values get the average of the ranks they span (midranks).
+//     Values are compared exactly: 0.47 in one sample ties 0.47 in another.
+//   - All p-values are two-sided, except the two one-sided p-values inside TostResult.
+//   - Distributions (normal, Student's t, chi-squared) come from Boost.Math; upper tails are
+//     computed as complements, so small p-values keep their relative precision.
+//   - Bad input throws secure::Error naming the function, the argument and the value: empty
+//     samples, non-finite values, too few values, bound <= 0, fewer than 2 groups, and
+//     all-values-tied inputs where a statistic is undefined (see each function).
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "secure/common/enum_strings.h"
+
+namespace secure::stats {
+
+// ---------------------------------------------------------------------------------------------
+// Summaries and ranks
+
+struct SampleSummary {
+  long n = 0;       // number of values
+  double mean = 0;  // arithmetic mean
+  double std = 0;   // sample standard deviation (ddof = 1); 0 for n = 1
+  double min = 0;   // smallest value
+  double max = 0;   // largest value
+  nlohmann::json ToJson() const;
+};
+
+/// n, mean, std (ddof = 1), min and max of `values` (at least one value, all finite).
+SampleSummary Summarize(const std::vector<double>& values);
+
+/// 1-based ranks of `values` with midranks for ties (scipy.stats.rankdata's "average"), e.g.
+/// {3, 1, 3, 2} -> {3.5, 1, 3.5, 2}. Values must be finite; an empty input gives an empty result.
+std::vector<double> Midranks(const std::vector<double>& values);
+
+// ---------------------------------------------------------------------------------------------
+// Mann–Whitney U (Wilcoxon rank-sum) test, two-sided
+
+enum class MannWhitneyMethod {
+  kAuto,        // exact if the pooled values hold no ties and both samples have <= 50 values,
+                // else asymptotic. (SciPy's own "auto" uses a different size limit: pass the
+                // method explicitly to reproduce a SciPy call exactly.)
+  kExact,       // the exact null distribution of U; requires that no two pooled values tie
+  kAsymptotic,  // normal approximation, tie-corrected variance, continuity correction 0.5
+};
+inline constexpr EnumTable<MannWhitneyMethod, 3> kMannWhitneyMethodNames{{
+    {MannWhitneyMethod::kAuto, "auto"},
+    {MannWhitneyMethod::kExact, "exact"},
+    {MannWhitneyMethod::kAsymptotic, "asymptotic"},
+}};
+
+/// The samples at which kAuto still uses the exact distribution (both samples at most this big).
+inline constexpr long kMannWhitneyExactMaxSize = 50;
+
+struct MannWhitneyResult {
+  // U of the first sample (SciPy's convention): the number of pairs (x in a, y in b) with x > y,
+  // plus half the number of tied pairs. U(a, b) + U(b, a) = n_a n_b.
+  double u = 0;
+  double p_value = 1;  // two-sided
+  std::string method;  // the method used: "exact" or "asymptotic" (never "auto")
+  // Asymptotic only: the continuity-corrected standard score of U, signed as U - n_a n_b / 2
+  // (positive when a tends to be larger). NaN for the exact method (null in JSON).
+  double z = 0;
+  // Effect size 2U / (n_a n_b) - 1 in [-1, 1]: +1 if every value of a exceeds every value of b,
+  // -1 if every value of b exceeds every value of a, 0 for no tendency.
+  double rank_biserial = 0;
+  nlohmann::json ToJson() const;
+};
+
+/// Two-sided Mann–Whitney U test of whether the values of `a` tend to be larger or smaller than
+/// those of `b`. Both samples need at least one value, all finite.
+///   exact:      p = min(1, 2 min(P(U <= u), P(U >= u))) under the exact null distribution of U
+///               (computed by dynamic programming over sample sizes; cost O((n_a n_b)^2 / 4)).
+///   asymptotic: z = sign(d) max(|d| - 0.5, 0) / sigma with d = u - n_a n_b / 2 and the tie-
+///               corrected sigma^2 = n_a n_b / 12 ((N + 1) - sum(t^3 - t) / (N (N - 1))); p = 2
+///               P(Z >= |z|), which equals SciPy's asymptotic p-value.
+/// If every pooled value is the same, nothing can be ranked: the result is SciPy's, U =
+/// n_a n_b / 2, p = 1 (asymptotic, z = 0). kExact with tied values throws.
+MannWhitneyResult MannWhitneyU(const std::vector<double>& a, const std::vector<double>& b,
+                               MannWhitneyMethod method = MannWhitneyMethod::kAuto);
+
+// ---------------------------------------------------------------------------------------------
+// TOST equivalence test with Welch's t
+
+struct TostResult {
+  double difference = 0;  // mean(a) - mean(b)
+  double bound = 0;       // equivalence margin: H1 is -bound < difference < bound
+  double se = 0;          // standard error of the difference, sqrt(var_a / n_a + var_b / n_b)
+  double df = 0;          // Welch–Satterthwaite degrees of freedom (+inf if se = 0)
+  double t_lower = 0;     // (difference + bound) / se, tests H0: difference <= -bound
+  double p_lower = 1;     // P(T >= t_lower)
+  double t_upper = 0;     // (difference - bound) / se, tests H0: difference >= +bound
+  double p_upper = 1;     // P(T <= t_upper)
+  double p_value = 1;     // max(p_lower, p_upper): the TOST p-value
+
+  /// True if both one-sided tests reject at level alpha (p_value < alpha), alpha in (0, 1).
+  bool equivalent(double alpha = 0.05) const;
+  nlohmann::json ToJson() const;  // infinite values are written as null
+};
+
+/// Two one-sided Welch t-tests (TOST) for the equivalence of mean(a) and mean(b) within ±bound
+/// (in the metric's units, bound > 0). Each sample needs at least 2 values, all finite.
+/// If both samples have zero variance the difference is known exactly: se = 0, df = +inf,
+/// p_lower = 0 if difference > -bound else 1, p_upper = 0 if difference < bound else 1, and the
+/// t statistics are +inf or -inf accordingly (so p_value = 0 iff |difference| < bound).
+/// If only one sample has zero variance, Welch's formulas hold as they are.
+TostResult TostWelch(const std::vector<double>& a, const std::vector<double>& b, double bound);
+
+// ---------------------------------------------------------------------------------------------
+// Kruskal–Wallis H test and Dunn's post-hoc test
+
+struct KruskalWallisResult {
+  double h = 0;        // H statistic, tie-corrected (divided by 1 - sum(t^3 - t) / (N^3 - N))
+  int df = 0;          // number of groups - 1
+  double p_value = 1;  // P(chi^2_df >= h)
+  nlohmann::json ToJson() const;
+};
+
+/// Kruskal–Wallis H test of whether the groups (numbered from 0) come from the same distribution.
+/// At least 2 groups, each with at least one value, all finite. Like SciPy, throws if every value
+/// is the same (H is 0 / 0 then).
+KruskalWallisResult KruskalWallis(const std::vector<std::vector<double>>& groups);
+
+/// How Dunn's p-values are adjusted for the number of pairs m.
+enum class PAdjust {
+  kBonferroni,  // min(1, p m)
+  kHolm,  // step-down Holm–Bonferroni: sort p ascending, p_(k) (m - k + 1), running maximum,
+          // capped at 1 (k 1-based); never larger than Bonferroni
+  kNone,  // p unchanged
+};
+inline constexpr EnumTable<PAdjust, 3> kPAdjustNames{{
+    {PAdjust::kBonferroni, "bonferroni"},
+    {PAdjust::kHolm, "holm"},
+    {PAdjust::kNone, "none"},
+}};
+
+struct DunnPair {
+  int i = 0;              // first group (i < j)
+  int j = 0;              // second group
+  double z = 0;           // (mean rank of i - mean rank of j) / se
+  double p_value = 1;     // two-sided, unadjusted
+  double p_adjusted = 1;  // after DunnResult::adjustment
+  nlohmann::json ToJson() const;
+};
+
+struct DunnResult {
+  std::vector<DunnPair> pairs;            // every pair i < j, ordered (0,1), (0,2), ..., (1,2), ...
+  std::string adjustment = "bonferroni";  // name of the PAdjust used
+  nlohmann::json ToJson() const;
+};
+
+/// Dunn's test for every pair of groups, on the ranks of the pooled values, tie-corrected:
+/// se = sqrt((N (N + 1) / 12 - sum(t^3 - t) / (12 (N - 1))) (1 / n_i + 1 / n_j)). Same input
+/// rules as KruskalWallis, including the error when every value is the same (se = 0).
+DunnResult Dunn(const std::vector<std::vector<double>>& groups,
+                PAdjust adjust = PAdjust::kBonferroni);
+
+}  // namespace secure::stats

@@ -1,0 +1,195 @@
+// The evaluation harness: episodes of policies with and without the shield on the
+// double-integrator reach-avoid task, and the across-seed summaries and tests.
+#include "secure/eval/policy_eval.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "secure/cbf/barrier.h"
+#include "secure/domains/double_integrator/reach_avoid.h"
+#include "tests/test_util.h"
+
+namespace secure::eval {
+namespace {
+
+namespace di = domains::double_integrator;
+using test::ErrorOf;
+
+// A linear policy: the PD controller a = kp (goal - p) - kd v straight at the goal (through the
+// obstacle), with the given noise.
+policy::GaussianPolicy PdPolicy(const di::ReachAvoidOptions& task, double sigma) {
+  policy::GaussianPolicy p;
+  p.mean.spec.input_dim = 4;
+  p.mean.spec.output_dim = 2;
+  nn::DenseLayer layer;
+  const float kp = 0.25f, kd = 1.0f;
+  layer.weight = Eigen::MatrixXf::Zero(2, 4);
+  layer.weight(0, 0) = -kp;
+  layer.weight(1, 1) = -kp;
+  layer.weight(0, 2) = -kd;
+  layer.weight(1, 3) = -kd;
+  layer.bias = Eigen::Vector2f(kp * static_cast<float>(task.goal_x),
+                               kp * static_cast<float>(task.goal_y));
+  p.mean.layers.push_back(layer);
+  p.input = nn::Normalizer::Identity(4);
+  p.log_std = Eigen::VectorXf::Constant(2, static_cast<float>(std::log(sigma)));
+  p.observation_features = di::StateFeatures();
+  const di::ReachAvoidEnv env(task);
+  p.action_features = env.ActionFeatures();
+  p.Validate();
+  return p;
+}
+
+TEST(PolicyEvalTest, ShieldWithGroundTruthPreventsTheCollisionsOfTheUnshieldedPolicy) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  SeedModels models;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<cbf::DoubleIntegratorGroundTruth>(task.truth); };
+  const auto results = EvaluateMethods(env, {Method::kAirl, Method::kSecure}, models,
+                                       shield::ShieldOptions{}, 40, 7);
+  const SeedResult& plain = results.at(Method::kAirl);
+  const SeedResult& shielded = results.at(Method::kSecure);
+  EXPECT_EQ(plain.episodes, 40);
+  EXPECT_GT(plain.dangerous, 30);  // the straight path crosses the obstacle
+  EXPECT_EQ(plain.decisions, 0);
+  EXPECT_EQ(shielded.dangerous, 0);
+  EXPECT_EQ(shielded.collision_events, 0);
+  EXPECT_GT(shielded.successes, 30);
+  EXPECT_GT(shielded.interventions, 0);
+  EXPECT_EQ(shielded.decisions, shielded.steps);
+  EXPECT_EQ(shielded.latency_us.count, shielded.decisions);
+  EXPECT_GT(shielded.interventions_per_episode(), 0.0);
+}
+
+TEST(PolicyEvalTest, SameSeedGivesTheSameEpisodes) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.5);
+  SeedModels models;
+  models.bc = &pd;
+  models.make_barrier = [&] { return std::make_unique<cbf::DoubleIntegratorGroundTruth>(task.truth); };
+  const std::vector<Method> methods = {Method::kBc, Method::kBcShield};
+  const auto a = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 3);
+  const auto b = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 3);
+  const auto c = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 4);
+  for (Method m : methods) {
+    EXPECT_EQ(a.at(m).steps, b.at(m).steps);
+    EXPECT_EQ(a.at(m).successes, b.at(m).successes);
+    EXPECT_EQ(a.at(m).interventions, b.at(m).interventions);
+    EXPECT_EQ(a.at(m).mean_steps_to_goal, b.at(m).mean_steps_to_goal);
+  }
+  EXPECT_NE(a.at(Method::kBcShield).steps, c.at(Method::kBcShield).steps);
+}
+
+TEST(PolicyEvalTest, MissingModelsAreNamed) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  SeedModels models;
+  models.bc = &pd;
+  EXPECT_HAS(ErrorOf([&] {
+               EvaluateMethods(env, {Method::kAirl}, models, shield::ShieldOptions{}, 1, 0);
+             }),
+             "method 'airl' needs a AIRL policy");
+  EXPECT_HAS(ErrorOf([&] {
+               EvaluateMethods(env, {Method::kBcShield}, models, shield::ShieldOptions{}, 1, 0);
+             }),
+             "method 'bc+shield' needs a barrier");
+}
+
+TEST(PolicyEvalTest, ParseMethods) {
+  EXPECT_EQ(ParseMethods("bc, airl,secure"),
+            (std::vector<Method>{Method::kBc, Method::kAirl, Method::kSecure}));
+  EXPECT_EQ(ParseMethods("secure-random-safe,secure-no-resampling,bc+shield").size(), 3u);
+  EXPECT_HAS(ErrorOf([] { ParseMethods("bc,gail"); }), "'gail'");
+  EXPECT_HAS(ErrorOf([] { ParseMethods("bc,bc"); }), "listed twice");
+  EXPECT_HAS(ErrorOf([] { ParseMethods(""); }), "no method");
+}
+
+TEST(PolicyEvalTest, ShieldOptionsForAppliesExactlyTheAblation) {
+  shield::ShieldOptions base;
+  base.num_samples = 32;
+  const shield::ShieldOptions a = ShieldOptionsFor(Method::kSecureRandomSafe, base);
+  EXPECT_EQ(a.aggregation, shield::Aggregation::kRandomSafe);
+  EXPECT_EQ(a.resampling, base.resampling);
+  const shield::ShieldOptions b = ShieldOptionsFor(Method::kSecureNoResampling, base);
+  EXPECT_EQ(b.resampling, shield::Resampling::kNone);
+  EXPECT_EQ(b.aggregation, base.aggregation);
+  EXPECT_EQ(ShieldOptionsFor(Method::kSecure, base).ToJson(), base.ToJson());
+  EXPECT_EQ(a.num_samples, 32);
+}
+
+SeedResult Synthetic(long successes, long dangerous) {
+  SeedResult r;
+  r.episodes = 100;
+  r.successes = successes;
+  r.dangerous = dangerous;
+  return r;
+}
+
+TEST(PolicyEvalTest, EvaluationSummarisesSeedsAndComparesSecureWithAirl) {
+  Evaluation evaluation;
+  const std::vector<long> airl_success = {80, 85, 78, 90, 83};
+  const std::vector<long> secure_success = {82, 84, 80, 88, 86};
+  const std::vector<long> airl_danger = {20, 25, 18, 22, 30};
+  for (std::size_t k = 0; k < 5; ++k) {
+    evaluation.Add(Method::kAirl, Synthetic(airl_success[k], airl_danger[k]));
+    evaluation.Add(Method::kSecure, Synthetic(secure_success[k], 0));
+  }
+  evaluation.Finish();
+  const nlohmann::json j = evaluation.ToJson();
+  const nlohmann::json& s = j["methods"]["secure"];
+  EXPECT_NEAR(s["success_rate"]["mean"].get<double>(), 0.84, 1e-12);
+  EXPECT_EQ(s["success_rate"]["per_seed"].size(), 5u);
+  EXPECT_NEAR(s["success_rate"]["per_seed"][3].get<double>(), 0.88, 1e-12);
+  EXPECT_EQ(s["dangerous_rate"]["mean"].get<double>(), 0.0);
+  EXPECT_EQ(s["dangerous_rate"]["std"].get<double>(), 0.0);
+  // Sample std (n - 1) of the AIRL dangerous rates.
+  EXPECT_NEAR(j["methods"]["airl"]["dangerous_rate"]["std"].get<double>(),
+              stats::Summarize({0.20, 0.25, 0.18, 0.22, 0.30}).std, 1e-12);
+  // SECURE never dangerous, AIRL always: complete separation, U = 0 (SECURE's zeros are ties,
+  // so the p-value is the asymptotic one).
+  const nlohmann::json& c = j["comparisons"]["secure_vs_airl"];
+  EXPECT_EQ(c["dangerous_mann_whitney"]["u"].get<double>(), 0.0);
+  EXPECT_EQ(c["dangerous_mann_whitney"]["method"], "asymptotic");
+  EXPECT_NEAR(c["dangerous_mann_whitney"]["p_value"].get<double>(),
+              stats::MannWhitneyU({0, 0, 0, 0, 0}, {0.20, 0.25, 0.18, 0.22, 0.30}).p_value, 1e-12);
+  EXPECT_LT(c["dangerous_mann_whitney"]["p_value"].get<double>(), 0.01);
+  EXPECT_NEAR(c["success_tost"]["difference"].get<double>(), 0.84 - 0.832, 1e-12);
+  EXPECT_LT(c["success_tost"]["p_value"].get<double>(), 0.05);
+  const std::string table = evaluation.Table();
+  EXPECT_HAS(table, "| secure | 84.0 (");
+  EXPECT_HAS(table, "| airl | 83.2 (");
+  EXPECT_HAS(table, "equivalent");
+}
+
+TEST(PolicyEvalTest, AblationsAreComparedWithKruskalWallisAndDunn) {
+  Evaluation evaluation;
+  for (long k = 0; k < 4; ++k) {
+    evaluation.Add(Method::kSecure, Synthetic(90 + k, 0));
+    evaluation.Add(Method::kSecureRandomSafe, Synthetic(70 + k, 1 + k));
+    evaluation.Add(Method::kSecureNoResampling, Synthetic(50 + k, 40 + k));
+  }
+  evaluation.Finish();
+  const nlohmann::json a = evaluation.ToJson()["comparisons"]["ablations"];
+  EXPECT_EQ(a["methods"].size(), 3u);
+  EXPECT_LT(a["success_rate"]["kruskal_wallis"]["p_value"].get<double>(), 0.05);
+  EXPECT_EQ(a["success_rate"]["dunn"]["pairs"].size(), 3u);
+  EXPECT_HAS(evaluation.Table(), "Kruskal-Wallis H =");
+}
+
+TEST(PolicyEvalTest, EvaluationRejectsUnequalSeedCounts) {
+  Evaluation evaluation;
+  evaluation.Add(Method::kBc, Synthetic(1, 0));
+  evaluation.Add(Method::kBc, Synthetic(2, 0));
+  evaluation.Add(Method::kAirl, Synthetic(1, 0));
+  EXPECT_HAS(ErrorOf([&] { evaluation.Finish(); }), "has 1 seeds");
+  Evaluation empty;
+  EXPECT_HAS(ErrorOf([&] { empty.Finish(); }), "no results");
+}
+
+}  // namespace
+}  // namespace secure::eval
