@@ -10,4 +10,6 @@ void RegisterCbfCommands(CLI::App& app, const Config& config);
 void RegisterShieldCommands(CLI::App& app, const Config& config);
 /// secure demo, secure demos generate, secure policy train, secure eval.
 void RegisterPipelineCommands(CLI::App& app, const Config& config);
+/// secure experiment derby-table3 | derby-joint | derby-ablation | derby-sensitivity.
+void RegisterExperimentCommands(CLI::App& app, const Config& config);
 }  // namespace secure::cli

@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterCbfCommands(app, config);
     secure::cli::RegisterShieldCommands(app, config);
     secure::cli::RegisterPipelineCommands(app, config);
+    secure::cli::RegisterExperimentCommands(app, config);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);

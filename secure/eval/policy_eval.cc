@@ -22,14 +22,23 @@ const std::vector<Method>& AllMethods() {
   return methods;
 }
 
-bool IsShielded(Method method) { return method != Method::kBc && method != Method::kAirl; }
+bool IsShielded(Method method) {
+  return method != Method::kBc && method != Method::kAirl && method != Method::kJoint;
+}
 
 bool UsesBcPolicy(Method method) { return method == Method::kBc || method == Method::kBcShield; }
+
+bool UsesJointPolicy(Method method) { return method == Method::kJoint; }
 
 shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOptions& base) {
   shield::ShieldOptions options = base;
   if (method == Method::kSecureRandomSafe) options.aggregation = shield::Aggregation::kRandomSafe;
   if (method == Method::kSecureNoResampling) options.resampling = shield::Resampling::kNone;
+  if (method == Method::kSecureMyopic) {
+    // alpha(h) = h / dt: g = (h(s+) - h(s)) / dt + h(s) / dt = h(s+) / dt, so g >= 0 is h(s+) >= 0.
+    options.class_k = shield::ClassK::kLinear;
+    options.class_k_gain = 1.0 / options.dt;
+  }
   return options;
 }
 
@@ -167,9 +176,13 @@ std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
   std::map<Method, SeedResult> results;
   for (Method method : methods) {
     const std::string name = ToString(kMethodNames, method);
-    const policy::GaussianPolicy* policy = UsesBcPolicy(method) ? models.bc : models.airl;
+    const policy::GaussianPolicy* policy = UsesBcPolicy(method)      ? models.bc
+                                           : UsesJointPolicy(method) ? models.joint
+                                                                     : models.airl;
     SECURE_CHECK(policy != nullptr, "method '" << name << "' needs a "
-                                               << (UsesBcPolicy(method) ? "BC" : "AIRL")
+                                               << (UsesBcPolicy(method)      ? "BC"
+                                                   : UsesJointPolicy(method) ? "joint"
+                                                                             : "AIRL")
                                                << " policy, and none was given");
     policy::PolicyEvaluator evaluator(*policy);
     if (!IsShielded(method)) {
@@ -328,14 +341,17 @@ std::string Evaluation::Table() const {
   const long episodes = methods_.begin()->second.per_seed.front().episodes;
   out << "Success and dangerous rate, % mean (std) over " << seeds << " seeds x " << episodes
       << " episodes\n\n";
-  out << "| method | success % | dangerous % | interventions / episode | no-safe-action | "
-         "decision p50 / p99 (us) |\n";
-  out << "|---|---|---|---|---|---|\n";
+  out << "| method | success % | dangerous % | interventions / episode | sampling rounds / "
+         "decision | no-safe-action | decision p50 / p99 (us) |\n";
+  out << "|---|---|---|---|---|---|---|\n";
   for (const auto& [method, s] : methods_) {
-    long no_safe = 0;
+    long no_safe = 0, decisions = 0;
+    double rounds = 0.0;
     std::vector<double> p50, p99;
     for (const SeedResult& r : s.per_seed) {
       no_safe += r.no_safe_action_decisions;
+      decisions += r.decisions;
+      rounds += r.mean_iterations * double(r.decisions);
       p50.push_back(r.latency_us.p50);
       p99.push_back(r.latency_us.p99);
     }
@@ -345,6 +361,7 @@ std::string Evaluation::Table() const {
     out << "| " << ToString(kMethodNames, method) << " | " << MeanStd(s.success_rate) << " | "
         << MeanStd(s.dangerous_rate) << " | "
         << (shielded ? Number(s.interventions_per_episode.mean, "%.2f") : "-") << " | "
+        << (shielded && decisions > 0 ? Number(rounds / double(decisions), "%.2f") : "-") << " | "
         << (shielded ? std::to_string(no_safe) : "-") << " | "
         << Number(p50[p50.size() / 2], "%.1f") << " / " << Number(p99[p99.size() / 2], "%.1f")
         << " |\n";

@@ -11,6 +11,10 @@
 //   secure-random-safe    ablation 1: the shield returns one random safe sample, not the mean
 //   secure-no-resampling  ablation 2: no adaptive resampling (the policy's own sigma)
 //   bc+shield             the BC policy under the same shield
+//   secure-myopic         SECURE with the myopic test h(T(s, a)) >= 0 (linear alpha with
+//                         alpha dt = 1, the released code's setting; paper Section 4.2, R3)
+//   joint                 the joint-optimisation baseline (paper Section 4.1): a policy trained
+//                         with the barrier's derivative condition as an extra loss, unshielded
 // Unshielded methods sample a ~ N(mu(o), sigma) as the authors' evaluation does; shielded ones
 // pass (mu, sigma) to the shield and apply its action.
 //
@@ -49,23 +53,30 @@ enum class Method {
   kSecureRandomSafe,
   kSecureNoResampling,
   kBcShield,
+  kSecureMyopic,
+  kJoint,
 };
-inline constexpr EnumTable<Method, 6> kMethodNames{{
+inline constexpr EnumTable<Method, 8> kMethodNames{{
     {Method::kBc, "bc"},
     {Method::kAirl, "airl"},
     {Method::kSecure, "secure"},
     {Method::kSecureRandomSafe, "secure-random-safe"},
     {Method::kSecureNoResampling, "secure-no-resampling"},
     {Method::kBcShield, "bc+shield"},
+    {Method::kSecureMyopic, "secure-myopic"},
+    {Method::kJoint, "joint"},
 }};
 
-/// All methods, in table order.
+/// The methods of the double-integrator pipeline (Table 3 and Figure 9), in table order; the
+/// Derby experiments add kSecureMyopic and kJoint.
 const std::vector<Method>& AllMethods();
-/// Whether the method runs the shield, and whether it uses the BC (else the AIRL) policy.
+/// Whether the method runs the shield, and which policy it uses.
 bool IsShielded(Method method);
 bool UsesBcPolicy(Method method);
+bool UsesJointPolicy(Method method);
 /// The shield options of a method: `base` with the method's ablation applied (aggregation
-/// random-safe for kSecureRandomSafe, resampling none for kSecureNoResampling).
+/// random-safe for kSecureRandomSafe, resampling none for kSecureNoResampling, a linear class-K
+/// function with gain 1 / dt for kSecureMyopic).
 shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOptions& base);
 /// "bc,airl,secure" -> methods; throws naming the unknown name and listing the valid ones.
 std::vector<Method> ParseMethods(const std::string& list);
@@ -119,11 +130,12 @@ class EpisodeRunner {
 /// The random stream of episode `episode` of an evaluation with `seed`.
 std::uint64_t EpisodeSeed(std::uint64_t seed, long episode);
 
-/// What one seed's evaluation needs: the two policies (either may be null when no listed method
-/// uses it) and a barrier factory (one evaluator per shield; null when no method is shielded).
+/// What one seed's evaluation needs: the policies (any may be null when no listed method uses
+/// it) and a barrier factory (one evaluator per shield; null when no method is shielded).
 struct SeedModels {
   const policy::GaussianPolicy* bc = nullptr;
   const policy::GaussianPolicy* airl = nullptr;
+  const policy::GaussianPolicy* joint = nullptr;
   std::function<std::unique_ptr<cbf::Barrier>()> make_barrier;
 };
 

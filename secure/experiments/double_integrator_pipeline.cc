@@ -2,21 +2,18 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include <atomic>
-#include <exception>
 #include <filesystem>
 #include <map>
 #include <optional>
-#include <mutex>
 #include <ostream>
 #include <sstream>
-#include <thread>
 
 #include "secure/cbf/double_integrator_study.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
+#include "secure/experiments/internal/seed_runner.h"
 #include "secure/nn/torch_threads.h"
 
 namespace secure::experiments {
@@ -53,23 +50,7 @@ bool NeedsBarrier(const std::vector<eval::Method>& methods) {
   return false;
 }
 
-// Serialised progress lines ("[seed 3/10] ...").
-class Progress {
- public:
-  Progress(std::ostream* out, bool enabled) : out_(enabled ? out : nullptr) {}
-  template <typename F>
-  void Line(F&& write) {
-    if (out_ == nullptr) return;
-    std::ostringstream line;
-    write(line);
-    const std::lock_guard<std::mutex> lock(mutex_);
-    *out_ << line.str() << std::endl;
-  }
-
- private:
-  std::ostream* out_;
-  std::mutex mutex_;
-};
+using internal::Progress;
 
 SeedOutcome RunSeed(const PipelineOptions& o, int index, const data::TrajectorySet& demos,
                     const data::StateSet& safe, const data::StateSet& near_dangerous,
@@ -315,34 +296,13 @@ PipelineResult RunDoubleIntegratorPipeline(const PipelineOptions& o, std::ostrea
   // 2. Seeds, on `threads` workers taking the next seed index.
   const di::ReachAvoidEnv env(o.task);
   std::vector<SeedOutcome> outcomes(static_cast<std::size_t>(o.seeds));
-  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(o.seeds));
-  std::atomic<int> next{0};
-  std::atomic<bool> failed{false};
-  auto worker = [&] {
-    nn::SetTorchThreads(1);  // per thread (OpenMP): two seeds in parallel, one core each
-    for (int i = next++; i < o.seeds && !failed; i = next++) {
-      try {
+  internal::RunJobsInParallel(
+      o.seeds, o.threads,
+      [&](int i) {
         outcomes[static_cast<std::size_t>(i)] =
             RunSeed(o, i, demos.trajectories, safe, near_dangerous, env, progress);
-      } catch (...) {
-        errors[static_cast<std::size_t>(i)] = std::current_exception();
-        failed = true;
-      }
-    }
-  };
-  const int workers = std::min(o.threads, o.seeds);
-  std::vector<std::thread> pool;
-  for (int t = 1; t < workers; ++t) pool.emplace_back(worker);
-  worker();
-  for (std::thread& t : pool) t.join();
-  for (int i = 0; i < o.seeds; ++i) {
-    if (!errors[static_cast<std::size_t>(i)]) continue;
-    try {
-      std::rethrow_exception(errors[static_cast<std::size_t>(i)]);
-    } catch (const std::exception& e) {
-      SECURE_THROW("seed " << o.first_seed + static_cast<std::uint64_t>(i) << ": " << e.what());
-    }
-  }
+      },
+      "seed", static_cast<long>(o.first_seed));
 
   // 3. Across seeds.
   result.evaluation = eval::Evaluation(o.evaluation);

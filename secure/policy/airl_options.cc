@@ -270,7 +270,29 @@ nlohmann::json AirlSummary::ToJson() const {
           {"discriminator_seconds", discriminator_seconds},
           {"ppo_seconds", ppo_seconds},
           {"iterations_per_second", iterations_per_second},
-          {"env_steps_per_second", env_steps_per_second}};
+          {"env_steps_per_second", env_steps_per_second},
+          {"cbf_loss", cbf_loss}};
+}
+
+void JointCbfOptions::Validate() const {
+  SECURE_POLICY_OPTION_CHECK(std::isfinite(weight) && weight >= 0, "JointCbfOptions", "weight",
+                             weight, "finite and >= 0");
+  SECURE_POLICY_OPTION_CHECK(std::isfinite(class_k_gain) && class_k_gain > 0, "JointCbfOptions",
+                             "class_k_gain", class_k_gain, "finite and > 0");
+  SECURE_POLICY_OPTION_CHECK(std::isfinite(dt) && dt > 0, "JointCbfOptions", "dt", dt,
+                             "finite and > 0");
+  SECURE_POLICY_OPTION_CHECK(std::isfinite(unsafe_weight) && unsafe_weight > 0,
+                             "JointCbfOptions", "unsafe_weight", unsafe_weight, "finite and > 0");
+  SECURE_POLICY_OPTION_CHECK(std::isfinite(unsafe_margin) && unsafe_margin >= 0,
+                             "JointCbfOptions", "unsafe_margin", unsafe_margin, "finite and >= 0");
+}
+
+nlohmann::json JointCbfOptions::ToJson() const {
+  return {{"weight", weight},
+          {"class_k_gain", class_k_gain},
+          {"dt", dt},
+          {"unsafe_weight", unsafe_weight},
+          {"unsafe_margin", unsafe_margin}};
 }
 
 }  // namespace secure::policy

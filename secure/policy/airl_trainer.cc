@@ -16,6 +16,7 @@
 #include "secure/common/strings.h"
 #include "secure/common/timer.h"
 #include "secure/policy/bc_trainer.h"
+#include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/policy/internal/torch_policy.h"
 
 namespace secure::policy {
@@ -157,6 +158,57 @@ Eigen::VectorXf EigenVector(const torch::Tensor& t) {
 }
 
 // One AIRL run: the state that a checkpoint holds, and the steps of an iteration.
+// The joint-optimisation term of TrainAirlJoint: the frozen barrier in LibTorch, the shield's
+// model and, per iteration, the model linearised around a = 0 at every rollout state.
+struct JointTerm {
+  JointCbfOptions options;
+  const domains::DynamicsModel* model = nullptr;
+  cbf::internal::CarBarrierTorch barrier{nullptr};
+  torch::Tensor base, jacobian, h_state;  // (n x obs), (n x act x obs), (n)
+  double loss_sum = 0.0;
+  long batches = 0;
+
+  // T(s, 0) and dT/da at every column of `states` (raw observations, obs x n), and h(s).
+  void Prepare(const Eigen::MatrixXf& states, int action_dim) {
+    const long n = states.cols();
+    const long d = states.rows();
+    Eigen::MatrixXf actions = Eigen::MatrixXf::Zero(action_dim, action_dim + 1);
+    for (int k = 0; k < action_dim; ++k) actions(k, k + 1) = 1.0f;
+    Eigen::MatrixXf next(d, action_dim + 1);
+    Eigen::MatrixXf base_m(d, n);
+    Eigen::MatrixXf jac_m(d, n * action_dim);  // column i * action_dim + k: dT/da_k at state i
+    for (long i = 0; i < n; ++i) {
+      model->Step(states.col(i), actions, next);
+      base_m.col(i) = next.col(0);
+      for (int k = 0; k < action_dim; ++k)
+        jac_m.col(i * action_dim + k) = next.col(k + 1) - next.col(0);
+    }
+    base = nn::ToTensor(base_m);
+    jacobian = nn::ToTensor(jac_m).reshape({n, action_dim, d});
+    torch::NoGradGuard no_grad;
+    h_state = barrier->forward(nn::ToTensor(states)).reshape({n});
+    loss_sum = 0.0;
+    batches = 0;
+  }
+
+  // L_cbf on rows `idx` for the reparameterised actions (m x act).
+  torch::Tensor Loss(const torch::Tensor& idx, const torch::Tensor& actions) {
+    const torch::Tensor next = base.index_select(0, idx) +
+                               torch::bmm(actions.unsqueeze(1), jacobian.index_select(0, idx))
+                                   .squeeze(1);
+    const torch::Tensor h = h_state.index_select(0, idx);
+    const torch::Tensor h_next = barrier->forward(next).reshape({-1});
+    const torch::Tensor deriv = h_next - h + options.dt * options.class_k_gain * h;
+    const torch::Tensor loss =
+        torch::where(h >= 0, torch::relu(-deriv),
+                     options.unsafe_weight * torch::relu(-deriv + options.unsafe_margin))
+            .mean();
+    loss_sum += loss.item<double>();
+    ++batches;
+    return loss;
+  }
+};
+
 class AirlRun {
  public:
   AirlRun(const AirlOptions& options, const data::TrajectorySet& demos,
@@ -226,6 +278,11 @@ class AirlRun {
     actions_.resize(act_dim_, n);
   }
 
+  void SetJoint(JointTerm* joint) { joint_ = joint; }
+  double JointLoss() const {
+    return joint_ != nullptr && joint_->batches > 0 ? joint_->loss_sum / joint_->batches : 0.0;
+  }
+
   int episodes() const { return episodes_; }
   int horizon() const { return horizon_; }
   long expert_count() const { return expert_count_; }
@@ -263,6 +320,7 @@ class AirlRun {
     timing.discriminator_seconds += watch.Seconds();
 
     watch.Restart();
+    if (joint_ != nullptr) joint_->Prepare(obs_, act_dim_);
     Ppo(x, x_next, a, ppo_rng, stats);
     timing.ppo_seconds += watch.Seconds();
 
@@ -290,6 +348,7 @@ class AirlRun {
             {"episodes_per_iteration", episodes_},
             {"policy_spec", SpecJson(policy_spec_)},
             {"warm_started", warm_started_},
+            {"joint", joint_ != nullptr ? joint_->options.ToJson() : nlohmann::json(nullptr)},
             {"reward_stat", {reward_stat_.count, reward_stat_.mean, reward_stat_.m2}},
             {"curve", rows}};
   }
@@ -350,7 +409,7 @@ class AirlRun {
     // Everything that shapes training must match.
     const nlohmann::json mine = Meta();
     for (const char* key : {"demonstrations_fingerprint", "environment", "horizon",
-                            "episodes_per_iteration", "policy_spec", "warm_started"}) {
+                            "episodes_per_iteration", "policy_spec", "warm_started", "joint"}) {
       SECURE_CHECK(meta.contains(key) && meta[key] == mine[key],
                    path << ": cannot resume: the checkpoint's " << key << " is "
                         << (meta.contains(key) ? meta[key].dump() : "missing") << ", this run's is "
@@ -578,6 +637,14 @@ class AirlRun {
             -torch::min(ratio * adv, torch::clamp(ratio, 1.0 - o_.clip, 1.0 + o_.clip) * adv)
                  .mean();
         torch::Tensor policy_loss = surrogate;
+        if (joint_ != nullptr && joint_->options.weight > 0) {
+          Eigen::MatrixXf eps(act_dim_, m);
+          for (long c = 0; c < m; ++c)
+            for (int k = 0; k < act_dim_; ++k) eps(k, c) = static_cast<float>(rng.Normal());
+          const torch::Tensor sampled =
+              policy_->Mean(xb) + torch::exp(policy_->LogStd()) * nn::ToTensor(eps);
+          policy_loss = policy_loss + joint_->options.weight * joint_->Loss(idx, sampled);
+        }
         if (o_.entropy_coef > 0)
           policy_loss =
               policy_loss - o_.entropy_coef * internal::GaussianEntropy(policy_->LogStd());
@@ -639,6 +706,7 @@ class AirlRun {
   long env_steps_ = 0;
   std::vector<AirlIterationStats> history_;
   double previous_seconds_ = 0.0;
+  JointTerm* joint_ = nullptr;  // TrainAirlJoint only
 };
 
 void CheckInputs(const data::TrajectorySet& demos, const domains::Environment& env) {
@@ -663,13 +731,17 @@ void CheckInputs(const data::TrajectorySet& demos, const domains::Environment& e
 
 }  // namespace
 
-GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& demos,
-                         const domains::Environment& env, const GaussianPolicy* warm_start,
-                         AirlSummary* summary, const AirlCallback& callback) {
+namespace {
+
+GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectorySet& demos,
+                             const domains::Environment& env, const GaussianPolicy* warm_start,
+                             AirlSummary* summary, const AirlCallback& callback,
+                             JointTerm* joint) {
   options.Validate();
   CheckInputs(demos, env);
   const Stopwatch clock;
   AirlRun run(options, demos, env, warm_start);
+  run.SetJoint(joint);
 
   AirlSummary s;
   s.horizon = run.horizon();
@@ -699,6 +771,7 @@ GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& 
   if (stop_now) s.stop_reason = "stop_after_iterations";
   while (!stop_now && run.completed() < options.iterations) {
     AirlIterationStats stats = run.Iterate(s);
+    s.cbf_loss = run.JointLoss();
     stats.seconds = total_seconds();
     run.Record(stats);
     if (!options.curve_path.empty())
@@ -743,7 +816,10 @@ GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& 
 
   GaussianPolicy policy = run.Policy();
   policy.provenance = {
-      {"trainer", "secure::policy::TrainAirl (AIRL, state-only discriminator, PPO generator)"},
+      {"trainer", joint != nullptr ? "secure::policy::TrainAirlJoint (AIRL + PPO with the "
+                                     "barrier's derivative condition as an extra loss)"
+                                   : "secure::policy::TrainAirl (AIRL, state-only discriminator, "
+                                     "PPO generator)"},
       {"options", options.ToJson()},
       {"summary", s.ToJson()},
       {"environment", env.Describe()},
@@ -753,9 +829,44 @@ GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& 
         {"steps", demos.num_steps()}}}};
   if (warm_start != nullptr && warm_start->provenance.contains("trainer"))
     policy.provenance["warm_start"] = warm_start->provenance["trainer"];
+  if (joint != nullptr) policy.provenance["joint"] = joint->options.ToJson();
   policy.Validate("AIRL policy");
   if (summary != nullptr) *summary = s;
   return policy;
+}
+
+}  // namespace
+
+GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& demos,
+                         const domains::Environment& env, const GaussianPolicy* warm_start,
+                         AirlSummary* summary, const AirlCallback& callback) {
+  return TrainAirlImpl(options, demos, env, warm_start, summary, callback, nullptr);
+}
+
+GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint_options,
+                              const cbf::CarBarrierNet& barrier,
+                              const domains::DynamicsModel& model,
+                              const data::TrajectorySet& demos, const domains::Environment& env,
+                              const GaussianPolicy* warm_start, AirlSummary* summary,
+                              const AirlCallback& callback) {
+  joint_options.Validate();
+  SECURE_CHECK(model.state_dim() == env.observation_dim() &&
+                   model.action_dim() == env.action_dim(),
+               "joint optimisation: the dynamics model (" << model.Describe() << ") maps "
+                   << model.state_dim() << "-D states and " << model.action_dim()
+                   << "-D actions; the environment (" << env.Describe() << ") has "
+                   << env.observation_dim() << "-D observations and " << env.action_dim()
+                   << "-D actions");
+  SECURE_CHECK(barrier.state_dim() == env.observation_dim(),
+               "joint optimisation: the barrier reads " << barrier.state_dim()
+                   << "-D states; the environment (" << env.Describe() << ") has "
+                   << env.observation_dim() << "-D observations");
+  JointTerm joint;
+  joint.options = joint_options;
+  joint.model = &model;
+  joint.barrier = cbf::internal::CarBarrierTorch(barrier);
+  joint.barrier->Freeze();
+  return TrainAirlImpl(options, demos, env, warm_start, summary, callback, &joint);
 }
 
 }  // namespace secure::policy

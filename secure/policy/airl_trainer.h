@@ -72,7 +72,9 @@
 #include <vector>
 
 #include "secure/common/enum_strings.h"
+#include "secure/cbf/car_barrier.h"
 #include "secure/data/data.h"
+#include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
 #include "secure/policy/gaussian_policy.h"
 
@@ -188,6 +190,7 @@ struct AirlSummary {
   double rollout_seconds = 0.0, discriminator_seconds = 0.0, ppo_seconds = 0.0;
   double iterations_per_second = 0.0;
   double env_steps_per_second = 0.0;  // environment steps trained on per wall-clock second
+  double cbf_loss = 0.0;  // TrainAirlJoint: mean L_cbf of the last iteration (0 for TrainAirl)
 
   std::string BriefReport() const;  // one line
   nlohmann::json ToJson() const;
@@ -206,5 +209,39 @@ using AirlCallback = std::function<bool(const AirlIterationStats&)>;
 GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& demos,
                          const domains::Environment& env, const GaussianPolicy* warm_start,
                          AirlSummary* summary, const AirlCallback& callback = nullptr);
+
+/// The joint-optimisation baseline of the paper (Section 4.1; official-code-facts.md §8.1,
+/// variant A): instead of a shield, the barrier's derivative condition is an extra term of the
+/// policy's loss, L = PPO surrogate + weight * L_cbf, with the barrier frozen:
+///
+///   deriv(s, a) = h(T(s, a)) - h(s) + dt * alpha * h(s),    a = mu(s) + sigma * eps (reparameterised)
+///   L_cbf = mean over the PPO minibatch of  max(-deriv, 0)                        if h(s) >= 0
+///                                           unsafe_weight * max(-deriv + unsafe_margin, 0)  else
+///
+/// T is the shield's dynamics model, linearised in the action around a = 0 per state (exact for
+/// models affine in the action, as Demolition Derby's within the action bound).
+struct JointCbfOptions {
+  double weight = 1.0;           // cbf_weight (the released driver script is missing: [ND])
+  double class_k_gain = 1.0;     // alpha (released: ALPHA_CBF = 1)
+  double dt = 0.1;               // dt in deriv (released: TIME_STEP = 0.1)
+  double unsafe_weight = 2.0;    // released: 2
+  double unsafe_margin = 1e-3;   // released: 1e-3
+
+  /// Throws secure::Error naming the field, value and rule.
+  void Validate() const;
+  nlohmann::json ToJson() const;
+};
+
+/// TrainAirl with the JointCbfOptions term in every PPO minibatch (the returned summary's
+/// `cbf_loss` is the last iteration's mean L_cbf). `model` must map the environment's
+/// observations (its state_dim and action_dim equal the environment's), and `barrier` must read
+/// them (its layout fits the observation).
+/// @throws secure::Error as TrainAirl, or on a model or barrier that does not fit the environment.
+GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint,
+                              const cbf::CarBarrierNet& barrier,
+                              const domains::DynamicsModel& model,
+                              const data::TrajectorySet& demos, const domains::Environment& env,
+                              const GaussianPolicy* warm_start, AirlSummary* summary,
+                              const AirlCallback& callback = nullptr);
 
 }  // namespace secure::policy

@@ -337,4 +337,31 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_HAS(r.err, "--domain = 'panda'");
 }
 
+// ------------------------------------------------------------------------------------------
+// The Demolition Derby experiments.
+
+TEST(CliTest, DerbyExperimentQuickPrintsTheResultDocument) {
+  const Result r = RunCli("experiment derby-table3 --quick --seeds 1 --episodes 3 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.err, "[seed 0]");
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["command"], "experiment derby-table3");
+  EXPECT_EQ(j["experiment"]["name"], "derby-table3");
+  for (const char* method : {"bc", "airl", "secure"}) {
+    ASSERT_TRUE(j["methods"].contains(method)) << method;
+    EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
+  }
+}
+
+TEST(CliTest, DerbyExperimentRejectsBadOptions) {
+  Result r = RunCli("experiment derby-table3 --quick --barrier convolutional");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "'convolutional'");
+  r = RunCli("experiment derby-ablation --quick --episodes -3");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "episodes = -3");
+  r = RunCli("experiment derby-everything");
+  EXPECT_NE(r.exit_code, 0);
+}
+
 }  // namespace

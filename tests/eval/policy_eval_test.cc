@@ -98,12 +98,31 @@ TEST(PolicyEvalTest, MissingModelsAreNamed) {
                EvaluateMethods(env, {Method::kBcShield}, models, shield::ShieldOptions{}, 1, 0);
              }),
              "method 'bc+shield' needs a barrier");
+  EXPECT_HAS(ErrorOf([&] {
+               EvaluateMethods(env, {Method::kJoint}, models, shield::ShieldOptions{}, 1, 0);
+             }),
+             "method 'joint' needs a joint policy");
+}
+
+TEST(PolicyEvalTest, TheJointPolicyIsUsedUnshielded) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  SeedModels models;
+  models.joint = &pd;
+  const auto r = EvaluateMethods(env, {Method::kJoint}, models, shield::ShieldOptions{}, 3, 7);
+  EXPECT_EQ(r.at(Method::kJoint).episodes, 3);
+  EXPECT_EQ(r.at(Method::kJoint).decisions, 0);  // no shield
+  EXPECT_FALSE(IsShielded(Method::kJoint));
+  EXPECT_TRUE(IsShielded(Method::kSecureMyopic));
 }
 
 TEST(PolicyEvalTest, ParseMethods) {
   EXPECT_EQ(ParseMethods("bc, airl,secure"),
             (std::vector<Method>{Method::kBc, Method::kAirl, Method::kSecure}));
   EXPECT_EQ(ParseMethods("secure-random-safe,secure-no-resampling,bc+shield").size(), 3u);
+  EXPECT_EQ(ParseMethods("secure-myopic,joint"),
+            (std::vector<Method>{Method::kSecureMyopic, Method::kJoint}));
   EXPECT_HAS(ErrorOf([] { ParseMethods("bc,gail"); }), "'gail'");
   EXPECT_HAS(ErrorOf([] { ParseMethods("bc,bc"); }), "listed twice");
   EXPECT_HAS(ErrorOf([] { ParseMethods(""); }), "no method");
@@ -120,6 +139,36 @@ TEST(PolicyEvalTest, ShieldOptionsForAppliesExactlyTheAblation) {
   EXPECT_EQ(b.aggregation, base.aggregation);
   EXPECT_EQ(ShieldOptionsFor(Method::kSecure, base).ToJson(), base.ToJson());
   EXPECT_EQ(a.num_samples, 32);
+  // The myopic test: alpha dt = 1, whatever class-K function the base had.
+  base.class_k = shield::ClassK::kCubic;
+  base.class_k_gain = 3.0;
+  base.dt = 0.05;
+  const shield::ShieldOptions m = ShieldOptionsFor(Method::kSecureMyopic, base);
+  EXPECT_EQ(m.class_k, shield::ClassK::kLinear);
+  EXPECT_DOUBLE_EQ(m.class_k_gain * m.dt, 1.0);
+  EXPECT_EQ(m.resampling, base.resampling);
+  EXPECT_EQ(m.aggregation, base.aggregation);
+}
+
+TEST(PolicyEvalTest, TheMyopicShieldAcceptsExactlyTheActionsWithNonNegativeNextH) {
+  // With alpha(h) = h / dt, g(a) = h(T(s, a)) / dt: g >= 0 iff h(T(s, a)) >= 0.
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  cbf::DoubleIntegratorGroundTruth barrier(task.truth);
+  shield::ShieldOptions base;
+  base.dt = task.dt;
+  shield::Shield shield(ShieldOptionsFor(Method::kSecureMyopic, base), barrier, env.ShieldModel());
+  const Eigen::Vector4f state(3.2f, 5.0f, 1.0f, 0.0f);
+  Eigen::MatrixXf actions(2, 3);
+  actions << -3.0f, 0.0f, 3.0f, 0.5f, 0.0f, -0.5f;
+  Eigen::VectorXd g(3);
+  const double h = shield.EvaluateH(state);
+  shield.EvaluateG(state, h, actions, g);
+  Eigen::MatrixXf next(4, 3);
+  env.ShieldModel().Step(state, actions, next);
+  Eigen::VectorXf h_next(3);
+  barrier.Evaluate(next, h_next);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(g[i], h_next[i] / task.dt, 1e-4) << i;
 }
 
 SeedResult Synthetic(long successes, long dangerous) {

@@ -1,0 +1,72 @@
+#pragma once
+// Pieces shared by the experiment drivers (double_integrator_pipeline.cc, derby_experiments.cc):
+// serialised progress lines and a pool that runs one job per seed on a few threads. INTERNAL:
+// include only from secure/experiments/*.cc.
+#include <algorithm>
+#include <atomic>
+#include <exception>
+#include <functional>
+#include <mutex>
+#include <ostream>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include "secure/common/error.h"
+#include "secure/nn/torch_threads.h"
+
+namespace secure::experiments::internal {
+
+/// Progress lines ("[seed 3] ...") written whole, one at a time, from any thread.
+class Progress {
+ public:
+  Progress(std::ostream* out, bool enabled) : out_(enabled ? out : nullptr) {}
+  template <typename F>
+  void Line(F&& write) {
+    if (out_ == nullptr) return;
+    std::ostringstream line;
+    write(line);
+    const std::lock_guard<std::mutex> lock(mutex_);
+    *out_ << line.str() << std::endl;
+  }
+
+ private:
+  std::ostream* out_;
+  std::mutex mutex_;
+};
+
+/// Runs job(i) for i = 0 .. count - 1 on `threads` workers (the calling thread is one of them),
+/// each worker taking the next index; LibTorch and OpenBLAS run one thread per worker. The
+/// first failure stops the remaining jobs and is rethrown as "<label> <first_label + i>: what".
+inline void RunJobsInParallel(int count, int threads, const std::function<void(int)>& job,
+                              const char* label, long first_label) {
+  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(count));
+  std::atomic<int> next{0};
+  std::atomic<bool> failed{false};
+  auto worker = [&] {
+    nn::SetTorchThreads(1);  // per thread (OpenMP): parallelism comes from the jobs
+    for (int i = next++; i < count && !failed; i = next++) {
+      try {
+        job(i);
+      } catch (...) {
+        errors[static_cast<std::size_t>(i)] = std::current_exception();
+        failed = true;
+      }
+    }
+  };
+  const int workers = std::max(1, std::min(threads, count));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < workers; ++t) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+  for (int i = 0; i < count; ++i) {
+    if (!errors[static_cast<std::size_t>(i)]) continue;
+    try {
+      std::rethrow_exception(errors[static_cast<std::size_t>(i)]);
+    } catch (const std::exception& e) {
+      SECURE_THROW(label << " " << first_label + i << ": " << e.what());
+    }
+  }
+}
+
+}  // namespace secure::experiments::internal

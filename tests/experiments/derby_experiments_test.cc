@@ -1,0 +1,182 @@
+// The Demolition Derby experiments on tiny profiles: the result structure of each experiment,
+// independence from the number of worker threads, and the barrier-data variants of the
+// sensitivity study.
+#include "secure/experiments/derby_experiments.h"
+
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <set>
+
+#include "tests/test_util.h"
+
+namespace secure::experiments {
+namespace {
+
+using test::ErrorOf;
+
+DerbyExperimentOptions Tiny() {
+  DerbyExperimentOptions o = DerbyExperimentOptions::Quick();
+  o.episodes = 4;
+  o.demonstrations.episodes = 12;
+  o.safe_states = 200;
+  o.near_dangerous.count = 200;
+  o.airl.iterations = 1;
+  o.airl.steps_per_iteration = 400;
+  o.verbose = false;
+  return o;
+}
+
+void ExpectRates(const nlohmann::json& methods, const std::string& name, std::size_t seeds) {
+  ASSERT_TRUE(methods.contains(name)) << name;
+  for (const char* metric : {"success_rate", "dangerous_rate"}) {
+    const nlohmann::json& r = methods[name][metric];
+    ASSERT_EQ(r["per_seed"].size(), seeds) << name;
+    for (const auto& v : r["per_seed"]) {
+      EXPECT_GE(v.get<double>(), 0.0) << name;
+      EXPECT_LE(v.get<double>(), 1.0) << name;
+    }
+  }
+}
+
+TEST(DerbyExperimentsTest, Table3RunsBcAirlSecureAndDoesNotDependOnTheWorkerCount) {
+  DerbyExperimentOptions one = Tiny();
+  one.threads = 1;
+  DerbyExperimentOptions two = Tiny();
+  two.threads = 2;
+  const DerbyExperimentResult a = RunDerbyExperiment(DerbyExperiment::kTable3, one, nullptr);
+  const DerbyExperimentResult b = RunDerbyExperiment(DerbyExperiment::kTable3, two, nullptr);
+  const nlohmann::json ja = a.ToJson(), jb = b.ToJson();
+  EXPECT_EQ(ja["methods"].size(), 3u);
+  for (const char* name : {"bc", "airl", "secure"}) {
+    ExpectRates(ja["methods"], name, 2);
+    for (const char* metric : {"success_rate", "dangerous_rate", "interventions_per_episode"})
+      EXPECT_EQ(ja["methods"][name][metric], jb["methods"][name][metric]) << name << metric;
+  }
+  EXPECT_TRUE(ja["comparisons"].contains("secure_vs_airl"));
+  EXPECT_EQ(ja["experiment"]["name"], "derby-table3");
+  EXPECT_EQ(a.demonstrations, 12);
+  EXPECT_EQ(a.safe_states, 200);
+  EXPECT_EQ(a.near_dangerous_states, 200);
+  // SECURE decides every step; the shield statistics are recorded.
+  const nlohmann::json& seed0 = ja["methods"]["secure"]["seeds"][0];
+  EXPECT_EQ(seed0["decisions"], seed0["steps"]);
+  EXPECT_GT(seed0["latency_us"]["p50"].get<double>(), 0.0);
+  EXPECT_NE(a.Table().find("| secure |"), std::string::npos);
+}
+
+TEST(DerbyExperimentsTest, AblationAndJointExperimentsRunTheirMethods) {
+  DerbyExperimentOptions o = Tiny();
+  o.seeds = 2;
+  const nlohmann::json ablation = RunDerbyExperiment(DerbyExperiment::kAblation, o, nullptr).ToJson();
+  for (const char* name : {"secure", "secure-random-safe", "secure-no-resampling", "secure-myopic"})
+    ExpectRates(ablation["methods"], name, 2);
+  EXPECT_TRUE(ablation["comparisons"].contains("ablations"));
+  EXPECT_EQ(ablation["comparisons"]["ablations"]["methods"].size(), 3u);
+
+  o.seeds = 1;
+  const DerbyExperimentResult joint = RunDerbyExperiment(DerbyExperiment::kJoint, o, nullptr);
+  const nlohmann::json jj = joint.ToJson();
+  for (const char* name : {"airl", "secure", "joint"}) ExpectRates(jj["methods"], name, 1);
+  EXPECT_EQ(jj["methods"]["joint"]["seeds"][0]["decisions"], 0);  // unshielded
+  EXPECT_TRUE(jj["experiment"]["seeds"][0].contains("joint"));
+}
+
+TEST(DerbyExperimentsTest, SensitivityEvaluatesSecureOncePerDataVariant) {
+  DerbyExperimentOptions o = Tiny();
+  o.seeds = 1;
+  o.data_fractions = {1.0, 0.1};
+  o.imbalance_ratios = {1, 4};
+  o.label_noise = {0.0, 0.5};
+  const DerbyExperimentResult r = RunDerbyExperiment(DerbyExperiment::kSensitivity, o, nullptr);
+  ASSERT_EQ(r.evaluations.size(), 4u);  // baseline, data 10%, imbalance 1:4, label noise 50%
+  const nlohmann::json j = r.ToJson();
+  for (const char* name : {"baseline", "data 10%", "imbalance 1:4", "label noise 50%"}) {
+    ASSERT_TRUE(j["variants"].contains(name)) << name;
+    ExpectRates(j["variants"][name]["methods"], "secure", 1);
+  }
+  const nlohmann::json& barriers = j["experiment"]["seeds"][0]["barriers"];
+  EXPECT_EQ(barriers["data 10%"]["safe_states"], 20);
+  EXPECT_EQ(barriers["data 10%"]["near_dangerous_states"], 20);
+  EXPECT_EQ(barriers["imbalance 1:4"]["near_dangerous_states"], 50);
+  EXPECT_EQ(barriers["label noise 50%"]["safe_states"], 200);
+  EXPECT_NE(r.Table().find("| imbalance 1:4 | 200 : 50 |"), std::string::npos) << r.Table();
+}
+
+data::StateSet Numbered(long n, float offset) {
+  data::StateSet s;
+  s.features = {"id"};
+  s.states.resize(1, n);
+  for (long i = 0; i < n; ++i) s.states(0, i) = offset + static_cast<float>(i);
+  return s;
+}
+
+TEST(DerbyExperimentsTest, BarrierDataVariantsKeepFlipAndValidate) {
+  const std::vector<BarrierDataVariant> variants =
+      SensitivityVariants({1.0, 0.1, 0.01}, {1, 2, 4, 8}, {0.0, 0.1, 0.3, 0.5});
+  std::vector<std::string> names;
+  for (const auto& v : variants) names.push_back(v.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"baseline", "data 10%", "data 1%", "imbalance 1:2",
+                                             "imbalance 1:4", "imbalance 1:8", "label noise 10%",
+                                             "label noise 30%", "label noise 50%"}));
+
+  // Label noise: 30 % of each class moves to the other; nothing is lost or duplicated.
+  data::StateSet safe = Numbered(100, 0), nd = Numbered(50, 1000);
+  ApplyBarrierDataVariant({"noise", 1.0, 1, 0.3}, 7, &safe, &nd);
+  EXPECT_EQ(safe.size(), 100 - 30 + 15);
+  EXPECT_EQ(nd.size(), 50 - 15 + 30);
+  std::set<float> all;
+  long safe_from_nd = 0, nd_from_safe = 0;
+  for (long i = 0; i < safe.size(); ++i) {
+    all.insert(safe.states(0, i));
+    safe_from_nd += safe.states(0, i) >= 1000;
+  }
+  for (long i = 0; i < nd.size(); ++i) {
+    all.insert(nd.states(0, i));
+    nd_from_safe += nd.states(0, i) < 1000;
+  }
+  EXPECT_EQ(all.size(), 150u);
+  EXPECT_EQ(safe_from_nd, 15);
+  EXPECT_EQ(nd_from_safe, 30);
+
+  // Deterministic for a seed, different across seeds.
+  data::StateSet s1 = Numbered(100, 0), n1 = Numbered(50, 1000);
+  data::StateSet s2 = Numbered(100, 0), n2 = Numbered(50, 1000);
+  data::StateSet s3 = Numbered(100, 0), n3 = Numbered(50, 1000);
+  ApplyBarrierDataVariant({"size", 0.1, 1, 0.0}, 1, &s1, &n1);
+  ApplyBarrierDataVariant({"size", 0.1, 1, 0.0}, 1, &s2, &n2);
+  ApplyBarrierDataVariant({"size", 0.1, 1, 0.0}, 2, &s3, &n3);
+  EXPECT_EQ(s1.size(), 10);
+  EXPECT_EQ(n1.size(), 5);
+  EXPECT_EQ(s1.states, s2.states);
+  EXPECT_NE(s1.states, s3.states);
+
+  // Imbalance 1:8 keeps every safe state and 1/8 of the near-dangerous ones.
+  data::StateSet s4 = Numbered(80, 0), n4 = Numbered(80, 1000);
+  ApplyBarrierDataVariant({"imbalance", 1.0, 8, 0.0}, 3, &s4, &n4);
+  EXPECT_EQ(s4.size(), 80);
+  EXPECT_EQ(n4.size(), 10);
+
+  EXPECT_HAS(ErrorOf([&] { ApplyBarrierDataVariant({"bad", 0.0, 1, 0.0}, 1, &s4, &n4); }),
+             "data_fraction = 0");
+  EXPECT_HAS(ErrorOf([&] { ApplyBarrierDataVariant({"bad", 1.0, 0, 0.0}, 1, &s4, &n4); }),
+             "imbalance = 0");
+  EXPECT_HAS(ErrorOf([&] { ApplyBarrierDataVariant({"bad", 1.0, 1, 1.0}, 1, &s4, &n4); }),
+             "label_noise = 1");
+}
+
+TEST(DerbyExperimentsTest, OptionsAreValidated) {
+  DerbyExperimentOptions o = Tiny();
+  o.seeds = 0;
+  EXPECT_HAS(ErrorOf([&] { RunDerbyExperiment(DerbyExperiment::kTable3, o, nullptr); }),
+             "DerbyExperimentOptions::seeds = 0");
+  o = Tiny();
+  o.label_noise = {0.0, 1.5};
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "label_noise[] = 1.5");
+  o = Tiny();
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{policy: {}}"), "cfg.yaml"); }),
+             "cfg.yaml: unknown section 'policy'");
+}
+
+}  // namespace
+}  // namespace secure::experiments
