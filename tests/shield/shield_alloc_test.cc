@@ -25,6 +25,8 @@
 
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
+#include "secure/domains/derby/derby.h"
 #include "secure/domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
 
@@ -391,6 +393,36 @@ TEST(ShieldAllocTest, PandaSizedLearnedBarrierDecisionsDoNotAllocate) {
   }
   // Fewer decisions than the other tests: one costs ~5 ms (3 batched passes of a 300k-MAC net).
   ExpectNoAllocations(s, barrier, dynamics, 200, note);
+}
+
+// Demolition Derby: the per-car barrier (3-64-128-64-1 over the 12 observed cars, min over cars
+// in range) with the shield's constant-velocity model, M = 64, resampling.
+TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
+  cbf::CarBarrierNet net;
+  net.mlp = nn::RandomMlpParams(nn::MlpSpec{3, {64, 128, 64}, 1, nn::Activation::kRelu}, 5);
+  net.normalizer = nn::Normalizer::Identity(3);
+  net.cap = 0.05;
+  const std::unique_ptr<cbf::Barrier> evaluator = net.MakeEvaluator(256);
+  // An observation with cars around the ego, the nearest one just ahead on the x axis.
+  Scenario s;
+  s.name = "derby per-car, M = 64, resampling";
+  s.state = Eigen::VectorXf::Zero(domains::derby::kObservationDim);
+  s.state << 1.0f, 1.0f, 0.6f, 0.0f;
+  for (int i = 0; i < domains::derby::kObservedCars; ++i) {
+    const float angle = 0.5f * static_cast<float>(i);
+    const float distance = 0.12f + 0.07f * static_cast<float>(i);
+    s.state[4 + 4 * i] = distance * std::cos(angle);
+    s.state[5 + 4 * i] = distance * std::sin(angle);
+  }
+  // h tilted by -100 (ego vx - 0.6): accelerating along +x is unsafe, so resampling runs.
+  TiltedBarrier barrier(*evaluator, 2, -100.0f, 0.6f);
+  s.mu = Eigen::Vector2f(2.0f, 0.0f);
+  s.sigma = Eigen::Vector2f(0.3f, 0.3f);
+  s.options.num_samples = 64;
+  s.options.max_iterations = 3;
+  s.expect_resampling = true;
+  const domains::derby::DerbyShieldModel model(0.1, 3.0, 3);
+  ExpectNoAllocations(s, barrier, model, 300);
 }
 
 }  // namespace
