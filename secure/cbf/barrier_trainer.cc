@@ -25,24 +25,6 @@ class TorchThreadsGuard {
   int previous_;
 };
 
-struct Split {
-  std::vector<long> train, validation;
-};
-
-// Stratified per class. A class too small to give at least one validation state keeps all of
-// its states for training (validation is then disabled, see below).
-Split SplitClass(long n, double fraction, Rng& rng) {
-  Split split;
-  long n_val = fraction > 0 ? std::lround(fraction * static_cast<double>(n)) : 0;
-  if (fraction > 0 && n >= 2) n_val = std::clamp(n_val, 1L, n - 1);
-  if (n < 2) n_val = 0;
-  std::vector<long> order(n);
-  std::iota(order.begin(), order.end(), 0L);
-  Shuffle(order.begin(), order.end(), rng);
-  split.validation.assign(order.begin(), order.begin() + n_val);
-  split.train.assign(order.begin() + n_val, order.end());
-  return split;
-}
 
 // Labelled, weighted, normalised samples as tensors: x (N x d), y (N) in {+1, -1}, w (N),
 // margin (N).
@@ -116,8 +98,10 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   Rng rng(options.seed);
 
   // Stratified split; validation only if both classes contribute.
-  Split safe_split = SplitClass(safe.size(), options.validation_fraction, rng);
-  Split nd_split = SplitClass(near_dangerous.size(), options.validation_fraction, rng);
+  data::IndexSplit safe_split =
+      data::SplitForValidation(safe.size(), options.validation_fraction, rng);
+  data::IndexSplit nd_split =
+      data::SplitForValidation(near_dangerous.size(), options.validation_fraction, rng);
   if (safe_split.validation.empty() || nd_split.validation.empty()) {
     for (long i : safe_split.validation) safe_split.train.push_back(i);
     for (long i : nd_split.validation) nd_split.train.push_back(i);

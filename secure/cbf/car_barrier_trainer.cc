@@ -84,22 +84,6 @@ void CheckObservations(const CarFeatureSpec& spec, const data::StateSet& set,
   }
 }
 
-struct Split {
-  std::vector<long> train, validation;
-};
-
-Split SplitClass(long n, double fraction, Rng& rng) {
-  Split split;
-  long n_val = fraction > 0 ? std::lround(fraction * static_cast<double>(n)) : 0;
-  if (fraction > 0 && n >= 2) n_val = std::clamp(n_val, 1L, n - 1);
-  if (n < 2) n_val = 0;
-  std::vector<long> order(n);
-  std::iota(order.begin(), order.end(), 0L);
-  Shuffle(order.begin(), order.end(), rng);
-  split.validation.assign(order.begin(), order.begin() + n_val);
-  split.train.assign(order.begin() + n_val, order.end());
-  return split;
-}
 
 // Labelled observations as tensors.
 struct Data {
@@ -468,8 +452,10 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   TorchThreadsGuard threads(options.threads);
   Rng rng(options.seed);
 
-  Split safe_split = SplitClass(safe.size(), options.validation_fraction, rng);
-  Split nd_split = SplitClass(near_dangerous.size(), options.validation_fraction, rng);
+  data::IndexSplit safe_split =
+      data::SplitForValidation(safe.size(), options.validation_fraction, rng);
+  data::IndexSplit nd_split =
+      data::SplitForValidation(near_dangerous.size(), options.validation_fraction, rng);
   if (safe_split.validation.empty() || nd_split.validation.empty()) {
     for (long i : safe_split.validation) safe_split.train.push_back(i);
     for (long i : nd_split.validation) nd_split.train.push_back(i);

@@ -99,6 +99,15 @@ void CheckNonEmptyFinite(const StateSet& set, const std::string& what);
 /// rest. Deterministic for a given Rng state.
 std::vector<std::vector<long>> RandomSplit(long n, const std::vector<double>& fractions, Rng& rng);
 
+/// A random hold-out of {0..n-1} for best-checkpoint selection (the barrier trainers split each
+/// class with it): round(fraction n) indices go to `validation`, at least one and at most n - 1
+/// when fraction > 0 and n >= 2; none when fraction <= 0 or n < 2. Deterministic for a given
+/// Rng state.
+struct IndexSplit {
+  std::vector<long> train, validation;
+};
+IndexSplit SplitForValidation(long n, double fraction, Rng& rng);
+
 /// Splits a state set at random into (first, second), `second_fraction` of the states (rounded
 /// down, but at least one when the set has two or more) going to `second`; e.g. a held-out test
 /// set. Sources are suffixed " [split 1/2]" / " [split 2/2]". Deterministic for a given Rng state.

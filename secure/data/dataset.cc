@@ -191,6 +191,19 @@ void CheckNonEmptyFinite(const StateSet& set, const std::string& what) {
   }
 }
 
+IndexSplit SplitForValidation(long n, double fraction, Rng& rng) {
+  IndexSplit split;
+  long n_val = fraction > 0 ? std::lround(fraction * static_cast<double>(n)) : 0;
+  if (fraction > 0 && n >= 2) n_val = std::clamp(n_val, 1L, n - 1);
+  if (n < 2) n_val = 0;
+  std::vector<long> order(static_cast<std::size_t>(std::max(n, 0L)));
+  std::iota(order.begin(), order.end(), 0L);
+  Shuffle(order.begin(), order.end(), rng);
+  split.validation.assign(order.begin(), order.begin() + n_val);
+  split.train.assign(order.begin() + n_val, order.end());
+  return split;
+}
+
 std::vector<std::vector<long>> RandomSplit(long n, const std::vector<double>& fractions, Rng& rng) {
   SECURE_CHECK(n >= 0, "random split: the number of items is " << n << ", must be >= 0");
   SECURE_CHECK(!fractions.empty(), "random split: no fractions given");

@@ -291,6 +291,22 @@ std::vector<std::size_t> Sizes(const std::vector<std::vector<long>>& parts) {
   return sizes;
 }
 
+TEST(SplitForValidationTest, HoldsOutARoundedShareOfAtLeastOneAndAtMostAllButOne) {
+  Rng rng(3);
+  IndexSplit s = SplitForValidation(100, 0.1, rng);
+  EXPECT_EQ(s.validation.size(), 10u);
+  EXPECT_EQ(s.train.size(), 90u);
+  std::vector<long> all = s.train;
+  all.insert(all.end(), s.validation.begin(), s.validation.end());
+  std::sort(all.begin(), all.end());
+  for (long i = 0; i < 100; ++i) EXPECT_EQ(all[static_cast<std::size_t>(i)], i);
+  EXPECT_EQ(SplitForValidation(10, 0.01, rng).validation.size(), 1u);  // at least one
+  EXPECT_EQ(SplitForValidation(2, 0.9, rng).validation.size(), 1u);    // at most n - 1
+  EXPECT_TRUE(SplitForValidation(1, 0.5, rng).validation.empty());     // too small to split
+  EXPECT_TRUE(SplitForValidation(50, 0.0, rng).validation.empty());
+  EXPECT_EQ(SplitForValidation(50, 0.0, rng).train.size(), 50u);
+}
+
 TEST(RandomSplitTest, PartSizesRoundDownExceptTheLast) {
   Rng rng(1);
   EXPECT_EQ(Sizes(RandomSplit(10, {0.7, 0.2, 0.1}, rng)), (std::vector<std::size_t>{7, 2, 1}));
