@@ -1,5 +1,6 @@
-// Batched barrier evaluation h(s) with the Eigen inference path (nn::InferenceMlp), the kernel
-// behind the shield and the grid validation, for the three network sizes secure uses.
+// Batched barrier evaluation h(s) with the inference path (nn::InferenceMlp), the kernel behind
+// the shield and the grid validation, for the three network sizes secure uses, with the default
+// LIBXSMM layer products and, for comparison in the same run, Eigen's GEMM (the *_eigen cases).
 //
 // Counters:
 //   GFLOPS        2 * MultiplyAddsPerSample * states / time, in units of 1e9 FLOP/s (compare with
@@ -9,7 +10,7 @@
 //   items_per_second  states per second.
 //
 // The model and its workspace are built before the timed loop; Forward() itself allocates no
-// buffers of ours (Eigen's GEMM may still use its own internal blocking buffers for large layers).
+// buffers (Eigen's GEMM packing buffers come from the stack, see nn/inference_mlp.h).
 
 #include <benchmark/benchmark.h>
 
@@ -39,11 +40,11 @@ nn::MlpSpec SpecOf(Net net) {
 
 // state.range(0) is the batch of states, except for Derby where it is the number of agent states
 // M and the network sees M x kDerbyObstacles inputs.
-void BM_BarrierEval(benchmark::State& state, Net net) {
+void BM_BarrierEval(benchmark::State& state, Net net, nn::MatmulBackend backend) {
   const nn::MlpSpec spec = SpecOf(net);
   const int batch = static_cast<int>(state.range(0)) * (net == Net::kDerby ? kDerbyObstacles : 1);
   const nn::MlpParams params = nn::RandomMlpParams(spec, /*seed=*/42);
-  const nn::InferenceMlp mlp(params, nn::Normalizer::Identity(spec.input_dim));
+  const nn::InferenceMlp mlp(params, nn::Normalizer::Identity(spec.input_dim), backend);
   nn::InferenceMlp::Workspace workspace = mlp.MakeWorkspace(batch);
   Eigen::MatrixXf inputs = Eigen::MatrixXf::Random(spec.input_dim, batch);  // uniform [-1, 1]
   Eigen::MatrixXf outputs(spec.output_dim, batch);
@@ -65,26 +66,24 @@ void BM_BarrierEval(benchmark::State& state, Net net) {
   state.counters["states"] = batch;
   state.SetItemsProcessed(state.iterations() * batch);
   state.SetLabel(Describe(spec) + ", " + std::to_string(spec.MultiplyAddsPerSample()) +
-                 " MAC/state");
+                 " MAC/state, " + ToString(nn::kMatmulBackendNames, mlp.backend()));
 }
 
-BENCHMARK_CAPTURE(BM_BarrierEval, DI, Net::kDoubleIntegrator)
-    ->ArgName("batch")
-    ->Arg(1)
-    ->Arg(64)
-    ->Arg(128)
-    ->Arg(1024)
-    ->Arg(4096);
+constexpr nn::MatmulBackend kDefault = nn::MatmulBackend::kAuto;
+constexpr nn::MatmulBackend kEigen = nn::MatmulBackend::kEigen;
+BENCHMARK_CAPTURE(BM_BarrierEval, DI, Net::kDoubleIntegrator, kDefault)
+    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+BENCHMARK_CAPTURE(BM_BarrierEval, DI_eigen, Net::kDoubleIntegrator, kEigen)
+    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
 // Derby: M agent states x 12 obstacles; M = 1 is one shield step, M = 64, 128 the batched cases
 // (768 and 1536 network inputs).
-BENCHMARK_CAPTURE(BM_BarrierEval, Derby, Net::kDerby)->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
-BENCHMARK_CAPTURE(BM_BarrierEval, Panda, Net::kPanda)
-    ->ArgName("batch")
-    ->Arg(1)
-    ->Arg(64)
-    ->Arg(128)
-    ->Arg(1024)
-    ->Arg(4096);
+BENCHMARK_CAPTURE(BM_BarrierEval, Derby, Net::kDerby, kDefault)->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
+BENCHMARK_CAPTURE(BM_BarrierEval, Derby_eigen, Net::kDerby, kEigen)
+    ->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
+BENCHMARK_CAPTURE(BM_BarrierEval, Panda, Net::kPanda, kDefault)
+    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+BENCHMARK_CAPTURE(BM_BarrierEval, Panda_eigen, Net::kPanda, kEigen)
+    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
 
 }  // namespace
 }  // namespace secure::bench

@@ -14,6 +14,7 @@ set -euo pipefail
 #   libopenblas0-pthread        BLAS behind LibTorch: the reference BLAS is ~30x slower
 #   libopenblas-pthread-dev     cblas.h for the sgemm peak benchmark (bench/peak_bench.cc)
 #   libeigen3-dev               fast inference path (the shield's hot loop), linear algebra
+#   libxsmm-dev                 JIT small-GEMM kernels: the inference path's layer products
 #   libcli11-dev                command-line parsing
 #   nlohmann-json3-dev          --json results, model file headers
 #   libyaml-cpp-dev             experiment config files
@@ -25,7 +26,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake git
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
-  libeigen3-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
+  libeigen3-dev libxsmm-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
   libmujoco-dev libqhull-dev
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
 )

@@ -1,19 +1,46 @@
 #pragma once
-// Fast batched MLP inference with Eigen: the path the shield and the grid validation use.
+// Fast batched MLP inference on the CPU: the path the shield, the policies and the grid
+// validation use.
 //
 // Immutable model + mutable workspace (as MuJoCo's mjModel/mjData): an InferenceMlp is built
 // once from trained parameters (input normalisation folded into the first layer) and can be
 // shared by threads; each thread or shield owns an InferenceMlp::Workspace sized for its largest
-// batch, which holds every activation buffer; Eigen's GEMM packing buffers come from the stack
-// (EIGEN_STACK_ALLOCATION_LIMIT is raised to 1 MiB project-wide, see CMakeLists.txt), so Forward()
-// does not allocate. The calling thread needs about 1 MiB of stack for the widest layers.
+// batch, which holds every activation buffer. Forward() does not allocate.
+//
+// Matrix products. By default the hidden layers run on LIBXSMM's JIT-generated small-GEMM
+// kernels (Debian libxsmm-dev): every kernel a layer can need is generated in the constructor
+// (64-column blocks, then 32/16/8/4/2/1-column tails), so Forward() only calls them. On the
+// project machine they run the shield's layer shapes 1.3-2x faster than Eigen's GEMM
+// (docs/PERFORMANCE.md). Bias and activation are applied per 64-column block while it is in
+// cache. The output layer (one or a few rows) and batches of fewer than 8 columns (a policy's
+// single-state forward) stay Eigen products, which are faster there. MatmulBackend::kEigen
+// selects Eigen's GEMM for every layer (the reference, and the A/B baseline of the benchmarks);
+// kAuto uses LIBXSMM when it can generate code for this CPU and Eigen otherwise, and backend()
+// says which one a model uses. Both compute the same function; results differ by float rounding
+// (~1e-6 relative).
+//
+// Eigen's GEMM packing buffers come from the stack (EIGEN_STACK_ALLOCATION_LIMIT is raised to
+// 1 MiB project-wide, see CMakeLists.txt): the calling thread needs about 1 MiB of stack for the
+// widest layers on the Eigen path.
 
 #include <Eigen/Core>
 #include <vector>
 
+#include "secure/common/enum_strings.h"
 #include "secure/nn/mlp.h"
 
 namespace secure::nn {
+
+enum class MatmulBackend {
+  kAuto,     // LIBXSMM if it generates kernels for this CPU, else Eigen (backend() tells)
+  kLibxsmm,  // LIBXSMM; the constructor throws if it cannot generate a kernel
+  kEigen,    // Eigen's GEMM for every layer
+};
+inline constexpr EnumTable<MatmulBackend, 3> kMatmulBackendNames{{
+    {MatmulBackend::kAuto, "auto"},
+    {MatmulBackend::kLibxsmm, "libxsmm"},
+    {MatmulBackend::kEigen, "eigen"},
+}};
 
 class InferenceMlp {
  public:
@@ -26,15 +53,20 @@ class InferenceMlp {
     friend class InferenceMlp;
     int max_batch_ = 0;
     Eigen::MatrixXf a_, b_;  // ping-pong activations (max_width x max_batch)
+    Eigen::MatrixXf x_;      // contiguous copy of strided inputs (input_dim x max_batch)
   };
 
   InferenceMlp() = default;
   /// Folds `normalizer` into the first layer: W' = W diag(1/scale), b' = b - W' mean.
-  InferenceMlp(const MlpParams& params, const Normalizer& normalizer);
+  /// @throws secure::Error for kLibxsmm when LIBXSMM cannot generate a kernel on this CPU.
+  InferenceMlp(const MlpParams& params, const Normalizer& normalizer,
+               MatmulBackend backend = MatmulBackend::kAuto);
 
   int input_dim() const { return spec_.input_dim; }
   int output_dim() const { return spec_.output_dim; }
   const MlpSpec& spec() const { return spec_; }
+  /// The backend in use: kLibxsmm or kEigen (never kAuto).
+  MatmulBackend backend() const { return backend_; }
 
   /// A workspace for batches of up to `max_batch` samples.
   Workspace MakeWorkspace(int max_batch) const;
@@ -45,9 +77,33 @@ class InferenceMlp {
                Eigen::Ref<Eigen::MatrixXf> outputs) const;
 
  private:
+  // A LIBXSMM kernel C = A B (column-major, beta = 0); the signature of libxsmm_smmfunction, kept
+  // here so that libxsmm.h stays out of this header.
+  using SmmKernel = void (*)(const float* a, const float* b, float* c, ...);
+  static constexpr int kColumnBlock = 64;  // columns per kernel call; tails use 32, 16, ..., 1
+  static constexpr int kTails = 7;         // column counts 64, 32, 16, 8, 4, 2, 1
+  static constexpr int kRowBlock = 64;     // output rows per kernel call
+  static constexpr int kMinLibxsmmBatch = 8;  // smaller batches take the Eigen path
+  struct LayerKernels {
+    // kernels[t][0]: kRowBlock (or all) rows, kernels[t][1]: the remaining rows (or null), for
+    // kColumnBlock >> t columns.
+    SmmKernel kernels[kTails][2] = {};
+    int row_block = 0;     // rows of kernels[.][0]
+    int row_blocks = 0;    // full row blocks
+    int row_rest = 0;      // rows of kernels[.][1]
+  };
+
+  void BuildKernels();
+  void ForwardEigen(const Eigen::Ref<const Eigen::MatrixXf>& inputs, Workspace& workspace,
+                    Eigen::Ref<Eigen::MatrixXf> outputs) const;
+  void ForwardLibxsmm(const Eigen::Ref<const Eigen::MatrixXf>& inputs, Workspace& workspace,
+                      Eigen::Ref<Eigen::MatrixXf> outputs) const;
+
   MlpSpec spec_;
   std::vector<DenseLayer> layers_;  // normalisation folded into layers_[0]
   int max_width_ = 0;
+  MatmulBackend backend_ = MatmulBackend::kEigen;
+  std::vector<LayerKernels> kernels_;  // one per hidden layer (LIBXSMM backend)
 };
 
 }  // namespace secure::nn

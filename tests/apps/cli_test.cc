@@ -33,6 +33,16 @@ fs::path TempDir() {
   return dir;
 }
 
+// Removes the directory after the run unless a test failed (its files help to debug it).
+class RemoveTempDirOnSuccess : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    if (::testing::UnitTest::GetInstance()->Passed()) fs::remove_all(TempDir());
+  }
+};
+[[maybe_unused]] ::testing::Environment* const kRemoveTempDir =
+    ::testing::AddGlobalTestEnvironment(new RemoveTempDirOnSuccess);
+
 // Runs `secure <args>`; stdout and stderr are captured through files.
 Result RunCli(const std::string& args) {
   const fs::path out = TempDir() / "stdout.txt", err = TempDir() / "stderr.txt";

@@ -105,6 +105,73 @@ TEST(InferenceMlpTest, MatchesReferenceForwardForAllArchitecturesAndBatchSizes) 
   }
 }
 
+// Both matrix-product backends against the double reference: shapes with a row remainder
+// (widths not a multiple of the 64-row kernel block), every column tail (1..63 after 64-column
+// blocks), and inputs that are a strided block of a larger matrix.
+TEST(InferenceMlpTest, BothBackendsMatchTheReference) {
+  std::uint64_t seed = 700;
+  std::vector<Case> cases = Architectures();
+  for (Activation a : {Activation::kRelu, Activation::kTanh})
+    cases.push_back({"row_remainder_" + ToString(kActivationNames, a),
+                     Spec(6, {100, 200, 70}, 2, a)});
+  for (const Case& c : cases) {
+    for (MatmulBackend backend : {MatmulBackend::kEigen, MatmulBackend::kAuto}) {
+      SCOPED_TRACE(c.name + " " + ToString(kMatmulBackendNames, backend));
+      const MlpParams params = RandomMlpParams(c.spec, seed++);
+      const Normalizer norm = ModerateNormalizer(c.spec.input_dim, seed++);
+      const InferenceMlp mlp(params, norm, backend);
+      EXPECT_NE(mlp.backend(), MatmulBackend::kAuto);
+      auto ws = mlp.MakeWorkspace(200);
+      for (int n : {1, 2, 3, 31, 63, 64, 65, 127, 128, 200}) {
+        SCOPED_TRACE("batch " + std::to_string(n));
+        const Eigen::MatrixXf big = RandomInputs(c.spec.input_dim + 3, n + 2, seed++);
+        const Eigen::MatrixXf x = big.block(1, 1, c.spec.input_dim, n);
+        const Eigen::MatrixXd ref = ReferenceForward(params, norm, x);
+        Eigen::MatrixXf y(c.spec.output_dim, n), y_strided(c.spec.output_dim, n);
+        mlp.Forward(x, ws, y);
+        EXPECT_LE(MaxScaledError(y, ref), 1e-5);
+        mlp.Forward(big.block(1, 1, c.spec.input_dim, n), ws, y_strided);  // outer stride != rows
+        EXPECT_EQ(y, y_strided);
+      }
+    }
+  }
+}
+
+#if defined(__x86_64__)
+TEST(InferenceMlpTest, DefaultBackendIsLibxsmmOnX86) {
+  const MlpParams params = RandomMlpParams(Spec(4, {64, 64}, 1, Activation::kTanh), 3);
+  EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4)).backend(), MatmulBackend::kLibxsmm);
+  EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4), MatmulBackend::kLibxsmm).backend(),
+            MatmulBackend::kLibxsmm);
+  EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4), MatmulBackend::kEigen).backend(),
+            MatmulBackend::kEigen);
+}
+#endif
+
+TEST(InferenceMlpTest, BackendsAgreeOnTheShieldShapes) {
+  // The two backends sum in different orders, so they agree to float rounding, not bitwise.
+  for (const MlpSpec& spec : {Spec(4, {64, 64}, 1, Activation::kTanh),
+                              Spec(3, {64, 128, 64}, 1, Activation::kRelu),
+                              Spec(9, kPandaHidden, 1, Activation::kTanh)}) {
+    const MlpParams params = RandomMlpParams(spec, 11);
+    const InferenceMlp fast(params, Normalizer::Identity(spec.input_dim));
+    const InferenceMlp eigen(params, Normalizer::Identity(spec.input_dim), MatmulBackend::kEigen);
+    const Eigen::MatrixXf x = RandomInputs(spec.input_dim, 780, 12);
+    EXPECT_LE(MaxScaledError(Forward(fast, x, 780), Forward(eigen, x, 780).cast<double>()), 1e-5);
+  }
+}
+
+TEST(InferenceMlpTest, ForwardRejectsAWorkspaceOfAnotherBackend) {
+  const MlpParams params = RandomMlpParams(Spec(4, {8}, 1, Activation::kRelu), 1);
+  const InferenceMlp eigen(params, Normalizer::Identity(4), MatmulBackend::kEigen);
+  const InferenceMlp fast(params, Normalizer::Identity(4));
+  if (fast.backend() != MatmulBackend::kLibxsmm) GTEST_SKIP() << "no LIBXSMM code for this CPU";
+  auto ws = eigen.MakeWorkspace(4);
+  Eigen::MatrixXf y(1, 4);
+  EXPECT_HAS(ErrorOf([&] { fast.Forward(Eigen::MatrixXf::Zero(4, 4), ws, y); }),
+             "workspace was made by a model with another backend");
+}
+
 TEST(InferenceMlpTest, BatchExactlyMaxBatchMatchesReference) {
   for (Activation a : {Activation::kRelu, Activation::kTanh}) {
     const MlpParams params = RandomMlpParams(Spec(4, {64, 64, 64}, 1, a), 5);
