@@ -97,17 +97,8 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   TorchThreadsGuard threads(options.threads);
   Rng rng(options.seed);
 
-  // Stratified split; validation only if both classes contribute.
-  data::IndexSplit safe_split =
-      data::SplitForValidation(safe.size(), options.validation_fraction, rng);
-  data::IndexSplit nd_split =
-      data::SplitForValidation(near_dangerous.size(), options.validation_fraction, rng);
-  if (safe_split.validation.empty() || nd_split.validation.empty()) {
-    for (long i : safe_split.validation) safe_split.train.push_back(i);
-    for (long i : nd_split.validation) nd_split.train.push_back(i);
-    safe_split.validation.clear();
-    nd_split.validation.clear();
-  }
+  const auto [safe_split, nd_split] = data::SplitTwoClassesForValidation(
+      safe.size(), near_dangerous.size(), options.validation_fraction, rng);
   const bool has_validation = !safe_split.validation.empty();
   const Eigen::MatrixXf train_safe = data::SelectColumns(safe.states, safe_split.train);
   const Eigen::MatrixXf train_nd = data::SelectColumns(near_dangerous.states, nd_split.train);

@@ -108,6 +108,12 @@ struct IndexSplit {
 };
 IndexSplit SplitForValidation(long n, double fraction, Rng& rng);
 
+/// A stratified hold-out of two classes (the barrier trainers' safe and near-dangerous states):
+/// SplitForValidation of class a, then of class b, from the same Rng; if either class holds out
+/// nothing, neither does (every index goes to train), so validation always sees both classes.
+std::pair<IndexSplit, IndexSplit> SplitTwoClassesForValidation(long n_a, long n_b,
+                                                               double fraction, Rng& rng);
+
 /// Splits a state set at random into (first, second), `second_fraction` of the states (rounded
 /// down, but at least one when the set has two or more) going to `second`; e.g. a held-out test
 /// set. Sources are suffixed " [split 1/2]" / " [split 2/2]". Deterministic for a given Rng state.

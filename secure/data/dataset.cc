@@ -204,6 +204,19 @@ IndexSplit SplitForValidation(long n, double fraction, Rng& rng) {
   return split;
 }
 
+std::pair<IndexSplit, IndexSplit> SplitTwoClassesForValidation(long n_a, long n_b,
+                                                               double fraction, Rng& rng) {
+  IndexSplit a = SplitForValidation(n_a, fraction, rng);
+  IndexSplit b = SplitForValidation(n_b, fraction, rng);
+  if (a.validation.empty() || b.validation.empty()) {
+    for (IndexSplit* s : {&a, &b}) {
+      s->train.insert(s->train.end(), s->validation.begin(), s->validation.end());
+      s->validation.clear();
+    }
+  }
+  return {std::move(a), std::move(b)};
+}
+
 std::vector<std::vector<long>> RandomSplit(long n, const std::vector<double>& fractions, Rng& rng) {
   SECURE_CHECK(n >= 0, "random split: the number of items is " << n << ", must be >= 0");
   SECURE_CHECK(!fractions.empty(), "random split: no fractions given");

@@ -307,6 +307,23 @@ TEST(SplitForValidationTest, HoldsOutARoundedShareOfAtLeastOneAndAtMostAllButOne
   EXPECT_EQ(SplitForValidation(50, 0.0, rng).train.size(), 50u);
 }
 
+TEST(SplitTwoClassesForValidationTest, EqualsTwoSplitsInTurnAndHoldsOutBothOrNeither) {
+  Rng rng(5), same(5);
+  const auto [a, b] = SplitTwoClassesForValidation(40, 20, 0.25, rng);
+  const IndexSplit a_ref = SplitForValidation(40, 0.25, same);
+  const IndexSplit b_ref = SplitForValidation(20, 0.25, same);
+  EXPECT_EQ(a.train, a_ref.train);
+  EXPECT_EQ(a.validation, a_ref.validation);
+  EXPECT_EQ(b.train, b_ref.train);
+  EXPECT_EQ(b.validation, b_ref.validation);
+  // One state in class b: it cannot be split, so class a keeps everything for training too.
+  const auto [c, d] = SplitTwoClassesForValidation(40, 1, 0.25, rng);
+  EXPECT_TRUE(c.validation.empty());
+  EXPECT_TRUE(d.validation.empty());
+  EXPECT_EQ(c.train.size(), 40u);
+  EXPECT_EQ(d.train.size(), 1u);
+}
+
 TEST(RandomSplitTest, PartSizesRoundDownExceptTheLast) {
   Rng rng(1);
   EXPECT_EQ(Sizes(RandomSplit(10, {0.7, 0.2, 0.1}, rng)), (std::vector<std::size_t>{7, 2, 1}));
