@@ -381,9 +381,11 @@ void DerbyExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string
       bc.ApplyYaml(entry.second, where);
     } else if (key == "airl") {
       airl.ApplyYaml(entry.second, where);
+    } else if (key == "joint") {
+      joint.ApplyYaml(entry.second, where);
     } else {
       SECURE_THROW(source << ": unknown section '" << key
-                          << "' (valid: barrier, flat_barrier, bc, airl)");
+                          << "' (valid: barrier, flat_barrier, bc, airl, joint)");
     }
   }
 }

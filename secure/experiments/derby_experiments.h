@@ -123,7 +123,8 @@ struct DerbyExperimentOptions {
 
   /// Throws secure::Error naming the field, value and rule.
   void Validate() const;
-  /// Sections of a YAML mapping: barrier (per-car trainer), flat_barrier, bc, airl; unknown
+  /// Sections of a YAML mapping: barrier (per-car trainer), flat_barrier, bc, airl, joint
+  /// (policy::JointCbfOptions, e.g. `joint: {weight: 10}`); unknown
   /// sections are an error naming `source`.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;

@@ -287,6 +287,25 @@ void JointCbfOptions::Validate() const {
                              "JointCbfOptions", "unsafe_margin", unsafe_margin, "finite and >= 0");
 }
 
+void JointCbfOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  using internal::YamlValue;
+  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of joint-optimisation options");
+  for (const auto& item : node) {
+    const std::string key = item.first.as<std::string>();
+    double* field = key == "weight"          ? &weight
+                    : key == "class_k_gain"  ? &class_k_gain
+                    : key == "dt"            ? &dt
+                    : key == "unsafe_weight" ? &unsafe_weight
+                    : key == "unsafe_margin" ? &unsafe_margin
+                                             : nullptr;
+    SECURE_CHECK(field != nullptr,
+                 source << ": unknown field '" << key
+                        << "' in the joint-optimisation options (valid: weight, class_k_gain, dt, "
+                           "unsafe_weight, unsafe_margin)");
+    *field = YamlValue<double>(item.second, key, source);
+  }
+}
+
 nlohmann::json JointCbfOptions::ToJson() const {
   return {{"weight", weight},
           {"class_k_gain", class_k_gain},

@@ -229,6 +229,9 @@ struct JointCbfOptions {
 
   /// Throws secure::Error naming the field, value and rule.
   void Validate() const;
+  /// Reads the fields above (keys as in ToJson()) from a YAML mapping; unknown keys and values
+  /// of the wrong type are errors naming the key and `source`. Does not validate.
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
 };
 

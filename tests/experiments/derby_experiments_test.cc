@@ -178,5 +178,22 @@ TEST(DerbyExperimentsTest, OptionsAreValidated) {
              "cfg.yaml: unknown section 'policy'");
 }
 
+TEST(DerbyExperimentsTest, JointSectionSetsTheCbfWeight) {
+  DerbyExperimentOptions o = Tiny();
+  o.ApplyYaml(YAML::Load("{joint: {weight: 25, class_k_gain: 2}, airl: {iterations: 3}}"),
+              "cfg.yaml");
+  EXPECT_EQ(o.joint.weight, 25.0);
+  EXPECT_EQ(o.joint.class_k_gain, 2.0);
+  EXPECT_EQ(o.joint.dt, policy::JointCbfOptions{}.dt);  // untouched fields keep their defaults
+  EXPECT_EQ(o.airl.iterations, 3);
+  EXPECT_EQ(o.ToJson()["joint"]["weight"], 25.0);
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{joint: {cbf_weight: 3}}"), "cfg.yaml"); }),
+             "unknown field 'cbf_weight'");
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{joint: {weight: heavy}}"), "cfg.yaml"); }),
+             "weight");
+  o.ApplyYaml(YAML::Load("{joint: {weight: -1}}"), "cfg.yaml");
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "JointCbfOptions::weight = -1");
+}
+
 }  // namespace
 }  // namespace secure::experiments
