@@ -46,6 +46,8 @@ void AirlOptions::Validate() const {
   CheckPositive(value_lr, "value_lr");
   AIRL_CHECK(std::isfinite(entropy_coef) && entropy_coef >= 0, "entropy_coef", entropy_coef,
              ">= 0");
+  AIRL_CHECK(std::isfinite(bc_weight) && bc_weight >= 0, "bc_weight", bc_weight,
+             "finite and >= 0");
   AIRL_CHECK(std::isfinite(max_grad_norm) && max_grad_norm >= 0, "max_grad_norm", max_grad_norm,
              ">= 0 (0: no clipping)");
   CheckPositive(discriminator_lr, "discriminator_lr");
@@ -80,6 +82,7 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
                                               "policy_lr",
                                               "value_lr",
                                               "entropy_coef",
+                                              "bc_weight",
                                               "max_grad_norm",
                                               "normalize_rewards",
                                               "discriminator_lr",
@@ -132,6 +135,8 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
       value_lr = dbl();
     else if (key == "entropy_coef")
       entropy_coef = dbl();
+    else if (key == "bc_weight")
+      bc_weight = dbl();
     else if (key == "max_grad_norm")
       max_grad_norm = dbl();
     else if (key == "normalize_rewards")
@@ -181,6 +186,7 @@ nlohmann::json AirlOptions::ToJson() const {
           {"policy_lr", policy_lr},
           {"value_lr", value_lr},
           {"entropy_coef", entropy_coef},
+          {"bc_weight", bc_weight},
           {"max_grad_norm", max_grad_norm},
           {"normalize_rewards", normalize_rewards},
           {"discriminator_lr", discriminator_lr},
@@ -200,7 +206,7 @@ std::vector<std::string> AirlIterationStats::Columns() {
   return {"iteration",       "env_steps",  "episodes", "success_rate",       "collision_rate",
           "mean_collisions", "d_expert",   "d_policy", "discriminator_loss", "mean_reward",
           "policy_loss",     "value_loss", "entropy",  "mean_sigma",         "approx_kl",
-          "clip_fraction",   "seconds"};
+          "clip_fraction",   "bc_nll",     "seconds"};
 }
 
 std::vector<double> AirlIterationStats::Values() const {
@@ -220,6 +226,7 @@ std::vector<double> AirlIterationStats::Values() const {
           mean_sigma,
           approx_kl,
           clip_fraction,
+          bc_nll,
           seconds};
 }
 

@@ -127,6 +127,7 @@ AirlIterationStats StatsFromJson(const nlohmann::json& j) {
   s.mean_sigma = num("mean_sigma");
   s.approx_kl = num("approx_kl");
   s.clip_fraction = num("clip_fraction");
+  s.bc_nll = num("bc_nll");
   s.seconds = num("seconds");
   return s;
 }
@@ -620,6 +621,7 @@ class AirlRun {
     const std::vector<torch::Tensor> policy_params = policy_->parameters();
     const std::vector<torch::Tensor> value_params = value_->parameters();
     double policy_loss_sum = 0.0, value_loss_sum = 0.0, kl_sum = 0.0, clipped_sum = 0.0;
+    double bc_nll_sum = 0.0;
     long batches = 0, last_epoch_samples = 0;
     for (int epoch = 0; epoch < o_.ppo_epochs; ++epoch) {
       const bool last_epoch = epoch + 1 == o_.ppo_epochs;
@@ -644,6 +646,16 @@ class AirlRun {
           const torch::Tensor sampled =
               policy_->Mean(xb) + torch::exp(policy_->LogStd()) * nn::ToTensor(eps);
           policy_loss = policy_loss + joint_->options.weight * joint_->Loss(idx, sampled);
+        }
+        if (o_.bc_weight > 0) {
+          std::vector<std::int64_t> ie(static_cast<std::size_t>(m));
+          for (auto& k : ie) k = static_cast<std::int64_t>(rng.UniformIndex(expert_count_));
+          const torch::Tensor te = internal::IndexTensor(ie);
+          const torch::Tensor bc_nll =
+              -policy_->LogProb(expert_x_.index_select(0, te), expert_a_.index_select(0, te))
+                   .mean();
+          policy_loss = policy_loss + o_.bc_weight * bc_nll;
+          bc_nll_sum += bc_nll.item<double>();
         }
         if (o_.entropy_coef > 0)
           policy_loss =
@@ -675,6 +687,8 @@ class AirlRun {
       }
     }
     stats.policy_loss = policy_loss_sum / std::max(1L, batches);
+    stats.bc_nll = o_.bc_weight > 0 ? bc_nll_sum / std::max(1L, batches)
+                                    : std::numeric_limits<double>::quiet_NaN();
     stats.value_loss = value_loss_sum / std::max(1L, batches);
     stats.approx_kl = kl_sum / std::max(1L, last_epoch_samples);
     stats.clip_fraction = clipped_sum / std::max(1L, last_epoch_samples);

@@ -116,6 +116,12 @@ struct AirlOptions {
   double policy_lr = 3e-4;        // Adam, policy mean and log sigma
   double value_lr = 1e-3;         // Adam, value network
   double entropy_coef = 0.0;      // entropy bonus (the released code: none)
+  // Behaviour-cloning regulariser: bc_weight x the mean negative log-likelihood of a minibatch
+  // of expert pairs (as many as the PPO minibatch, drawn afresh) is added to every PPO policy
+  // loss, as in GAIL/AIRL + BC (Jena et al. 2020) and DAPG (Rajeswaran et al. 2018). 0 (the
+  // released code): pure AIRL. It keeps the expert's action where the learned reward is flat,
+  // e.g. the final approach to a goal (docs/RESULTS.md, Demolition Derby).
+  double bc_weight = 0.0;
   double max_grad_norm = 0.5;     // gradient-norm clip per network (0: off)
   bool normalize_rewards = true;  // divide rewards by the running std of discounted returns
 
@@ -164,6 +170,7 @@ struct AirlIterationStats {
   double mean_sigma = 0.0;          // mean exp(log_std) after the update
   double approx_kl = 0.0;           // mean (ratio - 1) - log ratio of the last PPO epoch
   double clip_fraction = 0.0;       // fraction of clipped ratios in the last PPO epoch
+  double bc_nll = 0.0;              // mean expert NLL of the bc_weight term (NaN if bc_weight 0)
   double seconds = 0.0;             // cumulative wall-clock seconds of training
 
   /// The learning-curve CSV columns, in order, and this row's values.
