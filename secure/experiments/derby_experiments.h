@@ -18,8 +18,9 @@
 //      discarded), `safe_states` demonstration observations and `near_dangerous.count`
 //      near-dangerous observations (official-code-facts.md §1.7; paper Table 2: 1024 + 1024);
 //   2. per seed (the seed covers all training and the evaluation): the barrier(s), BC, AIRL
-//      warm-started from BC (with the BC regulariser, airl.bc_weight = 1), and for derby-joint the joint policy; then every method of the
-//      experiment on the same `episodes` episodes (common random numbers);
+//      warm-started from BC (with the BC regulariser, airl.bc_weight = 1), and for derby-joint
+//      the joint policy; then every method of the experiment on the same `episodes` episodes
+//      (common random numbers);
 //   3. across seeds: eval::Evaluation (one per sensitivity configuration).
 // Seeds run in parallel on `threads` workers; results do not depend on the number of workers.
 #include <cstdint>
@@ -124,8 +125,8 @@ struct DerbyExperimentOptions {
   /// Throws secure::Error naming the field, value and rule.
   void Validate() const;
   /// Sections of a YAML mapping: barrier (per-car trainer), flat_barrier, bc, airl, joint
-  /// (policy::JointCbfOptions, e.g. `joint: {weight: 10}`); unknown
-  /// sections are an error naming `source`.
+  /// (policy::JointCbfOptions, e.g. `joint: {weight: 10}`); unknown sections are an error
+  /// naming `source`.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
 };
