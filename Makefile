@@ -5,7 +5,7 @@
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: demo test build bench clean
+.PHONY: demo test build bench check clean
 
 build:
 	SECURE_BUILD_DIR=$(BUILD) scripts/setup.sh
@@ -13,12 +13,17 @@ build:
 demo: build
 	$(BUILD)/apps/secure/secure demo
 
+# Every test but the `long` label (ctest -L long: the shield's properties at 10^6 cases).
 test: build
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -LE long
 
 bench: build
 	cmake --build $(BUILD) --target bench
 	@echo "benchmarks are in $(BUILD)/bench/ (bench/README.md says what each measures)"
 
+# The checking build: ASan + UBSan unit tests and the fuzzers (scripts/check.sh; run by CI).
+check:
+	scripts/check.sh
+
 clean:
-	rm -rf $(BUILD)
+	rm -rf $(BUILD) build-check

@@ -1,6 +1,8 @@
-// Property-based tests of the shield (RapidCheck): random states in and near the double
-// integrator's box, random policies, options and seeds, with the ground-truth barrier and with
-// random barrier networks.
+// Property-based tests of the shield (RapidCheck): random policies, options and seeds over every
+// barrier type and dynamics model (the double integrator with its ground truth or a random barrier
+// network, Derby's shield model with a random per-car barrier). Case counts: RapidCheck's default
+// (100) in shield_test; 10^4 in the ctest entry shield_properties_10k and 10^6 under the `long`
+// label (tests/CMakeLists.txt; RC_PARAMS sets them).
 
 #include "secure/shield/shield.h"
 #include "tests/shield/shield_test_util.h"
@@ -18,6 +20,8 @@
 
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
+#include "secure/domains/derby/derby.h"
 #include "secure/common/rng.h"
 #include "secure/domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
@@ -28,6 +32,7 @@ namespace {
 using test::IndependentG;
 
 namespace di = domains::double_integrator;
+namespace derby = domains::derby;
 
 /// Uniform in [lo, hi] on a grid of 100001 points, whatever RapidCheck's size parameter.
 rc::Gen<double> UniformIn(double lo, double hi) {
@@ -41,28 +46,81 @@ Eigen::VectorXf RandomVector(int n, double lo, double hi) {
   return v;
 }
 
-/// The barrier of a case: the ground truth or a random barrier network, with a second,
-/// independent evaluator for re-checking.
-struct Barriers {
+/// The system of a case: a barrier (with a second, independent evaluator for re-checking) and
+/// the dynamics model the shield looks ahead with. Every barrier type and dynamics model the
+/// library has: the double integrator with its ground truth or a random barrier network, and
+/// Demolition Derby's constant-velocity shield model with a random per-car barrier.
+enum class SystemKind { kDoubleIntegratorTruth, kDoubleIntegratorNet, kDerbyCarNet };
+
+const char* Name(SystemKind kind) {
+  switch (kind) {
+    case SystemKind::kDoubleIntegratorTruth: return "double integrator, ground truth";
+    case SystemKind::kDoubleIntegratorNet: return "double integrator, barrier net";
+    case SystemKind::kDerbyCarNet: return "derby, per-car barrier";
+  }
+  return "?";
+}
+
+struct System {
   std::unique_ptr<cbf::BarrierNet> net;
+  std::unique_ptr<cbf::CarBarrierNet> car_net;
   std::unique_ptr<cbf::Barrier> shield_barrier;
   std::unique_ptr<cbf::Barrier> independent;
+  std::unique_ptr<domains::DynamicsModel> dynamics;
+  bool learned = false;
 };
 
-Barriers MakeBarriers(bool learned, unsigned long long net_seed) {
-  Barriers b;
-  if (learned) {
-    b.net = std::make_unique<cbf::BarrierNet>();
-    b.net->mlp = nn::RandomMlpParams(nn::MlpSpec{4, {8}, 1, nn::Activation::kTanh}, net_seed);
-    b.net->normalizer = nn::Normalizer::Identity(4);
-    b.net->features = di::StateFeatures();
-    b.shield_barrier = b.net->MakeEvaluator(256);
-    b.independent = b.net->MakeEvaluator(256);
-  } else {
-    b.shield_barrier = std::make_unique<cbf::DoubleIntegratorGroundTruth>(di::GroundTruth{});
-    b.independent = std::make_unique<cbf::DoubleIntegratorGroundTruth>(di::GroundTruth{});
+System MakeSystem(SystemKind kind, unsigned long long net_seed) {
+  System b;
+  switch (kind) {
+    case SystemKind::kDoubleIntegratorNet:
+      b.net = std::make_unique<cbf::BarrierNet>();
+      b.net->mlp = nn::RandomMlpParams(nn::MlpSpec{4, {8}, 1, nn::Activation::kTanh}, net_seed);
+      b.net->normalizer = nn::Normalizer::Identity(4);
+      b.net->features = di::StateFeatures();
+      b.shield_barrier = b.net->MakeEvaluator(256);
+      b.independent = b.net->MakeEvaluator(256);
+      b.dynamics = std::make_unique<di::Dynamics>(0.1);
+      b.learned = true;
+      break;
+    case SystemKind::kDoubleIntegratorTruth:
+      b.shield_barrier = std::make_unique<cbf::DoubleIntegratorGroundTruth>(di::GroundTruth{});
+      b.independent = std::make_unique<cbf::DoubleIntegratorGroundTruth>(di::GroundTruth{});
+      b.dynamics = std::make_unique<di::Dynamics>(0.1);
+      break;
+    case SystemKind::kDerbyCarNet: {
+      b.car_net = std::make_unique<cbf::CarBarrierNet>();
+      b.car_net->input.use_velocity = (net_seed & 1) != 0;
+      const int f = b.car_net->input.feature_dim();
+      b.car_net->mlp = nn::RandomMlpParams({f, {16, 8}, 1, nn::Activation::kRelu}, net_seed);
+      b.car_net->normalizer = nn::Normalizer::Identity(f);
+      b.shield_barrier = b.car_net->MakeEvaluator(256);
+      b.independent = b.car_net->MakeEvaluator(256);
+      const derby::DerbyOptions task;
+      b.dynamics = std::make_unique<derby::DerbyShieldModel>(task.dt, task.accel_bound,
+                                                             task.lookahead_steps);
+      b.learned = true;
+      break;
+    }
   }
   return b;
+}
+
+/// A Derby observation: a random episode start, then up to 30 steps of random accelerations.
+Eigen::VectorXf RandomDerbyState(std::uint64_t seed) {
+  derby::DerbyEnv env;
+  Rng rng(seed);
+  Eigen::VectorXf obs(env.observation_dim());
+  env.Reset(rng, obs);
+  const int steps = static_cast<int>(rng.UniformIndex(31));
+  Eigen::VectorXf action(env.action_dim());
+  for (int t = 0; t < steps; ++t) {
+    for (Eigen::Index i = 0; i < action.size(); ++i)
+      action[i] = static_cast<float>(rng.Uniform(-3.0, 3.0));
+    const domains::StepOutcome outcome = env.Step(action, obs);
+    if (outcome.reached_goal) break;
+  }
+  return obs;
 }
 
 ShieldOptions RandomOptions() {
@@ -106,11 +164,12 @@ Eigen::MatrixXf FirstRound(std::uint64_t seed, const Eigen::VectorXf& mu,
   return samples;
 }
 
-/// A random decision problem in or near the double integrator's state box.
+/// A random decision problem of a random system: a state in or near the double integrator's box,
+/// or a Derby observation.
 struct Problem {
+  SystemKind kind = SystemKind::kDoubleIntegratorTruth;
   Eigen::VectorXf state, mu, sigma;
   ShieldOptions options;
-  bool learned = false;
   unsigned long long net_seed = 0;
   bool with_backup = false;
   Eigen::VectorXf backup;
@@ -118,13 +177,18 @@ struct Problem {
 
 Problem RandomProblem() {
   Problem p;
-  p.state.resize(4);
-  p.state.head(2) = RandomVector(2, -1.0, 11.0);
-  p.state.tail(2) = RandomVector(2, -2.0, 2.0);
+  p.kind = *rc::gen::element(SystemKind::kDoubleIntegratorTruth, SystemKind::kDoubleIntegratorNet,
+                             SystemKind::kDerbyCarNet);
+  if (p.kind == SystemKind::kDerbyCarNet) {
+    p.state = RandomDerbyState(*rc::gen::arbitrary<std::uint64_t>());
+  } else {
+    p.state.resize(4);
+    p.state.head(2) = RandomVector(2, -1.0, 11.0);
+    p.state.tail(2) = RandomVector(2, -2.0, 2.0);
+  }
   p.mu = RandomVector(2, -5.0, 5.0);
   p.sigma = RandomVector(2, 0.01, 2.0);
   p.options = RandomOptions();
-  p.learned = *rc::gen::arbitrary<bool>();
   p.net_seed = *rc::gen::arbitrary<unsigned long long>();
   p.with_backup = *rc::gen::arbitrary<bool>();
   p.backup = RandomVector(2, -5.0, 5.0);
@@ -148,42 +212,41 @@ double GTolerance(bool learned, double g, double h_state, const ShieldOptions& o
 
 RC_GTEST_PROP(ShieldProperty, SafeDecisionsSatisfyTheCbfConditionIndependently, ()) {
   const Problem p = RandomProblem();
-  Barriers barriers = MakeBarriers(p.learned, p.net_seed);
-  const di::Dynamics dynamics(0.1);
-  Shield shield(p.options, *barriers.shield_barrier, dynamics);
+  System system = MakeSystem(p.kind, p.net_seed);
+  const domains::DynamicsModel& dynamics = *system.dynamics;
+  Shield shield(p.options, *system.shield_barrier, dynamics);
   if (p.with_backup) shield.SetBackupAction(p.backup);
   const Decision& d = shield.Decide(p.state, p.mu, p.sigma);
-  RC_TAG(ToString(kStatusNames, d.status), p.learned ? "learned" : "ground truth");
+  RC_TAG(ToString(kStatusNames, d.status), Name(p.kind));
   if (!d.safe()) return;
 
-  const double tolerance = GTolerance(p.learned, d.g, d.h, p.options);
-  Shield checker(p.options, *barriers.independent, dynamics);
+  const double tolerance = GTolerance(system.learned, d.g, d.h, p.options);
+  Shield checker(p.options, *system.independent, dynamics);
   Eigen::MatrixXf column = d.action;
   Eigen::VectorXd g(1);
   checker.EvaluateG(p.state, checker.EvaluateH(p.state), column, g);
   RC_LOG() << "g: shield " << d.g << ", re-evaluated " << g[0] << ", tolerance " << tolerance
            << "; " << d.ToJson().dump() << "\n";
   RC_ASSERT(std::abs(g[0] - d.g) <= tolerance);
-  if (p.learned) {
+  if (system.learned) {
     RC_ASSERT(g[0] >= -tolerance);
   } else {
     RC_ASSERT(g[0] >= 0.0);
   }
   const double formula =
-      IndependentG(*barriers.independent, dynamics, p.options, p.state, d.action);
+      IndependentG(*system.independent, dynamics, p.options, p.state, d.action);
   RC_ASSERT(std::abs(formula - d.g) <= tolerance);
-  RC_ASSERT(formula >= (p.learned ? -tolerance : 0.0));
+  RC_ASSERT(formula >= (system.learned ? -tolerance : 0.0));
 }
 
 // 2. The action is always finite and the status agrees with g.
 RC_GTEST_PROP(ShieldProperty, ActionIsFiniteAndStatusAgreesWithG, ()) {
   const Problem p = RandomProblem();
-  Barriers barriers = MakeBarriers(p.learned, p.net_seed);
-  const di::Dynamics dynamics(0.1);
-  Shield shield(p.options, *barriers.shield_barrier, dynamics);
+  System system = MakeSystem(p.kind, p.net_seed);
+  Shield shield(p.options, *system.shield_barrier, *system.dynamics);
   if (p.with_backup) shield.SetBackupAction(p.backup);
   const Decision& d = shield.Decide(p.state, p.mu, p.sigma);
-  RC_TAG(ToString(kStatusNames, d.status), ToString(kFallbackNames, d.fallback));
+  RC_TAG(ToString(kStatusNames, d.status), ToString(kFallbackNames, d.fallback), Name(p.kind));
 
   RC_ASSERT(d.action.size() == 2);
   RC_ASSERT(d.action.allFinite());
@@ -208,20 +271,20 @@ RC_GTEST_PROP(ShieldProperty, NonFiniteInputsGiveInvalidInputAndAFiniteAction, (
   const float bad = *rc::gen::element(std::numeric_limits<float>::quiet_NaN(),
                                       std::numeric_limits<float>::infinity(),
                                       -std::numeric_limits<float>::infinity(), -0.5f);
-  const int where = *rc::gen::inRange(0, 8);      // 4 state, 2 mu, 2 sigma entries
+  const int n = static_cast<int>(p.state.size());
+  const int where = *rc::gen::inRange(0, n + 4);  // n state, 2 mu, 2 sigma entries
   const bool negative_only = std::isfinite(bad);  // a negative value is bad only in sigma
   if (negative_only) {
     p.sigma[where % 2] = bad;
-  } else if (where < 4) {
+  } else if (where < n) {
     p.state[where] = bad;
-  } else if (where < 6) {
-    p.mu[where - 4] = bad;
+  } else if (where < n + 2) {
+    p.mu[where - n] = bad;
   } else {
-    p.sigma[where - 6] = bad;
+    p.sigma[where - n - 2] = bad;
   }
-  Barriers barriers = MakeBarriers(p.learned, p.net_seed);
-  const di::Dynamics dynamics(0.1);
-  Shield shield(p.options, *barriers.shield_barrier, dynamics);
+  System system = MakeSystem(p.kind, p.net_seed);
+  Shield shield(p.options, *system.shield_barrier, *system.dynamics);
   if (p.with_backup) shield.SetBackupAction(p.backup);
   const Decision& d = shield.Decide(p.state, p.mu, p.sigma);
   RC_ASSERT(d.status == Status::kInvalidInput);
@@ -318,18 +381,17 @@ RC_GTEST_PROP(ShieldProperty, AggregationAblationChangesOnlyTheAggregation, ()) 
 RC_GTEST_PROP(ShieldProperty, ResamplingAblationIsIdenticalWithoutResampling, ()) {
   const bool far = *rc::gen::arbitrary<bool>();
   Problem p = far ? FarProblem() : RandomProblem();
-  Barriers barriers = MakeBarriers(!far && p.learned, p.net_seed);
-  const di::Dynamics dynamics(0.1);
+  System system = MakeSystem(p.kind, p.net_seed);
   p.options.resampling = Resampling::kAdaptive;
-  Shield adaptive_shield(p.options, *barriers.shield_barrier, dynamics);
+  Shield adaptive_shield(p.options, *system.shield_barrier, *system.dynamics);
   const Decision adaptive = adaptive_shield.Decide(p.state, p.mu, p.sigma);
   p.options.resampling = Resampling::kNone;
-  Shield none_shield(p.options, *barriers.shield_barrier, dynamics);
+  Shield none_shield(p.options, *system.shield_barrier, *system.dynamics);
   const Decision none = none_shield.Decide(p.state, p.mu, p.sigma);
 
   const bool enough = adaptive.iterations == 1 && adaptive.safe_ratio > p.options.safe_ratio;
   if (far) RC_ASSERT(enough);
-  RC_TAG(enough ? "no resampling needed" : "resampling needed");
+  RC_TAG(enough ? "no resampling needed" : "resampling needed", Name(p.kind));
   if (enough) {
     RC_ASSERT(SameDecision(adaptive, none));
   } else {
