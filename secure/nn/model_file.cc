@@ -72,12 +72,6 @@ void ReadFloatsLittleEndian(const char* src, std::size_t count, std::vector<floa
   }
 }
 
-std::uint32_t Crc32(std::string_view bytes) {
-  boost::crc_32_type crc;
-  crc.process_bytes(bytes.data(), bytes.size());
-  return crc.checksum();
-}
-
 std::string Hex8(std::uint32_t value) {
   char buffer[9];
   std::snprintf(buffer, sizeof(buffer), "%08x", static_cast<unsigned>(value));
@@ -280,6 +274,12 @@ const json& MetadataField(const json& object, const std::string& prefix, const c
 }
 
 }  // namespace
+
+std::uint32_t Crc32(std::string_view bytes) {
+  boost::crc_32_type crc;
+  crc.process_bytes(bytes.data(), bytes.size());
+  return crc.checksum();
+}
 
 const NamedTensor& ModelFile::Tensor(const std::string& name) const {
   if (const NamedTensor* tensor = FindTensor(*this, name)) return *tensor;

@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "secure/nn/mlp.h"
@@ -39,6 +40,10 @@ struct ModelFile {
   /// The tensor called `name`; throws secure::Error naming `name` and the file's kind if absent.
   const NamedTensor& Tensor(const std::string& name) const;
 };
+
+/// CRC-32 (boost::crc_32_type: the zlib/PNG polynomial) of `bytes`: the model file's checksum,
+/// also used by other checksummed files (AIRL checkpoints).
+std::uint32_t Crc32(std::string_view bytes);
 
 /// Serialises to bytes (exposed for tests) and back. `source` names the file in messages.
 std::string SerializeModelFile(const ModelFile& file);

@@ -9,21 +9,31 @@
 #include <memory>
 #include <numeric>
 #include <sstream>
+#include <string_view>
 
+#include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/common/strings.h"
 #include "secure/common/timer.h"
+#include "secure/nn/model_file.h"
 #include "secure/policy/bc_trainer.h"
-#include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/policy/internal/torch_policy.h"
 
 namespace secure::policy {
 namespace {
 
-constexpr int kCheckpointVersion = 1;
+// Checkpoint file, version 2 (docs/FILE_FORMATS.md):
+//   "secure-airl-checkpoint 2\n"   format name and version
+//   <LibTorch archive bytes>        a zip (torch::serialize::OutputArchive::save_to)
+//   "\ncrc32 xxxxxxxx\n"            CRC-32 (nn::Crc32) of everything before this trailer
+// Version 1 was the bare archive (a zip, "PK\x03\x04..."), without a checksum: LibTorch's
+// reader does not verify the zip's own CRCs, so a flipped byte in tensor data was accepted.
+constexpr int kCheckpointVersion = 2;
 constexpr const char* kCheckpointFormat = "secure-airl-checkpoint";
+constexpr std::string_view kCheckpointTrailerPrefix = "\ncrc32 ";
+constexpr std::size_t kCheckpointTrailerSize = kCheckpointTrailerPrefix.size() + 8 + 1;
 // Expert transitions in the D-on-expert statistic (a fixed random subset).
 constexpr long kExpertStatTransitions = 2048;
 
@@ -51,6 +61,84 @@ std::uint64_t Fingerprint(const data::TrajectorySet& demos) {
   for (const auto& f : demos.state_features) mix(f.data(), f.size() + 1);
   for (const auto& f : demos.action_features) mix(f.data(), f.size() + 1);
   return h;
+}
+
+std::string Hex8(std::uint32_t value) {
+  char buffer[9];
+  std::snprintf(buffer, sizeof buffer, "%08x", static_cast<unsigned>(value));
+  return buffer;
+}
+
+// The checkpoint file's bytes: the format line, `archive`, the checksum trailer.
+std::string FrameCheckpoint(const std::string& archive) {
+  std::string out =
+      std::string(kCheckpointFormat) + " " + std::to_string(kCheckpointVersion) + "\n" + archive;
+  const std::uint32_t crc = nn::Crc32(out);
+  out += kCheckpointTrailerPrefix;
+  out += Hex8(crc);
+  out += '\n';
+  return out;
+}
+
+// The archive inside a checkpoint file's `bytes`, after checking the format line, the version,
+// the trailer and the checksum; throws naming `path` and what is wrong.
+std::string_view UnframeCheckpoint(const std::string& bytes, const std::string& path) {
+  const std::string_view all(bytes);
+  SECURE_CHECK(all.substr(0, 4) != std::string_view("PK\x03\x04", 4),
+               path << ": AIRL checkpoint version 1 (a bare LibTorch archive without a checksum, "
+                       "written by an older build); this build reads version "
+                    << kCheckpointVersion
+                    << " only: delete the file to start afresh, or run without resume");
+  const std::string prefix = std::string(kCheckpointFormat) + " ";
+  constexpr std::size_t kMaxFormatLine = 64;
+  const std::size_t line_end = all.substr(0, kMaxFormatLine).find('\n');
+  const bool prefix_ok =
+      all.substr(0, prefix.size()) == std::string_view(prefix).substr(0, all.size());
+  SECURE_CHECK(!prefix_ok || line_end != std::string_view::npos || all.size() >= kMaxFormatLine,
+               path << ": truncated AIRL checkpoint (" << all.size()
+                    << " bytes, the format line is incomplete)");
+  SECURE_CHECK(prefix_ok && line_end != std::string_view::npos,
+               path << ": not an AIRL checkpoint (it does not start with '" << kCheckpointFormat
+                    << " <version>')");
+  const std::string_view version = all.substr(prefix.size(), line_end - prefix.size());
+  SECURE_CHECK(version == std::to_string(kCheckpointVersion),
+               path << ": AIRL checkpoint version " << version << ", this build reads version "
+                    << kCheckpointVersion << " only");
+  const std::size_t body = line_end + 1;
+  SECURE_CHECK(all.size() >= body + kCheckpointTrailerSize,
+               path << ": truncated AIRL checkpoint (" << all.size()
+                    << " bytes, no room for the checksum trailer)");
+  const std::size_t trailer_start = all.size() - kCheckpointTrailerSize;
+  const std::string_view trailer = all.substr(trailer_start);
+  std::uint32_t stored = 0;
+  bool hex = true;
+  for (const char c : trailer.substr(kCheckpointTrailerPrefix.size(), 8)) {
+    const int digit = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+    hex = hex && digit >= 0;
+    stored = (stored << 4) | static_cast<std::uint32_t>(digit & 0xf);
+  }
+  SECURE_CHECK(hex &&
+                   trailer.substr(0, kCheckpointTrailerPrefix.size()) == kCheckpointTrailerPrefix &&
+                   trailer.back() == '\n',
+               path << ": truncated or corrupt AIRL checkpoint (it does not end with the "
+                       "checksum trailer '\\ncrc32 xxxxxxxx\\n')");
+  const std::uint32_t computed = nn::Crc32(all.substr(0, trailer_start));
+  SECURE_CHECK(stored == computed, path << ": checksum mismatch (stored " << Hex8(stored)
+                                        << ", computed " << Hex8(computed)
+                                        << "): the checkpoint is corrupt");
+  return all.substr(body, trailer_start - body);
+}
+
+// The summary as recorded in the model file's provenance: without timing (wall-clock seconds
+// and rates), so that identical runs write identical model files. Timing stays in
+// AirlSummary::ToJson() (the --json output) and BriefReport().
+nlohmann::json ModelFileSummary(const AirlSummary& s) {
+  nlohmann::json j = s.ToJson();
+  for (const char* key : {"wall_seconds", "rollout_seconds", "discriminator_seconds", "ppo_seconds",
+                          "iterations_per_second", "env_steps_per_second"})
+    j.erase(key);
+  if (j.contains("last") && j["last"].is_object()) j["last"].erase("seconds");
+  return j;
 }
 
 // Options that shape the training trajectory: must match when resuming.
@@ -380,17 +468,18 @@ class AirlRun {
     archive.save_to(bytes);
     const std::filesystem::path parent = std::filesystem::path(path).parent_path();
     if (!parent.empty()) std::filesystem::create_directories(parent);
-    WriteFileAtomically(path, bytes.str());
+    WriteFileAtomically(path, FrameCheckpoint(bytes.str()));
   }
 
   // Restores everything from `path`; throws naming the file and the first mismatch.
   void LoadCheckpoint(const std::string& path) {
     namespace ser = torch::serialize;
-    const std::string bytes = ReadFile(path);
+    const std::string file = ReadFile(path);
+    const std::string_view bytes = UnframeCheckpoint(file, path);
     ser::InputArchive archive;
     nlohmann::json meta;
     try {
-      std::istringstream in(bytes);
+      std::istringstream in{std::string(bytes)};
       archive.load_from(in);
       torch::Tensor meta_tensor;
       archive.read("meta", meta_tensor);
@@ -765,6 +854,15 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
   s.warm_started = run.warm_started();
   if (options.resume && std::filesystem::exists(options.checkpoint_path)) {
     run.LoadCheckpoint(options.checkpoint_path);
+    // A run cannot be shortened; with as many iterations as completed, the checkpoint's policy
+    // is returned without training.
+    SECURE_CHECK(run.completed() <= options.iterations,
+                 options.checkpoint_path
+                     << ": checkpoint has " << run.completed()
+                     << " completed iterations, more than iterations = " << options.iterations
+                     << " (AirlOptions::iterations, --iterations): a run cannot be shortened; "
+                        "resume with iterations >= "
+                     << run.completed() << ", or start afresh without resume");
     s.resumed = true;
     if (options.verbose)
       std::fprintf(stderr, "[airl] resumed from %s at iteration %d\n",
@@ -835,7 +933,7 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
                                    : "secure::policy::TrainAirl (AIRL, state-only discriminator, "
                                      "PPO generator)"},
       {"options", options.ToJson()},
-      {"summary", s.ToJson()},
+      {"summary", ModelFileSummary(s)},
       {"environment", env.Describe()},
       {"demonstrations",
        {{"source", demos.source},

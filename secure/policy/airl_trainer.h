@@ -48,15 +48,20 @@
 // counts give bitwise-identical policies, also when several trainers run concurrently in
 // different std::threads.
 //
-// Checkpoints: `checkpoint_path` is one file (LibTorch archive) holding the policy, value,
-// reward and shaping networks, the three Adam states, the normaliser, the reward statistics,
-// the iteration counter and the learning-curve rows so far; the RNG state needs no storage
-// (it is derived from seed and iteration). It is written atomically (temporary file + rename)
-// every `checkpoint_every` iterations and when training stops. With `resume`, training
-// continues from an existing checkpoint (a missing one starts afresh); the result is bitwise
-// identical to an uninterrupted run. Resuming checks that the options that shape training
-// (everything except iterations, verbose, curve/checkpoint paths and cadence, resume and
-// stop_after_iterations) and the demonstrations and environment match.
+// Checkpoints: `checkpoint_path` is one file (a format line, a LibTorch archive and a CRC-32
+// trailer over the whole content; docs/FILE_FORMATS.md) holding the policy, value, reward and
+// shaping networks, the three Adam states, the normaliser, the reward statistics, the iteration
+// counter and the learning-curve rows so far; the RNG state needs no storage (it is derived
+// from seed and iteration). It is written atomically (temporary file + rename) every
+// `checkpoint_every` iterations and when training stops. With `resume`, training continues from
+// an existing checkpoint (a missing one starts afresh); the result is bitwise identical to an
+// uninterrupted run. Resuming checks the checksum and format version, that the options that
+// shape training (everything except iterations, verbose, curve/checkpoint paths and cadence,
+// resume and stop_after_iterations) and the demonstrations and environment match, and that the
+// checkpoint has at most `iterations` completed iterations (as many: its policy is returned).
+//
+// The returned policy's provenance records the summary without timing (identical runs give
+// identical model files); AirlSummary keeps the timing.
 //
 //   policy::AirlOptions options;                  // documented defaults
 //   options.checkpoint_path = "run/airl.ckpt";
@@ -139,7 +144,8 @@ struct AirlOptions {
                                   // atomically every iteration (survives a kill; see resume)
   std::string checkpoint_path;    // checkpoint file ("" : none)
   int checkpoint_every = 10;      // iterations between checkpoints (also written at the end)
-  bool resume = false;            // continue from checkpoint_path if it exists
+  bool resume = false;            // continue from checkpoint_path if it exists (else start
+                                  // afresh); more completed iterations than `iterations`: error
   int stop_after_iterations = 0;  // > 0: stop once the iteration counter reaches this (for
                                   // splitting a run; a checkpoint is written)
 
@@ -211,7 +217,8 @@ using AirlCallback = std::function<bool(const AirlIterationStats&)>;
 /// architecture, normaliser and log sigma are the starting point; otherwise the observation
 /// normaliser is fitted on the demonstration states. The demonstrations' state/action features
 /// must equal env.ObservationFeatures()/ActionFeatures(), be finite, and every episode needs >= 2
-/// rows. The returned policy's provenance records options, data, environment and summary.
+/// rows. The returned policy's provenance records options, data, environment and summary
+/// (without timing).
 /// @throws secure::Error on invalid options, data, warm start or an incompatible checkpoint.
 GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& demos,
                          const domains::Environment& env, const GaussianPolicy* warm_start,

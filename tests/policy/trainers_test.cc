@@ -479,6 +479,116 @@ TEST_F(AirlFileTest, IncompatibleOrBrokenCheckpointsAreRejected) {
   EXPECT_HAS(m, o.checkpoint_path);
 }
 
+// A checkpoint carries a CRC-32 over its whole content: a flipped byte inside the tensor data
+// (which the LibTorch archive itself does not notice) or a truncated file is an error naming the
+// file, never a silently different model. So is a checkpoint of an older format version.
+TEST_F(AirlFileTest, CorruptTruncatedOrOldCheckpointsAreRejectedNamingTheFile) {
+  const data::TrajectorySet demos = ExpertDemos(10, 2);
+  const PointMassEnv env;
+  AirlOptions o = SmallAirl();
+  o.iterations = 2;
+  o.checkpoint_path = PathOf("airl.ckpt");
+  TrainAirl(o, demos, env, nullptr, nullptr);
+  const std::string good = ReadFile(o.checkpoint_path);
+  ASSERT_GT(good.size(), 1000u);
+  o.resume = true;
+  o.iterations = 3;
+  auto resume_error = [&](const std::string& bytes) {
+    WriteFileAtomically(o.checkpoint_path, bytes);
+    return ErrorOf([&] { TrainAirl(o, demos, env, nullptr, nullptr); });
+  };
+
+  // One bit of one byte in the middle of the file (tensor data of the archive).
+  std::string flipped = good;
+  flipped[flipped.size() / 2] = static_cast<char>(flipped[flipped.size() / 2] ^ 0x01);
+  std::string m = resume_error(flipped);
+  EXPECT_HAS(m, o.checkpoint_path);
+  EXPECT_HAS(m, "checksum mismatch");
+  EXPECT_HAS(m, "the checkpoint is corrupt");
+
+  // Truncated: the last bytes, or half of the file, missing.
+  for (const std::size_t keep : {good.size() - 5, good.size() / 2, std::size_t{10}}) {
+    m = resume_error(good.substr(0, keep));
+    EXPECT_HAS(m, o.checkpoint_path);
+    EXPECT_HAS(m, "truncated");
+  }
+  m = resume_error("");
+  EXPECT_HAS(m, o.checkpoint_path);
+
+  // The trailer's digits themselves damaged.
+  std::string trailer = good;
+  trailer[trailer.size() - 2] = trailer[trailer.size() - 2] == '0' ? '1' : '0';
+  EXPECT_HAS(resume_error(trailer), "checksum mismatch");
+
+  // Version 1 (a bare LibTorch archive, no checksum) and an unknown version: clear errors.
+  const std::size_t first_line = good.find('\n');
+  ASSERT_NE(first_line, std::string::npos);
+  EXPECT_EQ(good.substr(0, first_line), "secure-airl-checkpoint 2");
+  const std::size_t trailer_size = std::string("\ncrc32 01234567\n").size();
+  const std::string bare =
+      good.substr(first_line + 1, good.size() - (first_line + 1) - trailer_size);
+  m = resume_error(bare);
+  EXPECT_HAS(m, o.checkpoint_path);
+  EXPECT_HAS(m, "version 1");
+  EXPECT_HAS(m, "reads version 2");
+  m = resume_error("secure-airl-checkpoint 3" + good.substr(first_line));
+  EXPECT_HAS(m, "version 3");
+  m = resume_error("something else entirely\n");
+  EXPECT_HAS(m, "not an AIRL checkpoint");
+
+  // The intact file still resumes.
+  WriteFileAtomically(o.checkpoint_path, good);
+  AirlSummary s;
+  TrainAirl(o, demos, env, nullptr, &s);
+  EXPECT_TRUE(s.resumed);
+  EXPECT_EQ(s.start_iteration, 2);
+  EXPECT_EQ(s.iterations, 3);
+}
+
+// A run cannot be shortened: resuming a checkpoint with more completed iterations than
+// `iterations` is an error; with exactly as many it returns the checkpoint's policy.
+TEST_F(AirlFileTest, ResumingWithFewerIterationsThanTheCheckpointIsAnError) {
+  const data::TrajectorySet demos = ExpertDemos(10, 2);
+  const PointMassEnv env;
+  AirlOptions o = SmallAirl();
+  o.iterations = 3;
+  o.checkpoint_path = PathOf("airl.ckpt");
+  const GaussianPolicy trained = TrainAirl(o, demos, env, nullptr, nullptr);
+  o.resume = true;
+  o.iterations = 2;
+  const std::string m = ErrorOf([&] { TrainAirl(o, demos, env, nullptr, nullptr); });
+  EXPECT_HAS(m, o.checkpoint_path +
+                    ": checkpoint has 3 completed iterations, more than "
+                    "iterations = 2");
+  o.iterations = 3;
+  AirlSummary s;
+  EXPECT_TRUE(BitEqual(trained, TrainAirl(o, demos, env, nullptr, &s)));
+  EXPECT_EQ(s.start_iteration, 3);
+  EXPECT_EQ(s.iterations, 3);
+}
+
+// Timing is in the summary (and --json), not in the model file: two identical runs write
+// identical model files.
+TEST_F(AirlFileTest, IdenticalRunsWriteIdenticalModelFiles) {
+  const data::TrajectorySet demos = ExpertDemos(10, 2);
+  const PointMassEnv env;
+  AirlOptions o = SmallAirl();
+  o.iterations = 2;
+  AirlSummary s;
+  const GaussianPolicy a = TrainAirl(o, demos, env, nullptr, &s);
+  const GaussianPolicy b = TrainAirl(o, demos, env, nullptr, nullptr);
+  EXPECT_TRUE(s.ToJson().contains("wall_seconds"));
+  const nlohmann::json& summary = a.provenance.at("summary");
+  for (const char* key : {"wall_seconds", "rollout_seconds", "discriminator_seconds", "ppo_seconds",
+                          "iterations_per_second", "env_steps_per_second"})
+    EXPECT_FALSE(summary.contains(key)) << key;
+  EXPECT_FALSE(summary.at("last").contains("seconds"));
+  EXPECT_EQ(summary["iterations"], 2);
+  a.Save(PathOf("a.model"));
+  b.Save(PathOf("b.model"));
+  EXPECT_TRUE(ReadFile(PathOf("a.model")) == ReadFile(PathOf("b.model")));
+}
+
 TEST_F(AirlFileTest, WritesTheLearningCurveEveryIteration) {
   AirlOptions o = SmallAirl();
   o.iterations = 3;
