@@ -188,6 +188,8 @@ struct PolicyTrainCommand {
   bool json = false;
   YAML::Node bc_yaml, airl_yaml;
   std::string config_path;
+  // Flags that apply to one algorithm only: giving one with the other --algo is an error.
+  std::vector<CLI::Option*> bc_only, airl_only;
 
   void Register(CLI::App& parent, const Config& config) {
     CLI::App* cmd = parent.add_subcommand(
@@ -204,25 +206,41 @@ struct PolicyTrainCommand {
                     "domain the demonstrations come from (AIRL rolls out in it): "
                     "double-integrator")
         ->capture_default_str();
-    cmd->add_option("--state-features", state_features,
-                    "BC only: comma-separated state columns (default: the domain's)");
-    cmd->add_option("--action-features", action_features,
-                    "BC only: comma-separated action columns (default: the domain's)");
+    bc_only.push_back(
+        cmd->add_option("--state-features", state_features,
+                        "BC only: comma-separated state columns (default: the domain's)"));
+    bc_only.push_back(
+        cmd->add_option("--action-features", action_features,
+                        "BC only: comma-separated action columns (default: the domain's)"));
     cmd->add_option("--seed", bc.seed, "seed of the training")->capture_default_str();
-    cmd->add_option("--epochs", bc.epochs, "BC: epochs")->capture_default_str();
-    cmd->add_option("--iterations", airl.iterations, "AIRL: iterations")->capture_default_str();
+    bc_only.push_back(
+        cmd->add_option("--epochs", bc.epochs, "BC only: epochs")->capture_default_str());
+    airl_only.push_back(cmd->add_option("--iterations", airl.iterations,
+                                        "AIRL only: iterations in total (with --resume: "
+                                        "including the checkpoint's; fewer is an error)")
+                            ->capture_default_str());
     reward = ToString(policy::kAirlRewardNames, airl.reward);
-    cmd->add_option("--reward", reward,
-                    "AIRL policy reward: logit-d (log D - log(1-D), the paper) | state-reward "
-                    "(g(s), the released code)")
-        ->capture_default_str();
-    cmd->add_option("--warm-start", warm_start, "AIRL: initialise the policy from this model");
+    airl_only.push_back(
+        cmd->add_option("--reward", reward,
+                        "AIRL only: policy reward: logit-d (log D - log(1-D), the paper) | "
+                        "state-reward (g(s), the released code)")
+            ->capture_default_str());
+    airl_only.push_back(cmd->add_option("--warm-start", warm_start,
+                                        "AIRL only: initialise the policy from this model"));
     cmd->add_option("--curve", bc.curve_path, "write the learning curve to this CSV");
-    cmd->add_option("--checkpoint", airl.checkpoint_path, "AIRL: checkpoint path");
-    cmd->add_option("--checkpoint-every", airl.checkpoint_every, "AIRL: iterations between "
-                                                                 "checkpoints")
-        ->capture_default_str();
-    cmd->add_flag("--resume", airl.resume, "AIRL: continue from --checkpoint");
+    airl_only.push_back(cmd->add_option(
+        "--checkpoint", airl.checkpoint_path,
+        "AIRL only: checkpoint file (checksummed), written every --checkpoint-every "
+        "iterations and at the end"));
+    airl_only.push_back(cmd->add_option("--checkpoint-every", airl.checkpoint_every,
+                                        "AIRL only: iterations between checkpoints")
+                            ->capture_default_str());
+    airl_only.push_back(cmd->add_flag(
+        "--resume", airl.resume,
+        "AIRL only: continue from --checkpoint (needs it); if that file does not exist yet, "
+        "training starts from scratch (a note on stderr says so), so a crashed run can be "
+        "restarted with the same command. A corrupt checkpoint, one from other options or "
+        "data, or one with more iterations than --iterations is an error"));
     cmd->add_flag("--json", json, "print the training summary as JSON");
     cmd->callback([this] { Run(); });
   }
@@ -230,6 +248,16 @@ struct PolicyTrainCommand {
   void Run() {
     CheckDoubleIntegratorDomain(domain);
     SECURE_CHECK(algo == "bc" || algo == "airl", "--algo = '" << algo << "', must be bc or airl");
+    for (const CLI::Option* option : algo == "bc" ? airl_only : bc_only) {
+      SECURE_CHECK(option->count() == 0,
+                   option->get_name() << " applies to --algo " << (algo == "bc" ? "airl" : "bc")
+                                      << " only (this run: --algo " << algo << ")");
+    }
+    if (algo == "airl") {
+      if (airl_yaml.IsMap()) airl.ApplyYaml(airl_yaml, config_path + " [airl]");
+      SECURE_CHECK(!airl.resume || !airl.checkpoint_path.empty(),
+                   "--resume needs --checkpoint FILE (the checkpoint to continue from)");
+    }
     nn::SetTorchThreads(1);
     const di::ReachAvoidEnv env(task);
     std::vector<std::string> states = env.ObservationFeatures(), actions = env.ActionFeatures();
@@ -248,16 +276,15 @@ struct PolicyTrainCommand {
       summary_json = summary.ToJson();
       brief = summary.BriefReport();
     } else {
-      SECURE_CHECK(state_features.empty() && action_features.empty(),
-                   "--state-features/--action-features apply to BC only: AIRL uses the "
-                   "domain's features");
-      if (airl_yaml.IsMap()) airl.ApplyYaml(airl_yaml, config_path + " [airl]");
       airl.seed = bc.seed;
       airl.curve_path = bc.curve_path;
       airl.reward = FromString(policy::kAirlRewardNames, reward, "--reward");
       airl.verbose = !json;
       std::optional<policy::GaussianPolicy> start;
       if (!warm_start.empty()) start = policy::GaussianPolicy::Load(warm_start);
+      if (airl.resume && !std::filesystem::exists(airl.checkpoint_path))
+        std::cerr << "policy train: --resume: no checkpoint yet at " << airl.checkpoint_path
+                  << ": starting from scratch\n";
       policy::AirlSummary summary;
       trained = policy::TrainAirl(airl, demos, env, start ? &*start : nullptr, &summary);
       summary_json = summary.ToJson();

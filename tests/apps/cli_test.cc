@@ -374,4 +374,71 @@ TEST(CliTest, DerbyExperimentRejectsBadOptions) {
   EXPECT_NE(r.exit_code, 0);
 }
 
+// ------------------------------------------------------------------------------------------
+// `policy train`: flags of the other algorithm, --resume, corrupt checkpoints.
+
+TEST(CliTest, PolicyTrainRejectsFlagsOfTheOtherAlgorithm) {
+  // Checked before anything is read: the demonstrations file need not exist.
+  const std::string base = "policy train --demos /nonexistent/demos.csv --out never.model ";
+  for (const std::string flag :
+       {"--checkpoint x.ckpt", "--checkpoint x.ckpt --resume", "--checkpoint-every 5",
+        "--iterations 3", "--reward logit-d", "--warm-start bc.model", "--resume"}) {
+    const Result r = RunCli(base + "--algo bc " + flag);
+    EXPECT_EQ(r.exit_code, 1) << flag;
+    EXPECT_HAS(r.err, flag.substr(0, flag.find(' ')) + " applies to --algo airl only");
+  }
+  for (const std::string flag :
+       {"--epochs 3", "--state-features x,y,vx,vy", "--action-features ax,ay"}) {
+    const Result r = RunCli(base + "--algo airl " + flag);
+    EXPECT_EQ(r.exit_code, 1) << flag;
+    EXPECT_HAS(r.err, flag.substr(0, flag.find(' ')) + " applies to --algo bc only");
+  }
+  const Result r = RunCli(base + "--algo airl --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--resume needs --checkpoint");
+}
+
+TEST(CliTest, PolicyTrainAirlResumeChecksTheCheckpoint) {
+  const std::string dir = (TempDir() / "resume").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 4 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string ckpt = dir + "/airl.ckpt";
+  const std::string train = "policy train --algo airl --demos " + dir + "/demos.csv --out " + dir +
+                            "/airl.model --checkpoint " + ckpt + " --json ";
+  // --resume without a checkpoint yet starts from scratch and says so.
+  r = RunCli(train + "--iterations 2 --resume");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.err, "no checkpoint yet");
+  EXPECT_HAS(r.err, ckpt);
+  EXPECT_FALSE(nlohmann::json::parse(r.out)["summary"]["resumed"].get<bool>());
+  ASSERT_TRUE(fs::exists(ckpt));
+
+  // Fewer --iterations than the checkpoint has completed: an error, not the longer run's policy.
+  r = RunCli(train + "--iterations 1 --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, ckpt + ": checkpoint has 2 completed iterations, more than iterations = 1");
+  r = RunCli(train + "--iterations 2 --resume");  // as many: the checkpoint's policy
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(nlohmann::json::parse(r.out)["summary"]["resumed"].get<bool>());
+
+  // One flipped byte in the middle of the checkpoint: an error naming it.
+  std::string bytes;
+  {
+    std::ifstream in(ckpt, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  ASSERT_GT(bytes.size(), 1000u);
+  bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x10);
+  std::ofstream(ckpt, std::ios::binary) << bytes;
+  r = RunCli(train + "--iterations 3 --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, ckpt + ": checksum mismatch");
+  // Truncated.
+  std::ofstream(ckpt, std::ios::binary) << bytes.substr(0, bytes.size() - 3);
+  r = RunCli(train + "--iterations 3 --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, ckpt);
+  EXPECT_HAS(r.err, "truncated");
+}
+
 }  // namespace
