@@ -130,14 +130,26 @@ std::string_view UnframeCheckpoint(const std::string& bytes, const std::string& 
 }
 
 // The summary as recorded in the model file's provenance: without timing (wall-clock seconds
-// and rates), so that identical runs write identical model files. Timing stays in
-// AirlSummary::ToJson() (the --json output) and BriefReport().
+// and rates) and without how the run was split (resumed, start iteration, checkpoints written),
+// so that identical runs write identical model files, whether or not they were interrupted and
+// resumed. Both stay in AirlSummary::ToJson() (the --json output) and BriefReport().
 nlohmann::json ModelFileSummary(const AirlSummary& s) {
   nlohmann::json j = s.ToJson();
   for (const char* key : {"wall_seconds", "rollout_seconds", "discriminator_seconds", "ppo_seconds",
-                          "iterations_per_second", "env_steps_per_second"})
+                          "iterations_per_second", "env_steps_per_second", "resumed",
+                          "start_iteration", "checkpoints_written"})
     j.erase(key);
   if (j.contains("last") && j["last"].is_object()) j["last"].erase("seconds");
+  return j;
+}
+
+// The options as recorded in the model file's provenance: without run control (where the
+// curve and checkpoints went, how often, whether this invocation resumed, verbosity), which
+// does not change the model.
+nlohmann::json ModelFileOptions(const AirlOptions& o) {
+  nlohmann::json j = o.ToJson();
+  for (const char* key : {"curve_path", "checkpoint_path", "checkpoint_every", "resume", "verbose"})
+    j.erase(key);
   return j;
 }
 
@@ -932,7 +944,7 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
                                      "barrier's derivative condition as an extra loss)"
                                    : "secure::policy::TrainAirl (AIRL, state-only discriminator, "
                                      "PPO generator)"},
-      {"options", options.ToJson()},
+      {"options", ModelFileOptions(options)},
       {"summary", ModelFileSummary(s)},
       {"environment", env.Describe()},
       {"demonstrations",
