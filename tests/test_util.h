@@ -5,6 +5,7 @@
 
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -37,7 +38,9 @@ class TempDirTest : public ::testing::Test {
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
   }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
+  void TearDown() override {
+    if (!std::getenv("SECURE_KEEP_TEST_DIRS")) std::filesystem::remove_all(dir_);
+  }
 
   /// Writes `content` to <dir>/<name> and returns the path.
   std::string Write(const std::string& name, const std::string& content) {
