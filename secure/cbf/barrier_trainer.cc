@@ -8,6 +8,7 @@
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
+#include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
 
 namespace secure::cbf {
@@ -220,9 +221,10 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   s.wall_seconds = clock.Seconds();
 
   net.mlp = std::move(best_params);
+  // The summary without its wall-clock time: same seed and data, same model file bytes.
   net.provenance = {{"trainer", "secure::cbf::TrainBarrier (Eq. 4 hinge loss)"},
                     {"options", options.ToJson()},
-                    {"summary", s.ToJson()},
+                    {"summary", nn::WithoutTiming(s.ToJson())},
                     {"safe_states", {{"source", safe.source}, {"count", safe.size()}}},
                     {"near_dangerous_states",
                      {{"source", near_dangerous.source}, {"count", near_dangerous.size()}}}};

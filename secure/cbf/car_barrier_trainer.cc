@@ -15,6 +15,7 @@
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/common/yaml_value.h"
+#include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
 #include "secure/nn/torch_threads.h"
 
@@ -586,9 +587,10 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
 
   CarBarrierNet net = model->ToNet();
   net.features = safe.features;
+  // The summary without its wall-clock time: same seed and data, same model file bytes.
   net.provenance = {{"trainer", "secure::cbf::TrainCarBarrier (per-car hinge loss, §3.1)"},
                     {"options", options.ToJson()},
-                    {"summary", s.ToJson()},
+                    {"summary", nn::WithoutTiming(s.ToJson())},
                     {"safe_states", {{"source", safe.source}, {"count", safe.size()}}},
                     {"near_dangerous_states",
                      {{"source", near_dangerous.source}, {"count", near_dangerous.size()}}}};

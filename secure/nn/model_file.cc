@@ -427,6 +427,32 @@ void WriteModelFile(const std::string& path, const ModelFile& file) {
 
 ModelFile ReadModelFile(const std::string& path) { return ParseModelFile(ReadFile(path), path); }
 
+namespace {
+bool IsTimingKey(const std::string& key) {
+  auto ends_with = [&](const std::string& suffix) {
+    return key.size() >= suffix.size() &&
+           key.compare(key.size() - suffix.size(), suffix.size(), suffix) == 0;
+  };
+  return key == "seconds" || ends_with("_seconds") || ends_with("_per_second");
+}
+}  // namespace
+
+nlohmann::json WithoutTiming(nlohmann::json summary) {
+  if (summary.is_object()) {
+    for (auto it = summary.begin(); it != summary.end();) {
+      if (IsTimingKey(it.key())) {
+        it = summary.erase(it);
+      } else {
+        *it = WithoutTiming(std::move(*it));
+        ++it;
+      }
+    }
+  } else if (summary.is_array()) {
+    for (auto& element : summary) element = WithoutTiming(std::move(element));
+  }
+  return summary;
+}
+
 void AddMlp(const std::string& prefix, const MlpParams& params, ModelFile* file) {
   SECURE_INTERNAL_CHECK(file != nullptr, "AddMlp needs a ModelFile");
   SECURE_CHECK(!prefix.empty(), "AddMlp: empty prefix");

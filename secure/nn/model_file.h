@@ -53,6 +53,12 @@ ModelFile ParseModelFile(const std::string& bytes, const std::string& source);
 void WriteModelFile(const std::string& path, const ModelFile& file);
 ModelFile ReadModelFile(const std::string& path);
 
+/// `summary` without wall-clock timing: every member, at any depth, named "seconds" or ending in
+/// "_seconds" or "_per_second" is removed. Trainers store a training summary in the model file
+/// through this, so that the same seed and data give byte-identical model files; the timing stays
+/// in the run record (the command's --json output and printed summary).
+nlohmann::json WithoutTiming(nlohmann::json summary);
+
 /// Stores an MLP as tensors "<prefix>.layer<i>.weight" / ".bias" and its spec under
 /// metadata[prefix]; and reads it back, validating shapes against the stored spec.
 void AddMlp(const std::string& prefix, const MlpParams& params, ModelFile* file);

@@ -12,6 +12,7 @@
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
+#include "secure/nn/model_file.h"
 #include "secure/policy/internal/torch_policy.h"
 
 namespace secure::policy {
@@ -209,9 +210,10 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
 
   best.observation_features = demos.state_features;
   best.action_features = demos.action_features;
+  // The summary without its wall-clock time: same seed and data, same model file bytes.
   best.provenance = {{"trainer", "secure::policy::TrainBc (Gaussian maximum likelihood)"},
                      {"options", options.ToJson()},
-                     {"summary", s.ToJson()},
+                     {"summary", nn::WithoutTiming(s.ToJson())},
                      {"demonstrations",
                       {{"source", demos.source},
                        {"episodes", demos.num_episodes()},

@@ -12,6 +12,7 @@
 
 #include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/error.h"
+#include "secure/common/atomic_file.h"
 #include "secure/common/rng.h"
 #include "secure/nn/torch_mlp.h"
 
@@ -309,6 +310,22 @@ TEST(CarBarrierTrainerTest, DISABLED_Sweep) {
   o = {};
   o.input.use_velocity = true;
   run("use_velocity", o);
+}
+
+class CarBarrierTrainerFileTest : public secure::test::TempDirTest {};
+
+TEST_F(CarBarrierTrainerFileTest, SameSeedGivesByteIdenticalModelFiles) {
+  const auto safe = Synthetic(false, 60, 3), nd = Synthetic(true, 60, 4);
+  CarBarrierTrainerOptions o = Fast();
+  o.max_epochs = 2;
+  CarBarrierTrainingSummary sa, sb;
+  TrainCarBarrier(o, safe, nd, &sa).Save(PathOf("a.model"));
+  TrainCarBarrier(o, safe, nd, &sb).Save(PathOf("b.model"));
+  EXPECT_TRUE(ReadFile(PathOf("a.model")) == ReadFile(PathOf("b.model")))
+      << "model files of two same-seed runs differ";
+  const CarBarrierNet loaded = CarBarrierNet::Load(PathOf("a.model"));
+  EXPECT_FALSE(loaded.provenance["summary"].contains("wall_seconds"));
+  EXPECT_TRUE(sa.ToJson().contains("wall_seconds"));
 }
 
 }  // namespace

@@ -593,5 +593,24 @@ TEST(ModelFileTest, FuzzedCorruptionsThrowOrRoundTrip) {
   EXPECT_GT(rejected, 190);  // a CRC-32 catches every single-byte change
 }
 
+TEST(ModelFileTest, WithoutTimingRemovesWallClockFieldsAtAnyDepth) {
+  const json summary = {{"epochs", 3},
+                        {"wall_seconds", 1.5},
+                        {"seconds", 2.0},
+                        {"ppo_seconds", 0.5},
+                        {"env_steps_per_second", 1e4},
+                        {"stop_reason", "max_epochs"},
+                        {"seconds_budget_note", "kept: not a *_seconds suffix"},
+                        {"last", {{"iteration", 2}, {"seconds", 3.0}, {"loss", 0.25}}},
+                        {"rows", json::array({{{"seconds", 1.0}, {"x", 1}}})}};
+  const json expected = {{"epochs", 3},
+                         {"stop_reason", "max_epochs"},
+                         {"seconds_budget_note", "kept: not a *_seconds suffix"},
+                         {"last", {{"iteration", 2}, {"loss", 0.25}}},
+                         {"rows", json::array({{{"x", 1}}})}};
+  EXPECT_EQ(WithoutTiming(summary), expected);
+  EXPECT_EQ(WithoutTiming(json(4)), json(4));
+}
+
 }  // namespace
 }  // namespace secure::nn
