@@ -1,6 +1,7 @@
 // End-to-end tests of the `secure` command-line tool: run the real binary, check exit codes,
 // messages and --json documents.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -439,6 +440,91 @@ TEST(CliTest, PolicyTrainAirlResumeChecksTheCheckpoint) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err, ckpt);
   EXPECT_HAS(r.err, "truncated");
+}
+
+// ------------------------------------------------------------------------------------------
+// Output paths that are not plain files, and byte-identical model files for a seed.
+
+std::string TrainToyArgs(const std::string& out) {
+  WriteToyData();
+  return "cbf train --safe-states " + (TempDir() / "safe.csv").string() +
+         " --near-dangerous-states " + (TempDir() / "nd.csv").string() + " --features x,y" +
+         kFastTrain + " --out " + out;
+}
+
+bool IsCharDevice(const fs::path& p) { return fs::is_character_file(fs::symlink_status(p)); }
+
+TEST(CliTest, PredictToDevNullLeavesItACharacterDevice) {
+  const std::string model = (TempDir() / "devnull_toy.model").string();
+  Result r = RunCli(TrainToyArgs(model));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_TRUE(IsCharDevice("/dev/null"));
+  r = RunCli("cbf predict --model " + model + " --states " + (TempDir() / "nd.csv").string() +
+             " --out /dev/null --json");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(IsCharDevice("/dev/null"));
+}
+
+TEST(CliTest, TrainOutThroughASymlinkWritesTheTargetAndKeepsTheLink) {
+  const fs::path dir = TempDir() / "symlink_out";
+  fs::create_directories(dir / "models");
+  fs::create_symlink("models/barrier.model", dir / "latest.model");  // dangling: created
+  Result r = RunCli(TrainToyArgs((dir / "latest.model").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir / "latest.model"));
+  ASSERT_TRUE(fs::is_regular_file(fs::symlink_status(dir / "models" / "barrier.model")));
+  // Again, now replacing the existing target through the link.
+  const auto before = fs::last_write_time(dir / "models" / "barrier.model");
+  r = RunCli(TrainToyArgs((dir / "latest.model").string()) + " --seed 5");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir / "latest.model"));
+  EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(dir / "models" / "barrier.model")));
+  EXPECT_GE(fs::last_write_time(dir / "models" / "barrier.model"), before);
+  r = RunCli("cbf predict --model " + (dir / "latest.model").string() + " --states " +
+             (TempDir() / "nd.csv").string() + " --out " + (dir / "h.csv").string());
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir / "models"), fs::directory_iterator()), 1);
+}
+
+TEST(CliTest, TrainOutToADirectoryOrAReaderlessFifoFailsNamingIt) {
+  const fs::path dir = TempDir() / "bad_out";
+  fs::create_directories(dir / "a_directory");
+  Result r = RunCli(TrainToyArgs((dir / "a_directory").string()));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, (dir / "a_directory").string());
+  EXPECT_HAS(r.err, "directory");
+  EXPECT_TRUE(fs::is_empty(dir / "a_directory"));
+  const fs::path fifo = dir / "fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  r = RunCli(TrainToyArgs(fifo.string()));  // must not hang waiting for a reader
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, fifo.string());
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo)));
+}
+
+TEST(CliTest, SameSeedGivesByteIdenticalModelFilesTimingStaysInTheJson) {
+  auto slurp = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const fs::path dir = TempDir() / "same_seed";
+  fs::create_directories(dir);
+  for (const char* name : {"a.model", "b.model"}) {
+    const Result r = RunCli(TrainToyArgs((dir / name).string()) + " --seed 3 --json");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(nlohmann::json::parse(r.out)["summary"].contains("wall_seconds"));
+  }
+  EXPECT_TRUE(slurp(dir / "a.model") == slurp(dir / "b.model")) << "cbf train --seed 3";
+
+  Result r = RunCli("demos generate --domain double-integrator --episodes 6 --out " +
+                    dir.string() + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* name : {"bc_a.model", "bc_b.model"}) {
+    r = RunCli("policy train --algo bc --demos " + (dir / "demos.csv").string() + " --out " +
+               (dir / name).string() + " --epochs 2 --seed 3 --json");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  EXPECT_TRUE(slurp(dir / "bc_a.model") == slurp(dir / "bc_b.model")) << "policy train --algo bc";
 }
 
 }  // namespace
