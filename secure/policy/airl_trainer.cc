@@ -134,12 +134,8 @@ std::string_view UnframeCheckpoint(const std::string& bytes, const std::string& 
 // so that identical runs write identical model files, whether or not they were interrupted and
 // resumed. Both stay in AirlSummary::ToJson() (the --json output) and BriefReport().
 nlohmann::json ModelFileSummary(const AirlSummary& s) {
-  nlohmann::json j = s.ToJson();
-  for (const char* key : {"wall_seconds", "rollout_seconds", "discriminator_seconds", "ppo_seconds",
-                          "iterations_per_second", "env_steps_per_second", "resumed",
-                          "start_iteration", "checkpoints_written"})
-    j.erase(key);
-  if (j.contains("last") && j["last"].is_object()) j["last"].erase("seconds");
+  nlohmann::json j = nn::WithoutTiming(s.ToJson());
+  for (const char* key : {"resumed", "start_iteration", "checkpoints_written"}) j.erase(key);
   return j;
 }
 
