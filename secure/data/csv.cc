@@ -20,6 +20,8 @@
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/excerpt.h"
+#include "secure/common/filesystem.h"
 #include "secure/common/strings.h"
 
 namespace secure::data {
@@ -35,12 +37,12 @@ std::string_view TrimBlanks(std::string_view s) {
   return s;
 }
 
-// Values are quoted in messages; a runaway cell (e.g. a binary file) is cut to stay readable.
-std::string Shown(std::string_view value) {
-  constexpr std::size_t kMax = 40;
-  if (value.size() <= kMax) return std::string(value);
-  return std::string(value.substr(0, kMax)) + "...";
-}
+// Values are quoted in messages; a runaway cell (e.g. a binary file) is cut to stay readable and
+// control bytes (a NUL would cut the message short) are escaped.
+std::string Shown(std::string_view value) { return Excerpt(value); }
+
+// The header as listed in a message: names joined, the whole bounded like a cell.
+std::string ShownHeader(const std::vector<std::string>& header) { return Excerpt(Join(header)); }
 
 // Splits `line` at commas into `cells` (reused across rows so that it allocates only once).
 void SplitCells(std::string_view line, std::vector<std::string_view>& cells) {
@@ -127,6 +129,14 @@ std::string_view NextLine(std::string_view& rest) {
 }  // namespace
 
 NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& select) {
+  for (std::size_t k = 0; k < select.size(); ++k) {
+    for (std::size_t i = 0; i < k; ++i) {
+      SECURE_CHECK(select[i] != select[k],
+                   path << ": column '" << Shown(select[k])
+                        << "' is selected twice (selection: " << ShownHeader(select) << ")");
+    }
+  }
+  CheckNotADirectory(path);
   const std::string content = ReadFile(path);
   std::string_view rest = content;
   if (rest.substr(0, kUtf8Bom.size()) == kUtf8Bom) rest.remove_prefix(kUtf8Bom.size());
@@ -154,11 +164,14 @@ NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& se
       name = TrimBlanks(name.substr(1, name.size() - 2));
     }
     SECURE_CHECK(!name.empty(), path << ":1: header column " << j + 1 << " is empty");
+    SECURE_CHECK(name.find('\0') == std::string_view::npos,
+                 path << ":1: header column " << j + 1 << " '" << Shown(name)
+                      << "' contains a NUL byte (is this a binary file?)");
     header.emplace_back(name);
   }
   for (std::size_t j = 0; j < header.size(); ++j) {
     const auto [it, inserted] = index_of.emplace(header[j], j);
-    SECURE_CHECK(inserted, path << ":1: header column " << j + 1 << " '" << header[j]
+    SECURE_CHECK(inserted, path << ":1: header column " << j + 1 << " '" << Shown(header[j])
                                 << "' duplicates column " << it->second + 1);
   }
 
@@ -173,7 +186,8 @@ NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& se
     for (const std::string& name : select) {
       const auto it = index_of.find(name);
       SECURE_CHECK(it != index_of.end(),
-                   path << ": column '" << name << "' not found; the header has: " << Join(header));
+                   path << ": column '" << Shown(name)
+                        << "' not found; the header has: " << ShownHeader(header));
       selected.push_back(it->second);
     }
   }

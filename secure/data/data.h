@@ -25,10 +25,11 @@ struct NumericTable {
 /// Reads a CSV file with a header row. `select` picks and orders columns by name (empty: all
 /// columns in file order). Every data row must have as many cells as the header; every selected
 /// cell must parse completely as a finite number.
-/// @throws secure::Error on: missing/unreadable file, empty file (no header), header with an
-///   empty or duplicate name, a selected name not in the header (the message lists the header),
-///   a row with the wrong number of cells, a non-numeric, NaN or infinite selected cell, and a
-///   file with no data rows.
+/// @throws secure::Error on: missing/unreadable file, a directory ("is a directory"), empty file
+///   (no header), header with an empty or duplicate name, a name selected twice, a selected name
+///   not in the header (the message lists the header), a row with the wrong number of cells, a
+///   non-numeric, NaN or infinite selected cell, and a file with no data rows. File content
+///   quoted in a message is cut at 80 characters ("…") with control bytes escaped (Excerpt).
 NumericTable ReadCsv(const std::string& path, const std::vector<std::string>& select = {});
 
 /// Writes a CSV with a header row; `values` is (columns x rows) as in NumericTable. Atomic.

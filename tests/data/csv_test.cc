@@ -256,6 +256,51 @@ TEST_F(CsvTest, RejectsMissingFile) {
   ExpectContainsAll(ErrorOf([&] { ReadCsv(path); }), {path});
 }
 
+TEST_F(CsvTest, RejectsADirectoryAsSuch) {
+  const std::string dir = PathOf("states.csv");
+  fs::create_directories(dir);
+  const std::string message = ErrorOf([&] { ReadCsv(dir); });
+  ExpectContainsAll(message, {dir, "is a directory"});
+  EXPECT_EQ(message.find("empty"), std::string::npos) << message;
+}
+
+TEST_F(CsvTest, RejectsAColumnSelectedTwice) {
+  const std::string path = Write("twice.csv", std::string(kHeader) + "1,2,3,4\n");
+  ExpectContainsAll(ErrorOf([&] {
+                      ReadCsv(path, {"x", "x", "vx", "vy"});
+                    }),
+                    {path + ": column 'x' is selected twice (selection: x, x, vx, vy)"});
+}
+
+TEST_F(CsvTest, QuotedFileContentIsBoundedAndPrintable) {
+  // A binary file: one long "header line" with control bytes and a NUL.
+  std::string binary =
+      "\x7f"
+      "ELF\x02\x01";
+  binary += std::string("\0\0\0", 3);
+  binary += std::string(5000, 'A') + "\n1\n";
+  const std::string path = Write("binary.bin", binary);
+  const std::string message = ErrorOf([&] { ReadCsv(path, {"x"}); });
+  ExpectContainsAll(message, {path + ":1: header column 1 '\\x7FELF\\x02\\x01\\0\\0\\0AAA",
+                              "\u2026' contains a NUL byte"});
+  EXPECT_LT(message.size(), path.size() + 200) << message;
+  // A long header without a NUL: the listed header is bounded too.
+  const std::string wide = Write("wide.csv", std::string(5000, 'B') + "\x01,y\n1,2\n");
+  const std::string m1 = ErrorOf([&] { ReadCsv(wide, {"x"}); });
+  ExpectContainsAll(m1, {wide + ": column 'x' not found; the header has: BBBB", "\u2026"});
+  EXPECT_LT(m1.size(), wide.size() + 200) << m1;
+
+  // A long cell and a NUL inside a cell.
+  const std::string cell = Write("cell.csv", "x\n" + std::string(500, '7') + "z\n");
+  const std::string m2 = ErrorOf([&] { ReadCsv(cell); });
+  ExpectContainsAll(m2, {cell + ":2: column 'x': value '7777", "\u2026' is not a number"});
+  EXPECT_LT(m2.size(), cell.size() + 200) << m2;
+  const std::string nul = Write("nul.csv", std::string("x\n1\0"
+                                                       "2\n",
+                                                       6));
+  ExpectContainsAll(ErrorOf([&] { ReadCsv(nul); }), {"value '1\\02' is not a number"});
+}
+
 TEST_F(CsvTest, WriteRejectsNonFiniteValueNamingColumnAndRow) {
   Eigen::MatrixXd values = Eigen::MatrixXd::Zero(2, 4);
   values(1, 2) = std::numeric_limits<double>::quiet_NaN();
