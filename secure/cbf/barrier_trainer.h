@@ -72,7 +72,7 @@ struct BarrierTrainingSummary {
   double train_loss = 0.0;  // weighted hinge loss of the kept weights on the training split
   double validation_loss = 0.0;
   ClassAccuracy train_accuracy;
-  ClassAccuracy validation_accuracy;  // zeros if validation_fraction == 0
+  ClassAccuracy validation_accuracy;  // zeros without held-out states (reports: n/a, JSON: null)
   long train_safe = 0, train_near_dangerous = 0, validation_safe = 0, validation_near_dangerous = 0;
   double wall_seconds = 0.0;
   std::string stop_reason;  // "max_epochs", "early_stopping", "callback"

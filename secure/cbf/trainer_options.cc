@@ -9,6 +9,7 @@
 
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/common/error.h"
+#include "secure/common/limits.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
@@ -22,8 +23,11 @@ namespace {
 
 void BarrierTrainerOptions::Validate() const {
   SECURE_OPTION_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < hidden.size(); ++i)
+  for (std::size_t i = 0; i < hidden.size(); ++i) {
     SECURE_OPTION_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
+    SECURE_OPTION_CHECK(hidden[i] <= kMaxLayerWidth, "hidden[" << i << "]", hidden[i],
+                        "in [1, " << kMaxLayerWidth << "]");
+  }
   SECURE_OPTION_CHECK(std::isfinite(safe_margin) && safe_margin >= 0, "safe_margin", safe_margin,
                       ">= 0");
   SECURE_OPTION_CHECK(std::isfinite(unsafe_margin) && unsafe_margin >= 0, "unsafe_margin",
@@ -120,30 +124,52 @@ nlohmann::json BarrierTrainerOptions::ToJson() const {
           {"threads", threads}};
 }
 
+namespace {
+
+// A figure for the human-readable reports: "n/a" when undefined (not finite).
+std::string Figure(const char* format, double value) {
+  if (!std::isfinite(value)) return "n/a";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, value);
+  return buf;
+}
+
+constexpr const char* kNoHeldOut = "n/a (no held-out states)";
+
+}  // namespace
+
 std::string BarrierTrainingSummary::BriefReport() const {
-  char line[256];
-  std::snprintf(line, sizeof line,
-                "epochs %d (best %d, %s), %ld steps, train acc safe %.4f nd %.4f, val acc safe "
-                "%.4f nd %.4f, %.2f s",
-                epochs, best_epoch, stop_reason.c_str(), iterations, train_accuracy.safe,
-                train_accuracy.near_dangerous, validation_accuracy.safe,
-                validation_accuracy.near_dangerous, wall_seconds);
-  return line;
+  const bool validated = validation_safe + validation_near_dangerous > 0;
+  std::ostringstream s;
+  s << "epochs " << epochs << " (best " << best_epoch << ", " << stop_reason << "), " << iterations
+    << " steps, train acc safe " << Figure("%.4f", train_accuracy.safe) << " nd "
+    << Figure("%.4f", train_accuracy.near_dangerous) << ", val acc ";
+  if (validated) {
+    s << "safe " << Figure("%.4f", validation_accuracy.safe) << " nd "
+      << Figure("%.4f", validation_accuracy.near_dangerous);
+  } else {
+    s << kNoHeldOut;
+  }
+  s << ", " << Figure("%.2f", wall_seconds) << " s";
+  return s.str();
 }
 
 std::string BarrierTrainingSummary::FullReport() const {
+  const bool validated = validation_safe + validation_near_dangerous > 0;
   std::ostringstream s;
-  char buf[160];
   s << "| split | safe states | near-dangerous states | loss | acc safe | acc near-dangerous |\n"
     << "|---|---:|---:|---:|---:|---:|\n";
-  std::snprintf(buf, sizeof buf, "| train | %ld | %ld | %.5f | %.4f | %.4f |\n", train_safe,
-                train_near_dangerous, train_loss, train_accuracy.safe,
-                train_accuracy.near_dangerous);
-  s << buf;
-  std::snprintf(buf, sizeof buf, "| validation | %ld | %ld | %.5f | %.4f | %.4f |\n",
-                validation_safe, validation_near_dangerous, validation_loss,
-                validation_accuracy.safe, validation_accuracy.near_dangerous);
-  s << buf;
+  s << "| train | " << train_safe << " | " << train_near_dangerous << " | "
+    << Figure("%.5f", train_loss) << " | " << Figure("%.4f", train_accuracy.safe) << " | "
+    << Figure("%.4f", train_accuracy.near_dangerous) << " |\n";
+  s << "| validation | " << validation_safe << " | " << validation_near_dangerous << " | ";
+  if (validated) {
+    s << Figure("%.5f", validation_loss) << " | " << Figure("%.4f", validation_accuracy.safe)
+      << " | " << Figure("%.4f", validation_accuracy.near_dangerous) << " |\n";
+  } else {
+    s << "n/a | " << kNoHeldOut << " | " << kNoHeldOut << " |\n";
+  }
+  char buf[160];
   std::snprintf(buf, sizeof buf, "epochs %d, best epoch %d, stop: %s, %ld steps, %.2f s\n", epochs,
                 best_epoch, stop_reason.c_str(), iterations, wall_seconds);
   s << buf;
@@ -161,7 +187,10 @@ nlohmann::json BarrierTrainingSummary::ToJson() const {
           {"train_loss", train_loss},
           {"validation_loss", validation_loss},
           {"train_accuracy", acc(train_accuracy)},
-          {"validation_accuracy", acc(validation_accuracy)},
+          // null without held-out states: an accuracy of nothing is undefined, not 0.
+          {"validation_accuracy", validation_safe + validation_near_dangerous > 0
+                                      ? acc(validation_accuracy)
+                                      : nlohmann::json(nullptr)},
           {"train_counts", {{"safe", train_safe}, {"near_dangerous", train_near_dangerous}}},
           {"validation_counts",
            {{"safe", validation_safe}, {"near_dangerous", validation_near_dangerous}}},

@@ -7,9 +7,10 @@
 #include <sstream>
 
 #include "secure/common/error.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "secure/common/limits.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
+#include "secure/domains/double_integrator/reach_avoid.h"
 
 namespace secure::eval {
 namespace {
@@ -66,6 +67,8 @@ void ShieldRunOptions::Validate() const {
   SECURE_RUN_OPTION_CHECK(std::isfinite(start_clearance) && start_clearance >= 0, "start_clearance",
                           start_clearance, ">= 0");
   SECURE_RUN_OPTION_CHECK(episodes > 0, "episodes", episodes, "> 0");
+  SECURE_RUN_OPTION_CHECK(episodes <= kMaxEpisodes, "episodes", episodes,
+                          "in [1, " << kMaxEpisodes << "]");
   SECURE_RUN_OPTION_CHECK(max_steps > 0, "max_steps", max_steps, "> 0");
   SECURE_RUN_OPTION_CHECK(std::isfinite(dt) && dt > 0, "dt", dt, "> 0");
   SECURE_RUN_OPTION_CHECK(std::isfinite(accel_bound) && accel_bound > 0, "accel_bound", accel_bound,
@@ -168,6 +171,7 @@ std::string ShieldRunResult::Table() const {
     return std::string(buf);
   };
   auto number = [](const char* format, double v) {
+    if (!std::isfinite(v)) return std::string("n/a");  // undefined; JSON holds null
     char buf[64];
     std::snprintf(buf, sizeof(buf), format, v);
     return std::string(buf);
@@ -182,7 +186,8 @@ std::string ShieldRunResult::Table() const {
   row(out, "left the safe set (ground-truth h < 0)", count(unsafe_state_episodes));
   row(out, "steps with ground-truth h < 0", std::to_string(unsafe_state_steps));
   row(out, "steps", std::to_string(steps));
-  row(out, "mean steps to goal", number("%.1f", mean_steps_to_goal));
+  row(out, "mean steps to goal",
+      success_episodes > 0 ? number("%.1f", mean_steps_to_goal) : "n/a (no successful episode)");
   if (shielded) {
     row(out, "decisions", std::to_string(decisions));
     row(out, "interventions per episode", number("%.2f", mean_interventions_per_episode));

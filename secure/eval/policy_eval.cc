@@ -234,7 +234,10 @@ nlohmann::json MannWhitneyJson(const std::vector<double>& a, const std::vector<d
   return stats::MannWhitneyU(a, b).ToJson();
 }
 
+// Undefined figures (a p-value or std that could not be computed) read "n/a" in text tables;
+// the JSON document holds null for them.
 std::string Percent(double fraction) {
+  if (!std::isfinite(fraction)) return "n/a";
   char buffer[32];
   std::snprintf(buffer, sizeof buffer, "%.1f", 100.0 * fraction);
   return buffer;
@@ -245,6 +248,7 @@ std::string MeanStd(const stats::SampleSummary& s) {
 }
 
 std::string Number(double value, const char* format = "%.3g") {
+  if (!std::isfinite(value)) return "n/a";
   char buffer[32];
   std::snprintf(buffer, sizeof buffer, format, value);
   return buffer;

@@ -16,6 +16,8 @@
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/filesystem.h"
+#include "secure/common/limits.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
@@ -99,7 +101,7 @@ SeedOutcome RunSeed(DerbyExperiment experiment, const DerbyExperimentOptions& o,
   const std::string tag = "[seed " + std::to_string(seed) + "]";
   const std::string dir =
       o.output_dir.empty() ? "" : o.output_dir + "/seed-" + std::to_string(seed);
-  if (!dir.empty()) std::filesystem::create_directories(dir);
+  CreateDirectories(dir);
   const std::vector<eval::Method> methods = DerbyMethods(experiment);
   SeedOutcome outcome;
   nlohmann::json& timings = outcome.summary["seconds"];
@@ -362,11 +364,16 @@ void DerbyExperimentOptions::Validate() const {
   joint.Validate();
   shield.Validate();
   SECURE_DERBY_CHECK(safe_states > 0, "safe_states", safe_states, "> 0");
+  SECURE_DERBY_CHECK(safe_states <= kMaxStates, "safe_states", safe_states,
+                     "in [1, " << kMaxStates << "]");
   SECURE_DERBY_CHECK(seeds > 0, "seeds", seeds, "> 0");
+  SECURE_DERBY_CHECK(seeds <= kMaxSeeds, "seeds", seeds, "in [1, " << kMaxSeeds << "]");
   SECURE_DERBY_CHECK(episodes > 0, "episodes", episodes, "> 0");
+  SECURE_DERBY_CHECK(episodes <= kMaxEpisodes, "episodes", episodes,
+                     "in [1, " << kMaxEpisodes << "]");
   SECURE_DERBY_CHECK(threads > 0, "threads", threads, "> 0");
-  SECURE_DERBY_CHECK(evaluation.tost_bound > 0, "evaluation.tost_bound", evaluation.tost_bound,
-                     "> 0");
+  SECURE_DERBY_CHECK(std::isfinite(evaluation.tost_bound) && evaluation.tost_bound > 0,
+                     "evaluation.tost_bound", evaluation.tost_bound, "> 0");
   for (double f : data_fractions)
     SECURE_DERBY_CHECK(f > 0 && f <= 1, "data_fractions[]", f, "in (0, 1]");
   for (int k : imbalance_ratios) SECURE_DERBY_CHECK(k >= 1, "imbalance_ratios[]", k, ">= 1");
@@ -483,6 +490,8 @@ std::string DerbyExperimentResult::Table() const {
 DerbyExperimentResult RunDerbyExperiment(DerbyExperiment experiment,
                                          const DerbyExperimentOptions& o, std::ostream* out) {
   o.Validate();
+  // Before any work, so that an unusable --out (a file, a read-only place) fails at once.
+  CreateDirectories(o.output_dir);
   const Stopwatch clock;
   Progress progress(out, o.verbose);
   nn::SetTorchThreads(1);
@@ -509,7 +518,6 @@ DerbyExperimentResult RunDerbyExperiment(DerbyExperiment experiment,
   result.near_dangerous_states = shared.near_dangerous.size();
   result.data_seconds = clock.Seconds();
   if (!o.output_dir.empty()) {
-    std::filesystem::create_directories(o.output_dir);
     data::WriteTrajectories(o.output_dir + "/demos.csv", shared.demos);
     data::WriteStateSet(o.output_dir + "/safe.csv", shared.safe);
     data::WriteStateSet(o.output_dir + "/near_dangerous.csv", shared.near_dangerous);

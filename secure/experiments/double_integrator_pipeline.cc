@@ -11,6 +11,8 @@
 #include "secure/cbf/double_integrator_study.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/filesystem.h"
+#include "secure/common/limits.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
 #include "secure/experiments/internal/seed_runner.h"
@@ -59,7 +61,7 @@ SeedOutcome RunSeed(const PipelineOptions& o, int index, const data::TrajectoryS
   const std::string tag = "[seed " + std::to_string(seed) + "]";
   const std::string dir =
       o.output_dir.empty() ? "" : o.output_dir + "/seed-" + std::to_string(seed);
-  if (!dir.empty()) std::filesystem::create_directories(dir);
+  CreateDirectories(dir);
   SeedOutcome outcome;
 
   // The barrier, from the safe and near-dangerous states.
@@ -187,12 +189,17 @@ void PipelineOptions::Validate() const {
   airl.Validate();
   shield.Validate();
   SECURE_PIPELINE_CHECK(safe_states > 0, "safe_states", safe_states, "> 0");
+  SECURE_PIPELINE_CHECK(safe_states <= kMaxStates, "safe_states", safe_states,
+                        "in [1, " << kMaxStates << "]");
   SECURE_PIPELINE_CHECK(seeds > 0, "seeds", seeds, "> 0");
+  SECURE_PIPELINE_CHECK(seeds <= kMaxSeeds, "seeds", seeds, "in [1, " << kMaxSeeds << "]");
   SECURE_PIPELINE_CHECK(episodes > 0, "episodes", episodes, "> 0");
+  SECURE_PIPELINE_CHECK(episodes <= kMaxEpisodes, "episodes", episodes,
+                        "in [1, " << kMaxEpisodes << "]");
   SECURE_PIPELINE_CHECK(threads > 0, "threads", threads, "> 0");
   SECURE_PIPELINE_CHECK(!methods.empty(), "methods", "(empty)", "non-empty");
-  SECURE_PIPELINE_CHECK(evaluation.tost_bound > 0, "evaluation.tost_bound",
-                        evaluation.tost_bound, "> 0");
+  SECURE_PIPELINE_CHECK(std::isfinite(evaluation.tost_bound) && evaluation.tost_bound > 0,
+                        "evaluation.tost_bound", evaluation.tost_bound, "> 0");
   SECURE_PIPELINE_CHECK(shield.dt == task.dt, "shield.dt", shield.dt,
                         "the task's dt = " << task.dt << " (the shield looks one step ahead)");
 }
@@ -260,6 +267,8 @@ nlohmann::json PipelineResult::ToJson() const {
 
 PipelineResult RunDoubleIntegratorPipeline(const PipelineOptions& o, std::ostream* out) {
   o.Validate();
+  // Before any work, so that an unusable --out (a file, a read-only place) fails at once.
+  CreateDirectories(o.output_dir);
   const Stopwatch clock;
   Progress progress(out, o.verbose);
   nn::SetTorchThreads(1);  // parallelism comes from the seeds; 1 is fastest for small nets
@@ -281,7 +290,6 @@ PipelineResult RunDoubleIntegratorPipeline(const PipelineOptions& o, std::ostrea
   result.safe_states = safe.size();
   result.near_dangerous_states = near_dangerous.size();
   if (!o.output_dir.empty()) {
-    std::filesystem::create_directories(o.output_dir);
     data::WriteTrajectories(o.output_dir + "/demos.csv", demos.trajectories);
     data::WriteStateSet(o.output_dir + "/safe.csv", safe);
     data::WriteStateSet(o.output_dir + "/near_dangerous.csv", near_dangerous);

@@ -5,6 +5,7 @@
 #include <set>
 
 #include "secure/common/error.h"
+#include "secure/common/limits.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/internal/options_util.h"
 
@@ -16,8 +17,11 @@ namespace {
 
 void CheckWidths(const std::vector<int>& widths, const char* field) {
   AIRL_CHECK(!widths.empty(), field, "[]", "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < widths.size(); ++i)
+  for (std::size_t i = 0; i < widths.size(); ++i) {
     AIRL_CHECK(widths[i] > 0, field << "[" << i << "]", widths[i], "> 0");
+    AIRL_CHECK(widths[i] <= kMaxLayerWidth, field << "[" << i << "]", widths[i],
+               "in [1, " << kMaxLayerWidth << "]");
+  }
 }
 
 void CheckPositive(double x, const char* field) {

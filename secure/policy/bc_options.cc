@@ -4,6 +4,7 @@
 #include <set>
 
 #include "secure/common/error.h"
+#include "secure/common/limits.h"
 #include "secure/policy/bc_trainer.h"
 #include "secure/policy/internal/options_util.h"
 
@@ -19,8 +20,11 @@ nlohmann::json NumberOrNull(double x) { return std::isfinite(x) ? nlohmann::json
 
 void BcOptions::Validate() const {
   BC_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < hidden.size(); ++i)
+  for (std::size_t i = 0; i < hidden.size(); ++i) {
     BC_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
+    BC_CHECK(hidden[i] <= kMaxLayerWidth, "hidden[" << i << "]", hidden[i],
+             "in [1, " << kMaxLayerWidth << "]");
+  }
   BC_CHECK(std::isfinite(learning_rate) && learning_rate > 0, "learning_rate", learning_rate,
            "> 0");
   BC_CHECK(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&

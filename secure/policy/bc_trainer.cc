@@ -10,6 +10,7 @@
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/filesystem.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
@@ -203,8 +204,7 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   s.wall_seconds = clock.Seconds();
 
   if (!options.curve_path.empty()) {
-    const std::filesystem::path parent = std::filesystem::path(options.curve_path).parent_path();
-    if (!parent.empty()) std::filesystem::create_directories(parent);
+    CreateDirectories(std::filesystem::path(options.curve_path).parent_path().string());
     WriteFileAtomically(options.curve_path, CurveCsv(curve));
   }
 

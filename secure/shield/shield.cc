@@ -4,6 +4,7 @@
 #include <limits>
 
 #include "secure/common/error.h"
+#include "secure/common/limits.h"
 #include "secure/common/timer.h"
 
 namespace secure::shield {
@@ -18,12 +19,16 @@ constexpr double kNegInf = -std::numeric_limits<double>::infinity();
 
 void ShieldOptions::Validate() const {
   SECURE_SHIELD_OPTION_CHECK(num_samples > 0, "num_samples", num_samples, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(num_samples <= kMaxShieldSamples, "num_samples", num_samples,
+                             "in [1, " << kMaxShieldSamples << "]");
   SECURE_SHIELD_OPTION_CHECK(std::isfinite(safe_ratio) && safe_ratio >= 0 && safe_ratio < 1,
                              "safe_ratio", safe_ratio, "in [0, 1)");
   SECURE_SHIELD_OPTION_CHECK(std::isfinite(dt) && dt > 0, "dt", dt, "> 0");
   SECURE_SHIELD_OPTION_CHECK(std::isfinite(class_k_gain) && class_k_gain > 0, "class_k_gain",
                              class_k_gain, "> 0 (alpha must be strictly increasing)");
   SECURE_SHIELD_OPTION_CHECK(num_probes > 0, "num_probes", num_probes, "> 0");
+  SECURE_SHIELD_OPTION_CHECK(num_probes <= kMaxShieldSamples, "num_probes", num_probes,
+                             "in [1, " << kMaxShieldSamples << "]");
   SECURE_SHIELD_OPTION_CHECK(std::isfinite(probe_extent) && probe_extent > 0, "probe_extent",
                              probe_extent, "> 0");
   SECURE_SHIELD_OPTION_CHECK(std::isfinite(sigma_step) && sigma_step > 0, "sigma_step", sigma_step,

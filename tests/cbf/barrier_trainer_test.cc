@@ -143,6 +143,30 @@ TEST(BarrierTrainerOptionsTest, ValidateNamesFieldValueAndRule) {
   EXPECT_NO_THROW(BarrierTrainerOptions{}.Validate());
 }
 
+TEST(BarrierTrainerOptionsTest, ValidateBoundsTheLayerWidth) {
+  BarrierTrainerOptions o;
+  o.hidden = {64, 2000000000};
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }),
+            "BarrierTrainerOptions::hidden[1] = 2000000000, must be in [1, 10000]");
+  o.hidden = {10000};
+  EXPECT_NO_THROW(o.Validate());
+}
+
+TEST(BarrierTrainerTest, ReportsSayThereWasNoValidationSplit) {
+  BarrierTrainerOptions o = Fast();
+  o.validation_fraction = 0.0;
+  BarrierTrainingSummary s;
+  TrainBarrier(o, Disk(false, 40, 1), Disk(true, 40, 2), &s);
+  ASSERT_EQ(s.validation_safe + s.validation_near_dangerous, 0);
+  EXPECT_HAS(s.FullReport(), "| validation | 0 | 0 | n/a | n/a (no held-out states) |");
+  EXPECT_HAS(s.BriefReport(), "val acc n/a (no held-out states)");
+  EXPECT_TRUE(s.ToJson()["validation_accuracy"].is_null());
+  o.validation_fraction = 0.25;
+  TrainBarrier(o, Disk(false, 40, 1), Disk(true, 40, 2), &s);
+  EXPECT_TRUE(s.ToJson()["validation_accuracy"]["safe"].is_number());
+  EXPECT_EQ(s.FullReport().find("n/a"), std::string::npos) << s.FullReport();
+}
+
 TEST(BarrierTrainerOptionsTest, YamlOverridesAndRejectsUnknownKeys) {
   BarrierTrainerOptions o;
   o.ApplyYaml(YAML::Load("{hidden: [8, 4], activation: relu, max_epochs: 7, safe_margin: 0.5}"),

@@ -145,6 +145,31 @@ TEST(DoubleIntegratorShieldRunTest, ValidateNamesTheField) {
   EXPECT_HAS(ErrorOf([&] { RunDoubleIntegratorShield(bad, barrier); }), "ShieldRunOptions::kp");
 }
 
+TEST(DoubleIntegratorShieldRunTest, ImpossibleSizesAreRejectedByValidate) {
+  ShieldRunOptions o;
+  o.episodes = 2147483648L;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }),
+             "ShieldRunOptions::episodes = 2147483648, must be in [1, 1000000]");
+  o = ShieldRunOptions{};
+  o.shield.num_samples = 2000000000;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }),
+             "ShieldOptions::num_samples = 2000000000, must be in [1, 1000000]");
+  o = ShieldRunOptions{};
+  o.shield.num_probes = 1000001;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "ShieldOptions::num_probes = 1000001");
+}
+
+TEST(DoubleIntegratorShieldRunTest, TableSaysNotApplicableWithoutASuccess) {
+  ShieldRunOptions o;
+  o.episodes = 2;
+  o.max_steps = 3;  // too short to reach the goal
+  cbf::DoubleIntegratorGroundTruth barrier(o.truth);
+  const ShieldRunResult r = RunDoubleIntegratorShield(o, barrier);
+  ASSERT_EQ(r.success_episodes, 0);
+  EXPECT_HAS(r.Table(), "| mean steps to goal | n/a (no successful episode) |");
+  EXPECT_EQ(r.Table().find("nan"), std::string::npos) << r.Table();
+}
+
 TEST(DoubleIntegratorShieldRunTest, StartRegionWithoutSafeStatesIsAnError) {
   ShieldRunOptions options = FastOptions(1);
   options.start_lo = 4.5;  // entirely inside the obstacle

@@ -3,7 +3,9 @@
 #include "secure/experiments/double_integrator_pipeline.h"
 
 #include <gtest/gtest.h>
+
 #include <yaml-cpp/yaml.h>
+#include <limits>
 
 #include "tests/test_util.h"
 
@@ -61,6 +63,17 @@ TEST(PipelineTest, OptionsAreValidated) {
   PipelineOptions o = Tiny();
   o.seeds = 0;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "PipelineOptions::seeds = 0");
+  o = Tiny();
+  o.episodes = 2147483648L;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }),
+             "PipelineOptions::episodes = 2147483648, must be in [1, 1000000]");
+  o = Tiny();
+  o.seeds = 10001;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }),
+             "PipelineOptions::seeds = 10001, must be in [1, 10000]");
+  o = Tiny();
+  o.evaluation.tost_bound = std::numeric_limits<double>::infinity();
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "PipelineOptions::evaluation.tost_bound = inf");
   o = Tiny();
   o.shield.dt = 0.05;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "PipelineOptions::shield.dt = 0.05");

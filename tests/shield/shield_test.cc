@@ -784,6 +784,10 @@ TEST(ShieldTest, OptionsValidateNamesFieldValueAndRule) {
              "ShieldOptions::num_samples = 0, must be > 0");
   EXPECT_HAS(message([](ShieldOptions& o) { o.num_samples = -3; }),
              "ShieldOptions::num_samples = -3, must be > 0");
+  EXPECT_HAS(message([](ShieldOptions& o) { o.num_samples = 2000000000; }),
+             "ShieldOptions::num_samples = 2000000000, must be in [1, 1000000]");
+  EXPECT_HAS(message([](ShieldOptions& o) { o.num_probes = 1000001; }),
+             "ShieldOptions::num_probes = 1000001, must be in [1, 1000000]");
   EXPECT_HAS(message([](ShieldOptions& o) { o.safe_ratio = 1.0; }),
              "ShieldOptions::safe_ratio = 1, must be in [0, 1)");
   EXPECT_HAS(message([](ShieldOptions& o) { o.safe_ratio = -0.5; }),

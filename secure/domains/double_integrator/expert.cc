@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "secure/common/error.h"
+#include "secure/common/limits.h"
 #include "secure/common/timer.h"
 
 namespace secure::domains::double_integrator {
@@ -67,6 +68,8 @@ nlohmann::json ExpertOptions::ToJson() const {
 
 void DemonstrationOptions::Validate() const {
   SECURE_FIELD_CHECK("DemonstrationOptions", episodes > 0, "episodes", episodes, "> 0");
+  SECURE_FIELD_CHECK("DemonstrationOptions", episodes <= kMaxEpisodes, "episodes", episodes,
+                     "in [1, " << kMaxEpisodes << "]");
   SECURE_FIELD_CHECK("DemonstrationOptions", max_attempts >= 0, "max_attempts", max_attempts,
                      ">= 0 (0: 10 x episodes + 10)");
 }
@@ -81,6 +84,8 @@ nlohmann::json DemonstrationOptions::ToJson() const {
 
 void NearDangerousOptions::Validate() const {
   SECURE_FIELD_CHECK("NearDangerousOptions", count > 0, "count", count, "> 0");
+  SECURE_FIELD_CHECK("NearDangerousOptions", count <= kMaxStates, "count", count,
+                     "in [1, " << kMaxStates << "]");
   SECURE_FIELD_CHECK(
       "NearDangerousOptions", std::isfinite(rho_min) && std::isfinite(rho_max) && rho_min < rho_max,
       "rho_min, rho_max", rho_min << ", " << rho_max, "finite with rho_min < rho_max");
