@@ -1,4 +1,6 @@
 // secure cbf train | eval | predict | table1.
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <functional>
 #include <iostream>
@@ -78,6 +80,17 @@ class TrainerFlags {
   std::vector<std::pair<CLI::Option*, std::function<void(const Options&, Options*)>>> copies_;
 };
 
+// A --features list: no name twice (a repeated name would silently stand for another column).
+void CheckFeatureList(const std::vector<std::string>& names) {
+  for (std::size_t k = 0; k < names.size(); ++k) {
+    SECURE_CHECK(!names[k].empty(), "--features: entry " << k + 1 << " is empty");
+    for (std::size_t i = 0; i < k; ++i)
+      SECURE_CHECK(names[i] != names[k], "--features: feature '"
+                                             << names[k] << "' is given twice (entries " << i + 1
+                                             << " and " << k + 1 << ")");
+  }
+}
+
 // ------------------------------------------------------------------------------------------
 struct TrainCommand {
   YAML::Node trainer_yaml;  // the config's `trainer:` section, applied over the base options
@@ -91,13 +104,16 @@ struct TrainCommand {
   std::uint64_t seed = 0;
   double test_fraction = 0.0;
   bool json = false;
+  DeferredError config_error;  // thrown when this command runs, not at registration
 
   void Register(CLI::App& app, const Config& config) {
     CLI::App* cmd = app.add_subcommand(
         "train", "Learn a barrier h(s) from safe and near-dangerous states (Eq. 4)");
-    trainer_yaml = config.Section("trainer");
     config_path = config.path;
-    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+    config_error.Capture([&] {
+      trainer_yaml = config.Section("trainer");
+      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+    });
     AddConfigFlag(cmd, config);
     cmd->add_option("--domain", domain,
                     "sample labelled states from a domain: double-integrator (trainer options then "
@@ -111,20 +127,24 @@ struct TrainCommand {
     cmd->add_option("--unsafe", n_unsafe, "unsafe states to sample (with --domain)")
         ->capture_default_str();
     AddGroundTruthFlags(cmd, &truth, &obstacle);
-    cmd->add_option("--seed", seed, "seed for sampling, weights and minibatches")
-        ->capture_default_str();
+    AddSeedOption(cmd, "--seed", &seed, "seed for sampling, weights and minibatches");
     cmd->add_option("--out", out, "model file to write")->required();
     cmd->add_option("--test-fraction", test_fraction,
                     "hold out this fraction of each class before training and report the "
-                    "model's accuracy on it")
+                    "model's accuracy on it, in [0, 1)")
         ->capture_default_str();
     trainer_flags.Add(cmd, cbf::BarrierTrainerOptions{});
     cmd->add_flag("--json", json, "print the result as JSON");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
     const bool from_domain = !domain.empty();
+    SECURE_CHECK(std::isfinite(test_fraction) && test_fraction >= 0 && test_fraction < 1,
+                 "--test-fraction = " << test_fraction << ", must be in [0, 1)");
     trainer = from_domain ? cbf::DoubleIntegratorTrainerPreset() : cbf::BarrierTrainerOptions{};
     if (trainer_yaml.IsMap()) trainer.ApplyYaml(trainer_yaml, config_path);
     trainer_flags.ApplyTo(&trainer);
@@ -134,8 +154,12 @@ struct TrainCommand {
     SECURE_CHECK(from_domain != from_files,
                  "cbf train: give either --domain or both --safe-states and "
                  "--near-dangerous-states");
+    const std::vector<std::string> names = data::SplitList(features);
+    CheckFeatureList(names);
     if (from_domain) {
       CheckDoubleIntegratorDomain(domain);
+      CheckRange("--safe", n_safe, 1, kMaxStates);
+      CheckRange("--unsafe", n_unsafe, 1, kMaxStates);
       FinishGroundTruth(obstacle, &truth);
       auto sampled = cbf::SampleDoubleIntegratorData(truth, di::StateBox{}, n_safe, n_unsafe, seed);
       safe = std::move(sampled.safe);
@@ -143,7 +167,6 @@ struct TrainCommand {
     } else {
       SECURE_CHECK(!safe_path.empty() && !nd_path.empty(),
                    "cbf train: --safe-states and --near-dangerous-states go together");
-      const auto names = data::SplitList(features);
       safe = data::ReadStateSet(safe_path, names);
       nd = data::ReadStateSet(nd_path, names);
     }
@@ -157,13 +180,18 @@ struct TrainCommand {
     cbf::BarrierTrainingSummary summary;
     cbf::BarrierNet net = cbf::TrainBarrier(trainer, safe, nd, &summary);
     std::optional<cbf::ClassAccuracy> test;
+    // The accuracy of a class with no held-out state is undefined: null in JSON, n/a in text.
+    const auto accuracy_json = [](long n, double accuracy) {
+      return n > 0 ? nlohmann::json(accuracy) : nlohmann::json(nullptr);
+    };
     if (test_fraction > 0) {
       test = cbf::EvaluateAccuracy(*net.MakeEvaluator(), safe_test.states, nd_test.states);
-      net.provenance["test"] = {{"fraction", test_fraction},
-                                {"safe", safe_test.size()},
-                                {"near_dangerous", nd_test.size()},
-                                {"accuracy_safe", test->safe},
-                                {"accuracy_near_dangerous", test->near_dangerous}};
+      net.provenance["test"] = {
+          {"fraction", test_fraction},
+          {"safe", safe_test.size()},
+          {"near_dangerous", nd_test.size()},
+          {"accuracy_safe", accuracy_json(safe_test.size(), test->safe)},
+          {"accuracy_near_dangerous", accuracy_json(nd_test.size(), test->near_dangerous)}};
     }
     if (from_domain) {
       net.provenance["double_integrator"] = {{"obstacle", {truth.obstacle_x, truth.obstacle_y}},
@@ -178,12 +206,14 @@ struct TrainCommand {
                        {"options", trainer.ToJson()},
                        {"summary", summary.ToJson()}};
       if (test) {
-        r["test"] = {{"safe", safe_test.size()},
-                     {"near_dangerous", nd_test.size()},
-                     {"accuracy",
-                      {{"safe", test->safe},
-                       {"near_dangerous", test->near_dangerous},
-                       {"balanced", test->Balanced()}}}};
+        const bool both = safe_test.size() > 0 && nd_test.size() > 0;
+        r["test"] = {
+            {"safe", safe_test.size()},
+            {"near_dangerous", nd_test.size()},
+            {"accuracy",
+             {{"safe", accuracy_json(safe_test.size(), test->safe)},
+              {"near_dangerous", accuracy_json(nd_test.size(), test->near_dangerous)},
+              {"balanced", both ? nlohmann::json(test->Balanced()) : nlohmann::json(nullptr)}}}};
       }
       PrintJson(r);
     } else {
@@ -191,10 +221,17 @@ struct TrainCommand {
                 << " safe + " << nd.size() << " near-dangerous states -> " << out << "\n"
                 << summary.FullReport();
       if (test) {
-        std::printf(
-            "held-out test: %ld safe, %ld near-dangerous; accuracy safe %.4f, "
-            "near-dangerous %.4f, balanced %.4f\n",
-            safe_test.size(), nd_test.size(), test->safe, test->near_dangerous, test->Balanced());
+        const auto figure = [](long n, double accuracy) {
+          if (n == 0) return std::string("n/a (no held-out states)");
+          char buf[32];
+          std::snprintf(buf, sizeof buf, "%.4f", accuracy);
+          return std::string(buf);
+        };
+        const long both = std::min(safe_test.size(), nd_test.size());
+        std::cout << "held-out test: " << safe_test.size() << " safe, " << nd_test.size()
+                  << " near-dangerous; accuracy safe " << figure(safe_test.size(), test->safe)
+                  << ", near-dangerous " << figure(nd_test.size(), test->near_dangerous)
+                  << ", balanced " << figure(both, test->Balanced()) << "\n";
       }
     }
   }
@@ -207,11 +244,13 @@ struct EvalCommand {
   std::string model, domain;
   cbf::GridValidationOptions validation;
   bool json = false;
+  DeferredError config_error;
 
   void Register(CLI::App& app, const Config& config) {
     CLI::App* cmd = app.add_subcommand(
         "eval", "Confusion matrix of a barrier against a domain's ground truth on its grid");
-    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+    config_error.Capture(
+        [&] { ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth); });
     AddConfigFlag(cmd, config);
     cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
     cmd->add_option("--domain", domain, "domain with a ground truth: double-integrator")
@@ -219,7 +258,10 @@ struct EvalCommand {
     AddGroundTruthFlags(cmd, &truth, &obstacle);
     cmd->add_option("--threads", validation.threads, "worker threads")->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
@@ -270,6 +312,18 @@ struct PredictCommand {
     const data::StateSet set = data::ReadStateSet(states, net.features);
     Eigen::VectorXf h(set.size());
     net.MakeEvaluator()->Evaluate(set.states, h);
+    for (Eigen::Index i = 0; i < h.size(); ++i) {
+      if (std::isfinite(h[i])) continue;
+      // Name the input line (the data rows' lines, from the reader, only on this error path).
+      const data::NumericTable table = data::ReadCsv(states, net.features);
+      SECURE_THROW(states << ":" << table.lines[static_cast<std::size_t>(i)] << ": the model "
+                          << model << " gives h = "
+                          << (std::isnan(h[i]) ? "nan"
+                              : h[i] > 0       ? "inf"
+                                               : "-inf")
+                          << " for this state (not finite; its values are extreme for the "
+                             "model)");
+    }
     Eigen::MatrixXd table(2, set.size());
     table.row(0) = h.cast<double>().transpose();
     table.row(1) = (h.array() >= 0.0f).cast<double>().matrix().transpose();
@@ -295,17 +349,19 @@ struct Table1Command {
   TrainerFlags trainer_flags;
   std::vector<double> obstacle;
   bool json = false;
+  DeferredError config_error;
 
   void Register(CLI::App& app, const Config& config, const std::string& name,
                 const std::string& description) {
     CLI::App* cmd = app.add_subcommand(name, description);
-    if (config.Section("trainer").IsMap())
-      options.trainer.ApplyYaml(config.Section("trainer"), config.path);
-    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+    config_error.Capture([&] {
+      if (config.Section("trainer").IsMap())
+        options.trainer.ApplyYaml(config.Section("trainer"), config.path);
+      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+    });
     AddConfigFlag(cmd, config);
     cmd->add_option("--seeds", options.seeds, "number of training seeds")->capture_default_str();
-    cmd->add_option("--first-seed", options.first_seed, "seed of the first run")
-        ->capture_default_str();
+    AddSeedOption(cmd, "--first-seed", &options.first_seed, "seed of the first run");
     cmd->add_option("--safe", options.n_safe, "safe training states")->capture_default_str();
     cmd->add_option("--unsafe", options.n_unsafe, "unsafe training states")->capture_default_str();
     AddGroundTruthFlags(cmd, &options.truth, &obstacle);
@@ -313,10 +369,16 @@ struct Table1Command {
         ->capture_default_str();
     trainer_flags.Add(cmd, options.trainer);
     cmd->add_flag("--json", json, "print the result as JSON");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
+    CheckRange("--seeds", options.seeds, 1, kMaxSeeds);
+    CheckRange("--safe", options.n_safe, 1, kMaxStates);
+    CheckRange("--unsafe", options.n_unsafe, 1, kMaxStates);
     trainer_flags.ApplyTo(&options.trainer);
     FinishGroundTruth(obstacle, &options.truth);
     const cbf::Table1Result result = cbf::RunTable1(options);

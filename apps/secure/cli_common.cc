@@ -1,20 +1,69 @@
 #include "cli_common.h"
 
+#include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <iostream>
 
 #include "secure/common/build_info.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
+#include "secure/common/excerpt.h"
+#include "secure/common/filesystem.h"
+#include "secure/common/strings.h"
+#include "secure/common/yaml_keys.h"
 
 namespace secure::cli {
 
+const std::vector<std::string>& KnownConfigSections() {
+  static const std::vector<std::string> known = {"airl",     "bc",     "derby", "double_integrator",
+                                                 "pipeline", "trainer"};
+  return known;
+}
+
+void Config::Check() const {
+  if (error) std::rethrow_exception(error);
+}
+
 YAML::Node Config::Section(const std::string& key) const {
+  const auto& known = KnownConfigSections();
+  SECURE_INTERNAL_CHECK(std::find(known.begin(), known.end(), key) != known.end(),
+                        "config section '" << key << "' is missing from KnownConfigSections()");
+  Check();
   if (!root || !root.IsMap() || !root[key]) return YAML::Node();
   const YAML::Node node = root[key];
-  SECURE_CHECK(node.IsMap(), path << ": section '" << key << "' must be a mapping");
+  SECURE_CHECK(node.IsMap(), path << ":" << node.Mark().line + 1 << ": section '" << key
+                                  << "' must be a mapping");
   return node;
 }
+
+namespace {
+
+// Loads and checks the file; throws secure::Error naming the file (and the line where known).
+YAML::Node LoadConfig(const std::string& path) {
+  CheckNotADirectory(path);
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    SECURE_THROW("cannot open config file '" << path << "': " << std::strerror(errno));
+  } catch (const YAML::Exception& e) {
+    SECURE_THROW(path << ": invalid YAML: " << Excerpt(e.what()));
+  }
+  SECURE_CHECK(!root || root.IsMap(), path << ": the config file must be a mapping of sections");
+  if (!root) return root;
+  CheckNoDuplicateKeys(root, path);
+  const auto& known = KnownConfigSections();
+  for (const auto& item : root) {
+    const std::string key = YamlKeyText(item.first);
+    SECURE_CHECK(std::find(known.begin(), known.end(), key) != known.end(),
+                 path << ":" << item.first.Mark().line + 1 << ": unknown section '" << Excerpt(key)
+                      << "' (known sections: " << Join(known) << ")");
+  }
+  return root;
+}
+
+}  // namespace
 
 Config PreScanConfig(int argc, char** argv) {
   Config config;
@@ -28,20 +77,42 @@ Config PreScanConfig(int argc, char** argv) {
   }
   if (config.path.empty()) return config;
   try {
-    config.root = YAML::LoadFile(config.path);
-  } catch (const YAML::BadFile&) {
-    SECURE_THROW("cannot open config file '" << config.path << "'");
-  } catch (const YAML::Exception& e) {
-    SECURE_THROW(config.path << ": invalid YAML: " << e.what());
+    config.root = LoadConfig(config.path);
+  } catch (...) {
+    config.error = std::current_exception();
+    config.root = YAML::Node();
   }
-  SECURE_CHECK(!config.root || config.root.IsMap(),
-               config.path << ": the config file must be a mapping of sections");
   return config;
 }
 
-void AddConfigFlag(CLI::App* cmd, const Config& config) {
-  cmd->add_option("--config", "YAML file with option sections; command-line flags override it")
-      ->check(CLI::ExistingFile);
+void AddConfigFlag(CLI::App* cmd, const Config& /*config*/) {
+  // No CLI11 file check: a missing or unreadable file is reported by Config::Check as
+  // "secure: error: ...", like every other error.
+  cmd->add_option("--config", "YAML file with option sections; command-line flags override it");
+}
+
+CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
+                           const std::string& help) {
+  const CLI::Validator non_negative(
+      [](std::string& value) -> std::string {
+        const auto first = value.find_first_not_of(" \t");
+        if (first != std::string::npos && value[first] == '-')
+          return "value " + value + " is negative; a seed is an integer in [0, 2^64 - 1]";
+        return "";
+      },
+      "UINT64");
+  return cmd->add_option(name, *seed, help)->check(non_negative)->capture_default_str();
+}
+
+void CheckRange(const std::string& name, long value, long lo, long hi) {
+  SECURE_CHECK(value >= lo && value <= hi,
+               name << " = " << value << ", must be in [" << lo << ", " << hi << "]");
+}
+
+int ReportError(const std::string& message) {
+  const std::string first_line = message.substr(0, message.find('\n'));
+  std::cerr << "secure: error: " << (first_line.empty() ? "unknown error" : first_line) << "\n";
+  return 1;
 }
 
 void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
@@ -107,10 +178,12 @@ void ApplyGroundTruthYaml(const YAML::Node& node, const std::string& source,
       } else if (key == "gamma") {
         truth->gamma = item.second.as<double>();
       } else {
-        SECURE_THROW(source << ": unknown field '" << key << "' in section double_integrator");
+        SECURE_THROW(source << ":" << item.first.Mark().line + 1 << ": unknown field '"
+                            << Excerpt(key) << "' in section double_integrator");
       }
     } catch (const YAML::Exception&) {
-      SECURE_THROW(source << ": field double_integrator." << key << " has an invalid value");
+      SECURE_THROW(source << ":" << item.second.Mark().line + 1 << ": field double_integrator."
+                          << Excerpt(key) << " has an invalid value");
     }
   }
 }

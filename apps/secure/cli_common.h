@@ -3,28 +3,76 @@
 
 #include <yaml-cpp/yaml.h>
 #include <CLI/CLI.hpp>
+#include <cstdint>
+#include <exception>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "secure/common/limits.h"
 #include "secure/domains/double_integrator/double_integrator.h"
 #include "secure/shield/shield.h"
 
 namespace secure::cli {
 
+/// The top-level sections a config file may have: the union of what the commands read with
+/// Config::Section (trainer, double_integrator, pipeline, bc, airl, derby).
+const std::vector<std::string>& KnownConfigSections();
+
 /// The YAML config named by --config (pre-scanned from argv so that flags parsed afterwards
-/// override it), or a null node.
+/// override it), or a null node. Loading never throws: an error (unreadable file, a directory,
+/// invalid YAML, an unknown top-level section, a duplicate key at any depth) is kept and thrown
+/// by Check(), which every command that takes --config calls when it runs; so --help, --version
+/// and the commands not given --config work with a broken file.
 struct Config {
   std::string path;
   YAML::Node root;
-  /// The sub-mapping `key`, or a null node (test with IsMap()); throws if present but not a
-  /// mapping.
+  std::exception_ptr error;  // set when the file could not be loaded or checked
+  /// Throws the load error, if any.
+  void Check() const;
+  /// The sub-mapping `key` (one of KnownConfigSections()), or a null node (test with IsMap());
+  /// throws the load error, or if present but not a mapping.
   YAML::Node Section(const std::string& key) const;
 };
 Config PreScanConfig(int argc, char** argv);
 
-/// Adds --config (for help and validation; the file is read by PreScanConfig).
+/// An error met while a command registers (applying its config sections), kept until the command
+/// runs: a broken section must not break the other commands, --help or --version.
+class DeferredError {
+ public:
+  /// Runs `f`; keeps the first exception it throws.
+  template <typename F>
+  void Capture(F&& f) {
+    try {
+      f();
+    } catch (...) {
+      if (!error_) error_ = std::current_exception();
+    }
+  }
+  /// Throws the kept exception, if any (call first in the command's callback).
+  void Rethrow() const {
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  std::exception_ptr error_;
+};
+
+/// Adds --config (for help; the file is read by PreScanConfig and checked by Config::Check).
 void AddConfigFlag(CLI::App* cmd, const Config& config);
+
+/// Adds `--<name>` for an unsigned 64-bit seed, rejecting a negative value (which CLI11 would
+/// wrap around to 2^64 - 1).
+CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
+                           const std::string& help);
+
+/// Throws "NAME = VALUE, must be in [LO, HI]" unless lo <= value <= hi (limits:
+/// secure/common/limits.h).
+void CheckRange(const std::string& name, long value, long lo, long hi);
+
+/// Prints "secure: error: MESSAGE" (the first line of it) on stderr and returns 1, the exit code
+/// of every error.
+int ReportError(const std::string& message);
 
 /// The one domain with a ground truth so far, as named by --domain.
 inline constexpr const char* kDoubleIntegratorDomain = "double-integrator";

@@ -11,6 +11,7 @@
 #include "cli_common.h"
 #include "commands.h"
 #include "secure/common/enum_strings.h"
+#include "secure/common/filesystem.h"
 #include "secure/experiments/derby_experiments.h"
 
 namespace secure::cli {
@@ -28,21 +29,27 @@ struct ExperimentCommand {
   std::string out;
   YAML::Node config_section;
   std::string config_path;
+  CLI::Option* seeds_option = nullptr;
+  CLI::Option* episodes_option = nullptr;
+  DeferredError config_error;
 
   void Register(CLI::App& parent, const Config& config, experiments::DerbyExperiment which,
                 const std::string& description) {
     experiment = which;
     CLI::App* cmd =
         parent.add_subcommand(ToString(experiments::kDerbyExperimentNames, which), description);
-    config_section = config.Section("derby");
+    config_error.Capture([&] { config_section = config.Section("derby"); });
     config_path = config.path;
     AddConfigFlag(cmd, config);
     cmd->add_flag("--quick", quick, "a small profile for tests (2 seeds x 10 episodes, short "
                                     "training)");
-    cmd->add_option("--seeds", seeds, "seeds (default: 10; --quick: 2)");
-    cmd->add_option("--episodes", episodes, "episodes per method and seed (default: 100)");
-    cmd->add_option("--first-seed", first_seed, "seeds first-seed, first-seed + 1, ...")
-        ->capture_default_str();
+    seeds_option = cmd->add_option(
+        "--seeds", seeds,
+        "seeds, at most " + std::to_string(kMaxSeeds) + " (default: 10; --quick: 2)");
+    episodes_option = cmd->add_option("--episodes", episodes,
+                                      "episodes per method and seed, at most " +
+                                          std::to_string(kMaxEpisodes) + " (default: 100)");
+    AddSeedOption(cmd, "--first-seed", &first_seed, "seeds first-seed, first-seed + 1, ...");
     cmd->add_option("--threads", threads, "seeds run in parallel")->capture_default_str();
     cmd->add_option("--barrier", barrier,
                     "per-car (the permutation-invariant per-car network) or flat (an MLP on the "
@@ -50,20 +57,28 @@ struct ExperimentCommand {
         ->capture_default_str();
     cmd->add_option("--out", out, "directory for the data, per-seed models, result.json");
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
+    // A given --seeds / --episodes must be usable (0 is not "the default").
+    if (seeds_option->count() > 0) CheckRange("--seeds", seeds, 1, kMaxSeeds);
+    if (episodes_option->count() > 0) CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     experiments::DerbyExperimentOptions options =
         quick ? experiments::DerbyExperimentOptions::Quick()
               : experiments::DerbyExperimentOptions::Default();
     if (config_section.IsMap()) options.ApplyYaml(config_section, config_path + " [derby]");
-    if (seeds != 0) options.seeds = seeds;
-    if (episodes != 0) options.episodes = episodes;
+    if (seeds_option->count() > 0) options.seeds = seeds;
+    if (episodes_option->count() > 0) options.episodes = episodes;
     options.first_seed = first_seed;
     options.threads = threads;
     options.output_dir = out;
     options.barrier_kind = FromString(experiments::kDerbyBarrierKindNames, barrier, "--barrier");
+    options.Validate();      // before the first line of progress
+    CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
     const std::string name = ToString(experiments::kDerbyExperimentNames, experiment);
     std::cerr << "secure experiment " << name << ": " << options.seeds << " seeds x "
               << options.episodes << " episodes on " << options.threads << " threads"

@@ -2,6 +2,7 @@
 // and dispatches; see cbf_commands.cc, shield_commands.cc and pipeline_commands.cc.
 #include <CLI/CLI.hpp>
 #include <iostream>
+#include <new>
 
 #include "cli_common.h"
 #include "commands.h"
@@ -24,8 +25,15 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const secure::Error& e) {
-    std::cerr << "secure: error: " << e.what() << "\n";
-    return 1;
+    return secure::cli::ReportError(e.what());
+  } catch (const std::bad_alloc&) {
+    return secure::cli::ReportError(
+        "out of memory (an option asks for more than this machine has; see the limits in "
+        "apps/secure/README.md)");
+  } catch (const std::exception& e) {
+    return secure::cli::ReportError(e.what());
+  } catch (...) {
+    return secure::cli::ReportError("unknown error");
   }
   return 0;
 }

@@ -4,7 +4,7 @@
 //   secure policy train           BC or AIRL from a demonstrations CSV
 //   secure eval                   bc / airl / secure / ablations / bc+shield over seeds
 // Every stage reads and writes files, so users can bring their own data at any stage.
-#include <filesystem>
+#include <cmath>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -16,6 +16,7 @@
 #include "secure/cbf/barrier_net.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
+#include "secure/common/filesystem.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
 #include "secure/domains/double_integrator/expert.h"
@@ -31,6 +32,9 @@ namespace {
 
 namespace di = domains::double_integrator;
 
+// Safe-state augmentation: slowed copies per state (each multiplies the safe set).
+constexpr long kMaxSlowedCopies = 100;
+
 // ------------------------------------------------------------------------------------------
 struct DemoCommand {
   bool quick = false;
@@ -43,6 +47,9 @@ struct DemoCommand {
   std::string methods;
   YAML::Node config_section;
   std::string config_path;
+  CLI::Option* seeds_option = nullptr;
+  CLI::Option* episodes_option = nullptr;
+  DeferredError config_error;
 
   void Register(CLI::App& app, const Config& config) {
     CLI::App* cmd = app.add_subcommand(
@@ -50,14 +57,17 @@ struct DemoCommand {
         "The main job: the complete SECURE pipeline on the double-integrator reach-avoid task "
         "(demonstrations, learned barrier, BC and AIRL, shielded evaluation over seeds) and "
         "its results table");
-    config_section = config.Section("pipeline");
+    config_error.Capture([&] { config_section = config.Section("pipeline"); });
     config_path = config.path;
     AddConfigFlag(cmd, config);
     cmd->add_flag("--quick", quick, "a small profile (2 seeds x 20 episodes, short training)");
-    cmd->add_option("--seeds", seeds, "seeds (default: 10; --quick: 2)");
-    cmd->add_option("--episodes", episodes, "episodes per method and seed (default: 100)");
-    cmd->add_option("--first-seed", first_seed, "seeds first-seed, first-seed + 1, ...")
-        ->capture_default_str();
+    seeds_option = cmd->add_option(
+        "--seeds", seeds,
+        "seeds, at most " + std::to_string(kMaxSeeds) + " (default: 10; --quick: 2)");
+    episodes_option = cmd->add_option("--episodes", episodes,
+                                      "episodes per method and seed, at most " +
+                                          std::to_string(kMaxEpisodes) + " (default: 100)");
+    AddSeedOption(cmd, "--first-seed", &first_seed, "seeds first-seed, first-seed + 1, ...");
     cmd->add_option("--threads", threads, "seeds run in parallel")->capture_default_str();
     cmd->add_option("--methods", methods,
                     "comma-separated subset of bc, airl, secure, secure-random-safe, "
@@ -65,19 +75,27 @@ struct DemoCommand {
     cmd->add_option("--out", out,
                     "directory for the data, per-seed models and learning curves, result.json");
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
+    // A given --seeds / --episodes must be usable (0 is not "the default").
+    if (seeds_option->count() > 0) CheckRange("--seeds", seeds, 1, kMaxSeeds);
+    if (episodes_option->count() > 0) CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     experiments::PipelineOptions options =
         quick ? experiments::PipelineOptions::Quick() : experiments::PipelineOptions::Default();
     if (config_section.IsMap()) options.ApplyYaml(config_section, config_path + " [pipeline]");
-    if (seeds != 0) options.seeds = seeds;
-    if (episodes != 0) options.episodes = episodes;
+    if (seeds_option->count() > 0) options.seeds = seeds;
+    if (episodes_option->count() > 0) options.episodes = episodes;
     if (!methods.empty()) options.methods = eval::ParseMethods(methods);
     options.first_seed = first_seed;
     options.threads = threads;
     options.output_dir = out;
+    options.Validate();      // before the first line of progress
+    CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
     std::cerr << "secure demo: " << options.seeds << " seeds x " << options.episodes
               << " episodes per method on " << options.threads << " threads"
               << (out.empty() ? "" : ", writing to " + out) << "\n";
@@ -116,7 +134,8 @@ struct DemosGenerateCommand {
         "demos.csv, safe.csv, near_dangerous.csv in --out");
     cmd->add_option("--domain", domain, "domain: double-integrator")->required();
     cmd->add_option("--out", out, "output directory")->required();
-    cmd->add_option("--episodes", demos.episodes, "expert episodes to attempt")
+    cmd->add_option("--episodes", demos.episodes,
+                    "expert episodes to attempt, at most " + std::to_string(kMaxEpisodes))
         ->capture_default_str();
     cmd->add_option("--safe-states", safe_states,
                     "demonstration states (up to the goal) kept as safe states, at random")
@@ -135,21 +154,31 @@ struct DemosGenerateCommand {
         ->capture_default_str();
     cmd->add_flag("--stop-at-goal", demos.stop_at_goal,
                   "end each demonstration at the goal (default: run the full horizon)");
-    cmd->add_option("--seed", seed, "seed of all the data")->capture_default_str();
+    AddSeedOption(cmd, "--seed", &seed, "seed of all the data");
     cmd->add_flag("--json", json, "print counts as JSON");
     cmd->callback([this] { Run(); });
   }
 
   void Run() {
     CheckDoubleIntegratorDomain(domain);
-    SECURE_CHECK(safe_states > 0, "--safe-states = " << safe_states << ", must be > 0");
+    CheckRange("--episodes", demos.episodes, 1, kMaxEpisodes);
+    CheckRange("--safe-states", safe_states, 1, kMaxStates);
+    CheckRange("--slowed-copies", slowed_copies, 0, kMaxSlowedCopies);
+    CheckRange("--safe-states x (1 + --slowed-copies)", safe_states * (1L + slowed_copies), 1,
+               kMaxStates);
+    CheckRange("--near-dangerous", near_dangerous.count, 1, kMaxStates);
     demos.seed = seed;
+    task.Validate();
+    expert.Validate();
+    demos.Validate();
+    near_dangerous.Validate();
+    // Before the work: an unusable --out (a file, a read-only place) fails at once.
+    CreateDirectories(out);
     const di::Demonstrations d = di::GenerateDemonstrations(task, expert, demos);
     Rng rng(seed + 1);
     const data::StateSet safe = di::WithSlowedCopies(
         di::SafeStatesFromDemonstrations(di::UntilGoal(d), safe_states, rng), slowed_copies, rng);
     const data::StateSet nd = di::GenerateNearDangerous(task, near_dangerous, rng);
-    std::filesystem::create_directories(out);
     data::WriteTrajectories(out + "/demos.csv", d.trajectories);
     data::WriteStateSet(out + "/safe.csv", safe);
     data::WriteStateSet(out + "/near_dangerous.csv", nd);
@@ -190,12 +219,15 @@ struct PolicyTrainCommand {
   std::string config_path;
   // Flags that apply to one algorithm only: giving one with the other --algo is an error.
   std::vector<CLI::Option*> bc_only, airl_only;
+  DeferredError config_error;
 
   void Register(CLI::App& parent, const Config& config) {
     CLI::App* cmd = parent.add_subcommand(
         "train", "Train a Gaussian policy from demonstrations: behaviour cloning or AIRL (PPO)");
-    bc_yaml = config.Section("bc");
-    airl_yaml = config.Section("airl");
+    config_error.Capture([&] {
+      bc_yaml = config.Section("bc");
+      airl_yaml = config.Section("airl");
+    });
     config_path = config.path;
     AddConfigFlag(cmd, config);
     cmd->add_option("--algo", algo, "bc | airl")->required();
@@ -212,7 +244,7 @@ struct PolicyTrainCommand {
     bc_only.push_back(
         cmd->add_option("--action-features", action_features,
                         "BC only: comma-separated action columns (default: the domain's)"));
-    cmd->add_option("--seed", bc.seed, "seed of the training")->capture_default_str();
+    AddSeedOption(cmd, "--seed", &bc.seed, "seed of the training");
     bc_only.push_back(
         cmd->add_option("--epochs", bc.epochs, "BC only: epochs")->capture_default_str());
     airl_only.push_back(cmd->add_option("--iterations", airl.iterations,
@@ -242,7 +274,10 @@ struct PolicyTrainCommand {
         "restarted with the same command. A corrupt checkpoint, one from other options or "
         "data, or one with more iterations than --iterations is an error"));
     cmd->add_flag("--json", json, "print the training summary as JSON");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
@@ -345,8 +380,10 @@ struct EvalCommand {
     cmd->add_option("--seeds", seeds,
                     "evaluation seeds (with --run: the number of seed-<k> directories used)")
         ->capture_default_str();
-    cmd->add_option("--first-seed", first_seed, "first seed")->capture_default_str();
-    cmd->add_option("--episodes", episodes, "episodes per method and seed")->capture_default_str();
+    AddSeedOption(cmd, "--first-seed", &first_seed, "first seed");
+    cmd->add_option("--episodes", episodes,
+                    "episodes per method and seed, at most " + std::to_string(kMaxEpisodes))
+        ->capture_default_str();
     cmd->add_option("--tost-bound", tost_bound, "TOST equivalence bound (fraction)")
         ->capture_default_str();
     shield_flags.Add(cmd, &shield);
@@ -363,7 +400,11 @@ struct EvalCommand {
   void Run() {
     CheckDoubleIntegratorDomain(domain);
     shield_flags.ApplyTo(&shield);
-    SECURE_CHECK(seeds > 0, "--seeds = " << seeds << ", must be > 0");
+    CheckRange("--seeds", seeds, 1, kMaxSeeds);
+    CheckRange("--episodes", episodes, 1, kMaxEpisodes);
+    SECURE_CHECK(std::isfinite(tost_bound) && tost_bound > 0,
+                 "--tost-bound = " << tost_bound << ", must be > 0");
+    shield.Validate();
     SECURE_CHECK(!run_dir.empty() || !airl_path.empty() || !bc_path.empty(),
                  "give --run DIR or at least one of --airl, --bc");
     std::vector<eval::Method> list;

@@ -47,21 +47,25 @@ struct ShieldRunCommand {
   ShieldFlags shield_flags;
   bool unshielded = false;
   bool json = false;
+  DeferredError config_error;
 
   void Register(CLI::App& app, const Config& config) {
     CLI::App* cmd = app.add_subcommand(
         "run",
         "Closed-loop episodes of a noisy goal-seeking policy past an obstacle, with the CBF "
         "shield in the loop (or --unshielded): collisions, successes, interventions, latency");
-    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+    config_error.Capture([&] {
+      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+    });
     AddConfigFlag(cmd, config);
     cmd->add_option("--domain", domain, "domain: double-integrator")->required();
     cmd->add_option("--barrier", barrier,
                     "the shield's barrier: 'ground-truth' or a barrier model file")
         ->required();
-    cmd->add_option("--episodes", options.episodes, "episodes")->capture_default_str();
-    cmd->add_option("--seed", options.seed, "seed for start states, shield and policy noise")
+    cmd->add_option("--episodes", options.episodes,
+                    "episodes, at most " + std::to_string(kMaxEpisodes))
         ->capture_default_str();
+    AddSeedOption(cmd, "--seed", &options.seed, "seed for start states, shield and policy noise");
     cmd->add_flag("--unshielded", unshielded,
                   "apply the policy's sampled actions directly (the baseline)");
     AddGroundTruthFlags(cmd, &options.truth, &obstacle);
@@ -81,11 +85,15 @@ struct ShieldRunCommand {
     cmd->add_option("--dt", options.dt, "control period (environment step and the shield's dt)")
         ->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   void Run() {
     CheckDoubleIntegratorDomain(domain);
+    CheckRange("--episodes", options.episodes, 1, kMaxEpisodes);
     FinishGroundTruth(obstacle, &options.truth);
     if (goal.size() == 2) {
       options.goal_x = goal[0];
