@@ -13,6 +13,7 @@
 
 #include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/atomic_file.h"
+#include "secure/common/filesystem.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/common/strings.h"
@@ -474,8 +475,7 @@ class AirlRun {
                               .clone());
     std::ostringstream bytes;
     archive.save_to(bytes);
-    const std::filesystem::path parent = std::filesystem::path(path).parent_path();
-    if (!parent.empty()) std::filesystem::create_directories(parent);
+    CreateDirectories(std::filesystem::path(path).parent_path().string());
     WriteFileAtomically(path, FrameCheckpoint(bytes.str()));
   }
 
@@ -880,10 +880,8 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
   const double previous_seconds = run.previous_seconds();
   auto total_seconds = [&] { return previous_seconds + clock.Seconds(); };
 
-  if (!options.curve_path.empty()) {
-    const std::filesystem::path parent = std::filesystem::path(options.curve_path).parent_path();
-    if (!parent.empty()) std::filesystem::create_directories(parent);
-  }
+  if (!options.curve_path.empty())
+    CreateDirectories(std::filesystem::path(options.curve_path).parent_path().string());
   s.stop_reason = "iterations";
   double last_report = -1e9;
   const bool stop_now =
