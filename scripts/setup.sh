@@ -3,6 +3,8 @@
 #
 #   scripts/setup.sh            install missing packages, configure, build everything
 #   scripts/setup.sh --deps     only install missing packages
+#   scripts/setup.sh --check-deps   only install missing packages, with those of the checking
+#                                   build (scripts/check.sh: sanitizers and fuzzers)
 #
 # Every dependency is a Debian package; nothing is downloaded at build time. Packages are
 # installed only when missing, so a second run is fast. Needs root or sudo for apt-get.
@@ -30,6 +32,11 @@ PACKAGES=(
   libmujoco-dev libqhull-dev
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
 )
+# The checking build (scripts/check.sh), installed only with --check-deps:
+#   clang libclang-rt-14-dev    clang and its AddressSanitizer / UBSan runtimes
+#   libfuzzer-14-dev            libFuzzer (tests/fuzz)
+CHECK_PACKAGES=(clang libclang-rt-14-dev libfuzzer-14-dev)
+if [ "${1:-}" = "--check-deps" ]; then PACKAGES+=("${CHECK_PACKAGES[@]}"); fi
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build_dir="${SECURE_BUILD_DIR:-$root/build}"
@@ -58,7 +65,7 @@ case "$blas" in
   *openblas*) ;;
   *) echo "setup: warning: libblas.so.3 resolves to '$blas', not OpenBLAS: training will be slow" >&2 ;;
 esac
-[ "${1:-}" = "--deps" ] && exit 0
+case "${1:-}" in --deps|--check-deps) exit 0 ;; esac
 
 jobs="$(nproc)"
 cmake -S "$root" -B "$build_dir" -DCMAKE_BUILD_TYPE=Release
