@@ -215,8 +215,11 @@ struct PolicyTrainCommand {
   policy::AirlOptions airl;
   di::ReachAvoidOptions task;
   bool json = false;
-  YAML::Node bc_yaml, airl_yaml;
-  std::string config_path;
+  // --seed and --curve serve both algorithms: copied onto the chosen one's options if given.
+  std::uint64_t seed = 0;
+  std::string curve;
+  CLI::Option* seed_flag = nullptr;
+  CLI::Option* curve_flag = nullptr;
   // Flags that apply to one algorithm only: giving one with the other --algo is an error.
   std::vector<CLI::Option*> bc_only, airl_only;
   DeferredError config_error;
@@ -224,11 +227,13 @@ struct PolicyTrainCommand {
   void Register(CLI::App& parent, const Config& config) {
     CLI::App* cmd = parent.add_subcommand(
         "train", "Train a Gaussian policy from demonstrations: behaviour cloning or AIRL (PPO)");
+    // The config's sections are applied now, before the flags are parsed, so that flags override
+    // them (an error is raised only if this command runs).
     config_error.Capture([&] {
-      bc_yaml = config.Section("bc");
-      airl_yaml = config.Section("airl");
+      const YAML::Node bc_yaml = config.Section("bc"), airl_yaml = config.Section("airl");
+      if (bc_yaml.IsMap()) bc.ApplyYaml(bc_yaml, config.path + " [bc]");
+      if (airl_yaml.IsMap()) airl.ApplyYaml(airl_yaml, config.path + " [airl]");
     });
-    config_path = config.path;
     AddConfigFlag(cmd, config);
     cmd->add_option("--algo", algo, "bc | airl")->required();
     cmd->add_option("--demos", demos_path, "demonstrations CSV (episode, state and action columns)")
@@ -244,7 +249,7 @@ struct PolicyTrainCommand {
     bc_only.push_back(
         cmd->add_option("--action-features", action_features,
                         "BC only: comma-separated action columns (default: the domain's)"));
-    AddSeedOption(cmd, "--seed", &bc.seed, "seed of the training");
+    seed_flag = AddSeedOption(cmd, "--seed", &seed, "seed of the training (default: the config's, else 0)");
     bc_only.push_back(
         cmd->add_option("--epochs", bc.epochs, "BC only: epochs")->capture_default_str());
     airl_only.push_back(cmd->add_option("--iterations", airl.iterations,
@@ -259,7 +264,7 @@ struct PolicyTrainCommand {
             ->capture_default_str());
     airl_only.push_back(cmd->add_option("--warm-start", warm_start,
                                         "AIRL only: initialise the policy from this model"));
-    cmd->add_option("--curve", bc.curve_path, "write the learning curve to this CSV");
+    curve_flag = cmd->add_option("--curve", curve, "write the learning curve to this CSV");
     airl_only.push_back(cmd->add_option(
         "--checkpoint", airl.checkpoint_path,
         "AIRL only: checkpoint file (checksummed), written every --checkpoint-every "
@@ -288,8 +293,9 @@ struct PolicyTrainCommand {
                    option->get_name() << " applies to --algo " << (algo == "bc" ? "airl" : "bc")
                                       << " only (this run: --algo " << algo << ")");
     }
+    if (seed_flag->count() > 0) bc.seed = airl.seed = seed;
+    if (curve_flag->count() > 0) bc.curve_path = airl.curve_path = curve;
     if (algo == "airl") {
-      if (airl_yaml.IsMap()) airl.ApplyYaml(airl_yaml, config_path + " [airl]");
       SECURE_CHECK(!airl.resume || !airl.checkpoint_path.empty(),
                    "--resume needs --checkpoint FILE (the checkpoint to continue from)");
     }
@@ -304,15 +310,12 @@ struct PolicyTrainCommand {
     std::string brief;
     policy::GaussianPolicy trained;
     if (algo == "bc") {
-      if (bc_yaml.IsMap()) ApplyYamlKeepingFlags(bc_yaml);
       bc.verbose = !json;
       policy::BcSummary summary;
       trained = policy::TrainBc(bc, demos, &summary);
       summary_json = summary.ToJson();
       brief = summary.BriefReport();
     } else {
-      airl.seed = bc.seed;
-      airl.curve_path = bc.curve_path;
       airl.reward = FromString(policy::kAirlRewardNames, reward, "--reward");
       airl.verbose = !json;
       std::optional<policy::GaussianPolicy> start;
@@ -336,16 +339,6 @@ struct PolicyTrainCommand {
     } else {
       std::cout << algo << ": " << brief << "\nsaved " << out << "\n";
     }
-  }
-
-  // The YAML bc section, with flags given on the command line taking precedence over it.
-  void ApplyYamlKeepingFlags(const YAML::Node& node) {
-    const policy::BcOptions from_flags = bc;
-    bc.ApplyYaml(node, config_path + " [bc]");
-    const policy::BcOptions defaults;
-    if (from_flags.epochs != defaults.epochs) bc.epochs = from_flags.epochs;
-    if (from_flags.seed != defaults.seed) bc.seed = from_flags.seed;
-    if (!from_flags.curve_path.empty()) bc.curve_path = from_flags.curve_path;
   }
 };
 

@@ -751,3 +751,46 @@ TEST(CliHardeningTest, ANonFinitePredictionNamesTheInputLine) {
 }
 
 }  // namespace
+
+// ------------------------------------------------------------------------------------------
+// `policy train --config`: flags override the [bc] / [airl] sections, also when a flag's value
+// equals the built-in default, and --seed / --curve reach the algorithm that runs.
+
+// The training options recorded in a model file's provenance.
+nlohmann::json ModelOptions(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  std::getline(in, line);  // format line
+  std::getline(in, line);  // JSON header
+  return nlohmann::json::parse(line)["metadata"]["provenance"]["options"];
+}
+
+TEST(CliTest, PolicyTrainFlagsOverrideTheConfigSections) {
+  const std::string dir = (TempDir() / "precedence").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 4 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string config =
+      Write("precedence.yaml", "bc:\n  epochs: 3\n  seed: 9\nairl:\n  iterations: 1\n  seed: 9\n");
+  const std::string base =
+      "policy train --config " + config + " --demos " + dir + "/demos.csv --out " + dir;
+
+  r = RunCli(base + "/bc1.model --algo bc");  // the config alone
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  nlohmann::json o = ModelOptions(dir + "/bc1.model");
+  EXPECT_EQ(o["epochs"], 3);
+  EXPECT_EQ(o["seed"], 9);
+  r = RunCli(base + "/bc2.model --algo bc --epochs 80 --seed 0");  // flags equal to the defaults
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  o = ModelOptions(dir + "/bc2.model");
+  EXPECT_EQ(o["epochs"], 80);
+  EXPECT_EQ(o["seed"], 0);
+
+  r = RunCli(base + "/airl1.model --algo airl");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  o = ModelOptions(dir + "/airl1.model");
+  EXPECT_EQ(o["iterations"], 1);
+  EXPECT_EQ(o["seed"], 9);
+  r = RunCli(base + "/airl2.model --algo airl --seed 4");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(ModelOptions(dir + "/airl2.model")["seed"], 4);
+}
