@@ -10,6 +10,7 @@
 
 #include "cli_common.h"
 #include "commands.h"
+#include "secure/cbf/barrier_check.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/double_integrator_study.h"
@@ -99,7 +100,7 @@ struct TrainCommand {
   TrainerFlags trainer_flags;
   di::GroundTruth truth;
   std::vector<double> obstacle;
-  std::string domain, safe_path, nd_path, features, out;
+  std::string domain, safe_path, nd_path, features, out, augment_from;
   long n_safe = 800, n_unsafe = 800;
   std::uint64_t seed = 0;
   double test_fraction = 0.0;
@@ -133,6 +134,8 @@ struct TrainCommand {
                     "hold out this fraction of each class before training and report the "
                     "model's accuracy on it, in [0, 1)")
         ->capture_default_str();
+    cmd->add_option("--augment-from", augment_from,
+                    "a `cbf check` CSV: its states join the near-dangerous training states");
     trainer_flags.Add(cmd, cbf::BarrierTrainerOptions{});
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] {
@@ -177,8 +180,17 @@ struct TrainCommand {
       std::tie(safe, safe_test) = data::SplitStateSet(safe, test_fraction, rng);
       std::tie(nd, nd_test) = data::SplitStateSet(nd, test_fraction, rng);
     }
+    long augmented = 0;  // after the test split: the test set stays the original data
+    if (!augment_from.empty()) {
+      const data::StateSet extra = cbf::ReadCheckStates(augment_from, nd.features);
+      augmented = extra.size();
+      nd.states.conservativeResize(Eigen::NoChange, nd.size() + augmented);
+      nd.states.rightCols(augmented) = extra.states;
+    }
     cbf::BarrierTrainingSummary summary;
     cbf::BarrierNet net = cbf::TrainBarrier(trainer, safe, nd, &summary);
+    if (!augment_from.empty())
+      net.provenance["augmented_from"] = {{"file", augment_from}, {"states", augmented}};
     std::optional<cbf::ClassAccuracy> test;
     // The accuracy of a class with no held-out state is undefined: null in JSON, n/a in text.
     const auto accuracy_json = [](long n, double accuracy) {
@@ -415,6 +427,7 @@ void RegisterCbfCommands(CLI::App& app, const Config& config) {
   table1.Register(*cbf, config, "table1",
                   "The paper's Table 1: learn the double-integrator CBF over seeds, validate on "
                   "the 9M-state grid");
+  RegisterCbfCheckCommand(*cbf, config);
 }
 
 }  // namespace secure::cli

@@ -6,6 +6,8 @@
 namespace secure::cli {
 /// secure cbf ...
 void RegisterCbfCommands(CLI::App& app, const Config& config);
+/// secure cbf check (cbf_check_command.cc), registered by RegisterCbfCommands.
+void RegisterCbfCheckCommand(CLI::App& cbf, const Config& config);
 /// secure shield run.
 void RegisterShieldCommands(CLI::App& app, const Config& config);
 /// secure demo, secure demos generate, secure policy train, secure eval.

@@ -20,6 +20,7 @@
 #include "secure/common/limits.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
+#include "secure/common/yaml_value.h"
 #include "secure/data/data.h"
 #include "secure/experiments/internal/seed_runner.h"
 #include "secure/nn/torch_threads.h"
@@ -92,7 +93,28 @@ struct SeedOutcome {
 struct SharedData {
   data::TrajectorySet demos;
   data::StateSet safe, near_dangerous;
+  data::StateSet check_safe, check_near_dangerous;  // held-out, for the barrier check
 };
+
+constexpr std::uint64_t kCheckDataSalt = 0xc4ec4da7aULL;
+
+// The barrier check of one seed's barrier (the Derby glue is MakeDerbyCheckProblem).
+cbf::CheckReport CheckSeedBarrier(const DerbyExperimentOptions& o, const SharedData& data,
+                                  const std::function<std::unique_ptr<cbf::Barrier>()>& factory) {
+  std::unique_ptr<domains::DynamicsModel> dynamics;
+  const cbf::BarrierCheckProblem problem = MakeDerbyCheckProblem(
+      o.task, o.shield, data.check_safe, data.check_near_dangerous, &dynamics);
+  const std::unique_ptr<cbf::Barrier> barrier = factory();
+  return cbf::CheckBarrier(*barrier, *dynamics, problem, o.check);
+}
+
+std::string CheckBrief(const cbf::CheckReport& r) {
+  char line[256];
+  std::snprintf(line, sizeof line, "%s (a %.3f, b %.3f, c %.3f; held-out accuracy %.3f / %.3f)",
+                r.Verdict().c_str(), r.no_safe_action.rate(), r.near_dangerous.rate(),
+                r.unsafe.rate(), r.accuracy_safe, r.accuracy_near_dangerous);
+  return line;
+}
 
 SeedOutcome RunSeed(DerbyExperiment experiment, const DerbyExperimentOptions& o, int index,
                     const SharedData& data, const derby::DerbyEnv& env,
@@ -170,6 +192,57 @@ SeedOutcome RunSeed(DerbyExperiment experiment, const DerbyExperimentOptions& o,
           << near_dangerous.size() << " near-dangerous): " << brief << " (" << clock.Seconds()
           << " s)";
     });
+
+    // The pre-deployment check (its own streams; nothing above or below depends on it), and
+    // with augment_flagged one retraining round with the counterexamples as near-dangerous states.
+    if (o.check_enabled) {
+      const Stopwatch check_clock;
+      cbf::CheckReport report = CheckSeedBarrier(o, data, barrier.Factory());
+      nlohmann::json& record = outcome.summary["barriers"][variant.name];
+      record["check"] = report.ToJson();
+      record["check"]["seconds"] = check_clock.Seconds();
+      if (!dir.empty()) {
+        std::string file = variant.name;
+        for (char& c : file)
+          if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+        report.WriteCsv(dir + "/check_" + file + ".csv");
+      }
+      progress.Line([&](std::ostream& out) {
+        out << tag << " barrier check (" << variant.name << "): " << CheckBrief(report) << " ("
+            << check_clock.Seconds() << " s)";
+      });
+      if (o.augment_flagged && report.flagged && !report.worst.empty()) {
+        const Stopwatch augment_clock;
+        const long added = static_cast<long>(report.worst.size());
+        Eigen::MatrixXf states(near_dangerous.states.rows(), near_dangerous.size() + added);
+        states.leftCols(near_dangerous.size()) = near_dangerous.states;
+        for (long i = 0; i < added; ++i)
+          states.col(near_dangerous.size() + i) = report.worst[static_cast<std::size_t>(i)].state;
+        near_dangerous.states = std::move(states);
+        barrier = TrainSeedBarrier(o, seed, safe, near_dangerous, &brief);
+        cbf::CheckReport after = CheckSeedBarrier(o, data, barrier.Factory());
+        record["augmented"] = {{"added_near_dangerous_states", added},
+                               {"training", barrier.summary},
+                               {"check", after.ToJson()},
+                               {"seconds", augment_clock.Seconds()}};
+        progress.Line([&](std::ostream& out) {
+          out << tag << " barrier retrained with " << added
+              << " counterexamples as near-dangerous states: " << brief << "; check "
+              << CheckBrief(after) << " (" << augment_clock.Seconds() << " s)";
+        });
+        if (!dir.empty()) {
+          std::string file = variant.name;
+          for (char& c : file)
+            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+          barrier.Save(dir + "/barrier_" + file + "_augmented.model");
+        }
+      }
+      if (&variant == &variants.front()) {
+        outcome.summary["check"] = record["check"];
+        if (record.contains("augmented"))
+          outcome.summary["check_augmented"] = record["augmented"]["check"];
+      }
+    }
 
     // The joint policy needs the (baseline) barrier.
     std::optional<policy::GaussianPolicy> joint;
@@ -308,6 +381,15 @@ std::vector<eval::Method> DerbyMethods(DerbyExperiment experiment) {
   return {};
 }
 
+cbf::BarrierCheckOptions DerbyExperimentOptions::DerbyCheckDefaults() {
+  // The generic defaults with more samples: on the per-car barrier the whole check takes
+  // about 1 s per barrier on one core.
+  cbf::BarrierCheckOptions c;
+  c.region_samples = 2000;
+  c.near_samples = 2000;
+  return c;
+}
+
 DerbyExperimentOptions DerbyExperimentOptions::Default() {
   DerbyExperimentOptions o;
   o.near_dangerous.count = 1024;
@@ -379,6 +461,8 @@ void DerbyExperimentOptions::Validate() const {
   for (int k : imbalance_ratios) SECURE_DERBY_CHECK(k >= 1, "imbalance_ratios[]", k, ">= 1");
   for (double p : label_noise)
     SECURE_DERBY_CHECK(p >= 0 && p < 1, "label_noise[]", p, "in [0, 1)");
+  SECURE_DERBY_CHECK(check_held_out > 0, "check_held_out", check_held_out, "> 0");
+  check.Validate();
 }
 
 void DerbyExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -396,9 +480,25 @@ void DerbyExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string
       airl.ApplyYaml(entry.second, where);
     } else if (key == "joint") {
       joint.ApplyYaml(entry.second, where);
+    } else if (key == "check") {
+      SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping of check options");
+      YAML::Node rest(YAML::NodeType::Map);
+      for (const auto& item : entry.second) {
+        const std::string name = item.first.as<std::string>();
+        if (name == "enabled") {
+          check_enabled = YamlValue<bool>(item.second, name, where);
+        } else if (name == "held_out") {
+          check_held_out = YamlValue<long>(item.second, name, where);
+        } else if (name == "augment") {
+          augment_flagged = YamlValue<bool>(item.second, name, where);
+        } else {
+          rest[name] = item.second;
+        }
+      }
+      check.ApplyYaml(rest, where);
     } else {
       SECURE_THROW(source << ": unknown section '" << key
-                          << "' (valid: barrier, flat_barrier, bc, airl, joint)");
+                          << "' (valid: barrier, flat_barrier, bc, airl, joint, check)");
     }
   }
 }
@@ -424,6 +524,10 @@ nlohmann::json DerbyExperimentOptions::ToJson() const {
           {"data_fractions", data_fractions},
           {"imbalance_ratios", imbalance_ratios},
           {"label_noise", label_noise},
+          {"check_enabled", check_enabled},
+          {"check_held_out", check_held_out},
+          {"check", check.ToJson()},
+          {"augment_flagged", augment_flagged},
           {"threads", threads}};
 }
 
@@ -461,6 +565,7 @@ std::string DerbyExperimentResult::Table() const {
       << ToString(kDerbyBarrierKindNames, options.barrier_kind) << " barrier)\n\n";
   if (experiment != DerbyExperiment::kSensitivity) {
     out << evaluations.front().second.Table();
+    out << CheckTable();
     return out.str();
   }
   const std::size_t seeds = options.seeds;
@@ -484,7 +589,139 @@ std::string DerbyExperimentResult::Table() const {
                   s.interventions_per_episode.mean, no_safe);
     out << line;
   }
+  out << CheckTable();
   return out.str();
+}
+
+std::string DerbyExperimentResult::CheckTable() const {
+  if (seed_summaries.empty() || !seed_summaries.front().contains("check")) return "";
+  const auto& methods = evaluations.front().second.methods();
+  const auto secure_it = methods.find(eval::Method::kSecure);
+  std::ostringstream out;
+  out << "\nBarrier check per seed (" << evaluations.front().first
+      << " barrier; rates: (a) h >= 0 without an action with g >= 0, (b) near a near-dangerous "
+         "state with h >= 0, (c) within the collision radius with h >= 0)\n\n"
+      << "| seed | check | rate (a) | rate (b) | rate (c) | held-out accuracy safe / nd | "
+         "SECURE dangerous % |\n|---|---|---|---|---|---|---|\n";
+  long flagged = 0;
+  for (std::size_t i = 0; i < seed_summaries.size(); ++i) {
+    const nlohmann::json& c = seed_summaries[i]["check"];
+    const nlohmann::json& kinds = c["kinds"];
+    const bool is_flagged = c.value("flagged", false);
+    flagged += is_flagged;
+    std::string dangerous = "-";
+    if (secure_it != methods.end() && i < secure_it->second.per_seed.size()) {
+      char buffer[32];
+      std::snprintf(buffer, sizeof buffer, "%.1f",
+                    100 * secure_it->second.per_seed[i].dangerous_rate());
+      dangerous = buffer;
+    }
+    std::string verdict = is_flagged ? "**flagged**" : "pass";
+    if (seed_summaries[i].contains("check_augmented"))
+      verdict += std::string(" -> retrained: ") +
+                 (seed_summaries[i]["check_augmented"].value("flagged", false) ? "flagged"
+                                                                              : "pass");
+    double acc_safe = 0, acc_nd = 0;
+    if (c.contains("accuracy") && c["accuracy"].is_object()) {
+      acc_safe = c["accuracy"].value("safe", 0.0);
+      acc_nd = c["accuracy"].value("near_dangerous", 0.0);
+    }
+    char line[256];
+    std::snprintf(line, sizeof line, "| %llu | %s | %.4f | %.4f | %.4f | %.3f / %.3f | %s |\n",
+                  static_cast<unsigned long long>(options.first_seed + i), verdict.c_str(),
+                  kinds["no_safe_action"].value("rate", 0.0),
+                  kinds["near_dangerous"].value("rate", 0.0), kinds["unsafe"].value("rate", 0.0),
+                  acc_safe, acc_nd, dangerous.c_str());
+    out << line;
+  }
+  out << "\n" << flagged << " of " << seed_summaries.size() << " seeds flagged (thresholds: "
+      << options.check.thresholds.ToJson().dump() << ").\n";
+  return out.str();
+}
+
+void DerbyCheckHeldOut(const DerbyExperimentOptions& o,
+                       const derby::DerbyDemonstrations& demonstrations, data::StateSet* safe,
+                       data::StateSet* near_dangerous) {
+  Rng check_rng(o.data_seed ^ kCheckDataSalt);
+  derby::DerbyNearDangerousOptions nd_options = o.near_dangerous;
+  nd_options.count = o.check_held_out;
+  *safe = derby::SafeStatesFromDemonstrations(demonstrations.trajectories, o.check_held_out,
+                                              check_rng);
+  *near_dangerous = derby::GenerateDerbyNearDangerous(o.task, demonstrations, nd_options, check_rng);
+  safe->source = "held-out safe states (data_seed " + std::to_string(o.data_seed) + ")";
+  near_dangerous->source =
+      "held-out near-dangerous states (data_seed " + std::to_string(o.data_seed) + ")";
+}
+
+void DerbyCheckHeldOut(const DerbyExperimentOptions& o, data::StateSet* safe,
+                       data::StateSet* near_dangerous) {
+  derby::DerbyDemonstrationOptions demo_options = o.demonstrations;
+  demo_options.seed = o.data_seed;
+  const derby::DerbyDemonstrations demos =
+      derby::GenerateDerbyDemonstrations(o.task, o.expert, demo_options);
+  DerbyCheckHeldOut(o, demos, safe, near_dangerous);
+}
+
+cbf::BarrierCheckProblem MakeDerbyCheckProblem(const derby::DerbyOptions& task,
+                                               const shield::ShieldOptions& shield_options,
+                                               const data::StateSet& safe,
+                                               const data::StateSet& near_dangerous,
+                                               std::unique_ptr<domains::DynamicsModel>* dynamics) {
+  SECURE_CHECK(safe.states.rows() == derby::kObservationDim &&
+                   near_dangerous.states.rows() == derby::kObservationDim,
+               "the Derby barrier check needs observations of " << derby::kObservationDim
+                                                                << " values; got "
+                                                                << safe.states.rows() << " ("
+                                                                << safe.source << ") and "
+                                                                << near_dangerous.states.rows()
+                                                                << " (" << near_dangerous.source
+                                                                << ")");
+  data::CheckNonEmptyFinite(safe, "Derby barrier check: safe states");
+  data::CheckNonEmptyFinite(near_dangerous, "Derby barrier check: near-dangerous states");
+  task.Validate();
+  shield_options.Validate();
+  *dynamics = std::make_unique<derby::DerbyShieldModel>(task.dt, task.accel_bound,
+                                                        task.lookahead_steps);
+  cbf::BarrierCheckProblem p;
+  p.action_lo = Eigen::VectorXf::Constant(derby::kActionDim, -float(task.accel_bound));
+  p.action_hi = Eigen::VectorXf::Constant(derby::kActionDim, float(task.accel_bound));
+  p.dt = shield_options.dt;
+  p.class_k = [shield_options](double h) { return shield::ClassKValue(shield_options, h); };
+  p.class_k_description = ToString(shield::kClassKNames, shield_options.class_k) + ", k = " +
+                          std::to_string(shield_options.class_k_gain);
+  p.near_dangerous = near_dangerous;
+  p.held_out_safe = safe;
+  p.held_out_near_dangerous = near_dangerous;
+  const Eigen::MatrixXf safe_states = safe.states, nd_states = near_dangerous.states;
+  p.sample_region = [safe_states, nd_states](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
+    const bool from_safe = rng.Uniform() < 0.5;
+    const Eigen::MatrixXf& pool = from_safe ? safe_states : nd_states;
+    s = pool.col(static_cast<long>(rng.UniformIndex(static_cast<std::uint64_t>(pool.cols()))));
+    s[2] += static_cast<float>(0.1 * rng.Normal());
+    s[3] += static_cast<float>(0.1 * rng.Normal());
+    for (int c = 0; c < derby::kObservedCars; ++c) {
+      const int b = derby::kFirstCarOffset + derby::kCarStride * c;
+      s[b] += static_cast<float>(0.03 * rng.Normal());
+      s[b + 1] += static_cast<float>(0.03 * rng.Normal());
+      s[b + 2] += static_cast<float>(0.05 * rng.Normal());
+      s[b + 3] += static_cast<float>(0.05 * rng.Normal());
+    }
+  };
+  const double r2 = task.collision_radius * task.collision_radius;
+  p.is_unsafe = [r2](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    for (int c = 0; c < derby::kObservedCars; ++c) {
+      const int b = derby::kFirstCarOffset + derby::kCarStride * c;
+      const double dx = s[b], dy = s[b + 1];
+      if (dx * dx + dy * dy <= r2) return true;
+    }
+    return false;
+  };
+  p.is_unsafe_description =
+      "an observed car within the collision radius " + std::to_string(task.collision_radius);
+  p.region_description =
+      "safe and near-dangerous observations, perturbed (ego velocity sd 0.1, car positions sd "
+      "0.03, car velocities sd 0.05)";
+  return p;
 }
 
 DerbyExperimentResult RunDerbyExperiment(DerbyExperiment experiment,
@@ -513,6 +750,8 @@ DerbyExperimentResult RunDerbyExperiment(DerbyExperiment experiment,
     result.demonstrations = demos.trajectories.num_episodes();
     result.discarded_demonstrations = demos.discarded_collisions + demos.discarded_no_goal;
     result.demonstration_steps = demos.trajectories.num_steps();
+    if (o.check_enabled)
+      DerbyCheckHeldOut(o, demos, &shared.check_safe, &shared.check_near_dangerous);
   }
   result.safe_states = shared.safe.size();
   result.near_dangerous_states = shared.near_dangerous.size();
@@ -521,6 +760,11 @@ DerbyExperimentResult RunDerbyExperiment(DerbyExperiment experiment,
     data::WriteTrajectories(o.output_dir + "/demos.csv", shared.demos);
     data::WriteStateSet(o.output_dir + "/safe.csv", shared.safe);
     data::WriteStateSet(o.output_dir + "/near_dangerous.csv", shared.near_dangerous);
+    if (o.check_enabled) {
+      data::WriteStateSet(o.output_dir + "/check_safe.csv", shared.check_safe);
+      data::WriteStateSet(o.output_dir + "/check_near_dangerous.csv",
+                          shared.check_near_dangerous);
+    }
   }
   progress.Line([&](std::ostream& line) {
     line << "data: " << result.demonstrations << " expert demonstrations ("

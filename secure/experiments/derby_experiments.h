@@ -25,11 +25,13 @@
 // Seeds run in parallel on `threads` workers; results do not depend on the number of workers.
 #include <cstdint>
 #include <iosfwd>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "secure/cbf/barrier_check.h"
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/car_barrier_trainer.h"
 #include "secure/common/enum_strings.h"
@@ -108,6 +110,19 @@ struct DerbyExperimentOptions {
   long episodes = 100;
   std::uint64_t first_seed = 0;  // seeds first_seed, first_seed + 1, ...
 
+  // The pre-deployment barrier check (cbf/barrier_check.h) of every seed's barrier(s), recorded
+  // in the seed's summary ("barriers": {variant: {"check": ...}}, and "check" for the first
+  // variant) and in Table(). Its own streams: held-out states from the demonstrations with an Rng
+  // seeded data_seed ^ 0xc4ec4da7a, the search from check.seed; the experiment's numbers do not depend on it.
+  bool check_enabled = true;
+  long check_held_out = 256;  // held-out safe and near-dangerous states (each) for the check
+  cbf::BarrierCheckOptions check = DerbyCheckDefaults();
+  // If a seed's barrier is flagged: add its counterexamples (the check's worst examples, all
+  // kinds) to the near-dangerous states, retrain the barrier once (same seed), check it again,
+  // and evaluate SECURE with the retrained barrier. Off by default (it changes the numbers of
+  // the flagged seeds).
+  bool augment_flagged = false;
+
   // derby-sensitivity.
   std::vector<double> data_fractions = {1.0, 0.1, 0.01};
   std::vector<int> imbalance_ratios = {1, 2, 4, 8};
@@ -117,6 +132,9 @@ struct DerbyExperimentOptions {
   std::string output_dir;  // if set: data CSVs, per-seed models, result.json
   bool verbose = true;     // progress lines on the progress stream
 
+  /// The check's Derby defaults: cbf::BarrierCheckOptions with 2000 region and 2000
+  /// near-dangerous samples (about 1 s per per-car barrier).
+  static cbf::BarrierCheckOptions DerbyCheckDefaults();
   /// The defaults (the full protocol).
   static DerbyExperimentOptions Default();
   /// A small profile for tests and smoke runs (2 seeds x 10 episodes, short training).
@@ -125,11 +143,41 @@ struct DerbyExperimentOptions {
   /// Throws secure::Error naming the field, value and rule.
   void Validate() const;
   /// Sections of a YAML mapping: barrier (per-car trainer), flat_barrier, bc, airl, joint
-  /// (policy::JointCbfOptions, e.g. `joint: {weight: 10}`); unknown sections are an error
-  /// naming `source`.
+  /// (policy::JointCbfOptions, e.g. `joint: {weight: 10}`), check (cbf::BarrierCheckOptions
+  /// plus `enabled`, `held_out` and `augment` for the three fields above); unknown sections are
+  /// an error naming `source`.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
 };
+
+/// The barrier check's inputs on Demolition Derby (the domain glue of cbf::CheckBarrier):
+///  - dynamics: the shield's model, DerbyShieldModel(task.dt, task.accel_bound,
+///    task.lookahead_steps); action box [-accel_bound, accel_bound]^2; dt, class-K and gain from
+///    `shield`;
+///  - region: a state of `safe` or of `near_dangerous` (each with probability 1/2), perturbed:
+///    ego velocity + N(0, 0.1^2) per axis, every observed car's relative position + N(0, 0.03^2)
+///    and relative velocity + N(0, 0.05^2) per axis (the goal offset unchanged);
+///  - unsafe test (c): some observed car within task.collision_radius of the ego (the 12
+///    observed cars; the observation has no others);
+///  - (b) and the held-out accuracy: `near_dangerous` and `safe`.
+/// `safe` and `near_dangerous` must be observations (kObservationDim rows); the returned problem
+/// keeps copies. The dynamics model is returned through `dynamics` (it must outlive the check).
+cbf::BarrierCheckProblem MakeDerbyCheckProblem(const domains::derby::DerbyOptions& task,
+                                               const shield::ShieldOptions& shield,
+                                               const data::StateSet& safe,
+                                               const data::StateSet& near_dangerous,
+                                               std::unique_ptr<domains::DynamicsModel>* dynamics);
+
+/// The held-out states of the experiment's barrier check: `check_held_out` safe states
+/// (demonstration observations) and near-dangerous states (the domain's generator), drawn from
+/// the demonstrations of data_seed with an Rng seeded data_seed ^ 0xc4ec4da7a (so they differ
+/// from the training states, drawn from data_seed + 1). The second form regenerates the
+/// demonstrations first (0.3 s for 1000), so a CLI run reproduces the experiment's check.
+void DerbyCheckHeldOut(const DerbyExperimentOptions& o,
+                       const domains::derby::DerbyDemonstrations& demonstrations,
+                       data::StateSet* safe, data::StateSet* near_dangerous);
+void DerbyCheckHeldOut(const DerbyExperimentOptions& o, data::StateSet* safe,
+                       data::StateSet* near_dangerous);
 
 /// The methods an experiment evaluates, in table order.
 std::vector<eval::Method> DerbyMethods(DerbyExperiment experiment);
@@ -151,8 +199,11 @@ struct DerbyExperimentResult {
   /// "experiment": {name, data counts, per-seed summaries, options}. Sensitivity: "variants":
   /// {name: {"variant": ..., evaluation JSON}} plus "experiment".
   nlohmann::json ToJson() const;
-  /// Markdown: the method table(s) with the tests (sensitivity: one row per variant).
+  /// Markdown: the method table(s) with the tests (sensitivity: one row per variant), then, when
+  /// the barrier check ran, one row per seed: its verdict, rates and SECURE's dangerous rate.
   std::string Table() const;
+  /// The per-seed barrier-check table of Table() (empty when the check did not run).
+  std::string CheckTable() const;
 };
 
 /// Runs one experiment; progress lines go to `progress` when options.verbose (may be null).

@@ -750,8 +750,6 @@ TEST(CliHardeningTest, ANonFinitePredictionNamesTheInputLine) {
   EXPECT_FALSE(fs::exists(h));
 }
 
-}  // namespace
-
 // ------------------------------------------------------------------------------------------
 // `policy train --config`: flags override the [bc] / [airl] sections, also when a flag's value
 // equals the built-in default, and --seed / --curve reach the algorithm that runs.
@@ -794,3 +792,78 @@ TEST(CliTest, PolicyTrainFlagsOverrideTheConfigSections) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(ModelOptions(dir + "/airl2.model")["seed"], 4);
 }
+
+// ------------------------------------------------------------------------------------------
+// secure cbf check (the pre-deployment barrier check) and cbf train --augment-from.
+
+TEST(CliCbfCheckTest, ChecksASmallTrainedModelWritesTheCsvAndAugmentsTraining) {
+  const std::string model = (TempDir() / "check_di.model").string();
+  Result r = RunCli("cbf train --domain double-integrator --safe 200 --unsafe 200 --epochs 20 "
+                    "--hidden 16,16 --out " + model);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string csv = (TempDir() / "check.csv").string();
+  r = RunCli("cbf check --model " + model + " --domain double-integrator --region-samples 300 "
+             "--near-samples 300 --held-out 100 --out " + csv + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["command"], "cbf check");
+  EXPECT_TRUE(j["verdict"] == "pass" || j["verdict"] == "flagged") << j["verdict"];
+  EXPECT_EQ(j["kinds"]["unsafe"]["checked"].get<long>() > 0, true);
+  EXPECT_EQ(j["accuracy"]["held_out_safe"], 100);
+  EXPECT_DOUBLE_EQ(j["kinds"]["no_safe_action"]["threshold"].get<double>(), 0.01);
+  std::ifstream in(csv);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "kind,found_by,x,y,vx,vy,h,objective");
+  long rows = 0;
+  for (std::string line; std::getline(in, line);) ++rows;
+  long expected_rows = 0;
+  for (const char* kind : {"no_safe_action", "near_dangerous", "unsafe"})
+    expected_rows += j["kinds"][kind]["examples"].get<long>();
+  EXPECT_EQ(rows, expected_rows);
+
+  // Thresholds from flags and from a `check:` section; the text report names the verdict.
+  const std::string config = Write("check.yaml", "check:\n  thresholds:\n    unsafe: 1.0\n");
+  r = RunCli("cbf check --config " + config + " --model " + model +
+             " --domain double-integrator --region-samples 200 --near-samples 200 "
+             "--held-out 50 --max-rate-b 1 --max-rate-a 1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto k = nlohmann::json::parse(r.out);
+  EXPECT_DOUBLE_EQ(k["kinds"]["unsafe"]["threshold"].get<double>(), 1.0);
+  EXPECT_DOUBLE_EQ(k["kinds"]["near_dangerous"]["threshold"].get<double>(), 1.0);
+  EXPECT_EQ(k["verdict"], "pass");
+  r = RunCli("cbf check --model " + model + " --domain double-integrator --region-samples 100 "
+             "--near-samples 100 --held-out 50");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.out, "verdict: ");
+
+  // The counterexamples as extra near-dangerous training states.
+  const std::string augmented = (TempDir() / "check_di_aug.model").string();
+  r = RunCli("cbf train --domain double-integrator --safe 200 --unsafe 200 --epochs 5 "
+             "--hidden 8 --augment-from " + csv + " --out " + augmented);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.out, "200 safe + " + std::to_string(200 + rows) + " near-dangerous");
+}
+
+TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
+  const std::string model = (TempDir() / "check_bad.model").string();
+  Result r = RunCli("cbf train --domain double-integrator --safe 50 --unsafe 50 --epochs 2 "
+                    "--hidden 4 --out " + model);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("cbf check --model " + model + " --domain panda");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--domain = 'panda', must be one of: double-integrator, derby");
+  r = RunCli("cbf check --model " + model + " --domain derby");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "features");
+  r = RunCli("cbf check --model " + model + " --domain double-integrator --max-rate-a nan");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "no_safe_action = nan");
+  const std::string bad = Write("bad_check.csv", "kind,found_by,x,y\nunsafe,sample,1,2\n");
+  r = RunCli("cbf train --domain double-integrator --safe 50 --unsafe 50 --epochs 2 --hidden 4 "
+             "--augment-from " + bad + " --out " + model);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "vx");
+}
+
+}  // namespace

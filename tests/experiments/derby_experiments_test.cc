@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <set>
 
 #include "tests/test_util.h"
@@ -101,6 +102,77 @@ TEST(DerbyExperimentsTest, SensitivityEvaluatesSecureOncePerDataVariant) {
   EXPECT_EQ(barriers["imbalance 1:4"]["near_dangerous_states"], 50);
   EXPECT_EQ(barriers["label noise 50%"]["safe_states"], 200);
   EXPECT_NE(r.Table().find("| imbalance 1:4 | 200 : 50 |"), std::string::npos) << r.Table();
+}
+
+TEST(DerbyExperimentsTest, BarrierCheckIsRecordedPerSeedAndChangesNoNumber) {
+  DerbyExperimentOptions off = Tiny();
+  off.seeds = 1;
+  off.check_enabled = false;
+  DerbyExperimentOptions on = off;
+  on.check_enabled = true;
+  on.check.region_samples = 100;
+  on.check.near_samples = 100;
+  on.check_held_out = 50;
+  const DerbyExperimentResult a = RunDerbyExperiment(DerbyExperiment::kTable3, off, nullptr);
+  const DerbyExperimentResult b = RunDerbyExperiment(DerbyExperiment::kTable3, on, nullptr);
+  const nlohmann::json ja = a.ToJson(), jb = b.ToJson();
+  // The check draws from its own streams only: every number is unchanged.
+  for (const char* name : {"bc", "airl", "secure"})
+    for (const char* metric : {"success_rate", "dangerous_rate", "interventions_per_episode"})
+      EXPECT_EQ(ja["methods"][name][metric], jb["methods"][name][metric]) << name << metric;
+  EXPECT_EQ(ja["methods"]["secure"]["seeds"][0]["collision_events"],
+            jb["methods"]["secure"]["seeds"][0]["collision_events"]);
+  EXPECT_FALSE(ja["experiment"]["seeds"][0].contains("check"));
+  EXPECT_EQ(a.Table().find("Barrier check"), std::string::npos);
+  const nlohmann::json& check = jb["experiment"]["seeds"][0]["check"];
+  ASSERT_TRUE(check.is_object());
+  EXPECT_TRUE(check["verdict"] == "pass" || check["verdict"] == "flagged");
+  EXPECT_EQ(check["kinds"]["no_safe_action"]["threshold"], 0.01);
+  EXPECT_EQ(check["accuracy"]["held_out_near_dangerous"], 50);
+  EXPECT_EQ(check["kinds"]["near_dangerous"]["checked"], 100);
+  EXPECT_EQ(jb["experiment"]["seeds"][0]["barriers"]["baseline"]["check"], check);
+  EXPECT_NE(b.Table().find("Barrier check per seed"), std::string::npos) << b.Table();
+  EXPECT_NE(b.Table().find("| 0 | "), std::string::npos) << b.Table();
+
+  // Thresholds 0 flag any counterexample; `augment` then retrains once with them.
+  DerbyExperimentOptions augment = on;
+  augment.check.thresholds.no_safe_action = 0;
+  augment.check.thresholds.near_dangerous = 0;
+  augment.check.thresholds.unsafe = 0;
+  augment.check.thresholds.min_accuracy_safe = 1;
+  augment.check.thresholds.min_accuracy_near_dangerous = 1;
+  augment.augment_flagged = true;
+  const nlohmann::json jc =
+      RunDerbyExperiment(DerbyExperiment::kTable3, augment, nullptr).ToJson();
+  const nlohmann::json& seed = jc["experiment"]["seeds"][0];
+  ASSERT_TRUE(seed["check"]["flagged"].get<bool>()) << seed["check"].dump();
+  if (seed["check"]["kinds"]["unsafe"]["examples"].get<long>() +
+          seed["check"]["kinds"]["near_dangerous"]["examples"].get<long>() +
+          seed["check"]["kinds"]["no_safe_action"]["examples"].get<long>() >
+      0) {
+    const nlohmann::json& aug = seed["barriers"]["baseline"]["augmented"];
+    EXPECT_GT(aug["added_near_dangerous_states"].get<long>(), 0);
+    EXPECT_TRUE(seed.contains("check_augmented"));
+  }
+  // BC and AIRL do not depend on the barrier.
+  EXPECT_EQ(jc["methods"]["airl"]["dangerous_rate"], jb["methods"]["airl"]["dangerous_rate"]);
+}
+
+TEST(DerbyExperimentsTest, CheckOptionsFromYaml) {
+  DerbyExperimentOptions o = Tiny();
+  o.ApplyYaml(YAML::Load("{check: {enabled: false, held_out: 32, augment: true, "
+                         "region_samples: 10, thresholds: {unsafe: 0.5}}}"),
+              "x.yaml");
+  EXPECT_FALSE(o.check_enabled);
+  EXPECT_EQ(o.check_held_out, 32);
+  EXPECT_TRUE(o.augment_flagged);
+  EXPECT_EQ(o.check.region_samples, 10);
+  EXPECT_DOUBLE_EQ(o.check.thresholds.unsafe, 0.5);
+  EXPECT_NE(ErrorOf([&] { o.ApplyYaml(YAML::Load("{check: {bogus: 1}}"), "x.yaml"); })
+                .find("bogus"),
+            std::string::npos);
+  o.check.thresholds.near_dangerous = std::nan("");
+  EXPECT_NE(ErrorOf([&] { o.Validate(); }).find("near_dangerous = nan"), std::string::npos);
 }
 
 data::StateSet Numbered(long n, float offset) {
