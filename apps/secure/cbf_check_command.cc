@@ -64,8 +64,8 @@ struct CheckCommand {
   template <typename Field>
   void Bind(CLI::App* cmd, const std::string& name, Field field, const std::string& help) {
     CLI::Option* option = cmd->add_option(name, field(parsed), help);
-    copies.emplace_back(option,
-                        [this, field](cbf::BarrierCheckOptions* to) { field(*to) = field(parsed); });
+    copies.emplace_back(
+        option, [this, field](cbf::BarrierCheckOptions* to) { field(*to) = field(parsed); });
   }
 
   void Register(CLI::App& app, const Config& config) {
@@ -87,31 +87,55 @@ struct CheckCommand {
                     "domain's generators with a seed other than training's)");
     cmd->add_option("--near-dangerous-states", nd_path,
                     "CSV of labelled near-dangerous states, for the accuracy and (b)");
-    cmd->add_option("--held-out", held_out,
-                    "states per class drawn when no CSV is given")
+    cmd->add_option("--held-out", held_out, "states per class drawn when no CSV is given")
         ->capture_default_str();
     cmd->add_option("--data-seed", data_seed,
                     "seed of the drawn states (0: double-integrator the check's seed XOR a "
                     "constant, derby the experiments' data_seed 2000)")
         ->capture_default_str();
     cmd->add_option("--out", out, "CSV of the worst counterexamples (docs/FILE_FORMATS.md)");
-    Bind(cmd, "--seed", [](cbf::BarrierCheckOptions& o) -> auto& { return o.seed; }, "seed of the check's sampling and search");
-    Bind(cmd, "--region-samples", [](cbf::BarrierCheckOptions& o) -> auto& { return o.region_samples; }, "states sampled from the region");
-    Bind(cmd, "--near-samples", [](cbf::BarrierCheckOptions& o) -> auto& { return o.near_samples; }, "states sampled near near-dangerous ones");
-    Bind(cmd, "--near-radius", [](cbf::BarrierCheckOptions& o) -> auto& { return o.near_radius; },
-         "(b): half-width of the box around a near-dangerous state, in per-feature std units");
-    Bind(cmd, "--action-grid", [](cbf::BarrierCheckOptions& o) -> auto& { return o.action_grid; }, "max_a g: grid points per action dimension");
-    Bind(cmd, "--action-samples", [](cbf::BarrierCheckOptions& o) -> auto& { return o.action_samples; },
-         "max_a g: random actions (and per refinement round)");
-    Bind(cmd, "--search-starts", [](cbf::BarrierCheckOptions& o) -> auto& { return o.search_starts; }, "local search starts per kind");
-    Bind(cmd, "--search-steps", [](cbf::BarrierCheckOptions& o) -> auto& { return o.search_steps; }, "local search iterations per start");
-    Bind(cmd, "--worst", [](cbf::BarrierCheckOptions& o) -> auto& { return o.worst_examples; }, "counterexamples kept per kind");
-    Bind(cmd, "--max-rate-a", [](cbf::BarrierCheckOptions& o) -> auto& { return o.thresholds.no_safe_action; },
-         "threshold tau_a on rate (a) (default 0.01)");
-    Bind(cmd, "--max-rate-b", [](cbf::BarrierCheckOptions& o) -> auto& { return o.thresholds.near_dangerous; },
-         "threshold tau_b on rate (b) (default 0.05)");
-    Bind(cmd, "--max-rate-c", [](cbf::BarrierCheckOptions& o) -> auto& { return o.thresholds.unsafe; },
-         "threshold tau_c on rate (c) (default 0.01)");
+    Bind(
+        cmd, "--seed", [](cbf::BarrierCheckOptions & o) -> auto& { return o.seed; },
+        "seed of the check's sampling and search");
+    Bind(
+        cmd, "--region-samples",
+        [](cbf::BarrierCheckOptions & o) -> auto& { return o.region_samples; },
+        "states sampled from the region");
+    Bind(
+        cmd, "--near-samples", [](cbf::BarrierCheckOptions & o) -> auto& { return o.near_samples; },
+        "states sampled near near-dangerous ones");
+    Bind(
+        cmd, "--near-radius", [](cbf::BarrierCheckOptions & o) -> auto& { return o.near_radius; },
+        "(b): half-width of the box around a near-dangerous state, in per-feature std units");
+    Bind(
+        cmd, "--action-grid", [](cbf::BarrierCheckOptions & o) -> auto& { return o.action_grid; },
+        "max_a g: grid points per action dimension");
+    Bind(
+        cmd, "--action-samples",
+        [](cbf::BarrierCheckOptions & o) -> auto& { return o.action_samples; },
+        "max_a g: random actions (and per refinement round)");
+    Bind(
+        cmd, "--search-starts",
+        [](cbf::BarrierCheckOptions & o) -> auto& { return o.search_starts; },
+        "local search starts per kind");
+    Bind(
+        cmd, "--search-steps", [](cbf::BarrierCheckOptions & o) -> auto& { return o.search_steps; },
+        "local search iterations per start");
+    Bind(
+        cmd, "--worst", [](cbf::BarrierCheckOptions & o) -> auto& { return o.worst_examples; },
+        "counterexamples kept per kind");
+    Bind(
+        cmd, "--max-rate-a",
+        [](cbf::BarrierCheckOptions & o) -> auto& { return o.thresholds.no_safe_action; },
+        "threshold tau_a on rate (a) (default 0.01)");
+    Bind(
+        cmd, "--max-rate-b",
+        [](cbf::BarrierCheckOptions & o) -> auto& { return o.thresholds.near_dangerous; },
+        "threshold tau_b on rate (b) (default 0.05)");
+    Bind(
+        cmd, "--max-rate-c",
+        [](cbf::BarrierCheckOptions & o) -> auto& { return o.thresholds.unsafe; },
+        "threshold tau_c on rate (c) (default 0.01)");
     class_k_opt = cmd->add_option("--class-k", class_k,
                                   "the shield's class-K function: linear | cubic (default: the "
                                   "domain's shield)");
@@ -136,7 +160,8 @@ struct CheckCommand {
   }
 
   void ApplyShieldFlags(shield::ShieldOptions* s) const {
-    if (class_k_opt->count() > 0) s->class_k = FromString(shield::kClassKNames, class_k, "--class-k");
+    if (class_k_opt->count() > 0)
+      s->class_k = FromString(shield::kClassKNames, class_k, "--class-k");
     if (gain_opt->count() > 0) s->class_k_gain = class_k_gain;
     if (dt_opt->count() > 0) s->dt = dt;
     s->Validate();

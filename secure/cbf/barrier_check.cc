@@ -58,8 +58,8 @@ class Checker {
                                          t * (problem.action_hi[i] - problem.action_lo[i]));
       }
     }
-    const long batch = std::max<long>({grid_points + options.action_samples,
-                                       options.action_samples, 1L});
+    const long batch =
+        std::max<long>({grid_points + options.action_samples, options.action_samples, 1L});
     actions_.resize(n, batch);
     next_.resize(dynamics.state_dim(), batch);
     h_next_.resize(batch);
@@ -101,13 +101,12 @@ class Checker {
     if (grid_points > 0) actions_.leftCols(grid_points) = grid_;
     for (long k = 0; k < options_.action_samples; ++k)
       for (int i = 0; i < n; ++i)
-        actions_(i, grid_points + k) = static_cast<float>(
-            rng.Uniform(problem_.action_lo[i], problem_.action_hi[i]));
+        actions_(i, grid_points + k) =
+            static_cast<float>(rng.Uniform(problem_.action_lo[i], problem_.action_hi[i]));
     evaluate(grid_points + options_.action_samples);
     // Refinement: uniform in a box around the best action, halved each round.
-    const Eigen::VectorXd width =
-        (problem_.action_hi - problem_.action_lo).cast<double>() /
-        (grid_points > 0 ? 2.0 * (options_.action_grid - 1) : 4.0);
+    const Eigen::VectorXd width = (problem_.action_hi - problem_.action_lo).cast<double>() /
+                                  (grid_points > 0 ? 2.0 * (options_.action_grid - 1) : 4.0);
     for (int round = 0; round < options_.action_refine_rounds && options_.action_samples > 0;
          ++round) {
       const double shrink = std::ldexp(1.0, -round);
@@ -115,9 +114,9 @@ class Checker {
       for (long k = 0; k < options_.action_samples; ++k)
         for (int i = 0; i < n; ++i) {
           const double w = width[i] * shrink;
-          const double a = std::clamp(centre[i] + rng.Uniform(-w, w),
-                                      static_cast<double>(problem_.action_lo[i]),
-                                      static_cast<double>(problem_.action_hi[i]));
+          const double a =
+              std::clamp(centre[i] + rng.Uniform(-w, w), static_cast<double>(problem_.action_lo[i]),
+                         static_cast<double>(problem_.action_hi[i]));
           actions_(i, k) = static_cast<float>(a);
         }
       evaluate(options_.action_samples);
@@ -138,8 +137,8 @@ void ValidateInputs(Barrier& barrier, const domains::DynamicsModel& dynamics,
                     const BarrierCheckProblem& p, const BarrierCheckOptions& options) {
   options.Validate();
   const int d = barrier.state_dim();
-  SECURE_CHECK(dynamics.state_dim() == d, "barrier check: the barrier (" << barrier.Describe()
-                                              << ") has state dimension " << d
+  SECURE_CHECK(dynamics.state_dim() == d, "barrier check: the barrier ("
+                                              << barrier.Describe() << ") has state dimension " << d
                                               << ", the dynamics model (" << dynamics.Describe()
                                               << ") " << dynamics.state_dim());
   const int n = dynamics.action_dim();
@@ -160,11 +159,10 @@ void ValidateInputs(Barrier& barrier, const domains::DynamicsModel& dynamics,
   SECURE_CHECK(static_cast<bool>(p.class_k), "barrier check: no class-K function given");
   SECURE_CHECK(static_cast<bool>(p.sample_region), "barrier check: no region sampler given");
   data::CheckNonEmptyFinite(p.near_dangerous, "barrier check: near-dangerous states");
-  SECURE_CHECK(p.near_dangerous.states.rows() == d,
-               "barrier check: the near-dangerous states (" << p.near_dangerous.source << ") have "
-                                                            << p.near_dangerous.states.rows()
-                                                            << " features, the barrier expects "
-                                                            << d);
+  SECURE_CHECK(p.near_dangerous.states.rows() == d, "barrier check: the near-dangerous states ("
+                                                        << p.near_dangerous.source << ") have "
+                                                        << p.near_dangerous.states.rows()
+                                                        << " features, the barrier expects " << d);
   SECURE_CHECK(p.held_out_safe.has_value() == p.held_out_near_dangerous.has_value(),
                "barrier check: give both held-out classes or neither");
   for (const auto* set : {&p.held_out_safe, &p.held_out_near_dangerous}) {
@@ -182,8 +180,8 @@ void ValidateInputs(Barrier& barrier, const domains::DynamicsModel& dynamics,
 // objective to MAXIMISE for an eligible candidate, or nullopt if it is not eligible.
 template <typename Propose, typename Score>
 std::pair<Eigen::VectorXf, double> LocalSearch(const Eigen::VectorXf& start, double start_score,
-                                               const BarrierCheckOptions& options,
-                                               Propose propose, Score score) {
+                                               const BarrierCheckOptions& options, Propose propose,
+                                               Score score) {
   Eigen::VectorXf current = start, candidate(start.size()), best_candidate(start.size());
   double current_score = start_score, step = options.search_step;
   for (int it = 0; it < options.search_steps; ++it) {
@@ -200,6 +198,8 @@ std::pair<Eigen::VectorXf, double> LocalSearch(const Eigen::VectorXf& start, dou
       current = best_candidate;
       current_score = best;
       step *= 1.5;
+    } else if (best == current_score) {
+      current = best_candidate;  // drift along a plateau (e.g. h at a cap), same step
     } else {
       step *= 0.6;
     }
@@ -336,9 +336,12 @@ void BarrierCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& s
 // ---------------------------------------------------------------------------------------------
 const CheckKindStats& CheckReport::Stats(CheckKind kind) const {
   switch (kind) {
-    case CheckKind::kNoSafeAction: return no_safe_action;
-    case CheckKind::kNearDangerous: return near_dangerous;
-    case CheckKind::kUnsafe: return unsafe;
+    case CheckKind::kNoSafeAction:
+      return no_safe_action;
+    case CheckKind::kNearDangerous:
+      return near_dangerous;
+    case CheckKind::kUnsafe:
+      return unsafe;
   }
   SECURE_INTERNAL_CHECK(false, "unknown check kind");
   return unsafe;
@@ -349,23 +352,21 @@ nlohmann::json CheckReport::ToJson() const {
     return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
   };
   nlohmann::json kinds = nlohmann::json::object();
-  const double tau[3] = {thresholds.no_safe_action, thresholds.near_dangerous,
-                         thresholds.unsafe};
+  const double tau[3] = {thresholds.no_safe_action, thresholds.near_dangerous, thresholds.unsafe};
   for (int k = 0; k < 3; ++k) {
     const auto kind = static_cast<CheckKind>(k);
     const CheckKindStats& s = Stats(kind);
     long examples = 0;
     for (const CheckExample& e : worst) examples += e.kind == kind;
-    kinds[ToString(kCheckKindNames, kind)] = {
-        {"available", s.available},
-        {"checked", s.checked},
-        {"counterexamples", s.counterexamples},
-        {"rate", s.rate()},
-        {"threshold", tau[k]},
-        {"flagged", s.available && s.rate() > tau[k]},
-        {"search_counterexamples", s.search_counterexamples},
-        {"worst_objective", number(s.worst_objective)},
-        {"examples", examples}};
+    kinds[ToString(kCheckKindNames, kind)] = {{"available", s.available},
+                                              {"checked", s.checked},
+                                              {"counterexamples", s.counterexamples},
+                                              {"rate", s.rate()},
+                                              {"threshold", tau[k]},
+                                              {"flagged", s.available && s.rate() > tau[k]},
+                                              {"search_counterexamples", s.search_counterexamples},
+                                              {"worst_objective", number(s.worst_objective)},
+                                              {"examples", examples}};
   }
   nlohmann::json j = {{"verdict", Verdict()},
                       {"flagged", flagged},
@@ -401,8 +402,7 @@ std::string CheckReport::Summary() const {
   const char* what[3] = {"(a) h >= 0 but no action with g >= 0",
                          "(b) near a near-dangerous state, h >= 0",
                          "(c) unsafe by the domain's test, h >= 0"};
-  const double tau[3] = {thresholds.no_safe_action, thresholds.near_dangerous,
-                         thresholds.unsafe};
+  const double tau[3] = {thresholds.no_safe_action, thresholds.near_dangerous, thresholds.unsafe};
   for (int k = 0; k < 3; ++k) {
     const CheckKindStats& s = Stats(static_cast<CheckKind>(k));
     if (!s.available) {
@@ -478,6 +478,7 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   struct Scored {
     long index;
     double objective;
+    double h;  // tie-break: the smaller h first (nearer the boundary)
   };
   std::vector<CheckExample> pool[3];
   auto add_example = [&](CheckKind kind, bool from_search, const Eigen::VectorXf& s, double hv,
@@ -489,9 +490,9 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   Eigen::MatrixXf region(d, o.region_samples);
   for (long i = 0; i < o.region_samples; ++i) {
     p.sample_region(rng, region.col(i));
-    SECURE_CHECK(region.col(i).allFinite(),
-                 "barrier check: the region sampler returned a non-finite state (sample " << i
-                                                                                          << ")");
+    SECURE_CHECK(
+        region.col(i).allFinite(),
+        "barrier check: the region sampler returned a non-finite state (sample " << i << ")");
   }
   Eigen::VectorXf h_region;
   checker.H(region, &h_region);
@@ -503,7 +504,7 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
     const double hv = h_region[i];
     if (p.is_unsafe && p.is_unsafe(region.col(i))) {
       ++report.unsafe.checked;
-      eligible_c.push_back({i, hv});
+      eligible_c.push_back({i, hv, hv});
       report.unsafe.worst_objective = std::max(report.unsafe.worst_objective, hv);
       if (hv >= 0) {
         ++report.unsafe.counterexamples;
@@ -513,7 +514,7 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
     if (hv >= 0) {
       ++report.no_safe_action.checked;
       const double g = checker.MaxG(region.col(i), hv, rng);
-      eligible_a.push_back({i, g});
+      eligible_a.push_back({i, g, hv});
       report.no_safe_action.worst_objective = std::min(report.no_safe_action.worst_objective, g);
       if (g < 0) {
         ++report.no_safe_action.counterexamples;
@@ -534,8 +535,8 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
     const long k = static_cast<long>(rng.UniformIndex(static_cast<std::uint64_t>(n_nd)));
     anchors[static_cast<std::size_t>(j)] = k;
     for (int i = 0; i < d; ++i)
-      near(i, j) = static_cast<float>(p.near_dangerous.states(i, k) +
-                                      rng.Uniform(-radius[i], radius[i]));
+      near(i, j) =
+          static_cast<float>(p.near_dangerous.states(i, k) + rng.Uniform(-radius[i], radius[i]));
   }
   Eigen::VectorXf h_near;
   checker.H(near, &h_near);
@@ -544,7 +545,7 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   for (long j = 0; j < o.near_samples; ++j) {
     const double hv = h_near[j];
     ++report.near_dangerous.checked;
-    eligible_b.push_back({j, hv});
+    eligible_b.push_back({j, hv, hv});
     report.near_dangerous.worst_objective = std::max(report.near_dangerous.worst_objective, hv);
     if (hv >= 0) {
       ++report.near_dangerous.counterexamples;
@@ -556,7 +557,9 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   const Eigen::VectorXd region_scale = FeatureStd(region);
   auto top = [&](std::vector<Scored> v, bool lowest) {
     std::stable_sort(v.begin(), v.end(), [&](const Scored& x, const Scored& y) {
-      return lowest ? x.objective < y.objective : x.objective > y.objective;
+      if (x.objective != y.objective)
+        return lowest ? x.objective < y.objective : x.objective > y.objective;
+      return x.h < y.h;
     });
     if (static_cast<long>(v.size()) > o.search_starts) v.resize(o.search_starts);
     return v;
@@ -570,14 +573,14 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   };
   // (a): minimise max_a g among states with h >= 0 (maximise its negative).
   for (const Scored& s : top(eligible_a, true)) {
-    const auto [state, score] = LocalSearch(
-        region.col(s.index), -s.objective, o, perturb(region_scale),
-        [&](const Eigen::VectorXf& c) -> std::optional<double> {
-          if (!c.allFinite()) return std::nullopt;
-          const double hv = checker.HOne(c);
-          if (!(hv >= 0)) return std::nullopt;
-          return -checker.MaxG(c, hv, rng);
-        });
+    const auto [state, score] =
+        LocalSearch(region.col(s.index), -s.objective, o, perturb(region_scale),
+                    [&](const Eigen::VectorXf& c) -> std::optional<double> {
+                      if (!c.allFinite()) return std::nullopt;
+                      const double hv = checker.HOne(c);
+                      if (!(hv >= 0)) return std::nullopt;
+                      return -checker.MaxG(c, hv, rng);
+                    });
     const double g = -score;
     report.no_safe_action.worst_objective = std::min(report.no_safe_action.worst_objective, g);
     if (g < 0) {
@@ -611,14 +614,14 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   // (c): maximise h among states the predicate calls unsafe.
   if (p.is_unsafe) {
     for (const Scored& s : top(eligible_c, false)) {
-      const auto [state, score] = LocalSearch(
-          region.col(s.index), s.objective, o, perturb(region_scale),
-          [&](const Eigen::VectorXf& c) -> std::optional<double> {
-            if (!c.allFinite() || !p.is_unsafe(c)) return std::nullopt;
-            const double hv = checker.HOne(c);
-            if (!std::isfinite(hv)) return std::nullopt;
-            return hv;
-          });
+      const auto [state, score] =
+          LocalSearch(region.col(s.index), s.objective, o, perturb(region_scale),
+                      [&](const Eigen::VectorXf& c) -> std::optional<double> {
+                        if (!c.allFinite() || !p.is_unsafe(c)) return std::nullopt;
+                        const double hv = checker.HOne(c);
+                        if (!std::isfinite(hv)) return std::nullopt;
+                        return hv;
+                      });
       report.unsafe.worst_objective = std::max(report.unsafe.worst_objective, score);
       if (score >= 0) {
         ++report.unsafe.search_counterexamples;
@@ -664,8 +667,8 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
        rate_reason("c", report.unsafe.rate(), t.unsafe));
   if (report.has_accuracy) {
     char buffer[96];
-    std::snprintf(buffer, sizeof buffer, "held-out safe accuracy %.4f < %g",
-                  report.accuracy_safe, t.min_accuracy_safe);
+    std::snprintf(buffer, sizeof buffer, "held-out safe accuracy %.4f < %g", report.accuracy_safe,
+                  t.min_accuracy_safe);
     flag(report.accuracy_safe < t.min_accuracy_safe, buffer);
     std::snprintf(buffer, sizeof buffer, "held-out near-dangerous accuracy %.4f < %g",
                   report.accuracy_near_dangerous, t.min_accuracy_near_dangerous);
@@ -674,8 +677,7 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
   return report;
 }
 
-data::StateSet ReadCheckStates(const std::string& path,
-                               const std::vector<std::string>& features) {
+data::StateSet ReadCheckStates(const std::string& path, const std::vector<std::string>& features) {
   // A check without counterexamples writes a header-only file: that adds no states.
   std::ifstream in(path);
   SECURE_CHECK(in.good(), path << ": cannot open the check CSV");

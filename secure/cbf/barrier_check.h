@@ -19,8 +19,9 @@
 // and (c) (those the predicate calls unsafe); `near_samples` states drawn uniformly in the boxes
 // around randomly chosen near-dangerous states serve (b). The RATES (the verdict's inputs) are
 // counterexamples / eligible samples of this sampling phase, i.e. estimates over the sampling
-// distribution. Then a gradient-free local search (a (1, lambda) evolution strategy with a 1/5-th
-// style step-size rule) starts from the `search_starts` most promising samples of each kind and
+// distribution. Then a gradient-free local search (an elitist (1 + lambda) evolution strategy:
+// step x1.5 after an improvement, x0.6 after none, moves along plateaus) starts from the
+// `search_starts` most promising samples of each kind (ties: the smaller h first) and
 // pushes the objective further (lower max_a g, higher h), staying eligible (h >= 0 for (a); inside
 // the near-dangerous box for (b); unsafe for (c)); its results feed the worst examples (and the
 // counts `search_counterexamples`), not the rates.
@@ -60,10 +61,10 @@ inline constexpr EnumTable<CheckKind, 3> kCheckKindNames{{
 /// A barrier is flagged when a rate exceeds its threshold (strictly), or when the held-out
 /// accuracy of a class falls below its minimum.
 struct CheckThresholds {
-  double no_safe_action = 0.01;  // tau_a: rate (a) over states with h >= 0
-  double near_dangerous = 0.05;  // tau_b: rate (b) over states near the near-dangerous set
-  double unsafe = 0.01;          // tau_c: rate (c) over states the predicate calls unsafe
-  double min_accuracy_safe = 0.0;            // held-out safe accuracy below this flags (0: off)
+  double no_safe_action = 0.01;    // tau_a: rate (a) over states with h >= 0
+  double near_dangerous = 0.05;    // tau_b: rate (b) over states near the near-dangerous set
+  double unsafe = 0.01;            // tau_c: rate (c) over states the predicate calls unsafe
+  double min_accuracy_safe = 0.0;  // held-out safe accuracy below this flags (0: off)
   double min_accuracy_near_dangerous = 0.0;  // held-out near-dangerous accuracy (0: off)
 
   void Validate() const;
@@ -71,19 +72,19 @@ struct CheckThresholds {
 };
 
 struct BarrierCheckOptions {
-  long region_samples = 1000;  // states from the region sampler, for (a) and (c)
-  long near_samples = 1000;    // states around the near-dangerous set, for (b)
-  double near_radius = 0.05;   // (b)'s box half-width, in per-feature standard deviations
-  int action_grid = 7;         // max_a g: points per action dimension of a grid over the box
-                               // (used while action_grid^action_dim <= 4096, else none)
-  int action_samples = 16;     // max_a g: uniform random actions, and per refinement round
+  long region_samples = 1000;    // states from the region sampler, for (a) and (c)
+  long near_samples = 1000;      // states around the near-dangerous set, for (b)
+  double near_radius = 0.05;     // (b)'s box half-width, in per-feature standard deviations
+  int action_grid = 7;           // max_a g: points per action dimension of a grid over the box
+                                 // (used while action_grid^action_dim <= 4096, else none)
+  int action_samples = 16;       // max_a g: uniform random actions, and per refinement round
   int action_refine_rounds = 2;  // max_a g: rounds around the best action, each half as wide
-  int search_starts = 4;       // local search: starts per kind (the most promising samples)
-  int search_steps = 10;       // local search: iterations per start
-  int search_population = 6;   // local search: candidates per iteration (lambda)
-  double search_step = 0.05;   // local search: initial step, in per-feature standard deviations
-                               // of the sampled states (of the near-dangerous set for (b))
-  int worst_examples = 20;     // counterexamples kept per kind (the worst first)
+  int search_starts = 4;         // local search: starts per kind (the most promising samples)
+  int search_steps = 10;         // local search: iterations per start
+  int search_population = 6;     // local search: candidates per iteration (lambda)
+  double search_step = 0.05;     // local search: initial step, in per-feature standard deviations
+                                 // of the sampled states (of the near-dangerous set for (b))
+  int worst_examples = 20;       // counterexamples kept per kind (the worst first)
   std::uint64_t seed = 0x0c4ec4ULL;  // the check's own stream
   CheckThresholds thresholds;
 
@@ -98,8 +99,8 @@ struct BarrierCheckOptions {
 
 /// What the check needs besides the barrier and the dynamics. The glue of a domain fills it.
 struct BarrierCheckProblem {
-  Eigen::VectorXf action_lo, action_hi;  // the action box (action_dim each, lo <= hi)
-  double dt = 0.1;                       // dt in g (the shield's)
+  Eigen::VectorXf action_lo, action_hi;   // the action box (action_dim each, lo <= hi)
+  double dt = 0.1;                        // dt in g (the shield's)
   std::function<double(double)> class_k;  // alpha(h) (the shield's)
   std::string class_k_description;        // e.g. "linear, k = 2", for reports
   /// Draws one state of the region into `state` (state_dim).
@@ -116,11 +117,11 @@ struct BarrierCheckProblem {
 };
 
 struct CheckKindStats {
-  bool available = true;  // false for (c) without a predicate
-  long checked = 0;            // eligible samples (the rate's denominator)
-  long counterexamples = 0;    // eligible samples that are counterexamples
+  bool available = true;            // false for (c) without a predicate
+  long checked = 0;                 // eligible samples (the rate's denominator)
+  long counterexamples = 0;         // eligible samples that are counterexamples
   long search_counterexamples = 0;  // local-search runs that ended in a counterexample
-  double worst_objective = 0.0;  // over samples and search (NaN if nothing was eligible)
+  double worst_objective = 0.0;     // over samples and search (NaN if nothing was eligible)
   double rate() const { return checked > 0 ? double(counterexamples) / double(checked) : 0.0; }
 };
 

@@ -618,9 +618,9 @@ std::string DerbyExperimentResult::CheckTable() const {
     }
     std::string verdict = is_flagged ? "**flagged**" : "pass";
     if (seed_summaries[i].contains("check_augmented"))
-      verdict += std::string(" -> retrained: ") +
-                 (seed_summaries[i]["check_augmented"].value("flagged", false) ? "flagged"
-                                                                              : "pass");
+      verdict +=
+          std::string(" -> retrained: ") +
+          (seed_summaries[i]["check_augmented"].value("flagged", false) ? "flagged" : "pass");
     double acc_safe = 0, acc_nd = 0;
     if (c.contains("accuracy") && c["accuracy"].is_object()) {
       acc_safe = c["accuracy"].value("safe", 0.0);
@@ -634,8 +634,9 @@ std::string DerbyExperimentResult::CheckTable() const {
                   acc_safe, acc_nd, dangerous.c_str());
     out << line;
   }
-  out << "\n" << flagged << " of " << seed_summaries.size() << " seeds flagged (thresholds: "
-      << options.check.thresholds.ToJson().dump() << ").\n";
+  out << "\n"
+      << flagged << " of " << seed_summaries.size()
+      << " seeds flagged (thresholds: " << options.check.thresholds.ToJson().dump() << ").\n";
   return out.str();
 }
 
@@ -645,9 +646,10 @@ void DerbyCheckHeldOut(const DerbyExperimentOptions& o,
   Rng check_rng(o.data_seed ^ kCheckDataSalt);
   derby::DerbyNearDangerousOptions nd_options = o.near_dangerous;
   nd_options.count = o.check_held_out;
-  *safe = derby::SafeStatesFromDemonstrations(demonstrations.trajectories, o.check_held_out,
-                                              check_rng);
-  *near_dangerous = derby::GenerateDerbyNearDangerous(o.task, demonstrations, nd_options, check_rng);
+  *safe =
+      derby::SafeStatesFromDemonstrations(demonstrations.trajectories, o.check_held_out, check_rng);
+  *near_dangerous =
+      derby::GenerateDerbyNearDangerous(o.task, demonstrations, nd_options, check_rng);
   safe->source = "held-out safe states (data_seed " + std::to_string(o.data_seed) + ")";
   near_dangerous->source =
       "held-out near-dangerous states (data_seed " + std::to_string(o.data_seed) + ")";
@@ -669,26 +671,23 @@ cbf::BarrierCheckProblem MakeDerbyCheckProblem(const derby::DerbyOptions& task,
                                                std::unique_ptr<domains::DynamicsModel>* dynamics) {
   SECURE_CHECK(safe.states.rows() == derby::kObservationDim &&
                    near_dangerous.states.rows() == derby::kObservationDim,
-               "the Derby barrier check needs observations of " << derby::kObservationDim
-                                                                << " values; got "
-                                                                << safe.states.rows() << " ("
-                                                                << safe.source << ") and "
-                                                                << near_dangerous.states.rows()
-                                                                << " (" << near_dangerous.source
-                                                                << ")");
+               "the Derby barrier check needs observations of "
+                   << derby::kObservationDim << " values; got " << safe.states.rows() << " ("
+                   << safe.source << ") and " << near_dangerous.states.rows() << " ("
+                   << near_dangerous.source << ")");
   data::CheckNonEmptyFinite(safe, "Derby barrier check: safe states");
   data::CheckNonEmptyFinite(near_dangerous, "Derby barrier check: near-dangerous states");
   task.Validate();
   shield_options.Validate();
-  *dynamics = std::make_unique<derby::DerbyShieldModel>(task.dt, task.accel_bound,
-                                                        task.lookahead_steps);
+  *dynamics =
+      std::make_unique<derby::DerbyShieldModel>(task.dt, task.accel_bound, task.lookahead_steps);
   cbf::BarrierCheckProblem p;
   p.action_lo = Eigen::VectorXf::Constant(derby::kActionDim, -float(task.accel_bound));
   p.action_hi = Eigen::VectorXf::Constant(derby::kActionDim, float(task.accel_bound));
   p.dt = shield_options.dt;
   p.class_k = [shield_options](double h) { return shield::ClassKValue(shield_options, h); };
-  p.class_k_description = ToString(shield::kClassKNames, shield_options.class_k) + ", k = " +
-                          std::to_string(shield_options.class_k_gain);
+  p.class_k_description = ToString(shield::kClassKNames, shield_options.class_k) +
+                          ", k = " + std::to_string(shield_options.class_k_gain);
   p.near_dangerous = near_dangerous;
   p.held_out_safe = safe;
   p.held_out_near_dangerous = near_dangerous;
@@ -762,8 +761,7 @@ DerbyExperimentResult RunDerbyExperiment(DerbyExperiment experiment,
     data::WriteStateSet(o.output_dir + "/near_dangerous.csv", shared.near_dangerous);
     if (o.check_enabled) {
       data::WriteStateSet(o.output_dir + "/check_safe.csv", shared.check_safe);
-      data::WriteStateSet(o.output_dir + "/check_near_dangerous.csv",
-                          shared.check_near_dangerous);
+      data::WriteStateSet(o.output_dir + "/check_near_dangerous.csv", shared.check_near_dangerous);
     }
   }
   progress.Line([&](std::ostream& line) {

@@ -113,7 +113,8 @@ struct DerbyExperimentOptions {
   // The pre-deployment barrier check (cbf/barrier_check.h) of every seed's barrier(s), recorded
   // in the seed's summary ("barriers": {variant: {"check": ...}}, and "check" for the first
   // variant) and in Table(). Its own streams: held-out states from the demonstrations with an Rng
-  // seeded data_seed ^ 0xc4ec4da7a, the search from check.seed; the experiment's numbers do not depend on it.
+  // seeded data_seed ^ 0xc4ec4da7a, the search from check.seed; the experiment's numbers do not
+  // depend on it.
   bool check_enabled = true;
   long check_held_out = 256;  // held-out safe and near-dangerous states (each) for the check
   cbf::BarrierCheckOptions check = DerbyCheckDefaults();

@@ -798,12 +798,16 @@ TEST(CliTest, PolicyTrainFlagsOverrideTheConfigSections) {
 
 TEST(CliCbfCheckTest, ChecksASmallTrainedModelWritesTheCsvAndAugmentsTraining) {
   const std::string model = (TempDir() / "check_di.model").string();
-  Result r = RunCli("cbf train --domain double-integrator --safe 200 --unsafe 200 --epochs 20 "
-                    "--hidden 16,16 --out " + model);
+  Result r = RunCli(
+      "cbf train --domain double-integrator --safe 200 --unsafe 200 --epochs 20 "
+      "--hidden 16,16 --out " +
+      model);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string csv = (TempDir() / "check.csv").string();
-  r = RunCli("cbf check --model " + model + " --domain double-integrator --region-samples 300 "
-             "--near-samples 300 --held-out 100 --out " + csv + " --json");
+  r = RunCli("cbf check --model " + model +
+             " --domain double-integrator --region-samples 300 "
+             "--near-samples 300 --held-out 100 --out " +
+             csv + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["command"], "cbf check");
@@ -832,23 +836,28 @@ TEST(CliCbfCheckTest, ChecksASmallTrainedModelWritesTheCsvAndAugmentsTraining) {
   EXPECT_DOUBLE_EQ(k["kinds"]["unsafe"]["threshold"].get<double>(), 1.0);
   EXPECT_DOUBLE_EQ(k["kinds"]["near_dangerous"]["threshold"].get<double>(), 1.0);
   EXPECT_EQ(k["verdict"], "pass");
-  r = RunCli("cbf check --model " + model + " --domain double-integrator --region-samples 100 "
+  r = RunCli("cbf check --model " + model +
+             " --domain double-integrator --region-samples 100 "
              "--near-samples 100 --held-out 50");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_HAS(r.out, "verdict: ");
 
   // The counterexamples as extra near-dangerous training states.
   const std::string augmented = (TempDir() / "check_di_aug.model").string();
-  r = RunCli("cbf train --domain double-integrator --safe 200 --unsafe 200 --epochs 5 "
-             "--hidden 8 --augment-from " + csv + " --out " + augmented);
+  r = RunCli(
+      "cbf train --domain double-integrator --safe 200 --unsafe 200 --epochs 5 "
+      "--hidden 8 --augment-from " +
+      csv + " --out " + augmented);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_HAS(r.out, "200 safe + " + std::to_string(200 + rows) + " near-dangerous");
 }
 
 TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
   const std::string model = (TempDir() / "check_bad.model").string();
-  Result r = RunCli("cbf train --domain double-integrator --safe 50 --unsafe 50 --epochs 2 "
-                    "--hidden 4 --out " + model);
+  Result r = RunCli(
+      "cbf train --domain double-integrator --safe 50 --unsafe 50 --epochs 2 "
+      "--hidden 4 --out " +
+      model);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = RunCli("cbf check --model " + model + " --domain panda");
   EXPECT_EQ(r.exit_code, 1);
@@ -860,8 +869,10 @@ TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err, "no_safe_action = nan");
   const std::string bad = Write("bad_check.csv", "kind,found_by,x,y\nunsafe,sample,1,2\n");
-  r = RunCli("cbf train --domain double-integrator --safe 50 --unsafe 50 --epochs 2 --hidden 4 "
-             "--augment-from " + bad + " --out " + model);
+  r = RunCli(
+      "cbf train --domain double-integrator --safe 50 --unsafe 50 --epochs 2 --hidden 4 "
+      "--augment-from " +
+      bad + " --out " + model);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err, "vx");
 }

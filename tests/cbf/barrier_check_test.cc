@@ -10,8 +10,8 @@
 
 #include <cmath>
 #include <fstream>
-#include <iostream>
 #include <functional>
+#include <iostream>
 #include <limits>
 
 #include "secure/cbf/barrier.h"
@@ -199,7 +199,9 @@ TEST(BarrierCheckTest, WritesTheWorstExamplesAsCsvThatReadsBackForAugmentation) 
   EXPECT_TRUE(none.worst.empty());
   none.WriteCsv(path);
   EXPECT_EQ(ReadCheckStates(path, di::StateFeatures()).size(), 0);
-  EXPECT_NE(ErrorOf([&] { ReadCheckStates(path, {"x", "speed"}); }).find("'speed'"),
+  EXPECT_NE(ErrorOf([&] {
+              ReadCheckStates(path, {"x", "speed"});
+            }).find("'speed'"),
             std::string::npos);
 }
 
@@ -209,8 +211,9 @@ TEST(BarrierCheckTest, RejectsBadInputs) {
   const BarrierCheckOptions o = SmallOptions();
 
   FunctionBarrier three(3, [](const auto&) { return 1.0f; });
-  EXPECT_NE(ErrorOf([&] { CheckBarrier(three, setup.dynamics, setup.problem, o); })
-                .find("state dimension 3"),
+  EXPECT_NE(ErrorOf([&] {
+              CheckBarrier(three, setup.dynamics, setup.problem, o);
+            }).find("state dimension 3"),
             std::string::npos);
 
   BarrierCheckProblem p = setup.problem;
@@ -243,8 +246,9 @@ TEST(BarrierCheckTest, RejectsBadInputs) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   BarrierCheckOptions bad = o;
   bad.thresholds.no_safe_action = nan;
-  EXPECT_NE(ErrorOf([&] { CheckBarrier(one, setup.dynamics, setup.problem, bad); })
-                .find("CheckThresholds::no_safe_action = nan"),
+  EXPECT_NE(ErrorOf([&] {
+              CheckBarrier(one, setup.dynamics, setup.problem, bad);
+            }).find("CheckThresholds::no_safe_action = nan"),
             std::string::npos);
   bad = o;
   bad.thresholds.unsafe = 1.5;
@@ -265,11 +269,13 @@ TEST(BarrierCheckTest, OptionsFromYaml) {
   EXPECT_DOUBLE_EQ(o.near_radius, 0.1);
   EXPECT_DOUBLE_EQ(o.thresholds.unsafe, 0.2);
   EXPECT_DOUBLE_EQ(o.thresholds.no_safe_action, 0.01);
-  EXPECT_NE(ErrorOf([&] { o.ApplyYaml(YAML::Load("{samples: 3}"), "c.yaml"); })
-                .find("unknown field 'samples'"),
+  EXPECT_NE(ErrorOf([&] {
+              o.ApplyYaml(YAML::Load("{samples: 3}"), "c.yaml");
+            }).find("unknown field 'samples'"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { o.ApplyYaml(YAML::Load("{thresholds: {d: 3}}"), "c.yaml"); })
-                .find("thresholds.d"),
+  EXPECT_NE(ErrorOf([&] {
+              o.ApplyYaml(YAML::Load("{thresholds: {d: 3}}"), "c.yaml");
+            }).find("thresholds.d"),
             std::string::npos);
 }
 

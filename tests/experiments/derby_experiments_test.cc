@@ -142,8 +142,7 @@ TEST(DerbyExperimentsTest, BarrierCheckIsRecordedPerSeedAndChangesNoNumber) {
   augment.check.thresholds.min_accuracy_safe = 1;
   augment.check.thresholds.min_accuracy_near_dangerous = 1;
   augment.augment_flagged = true;
-  const nlohmann::json jc =
-      RunDerbyExperiment(DerbyExperiment::kTable3, augment, nullptr).ToJson();
+  const nlohmann::json jc = RunDerbyExperiment(DerbyExperiment::kTable3, augment, nullptr).ToJson();
   const nlohmann::json& seed = jc["experiment"]["seeds"][0];
   ASSERT_TRUE(seed["check"]["flagged"].get<bool>()) << seed["check"].dump();
   if (seed["check"]["kinds"]["unsafe"]["examples"].get<long>() +
@@ -168,9 +167,9 @@ TEST(DerbyExperimentsTest, CheckOptionsFromYaml) {
   EXPECT_TRUE(o.augment_flagged);
   EXPECT_EQ(o.check.region_samples, 10);
   EXPECT_DOUBLE_EQ(o.check.thresholds.unsafe, 0.5);
-  EXPECT_NE(ErrorOf([&] { o.ApplyYaml(YAML::Load("{check: {bogus: 1}}"), "x.yaml"); })
-                .find("bogus"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOf([&] { o.ApplyYaml(YAML::Load("{check: {bogus: 1}}"), "x.yaml"); }).find("bogus"),
+      std::string::npos);
   o.check.thresholds.near_dangerous = std::nan("");
   EXPECT_NE(ErrorOf([&] { o.Validate(); }).find("near_dangerous = nan"), std::string::npos);
 }
