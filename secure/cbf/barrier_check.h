@@ -26,6 +26,11 @@
 // the near-dangerous box for (b); unsafe for (c)); its results feed the worst examples (and the
 // counts `search_counterexamples`), not the rates.
 //
+// Limits: (a) is judged under the given dynamics model (the shield's), so the model's own blind
+// spots are invisible to it as they are to the shield; the rates estimate failures over the
+// sampling distribution only. A passing check is a screen, not a certificate (docs/RESULTS.md:
+// on Derby it flags the flat MLP barrier but not a velocity-aware per-car barrier that fails).
+//
 // Generic: the inputs are a Barrier, a DynamicsModel, an action box, the class-K function, a
 // region sampler and an optional unsafe predicate; the glue of a concrete domain (its region,
 // predicate, dynamics and box) lives with the caller (the CLI's `cbf check`, the experiments).
