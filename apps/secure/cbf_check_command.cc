@@ -59,13 +59,15 @@ struct CheckCommand {
   std::vector<double> obstacle;
   YAML::Node check_yaml;
   std::string config_path;
+  DeferredError config_error;  // thrown when this command runs, not at registration
 
   // A flag whose value lands in `parsed` and is copied onto the options only when given.
   template <typename Field>
-  void Bind(CLI::App* cmd, const std::string& name, Field field, const std::string& help) {
+  CLI::Option* Bind(CLI::App* cmd, const std::string& name, Field field, const std::string& help) {
     CLI::Option* option = cmd->add_option(name, field(parsed), help);
     copies.emplace_back(
         option, [this, field](cbf::BarrierCheckOptions* to) { field(*to) = field(parsed); });
+    return option;
   }
 
   void Register(CLI::App& app, const Config& config) {
@@ -74,9 +76,11 @@ struct CheckCommand {
         "Check a learned barrier before deployment: held-out accuracy and a counterexample "
         "search for (a) h >= 0 with no admissible action, (b) h >= 0 near near-dangerous "
         "states, (c) h >= 0 where the domain's own test says unsafe; verdict by thresholds");
-    check_yaml = config.Section("check");
+    config_error.Capture([&] {
+      check_yaml = config.Section("check");
+      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+    });
     config_path = config.path;
-    ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
     AddConfigFlag(cmd, config);
     cmd->add_option("--model", model, "barrier model file (barrier_mlp or car_barrier)")
         ->required()
@@ -89,14 +93,14 @@ struct CheckCommand {
                     "CSV of labelled near-dangerous states, for the accuracy and (b)");
     cmd->add_option("--held-out", held_out, "states per class drawn when no CSV is given")
         ->capture_default_str();
-    cmd->add_option("--data-seed", data_seed,
-                    "seed of the drawn states (0: double-integrator the check's seed XOR a "
-                    "constant, derby the experiments' data_seed 2000)")
-        ->capture_default_str();
+    AddSeedOption(cmd, "--data-seed", &data_seed,
+                  "seed of the drawn states (0: double-integrator the check's seed XOR a "
+                  "constant, derby the experiments' data_seed 2000)");
     cmd->add_option("--out", out, "CSV of the worst counterexamples (docs/FILE_FORMATS.md)");
     Bind(
         cmd, "--seed", [](cbf::BarrierCheckOptions & o) -> auto& { return o.seed; },
-        "seed of the check's sampling and search");
+        "seed of the check's sampling and search")
+        ->check(NonNegativeSeed());
     Bind(
         cmd, "--region-samples",
         [](cbf::BarrierCheckOptions & o) -> auto& { return o.region_samples; },
@@ -147,7 +151,10 @@ struct CheckCommand {
         ->capture_default_str();
     AddGroundTruthFlags(cmd, &truth, &obstacle);
     cmd->add_flag("--json", json, "print the report as JSON");
-    cmd->callback([this] { Run(); });
+    cmd->callback([this] {
+      config_error.Rethrow();
+      Run();
+    });
   }
 
   cbf::BarrierCheckOptions Options(const cbf::BarrierCheckOptions& base) const {
@@ -177,7 +184,7 @@ struct CheckCommand {
     SECURE_CHECK(known, "--domain = '" << domain << "', must be one of: " << list);
     SECURE_CHECK(safe_path.empty() == nd_path.empty(),
                  "cbf check: --safe-states and --near-dangerous-states go together");
-    SECURE_CHECK(held_out > 0, "cbf check: --held-out = " << held_out << ", must be > 0");
+    CheckRange("--held-out", held_out, 1, kMaxStates);
 
     // The barrier, by the model file's kind.
     const std::string kind = nn::ReadModelFile(model).kind;

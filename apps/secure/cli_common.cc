@@ -16,8 +16,8 @@
 namespace secure::cli {
 
 const std::vector<std::string>& KnownConfigSections() {
-  static const std::vector<std::string> known = {"airl",     "bc",     "derby", "double_integrator",
-                                                 "pipeline", "trainer"};
+  static const std::vector<std::string> known = {"airl",     "bc",      "check", "derby",
+                                                 "double_integrator", "pipeline", "trainer"};
   return known;
 }
 
@@ -91,9 +91,8 @@ void AddConfigFlag(CLI::App* cmd, const Config& /*config*/) {
   cmd->add_option("--config", "YAML file with option sections; command-line flags override it");
 }
 
-CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
-                           const std::string& help) {
-  const CLI::Validator non_negative(
+const CLI::Validator& NonNegativeSeed() {
+  static const CLI::Validator validator(
       [](std::string& value) -> std::string {
         const auto first = value.find_first_not_of(" \t");
         if (first != std::string::npos && value[first] == '-')
@@ -101,7 +100,12 @@ CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t
         return "";
       },
       "UINT64");
-  return cmd->add_option(name, *seed, help)->check(non_negative)->capture_default_str();
+  return validator;
+}
+
+CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
+                           const std::string& help) {
+  return cmd->add_option(name, *seed, help)->check(NonNegativeSeed())->capture_default_str();
 }
 
 void CheckRange(const std::string& name, long value, long lo, long hi) {

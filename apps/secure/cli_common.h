@@ -61,8 +61,10 @@ class DeferredError {
 /// Adds --config (for help; the file is read by PreScanConfig and checked by Config::Check).
 void AddConfigFlag(CLI::App* cmd, const Config& config);
 
-/// Adds `--<name>` for an unsigned 64-bit seed, rejecting a negative value (which CLI11 would
-/// wrap around to 2^64 - 1).
+/// Rejects a negative value for an unsigned 64-bit seed (which CLI11 would wrap around to
+/// 2^64 - 1).
+const CLI::Validator& NonNegativeSeed();
+/// Adds `--<name>` for an unsigned 64-bit seed, checked by NonNegativeSeed().
 CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
                            const std::string& help);
 

@@ -13,6 +13,7 @@
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/limits.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
@@ -237,20 +238,25 @@ nlohmann::json CheckThresholds::ToJson() const {
 }
 
 void BarrierCheckOptions::Validate() const {
-  SECURE_CHECK_OPTION(region_samples > 0, "region_samples", region_samples, "> 0");
-  SECURE_CHECK_OPTION(near_samples > 0, "near_samples", near_samples, "> 0");
+  SECURE_CHECK_OPTION(region_samples > 0 && region_samples <= kMaxStates, "region_samples",
+                      region_samples, "in [1, " << kMaxStates << "]");
+  SECURE_CHECK_OPTION(near_samples > 0 && near_samples <= kMaxStates, "near_samples",
+                      near_samples, "in [1, " << kMaxStates << "]");
   SECURE_CHECK_OPTION(std::isfinite(near_radius) && near_radius > 0, "near_radius", near_radius,
                       "finite and > 0");
-  SECURE_CHECK_OPTION(action_grid == 0 || action_grid >= 2, "action_grid", action_grid,
-                      "0 (no grid) or >= 2");
-  SECURE_CHECK_OPTION(action_samples >= 0, "action_samples", action_samples, ">= 0");
+  SECURE_CHECK_OPTION(action_grid == 0 || (action_grid >= 2 && action_grid <= 1000), "action_grid",
+                      action_grid, "0 (no grid) or in [2, 1000]");
+  SECURE_CHECK_OPTION(action_samples >= 0 && action_samples <= kMaxShieldSamples, "action_samples",
+                      action_samples, "in [0, " << kMaxShieldSamples << "]");
   SECURE_CHECK_OPTION(action_grid > 0 || action_samples > 0, "action_samples", action_samples,
                       "> 0 when action_grid is 0");
   SECURE_CHECK_OPTION(action_refine_rounds >= 0, "action_refine_rounds", action_refine_rounds,
                       ">= 0");
   SECURE_CHECK_OPTION(search_starts >= 0, "search_starts", search_starts, ">= 0");
   SECURE_CHECK_OPTION(search_steps >= 0, "search_steps", search_steps, ">= 0");
-  SECURE_CHECK_OPTION(search_population > 0, "search_population", search_population, "> 0");
+  SECURE_CHECK_OPTION(search_population > 0 && search_population <= kMaxShieldSamples,
+                      "search_population", search_population,
+                      "in [1, " << kMaxShieldSamples << "]");
   SECURE_CHECK_OPTION(std::isfinite(search_step) && search_step > 0, "search_step", search_step,
                       "finite and > 0");
   SECURE_CHECK_OPTION(worst_examples >= 0, "worst_examples", worst_examples, ">= 0");
