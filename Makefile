@@ -26,4 +26,4 @@ check:
 	scripts/check.sh
 
 clean:
-	rm -rf $(BUILD) build-check
+	rm -rf $(BUILD) build-asan build-fuzz
