@@ -5,6 +5,7 @@
 #include <cstring>
 #include <iostream>
 
+#include "secure/common/yaml_value.h"
 #include "secure/common/build_info.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
@@ -170,7 +171,7 @@ void ApplyGroundTruthYaml(const YAML::Node& node, const std::string& source,
                           domains::double_integrator::GroundTruth* truth) {
   if (!node.IsMap()) return;  // section absent
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     try {
       if (key == "obstacle") {
         const auto xy = item.second.as<std::vector<double>>();

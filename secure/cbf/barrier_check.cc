@@ -282,7 +282,7 @@ nlohmann::json BarrierCheckOptions::ToJson() const {
 void BarrierCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier check options");
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     const YAML::Node& v = item.second;
     if (key == "region_samples") {
       region_samples = YamlValue<long>(v, key, source);
@@ -311,7 +311,7 @@ void BarrierCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& s
     } else if (key == "thresholds") {
       SECURE_CHECK(v.IsMap(), source << ": field 'thresholds' must be a mapping");
       for (const auto& t : v) {
-        const std::string name = t.first.as<std::string>();
+        const std::string name = YamlKey(t.first, source);
         const std::string where = "thresholds." + name;
         if (name == "no_safe_action") {
           thresholds.no_safe_action = YamlValue<double>(t.second, where, source);

@@ -234,14 +234,14 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
                                                     "obstacle_stride", "num_obstacles",
                                                     "position_offset", "velocity_offset"};
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
                  source << ": unknown field '" << key << "' in the car barrier trainer options");
     const YAML::Node& v = item.second;
     if (key == "layout") {
       SECURE_CHECK(v.IsMap(), source << ": field 'layout' must be a mapping");
       for (const auto& l : v) {
-        const std::string lk = l.first.as<std::string>();
+        const std::string lk = YamlKey(l.first, source);
         SECURE_CHECK(layout_keys.count(lk),
                      source << ": unknown field 'layout." << lk << "' in the car barrier options");
         const int value = YamlValue<int>(l.second, "layout." + lk, source);

@@ -60,7 +60,7 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
       "batch_size",  "max_epochs",    "patience",      "validation_fraction", "seed",
       "threads",     "verbose"};
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
                  source << ": unknown field '" << key << "' in the barrier trainer options");
     const YAML::Node& v = item.second;

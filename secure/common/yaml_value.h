@@ -11,6 +11,17 @@
 
 namespace secure {
 
+/// The key of a mapping entry as a string. A key that is not a plain scalar (a sequence, a
+/// mapping or null used as a key) is an error naming `source` and the line.
+inline std::string YamlKey(const YAML::Node& key, const std::string& source) {
+  SECURE_CHECK(key.IsScalar(), source << ":" << key.Mark().line + 1
+                                      << ": a key must be a plain name, not "
+                                      << (key.IsSequence() ? "a sequence"
+                                          : key.IsMap()    ? "a mapping"
+                                                           : "null"));
+  return key.Scalar();
+}
+
 template <typename T>
 T YamlValue(const YAML::Node& node, const std::string& key, const std::string& source) {
   try {

@@ -468,7 +468,7 @@ void DerbyExperimentOptions::Validate() const {
 void DerbyExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": the derby configuration must be a mapping");
   for (const auto& entry : node) {
-    const std::string key = entry.first.as<std::string>();
+    const std::string key = YamlKey(entry.first, source);
     const std::string where = source + " [" + key + "]";
     if (key == "barrier") {
       car_barrier.ApplyYaml(entry.second, where);
@@ -484,7 +484,7 @@ void DerbyExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string
       SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping of check options");
       YAML::Node rest(YAML::NodeType::Map);
       for (const auto& item : entry.second) {
-        const std::string name = item.first.as<std::string>();
+        const std::string name = YamlKey(item.first, source);
         if (name == "enabled") {
           check_enabled = YamlValue<bool>(item.second, name, where);
         } else if (name == "held_out") {

@@ -1,3 +1,4 @@
+#include "secure/common/yaml_value.h"
 #include "secure/experiments/double_integrator_pipeline.h"
 
 #include <yaml-cpp/yaml.h>
@@ -207,7 +208,7 @@ void PipelineOptions::Validate() const {
 void PipelineOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": the pipeline configuration must be a mapping");
   for (const auto& entry : node) {
-    const std::string key = entry.first.as<std::string>();
+    const std::string key = YamlKey(entry.first, source);
     const std::string where = source + " [" + key + "]";
     if (key == "barrier") {
       barrier.ApplyYaml(entry.second, where);

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <set>
 
+#include "secure/common/yaml_value.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/policy/airl_trainer.h"
@@ -102,7 +103,7 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
                                               "resume",
                                               "stop_after_iterations"};
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key), source << ": unknown field '" << key << "' in the AIRL options");
     const YAML::Node& v = item.second;
     auto dbl = [&] { return YamlValue<double>(v, key, source); };
@@ -302,7 +303,7 @@ void JointCbfOptions::ApplyYaml(const YAML::Node& node, const std::string& sourc
   using internal::YamlValue;
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of joint-optimisation options");
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     double* field = key == "weight"          ? &weight
                     : key == "class_k_gain"  ? &class_k_gain
                     : key == "dt"            ? &dt

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <set>
 
+#include "secure/common/yaml_value.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/policy/bc_trainer.h"
@@ -47,7 +48,7 @@ void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
       "epochs",      "batch_size", "weight_decay",  "validation_fraction",
       "min_log_std", "seed",       "verbose",       "curve_path"};
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
                  source << ": unknown field '" << key << "' in the behaviour cloning options");
     const YAML::Node& v = item.second;

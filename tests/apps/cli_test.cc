@@ -877,4 +877,16 @@ TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
   EXPECT_HAS(r.err, "vx");
 }
 
+// Found by yaml_options_fuzz: a key that is a sequence (`? [a, b]`) escaped as yaml-cpp's
+// TypedBadConversion; now every options parser says which line holds it.
+TEST(CliHardeningTest, AConfigKeyThatIsNotAPlainNameIsAnError) {
+  const std::string config = Write("complex_key.yaml", "trainer:\n  ? [a, b]\n  : 1\n");
+  WriteToyData();
+  const Result r = RunCli("cbf train --config " + config + " --safe-states " +
+                          (TempDir() / "safe.csv").string() + " --near-dangerous-states " +
+                          (TempDir() / "nd.csv").string() + " --out never.model");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, config + ":2: a key must be a plain name, not a sequence");
+}
+
 }  // namespace

@@ -10,6 +10,7 @@
 #include "secure/common/excerpt.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/yaml_keys.h"
+#include "secure/common/yaml_value.h"
 #include "tests/test_util.h"
 
 namespace secure {
@@ -94,6 +95,17 @@ TEST(YamlKeysTest, DuplicateKeysAtAnyDepthNameTheLines) {
             "c.yaml:2: duplicate key 'k' (first at line 2)");
   // The same key in different mappings is fine.
   CheckNoDuplicateKeys(YAML::Load("a:\n  k: 1\nb:\n  k: 2\n"), "c.yaml");
+}
+
+// Found by yaml_options_fuzz (corpus/yaml_options_fuzz/complex_key.yaml): a sequence used as a
+// key made every ApplyYaml throw yaml-cpp's TypedBadConversion instead of secure::Error.
+TEST(YamlKeysTest, AKeyThatIsNotAPlainNameIsAnErrorNamingTheLine) {
+  const YAML::Node root = YAML::Load("derby:\n  ? [a, b]\n  : 1\n");
+  for (const auto& item : root["derby"]) {
+    EXPECT_EQ(ErrorOf([&] { YamlKey(item.first, "c.yaml"); }),
+              "c.yaml:2: a key must be a plain name, not a sequence");
+  }
+  EXPECT_EQ(YamlKey(YAML::Load("{epochs: 3}").begin()->first, "c.yaml"), "epochs");
 }
 
 }  // namespace

@@ -109,7 +109,7 @@ nlohmann::json DerbyOptions::ToJson() const {
 void DerbyOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of demolition derby task options");
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     const YAML::Node& v = item.second;
     if (key == "num_cars") {
       num_cars = YamlValue<int>(v, key, source);

@@ -93,7 +93,7 @@ void ReachAvoidOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
       "obstacle",    "radius", "gamma",       "goal",       "goal_radius", "start_region",
       "start_speed", "dt",     "accel_bound", "brake_gain", "max_steps",   "start_clearance"};
   for (const auto& item : node) {
-    const std::string key = item.first.as<std::string>();
+    const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
                  source << ": unknown field '" << key << "' in the reach-avoid task options");
     const YAML::Node& v = item.second;
