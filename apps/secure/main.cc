@@ -23,7 +23,11 @@ int main(int argc, char** argv) {
     secure::cli::RegisterExperimentCommands(app, config);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version end parsing with exit code 0: CLI11 prints them. Every other parse
+    // error (a missing or unknown option, a value a validator rejects) is an error like any
+    // other: one line, exit code 1.
+    if (e.get_exit_code() == 0) return app.exit(e);
+    return secure::cli::ReportError(e.what());
   } catch (const secure::Error& e) {
     return secure::cli::ReportError(e.what());
   } catch (const std::bad_alloc&) {

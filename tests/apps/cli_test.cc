@@ -590,7 +590,7 @@ TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
                            (TempDir() / "never.model").string() + " --config ";
   Result r = RunCli(base + Write("typo.yaml", "trainr:\n  max_epochs: 3\n"));
   ExpectOneErrorLine(r,
-                     "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, derby, "
+                     "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, derby, "
                      "double_integrator, pipeline, trainer)");
   r = RunCli(base + Write("dup.yaml", "trainer:\n  max_epochs: 3\n  max_epochs: 4\n"));
   ExpectOneErrorLine(r, "dup.yaml:3: duplicate key 'max_epochs' (first at line 2)");
@@ -671,8 +671,10 @@ TEST(CliHardeningTest, InvalidValuesAreRejected) {
         std::string("eval --domain double-integrator --bc x.model --first-seed -1"),
         std::string("experiment derby-table3 --quick --first-seed -1")}) {
     const Result r = RunCli(command);
-    EXPECT_NE(r.exit_code, 0) << command;
+    EXPECT_EQ(r.exit_code, 1) << command;
+    EXPECT_HAS(r.err, "secure: error: ");
     EXPECT_HAS(r.err, "-1 is negative");
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
   }
   EXPECT_FALSE(fs::exists(TempDir() / "never_dir"));
 }
