@@ -9,9 +9,9 @@
 #   CHECK_LABELS='common|data' scripts/check.sh    only these ctest labels (a regex) in step 1
 #   CHECK_STEPS=fuzz scripts/check.sh              only step 2 (sanitizers: only step 1)
 #
-# Why GCC for step 1: clang 14's ASan runtime aborts at start-up in some of our test binaries on
-# Debian 12 ("CHECK failed: asan_posix.cpp:124 tsd_key_inited", inside its interceptor set-up,
-# before main); GCC 12's does not. libFuzzer needs clang, and its targets start cleanly.
+# Step 1 uses GCC, the compiler of the Release build; libFuzzer needs clang, so step 2 uses it.
+# Tests that replace malloc to count allocations skip themselves under ASan (SECURE_TEST_ASAN in
+# tests/test_util.h): ASan owns malloc and calls it before any static initialiser.
 #
 # Build dirs: $SECURE_ASAN_BUILD_DIR (default build-asan), $SECURE_FUZZ_BUILD_DIR (build-fuzz).
 # A fuzzer's crash input is kept in <fuzz build>/fuzz-artifacts/<target>/; once the defect is
