@@ -11,7 +11,7 @@
 #
 # Step 1 uses GCC, the compiler of the Release build; libFuzzer needs clang, so step 2 uses it.
 # Tests that replace malloc to count allocations skip themselves under ASan (SECURE_TEST_ASAN in
-# tests/test_util.h): ASan owns malloc and calls it before any static initialiser.
+# tests/sanitizers.h): ASan owns malloc and calls it before any static initialiser.
 #
 # Build dirs: $SECURE_ASAN_BUILD_DIR (default build-asan), $SECURE_FUZZ_BUILD_DIR (build-fuzz).
 # A fuzzer's crash input is kept in <fuzz build>/fuzz-artifacts/<target>/; once the defect is

@@ -15,6 +15,7 @@
 
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
+#include "tests/sanitizers.h"
 #include "tests/test_util.h"
 
 // ------------------------------------------------------------------------------------------------
