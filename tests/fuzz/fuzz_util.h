@@ -9,13 +9,19 @@
 
 namespace secure::fuzz {
 
-/// A per-process scratch file for readers that take a path; rewritten for every input.
+/// A per-process scratch file for readers that take a path; rewritten for every input and
+/// removed when the fuzzer exits.
+struct ScratchFile {
+  std::string path;
+  ~ScratchFile() { ::unlink(path.c_str()); }
+};
+
 inline const std::string& ScratchPath(const char* suffix) {
-  static const std::string path = [suffix] {
+  static const ScratchFile file{[suffix] {
     const char* dir = ::access("/dev/shm", W_OK) == 0 ? "/dev/shm" : "/tmp";
     return std::string(dir) + "/secure_fuzz_" + std::to_string(::getpid()) + suffix;
-  }();
-  return path;
+  }()};
+  return file.path;
 }
 
 inline const std::string& WriteScratch(const std::string& bytes, const char* suffix) {
