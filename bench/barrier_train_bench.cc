@@ -17,8 +17,8 @@
 
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/barrier_trainer.h"
-#include "secure/cbf/double_integrator_study.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/table1.h"
+#include "domains/double_integrator/double_integrator.h"
 
 namespace secure::bench {
 namespace {

@@ -14,8 +14,8 @@
 #include <Eigen/Core>
 
 #include "secure/common/rng.h"
-#include "secure/domains/derby/derby.h"
-#include "secure/domains/derby/expert.h"
+#include "domains/derby/derby.h"
+#include "domains/derby/expert.h"
 
 namespace secure::domains::derby {
 namespace {

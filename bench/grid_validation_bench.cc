@@ -19,10 +19,11 @@
 #include <memory>
 
 #include "bench/bench_nets.h"
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/validation.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
 
 namespace secure::bench {
@@ -63,7 +64,7 @@ void BM_GridValidation_Net(benchmark::State& state) {
   options.threads = static_cast<int>(state.range(0));
   cbf::Confusion c;
   for (auto _ : state) {
-    c = cbf::ValidateOnGrid([&] { return net.MakeEvaluator(); }, truth, grid, options);
+    c = domains::double_integrator::ValidateAgainstGroundTruth([&] { return net.MakeEvaluator(); }, truth, grid, options);
     benchmark::DoNotOptimize(c);
   }
   ReportGrid(state, grid, c);
@@ -84,8 +85,8 @@ void BM_GridValidation_GroundTruth(benchmark::State& state) {
   options.threads = static_cast<int>(state.range(0));
   cbf::Confusion c;
   for (auto _ : state) {
-    c = cbf::ValidateOnGrid(
-        [&] { return std::make_unique<cbf::DoubleIntegratorGroundTruth>(truth); }, truth, grid,
+    c = domains::double_integrator::ValidateAgainstGroundTruth(
+        [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(truth); }, truth, grid,
         options);
     benchmark::DoNotOptimize(c);
   }

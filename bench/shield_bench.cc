@@ -52,10 +52,11 @@
 #include <vector>
 
 #include "bench/bench_nets.h"
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/common/rng.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/domains/dynamics.h"
 #include "secure/nn/inference_mlp.h"
 #include "secure/nn/mlp.h"
@@ -307,7 +308,7 @@ Case MakeCase(Net net, Regime regime, int m) {
     case Net::kDoubleIntegratorTruth: {
       c.dynamics = std::make_unique<domains::double_integrator::Dynamics>(0.1);
       if (net == Net::kDoubleIntegratorTruth) {
-        c.raw = std::make_unique<cbf::DoubleIntegratorGroundTruth>(
+        c.raw = std::make_unique<domains::double_integrator::GroundTruthBarrier>(
             domains::double_integrator::GroundTruth{});
       } else {
         const nn::MlpSpec spec = ShieldDoubleIntegratorSpec();

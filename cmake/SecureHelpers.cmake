@@ -25,3 +25,12 @@ function(secure_add_test name label)
     SECURE_SHARED_DIR="${PROJECT_SOURCE_DIR}/../shared")
   gtest_discover_tests(${name} PROPERTIES LABELS ${label} DISCOVERY_TIMEOUT 60)
 endfunction()
+
+# secure_add_domain(<name> SOURCES ... DEPS ... [PRIVATE_DEPS ...])
+# A domain plug-in (domains/<name>/): target secure_domain_<name>, alias secure::domain_<name>.
+# Its dependencies stay its own (a MuJoCo domain links MuJoCo PRIVATE), so nothing else pulls them.
+function(secure_add_domain name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
+  secure_add_library(domain_${name} SOURCES ${ARG_SOURCES} DEPS ${ARG_DEPS}
+                     PRIVATE_DEPS ${ARG_PRIVATE_DEPS})
+endfunction()

@@ -27,8 +27,8 @@
 #include "secure/common/error.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
-#include "secure/domains/derby/derby.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/derby/derby.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/experiments/derby_experiments.h"
 #include "secure/nn/model_file.h"
 

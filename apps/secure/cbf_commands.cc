@@ -13,7 +13,7 @@
 #include "secure/cbf/barrier_check.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/barrier_trainer.h"
-#include "secure/cbf/double_integrator_study.h"
+#include "domains/double_integrator/table1.h"
 #include "secure/cbf/validation.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
@@ -284,7 +284,7 @@ struct EvalCommand {
     const di::Grid grid;
     const Stopwatch clock;
     const cbf::Confusion c =
-        cbf::ValidateOnGrid([&] { return net.MakeEvaluator(); }, truth, grid, validation);
+        domains::double_integrator::ValidateAgainstGroundTruth([&] { return net.MakeEvaluator(); }, truth, grid, validation);
     const double seconds = clock.Seconds();
     if (json) {
       nlohmann::json r = c.ToJson();

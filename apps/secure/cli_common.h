@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "secure/common/limits.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/shield/shield.h"
 
 namespace secure::cli {

@@ -12,6 +12,7 @@
 
 #include "cli_common.h"
 #include "commands.h"
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/common/enum_strings.h"
@@ -19,8 +20,8 @@
 #include "secure/common/filesystem.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
-#include "secure/domains/double_integrator/expert.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/expert.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/double_integrator_pipeline.h"
 #include "secure/nn/torch_threads.h"
@@ -432,7 +433,7 @@ struct EvalCommand {
         SECURE_CHECK(!path.empty(), "the shielded methods need --barrier or --run");
         if (path == "ground-truth") {
           models.make_barrier = [this] {
-            return std::make_unique<cbf::DoubleIntegratorGroundTruth>(task.truth);
+            return std::make_unique<domains::double_integrator::GroundTruthBarrier>(task.truth);
           };
         } else {
           net = cbf::BarrierNet::Load(path);

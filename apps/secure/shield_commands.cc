@@ -7,11 +7,12 @@
 
 #include "cli_common.h"
 #include "commands.h"
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
-#include "secure/eval/double_integrator_shield_run.h"
+#include "domains/double_integrator/shield_run.h"
 
 namespace secure::cli {
 namespace {
@@ -106,7 +107,7 @@ struct ShieldRunCommand {
 
     std::unique_ptr<cbf::Barrier> evaluator;
     if (barrier == kGroundTruthBarrier) {
-      evaluator = std::make_unique<cbf::DoubleIntegratorGroundTruth>(options.truth);
+      evaluator = std::make_unique<domains::double_integrator::GroundTruthBarrier>(options.truth);
     } else {
       const cbf::BarrierNet net = cbf::BarrierNet::Load(barrier);
       net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", barrier);

@@ -1,7 +1,7 @@
 #pragma once
 // The barrier interface: anything that maps a batch of states to h values. The shield, the
 // validation code and the CLI work with any implementation — the learned BarrierNet, an
-// analytic ground truth, and (later) per-obstacle networks.
+// analytic ground truth of a domain, and per-obstacle networks.
 //
 // A Barrier object is an *evaluator*: it may own scratch memory, so Evaluate() is non-const and
 // one object must not be used by two threads at once. Make one per thread from the shared,
@@ -12,7 +12,6 @@
 #include <string>
 #include <vector>
 
-#include "secure/domains/double_integrator/double_integrator.h"
 
 namespace secure::cbf {
 
@@ -34,21 +33,6 @@ class Barrier {
   /// Called with checked dimensions.
   virtual void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h) = 0;
-};
-
-/// The double integrator's ground-truth CBF as a Barrier (h computed in double, returned as float).
-class DoubleIntegratorGroundTruth final : public Barrier {
- public:
-  explicit DoubleIntegratorGroundTruth(const domains::double_integrator::GroundTruth& truth);
-  int state_dim() const override { return domains::double_integrator::kStateDim; }
-  std::string Describe() const override;
-
- protected:
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                  Eigen::Ref<Eigen::VectorXf> h) override;
-
- private:
-  domains::double_integrator::GroundTruth truth_;
 };
 
 }  // namespace secure::cbf

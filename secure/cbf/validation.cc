@@ -55,25 +55,28 @@ nlohmann::json Confusion::ToJson() const {
 }
 
 Confusion ValidateOnGrid(const std::function<std::unique_ptr<Barrier>()>& make_barrier,
-                         const domains::double_integrator::GroundTruth& truth,
-                         const domains::double_integrator::Grid& grid,
-                         const GridValidationOptions& options) {
-  namespace di = domains::double_integrator;
-  truth.Validate();
-  grid.Validate();
+                         const std::function<std::unique_ptr<Barrier>()>& make_reference,
+                         const StateSource& source, const GridValidationOptions& options) {
   SECURE_CHECK(options.threads > 0,
                "GridValidationOptions::threads = " << options.threads << ", must be > 0");
   SECURE_CHECK(options.chunk > 0,
                "GridValidationOptions::chunk = " << options.chunk << ", must be > 0");
-  const long total = grid.size();
+  SECURE_CHECK(source.state_dim > 0 && source.size >= 0 && source.fill,
+               "ValidateOnGrid: the state source (" << source.size << " states of dimension "
+                                                    << source.state_dim << ") is not usable");
+  const long total = source.size;
   const int threads = static_cast<int>(std::min<long>(options.threads, std::max(1L, total / 1024)));
-  // Evaluators are made on this thread (make_barrier need not be thread safe).
-  std::vector<std::unique_ptr<Barrier>> barriers;
+  // Evaluators are made on this thread (the factories need not be thread safe).
+  std::vector<std::unique_ptr<Barrier>> barriers, references;
   for (int t = 0; t < threads; ++t) {
     barriers.push_back(make_barrier());
-    SECURE_CHECK(barriers.back()->state_dim() == di::kStateDim,
-                 barriers.back()->Describe() << " takes " << barriers.back()->state_dim()
-                                             << "-dimensional states; the double integrator has 4");
+    references.push_back(make_reference());
+    for (const Barrier* b : {barriers.back().get(), references.back().get()}) {
+      SECURE_CHECK(b->state_dim() == source.state_dim,
+                   b->Describe() << " takes " << b->state_dim()
+                                 << "-dimensional states; the grid's states have "
+                                 << source.state_dim);
+    }
   }
   std::vector<Confusion> partial(threads);
   std::vector<std::exception_ptr> errors(threads);
@@ -81,16 +84,16 @@ Confusion ValidateOnGrid(const std::function<std::unique_ptr<Barrier>()>& make_b
     try {
       // Contiguous slices: thread t takes [t*total/threads, (t+1)*total/threads).
       const long begin = total * t / threads, end = total * (t + 1) / threads;
-      Eigen::MatrixXf states(di::kStateDim, options.chunk);
-      Eigen::VectorXf h(options.chunk);
+      Eigen::MatrixXf states(source.state_dim, options.chunk);
+      Eigen::VectorXf h(options.chunk), truth(options.chunk);
       Confusion c;
       for (long first = begin; first < end; first += options.chunk) {
         const long n = std::min(options.chunk, end - first);
-        grid.Fill(first, n, states);
+        source.fill(first, n, states.leftCols(n));
         barriers[t]->Evaluate(states.leftCols(n), h.head(n));
+        references[t]->Evaluate(states.leftCols(n), truth.head(n));
         for (long i = 0; i < n; ++i) {
-          const bool truly_safe =
-              truth.H(states(0, i), states(1, i), states(2, i), states(3, i)) >= 0.0;
+          const bool truly_safe = truth[i] >= 0.0f;
           const bool predicted_safe = h[i] >= 0.0f;
           if (truly_safe) {
             ++(predicted_safe ? c.safe_as_safe : c.safe_as_unsafe);

@@ -9,7 +9,6 @@
 #include <string>
 
 #include "secure/cbf/barrier.h"
-#include "secure/domains/double_integrator/double_integrator.h"
 
 namespace secure::cbf {
 
@@ -51,9 +50,21 @@ struct GridValidationOptions {
 /// Confusion of the barriers made by `make_barrier` (called once per worker thread, each
 /// evaluator is used by one thread only) against the double integrator's ground truth on `grid`.
 /// Deterministic: the counts do not depend on threads or chunk.
+/// The states of a validation grid, produced in chunks: `size` states of `state_dim` rows;
+/// fill(first, n, out) writes states [first, first + n) into out (state_dim x n). `fill` is called
+/// from several threads at once.
+struct StateSource {
+  int state_dim = 0;
+  long size = 0;
+  std::function<void(long first, long n, Eigen::Ref<Eigen::MatrixXf> out)> fill;
+};
+
+/// The confusion matrix of a barrier against a reference barrier (a domain's ground truth) on
+/// every state of `states`: a state is truly safe when the reference's h >= 0, predicted safe when
+/// the barrier's h >= 0. Each worker thread makes its own evaluators (the factories are called
+/// on the calling thread). @throws secure::Error on dimension mismatches or bad options.
 Confusion ValidateOnGrid(const std::function<std::unique_ptr<Barrier>()>& make_barrier,
-                         const domains::double_integrator::GroundTruth& truth,
-                         const domains::double_integrator::Grid& grid,
-                         const GridValidationOptions& options = {});
+                         const std::function<std::unique_ptr<Barrier>()>& make_reference,
+                         const StateSource& states, const GridValidationOptions& options = {});
 
 }  // namespace secure::cbf

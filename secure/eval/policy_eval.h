@@ -39,7 +39,7 @@
 #include "secure/cbf/barrier.h"
 #include "secure/common/rng.h"
 #include "secure/domains/environment.h"
-#include "secure/eval/double_integrator_shield_run.h"
+#include "secure/eval/latency.h"
 #include "secure/policy/gaussian_policy.h"
 #include "secure/shield/shield.h"
 #include "secure/stats/statistics.h"

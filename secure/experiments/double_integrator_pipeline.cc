@@ -9,7 +9,7 @@
 #include <ostream>
 #include <sstream>
 
-#include "secure/cbf/double_integrator_study.h"
+#include "domains/double_integrator/table1.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"

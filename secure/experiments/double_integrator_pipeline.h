@@ -24,8 +24,8 @@
 #include <vector>
 
 #include "secure/cbf/barrier_trainer.h"
-#include "secure/domains/double_integrator/expert.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/expert.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/bc_trainer.h"

@@ -5,7 +5,7 @@
 #include <filesystem>
 
 #include "secure/cbf/barrier_trainer.h"
-#include "secure/cbf/double_integrator_study.h"
+#include "domains/double_integrator/table1.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
 

@@ -1,6 +1,7 @@
 // The pre-deployment barrier check (cbf/barrier_check.h) on the double integrator, with
 // barriers whose failures are known: a constant +1, the analytic ground truth, and a hand-made
 // barrier that is "safe" where no bounded action can keep it so.
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier_check.h"
 
 #include <gtest/gtest.h>
@@ -15,7 +16,7 @@
 #include <limits>
 
 #include "secure/cbf/barrier.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "tests/test_util.h"
 
 namespace secure::cbf {
@@ -110,7 +111,7 @@ TEST(BarrierCheckTest, ConstantPositiveBarrierIsFlaggedForUnsafeStates) {
 
 TEST(BarrierCheckTest, GroundTruthPassesTheUnsafeTestAndHasFewStatesWithoutAction) {
   DiSetup setup;
-  DoubleIntegratorGroundTruth truth(setup.truth);
+  domains::double_integrator::GroundTruthBarrier truth(setup.truth);
   BarrierCheckOptions o = SmallOptions();
   o.region_samples = 2000;
   const CheckReport r = CheckBarrier(truth, setup.dynamics, setup.problem, o);

@@ -1,3 +1,4 @@
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "tests/test_util.h"
 
@@ -138,7 +139,7 @@ TEST(GroundTruthBarrierTest, MatchesTheDomainFormula) {
   truth.obstacle_y = 7;
   truth.radius = 1.2;
   truth.gamma = 0.5;
-  DoubleIntegratorGroundTruth barrier(truth);
+  domains::double_integrator::GroundTruthBarrier barrier(truth);
   Eigen::MatrixXf states(4, 3);
   states << 3, 0, 5, 7, 1, 8, 0, 1, -1, 0, -1, 1;
   Eigen::VectorXf h(3);

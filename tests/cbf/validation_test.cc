@@ -1,3 +1,4 @@
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/validation.h"
 
 #include <gtest/gtest.h>
@@ -8,6 +9,7 @@ namespace secure::cbf {
 namespace {
 
 namespace di = domains::double_integrator;
+using di::ValidateAgainstGroundTruth;
 
 // A barrier with a constant answer, to pin the confusion bookkeeping.
 class ConstantBarrier final : public Barrier {
@@ -35,8 +37,8 @@ di::Grid SmallGrid() {
 
 TEST(ValidateOnGridTest, GroundTruthAgainstItselfIsPerfect) {
   const di::GroundTruth truth;
-  const Confusion c = ValidateOnGrid(
-      [&] { return std::make_unique<DoubleIntegratorGroundTruth>(truth); }, truth, SmallGrid());
+  const Confusion c = ValidateAgainstGroundTruth(
+      [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(truth); }, truth, SmallGrid());
   EXPECT_EQ(c.total(), 20 * 20 * 6 * 6);
   EXPECT_EQ(c.safe_as_unsafe, 0);
   EXPECT_EQ(c.unsafe_as_safe, 0);
@@ -49,11 +51,11 @@ TEST(ValidateOnGridTest, GroundTruthAgainstItselfIsPerfect) {
 TEST(ValidateOnGridTest, AlwaysSafeIsFullyUnderConservative) {
   const di::GroundTruth truth;
   const Confusion c =
-      ValidateOnGrid([] { return std::make_unique<ConstantBarrier>(1.0f); }, truth, SmallGrid());
+      ValidateAgainstGroundTruth([] { return std::make_unique<ConstantBarrier>(1.0f); }, truth, SmallGrid());
   EXPECT_DOUBLE_EQ(c.OverConservative(), 0.0);
   EXPECT_DOUBLE_EQ(c.UnderConservative(), 1.0);
   const Confusion d =
-      ValidateOnGrid([] { return std::make_unique<ConstantBarrier>(-1.0f); }, truth, SmallGrid());
+      ValidateAgainstGroundTruth([] { return std::make_unique<ConstantBarrier>(-1.0f); }, truth, SmallGrid());
   EXPECT_DOUBLE_EQ(d.OverConservative(), 1.0);
   EXPECT_DOUBLE_EQ(d.UnderConservative(), 0.0);
   EXPECT_EQ(c.truly_safe(), d.truly_safe());
@@ -81,7 +83,7 @@ TEST(ValidateOnGridTest, CountsAgreeWithABruteForceLoop) {
       options.threads = threads;
       options.chunk = chunk;
       const Confusion c =
-          ValidateOnGrid([&] { return std::make_unique<DoubleIntegratorGroundTruth>(other); },
+          ValidateAgainstGroundTruth([&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(other); },
                          truth, grid, options);
       EXPECT_EQ(c.safe_as_safe, expected.safe_as_safe) << threads << " " << chunk;
       EXPECT_EQ(c.safe_as_unsafe, expected.safe_as_unsafe) << threads << " " << chunk;
@@ -104,7 +106,7 @@ TEST(ValidateOnGridTest, RejectsBarriersOfTheWrongDimension) {
                     Eigen::Ref<Eigen::VectorXf>) override {}
   };
   try {
-    ValidateOnGrid([] { return std::make_unique<ThreeD>(); }, di::GroundTruth{}, SmallGrid());
+    ValidateAgainstGroundTruth([] { return std::make_unique<ThreeD>(); }, di::GroundTruth{}, SmallGrid());
     FAIL() << "expected an error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("three-d takes 3-dimensional states"), std::string::npos)
@@ -126,7 +128,7 @@ TEST(ValidateOnGridTest, AnErrorInAWorkerThreadReachesTheCaller) {
   };
   GridValidationOptions options;
   options.threads = 2;
-  EXPECT_THROW(ValidateOnGrid([] { return std::make_unique<Failing>(); }, di::GroundTruth{},
+  EXPECT_THROW(ValidateAgainstGroundTruth([] { return std::make_unique<Failing>(); }, di::GroundTruth{},
                               SmallGrid(), options),
                Error);
 }

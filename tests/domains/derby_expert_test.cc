@@ -1,7 +1,7 @@
 // Tests of the Demolition Derby expert (privileged CBF-QP filter) and the generators of
-// demonstrations, safe states and near-dangerous states (secure/domains/derby/expert.h).
+// demonstrations, safe states and near-dangerous states (domains/derby/expert.h).
 
-#include "secure/domains/derby/expert.h"
+#include "domains/derby/expert.h"
 
 #include <gtest/gtest.h>
 

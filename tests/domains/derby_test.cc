@@ -1,7 +1,7 @@
-// Tests of the Demolition Derby task (secure/domains/derby/derby.h): options, observation layout,
+// Tests of the Demolition Derby task (domains/derby/derby.h): options, observation layout,
 // Euler semantics, collisions, success, determinism, the shield model, bad inputs, allocations.
 
-#include "secure/domains/derby/derby.h"
+#include "domains/derby/derby.h"
 
 #include <gtest/gtest.h>
 

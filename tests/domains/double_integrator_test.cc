@@ -1,4 +1,4 @@
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>

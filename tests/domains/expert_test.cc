@@ -1,7 +1,7 @@
 // Tests of the reach-avoid expert (its exact CBF filter), the demonstration generator and the
 // safety-demonstration generators.
 
-#include "secure/domains/double_integrator/expert.h"
+#include "domains/double_integrator/expert.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -18,7 +18,7 @@
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/reach_avoid.h"
 
 namespace secure::domains::double_integrator {
 namespace {

@@ -1,6 +1,6 @@
 // Tests of the reach-avoid task (ReachAvoidEnv, its options) and ClippedDoubleIntegrator.
 
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,5 @@
-#include "secure/eval/double_integrator_shield_run.h"
+#include "domains/double_integrator/ground_truth_barrier.h"
+#include "domains/double_integrator/shield_run.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -46,7 +47,7 @@ void ExpectConsistent(const ShieldRunResult& r) {
 
 TEST(DoubleIntegratorShieldRunTest, GroundTruthShieldIsSafeAndReachesTheGoal) {
   const ShieldRunOptions options = FastOptions();
-  cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(options, barrier);
   ExpectConsistent(r);
   // With the exact model and the true CBF, h(s') >= (1 - k dt) h(s) >= 0 holds at every step.
@@ -61,7 +62,7 @@ TEST(DoubleIntegratorShieldRunTest, GroundTruthShieldIsSafeAndReachesTheGoal) {
 
 TEST(DoubleIntegratorShieldRunTest, UnshieldedBaselineCollides) {
   const ShieldRunOptions options = FastOptions();
-  cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(options, barrier, /*shielded=*/false);
   ExpectConsistent(r);
   // The task tests safety: without the shield most episodes end in the obstacle.
@@ -72,7 +73,7 @@ TEST(DoubleIntegratorShieldRunTest, UnshieldedBaselineCollides) {
 
 TEST(DoubleIntegratorShieldRunTest, SameSeedSameResult) {
   ShieldRunOptions options = FastOptions(30);
-  cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
   auto without_timing = [](const ShieldRunResult& r) {
     nlohmann::json j = r.ToJson();
     j.erase("latency_us");
@@ -93,7 +94,7 @@ TEST(DoubleIntegratorShieldRunTest, SameSeedSameResult) {
 
 TEST(DoubleIntegratorShieldRunTest, JsonHasTheDocumentedKeys) {
   const ShieldRunOptions options = FastOptions(3);
-  cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(options, barrier);
   const nlohmann::json j = r.ToJson();
   for (const char* key :
@@ -141,7 +142,7 @@ TEST(DoubleIntegratorShieldRunTest, ValidateNamesTheField) {
   // RunDoubleIntegratorShield validates too.
   ShieldRunOptions bad = good;
   bad.kp = 0;
-  cbf::DoubleIntegratorGroundTruth barrier(good.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(good.truth);
   EXPECT_HAS(ErrorOf([&] { RunDoubleIntegratorShield(bad, barrier); }), "ShieldRunOptions::kp");
 }
 
@@ -163,7 +164,7 @@ TEST(DoubleIntegratorShieldRunTest, TableSaysNotApplicableWithoutASuccess) {
   ShieldRunOptions o;
   o.episodes = 2;
   o.max_steps = 3;  // too short to reach the goal
-  cbf::DoubleIntegratorGroundTruth barrier(o.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(o.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(o, barrier);
   ASSERT_EQ(r.success_episodes, 0);
   EXPECT_HAS(r.Table(), "| mean steps to goal | n/a (no successful episode) |");
@@ -174,7 +175,7 @@ TEST(DoubleIntegratorShieldRunTest, StartRegionWithoutSafeStatesIsAnError) {
   ShieldRunOptions options = FastOptions(1);
   options.start_lo = 4.5;  // entirely inside the obstacle
   options.start_hi = 5.5;
-  cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
   EXPECT_HAS(ErrorOf([&] { RunDoubleIntegratorShield(options, barrier); }), "no start state");
 }
 

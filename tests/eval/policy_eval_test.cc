@@ -1,5 +1,6 @@
 // The evaluation harness: episodes of policies with and without the shield on the
 // double-integrator reach-avoid task, and the across-seed summaries and tests.
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/eval/policy_eval.h"
 
 #include <gtest/gtest.h>
@@ -7,7 +8,7 @@
 #include <cmath>
 
 #include "secure/cbf/barrier.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "tests/test_util.h"
 
 namespace secure::eval {
@@ -47,7 +48,7 @@ TEST(PolicyEvalTest, ShieldWithGroundTruthPreventsTheCollisionsOfTheUnshieldedPo
   const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
   SeedModels models;
   models.airl = &pd;
-  models.make_barrier = [&] { return std::make_unique<cbf::DoubleIntegratorGroundTruth>(task.truth); };
+  models.make_barrier = [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(task.truth); };
   const auto results = EvaluateMethods(env, {Method::kAirl, Method::kSecure}, models,
                                        shield::ShieldOptions{}, 40, 7);
   const SeedResult& plain = results.at(Method::kAirl);
@@ -70,7 +71,7 @@ TEST(PolicyEvalTest, SameSeedGivesTheSameEpisodes) {
   const policy::GaussianPolicy pd = PdPolicy(task, 0.5);
   SeedModels models;
   models.bc = &pd;
-  models.make_barrier = [&] { return std::make_unique<cbf::DoubleIntegratorGroundTruth>(task.truth); };
+  models.make_barrier = [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(task.truth); };
   const std::vector<Method> methods = {Method::kBc, Method::kBcShield};
   const auto a = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 3);
   const auto b = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 3);
@@ -154,7 +155,7 @@ TEST(PolicyEvalTest, TheMyopicShieldAcceptsExactlyTheActionsWithNonNegativeNextH
   // With alpha(h) = h / dt, g(a) = h(T(s, a)) / dt: g >= 0 iff h(T(s, a)) >= 0.
   const di::ReachAvoidOptions task;
   di::ReachAvoidEnv env(task);
-  cbf::DoubleIntegratorGroundTruth barrier(task.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(task.truth);
   shield::ShieldOptions base;
   base.dt = task.dt;
   shield::Shield shield(ShieldOptionsFor(Method::kSecureMyopic, base), barrier, env.ShieldModel());

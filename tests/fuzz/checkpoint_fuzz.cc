@@ -11,7 +11,7 @@
 #include <string>
 
 #include "secure/common/error.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "secure/nn/model_file.h"
 #include "secure/policy/airl_trainer.h"
 #include "tests/fuzz/fuzz_util.h"

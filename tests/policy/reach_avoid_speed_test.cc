@@ -13,8 +13,8 @@
 #include <thread>
 
 #include "secure/common/timer.h"
-#include "secure/domains/double_integrator/expert.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/expert.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/bc_trainer.h"
 #include "tests/policy/single_thread.h"

@@ -7,6 +7,7 @@
 // The interposition forwards to glibc's __libc_* entry points, so it is glibc-specific (as is the
 // project: Debian 12).
 
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/shield/shield.h"
 #include "tests/shield/shield_test_util.h"
 
@@ -26,8 +27,8 @@
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
-#include "secure/domains/derby/derby.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/derby/derby.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
 
 // ------------------------------------------------------------------------------------------------
@@ -341,7 +342,7 @@ TEST(ShieldAllocTest, CounterSeesOperatorNewMallocAndEigen) {
 
 TEST(ShieldAllocTest, GroundTruthDecisionsDoNotAllocate) {
   const di::Dynamics dynamics(0.1);
-  cbf::DoubleIntegratorGroundTruth barrier{di::GroundTruth{}};
+  domains::double_integrator::GroundTruthBarrier barrier{di::GroundTruth{}};
   for (const Scenario& s : DoubleIntegratorScenarios(false))
     ExpectNoAllocations(s, barrier, dynamics);
 }

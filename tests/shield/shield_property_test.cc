@@ -4,6 +4,7 @@
 // (100) in shield_test; 10^4 in the ctest entry shield_properties_10k and 10^6 under the `long`
 // label (tests/CMakeLists.txt; RC_PARAMS sets them).
 
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/shield/shield.h"
 #include "tests/shield/shield_test_util.h"
 
@@ -21,9 +22,9 @@
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
-#include "secure/domains/derby/derby.h"
+#include "domains/derby/derby.h"
 #include "secure/common/rng.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
 
 namespace secure::shield {
@@ -84,8 +85,8 @@ System MakeSystem(SystemKind kind, unsigned long long net_seed) {
       b.learned = true;
       break;
     case SystemKind::kDoubleIntegratorTruth:
-      b.shield_barrier = std::make_unique<cbf::DoubleIntegratorGroundTruth>(di::GroundTruth{});
-      b.independent = std::make_unique<cbf::DoubleIntegratorGroundTruth>(di::GroundTruth{});
+      b.shield_barrier = std::make_unique<domains::double_integrator::GroundTruthBarrier>(di::GroundTruth{});
+      b.independent = std::make_unique<domains::double_integrator::GroundTruthBarrier>(di::GroundTruth{});
       b.dynamics = std::make_unique<di::Dynamics>(0.1);
       break;
     case SystemKind::kDerbyCarNet: {
@@ -313,7 +314,7 @@ Problem FarProblem() {
 RC_GTEST_PROP(ShieldProperty, AggregationAblationChangesOnlyTheAggregation, ()) {
   Problem p = FarProblem();
   const di::Dynamics dynamics(0.1);
-  cbf::DoubleIntegratorGroundTruth barrier{di::GroundTruth{}}, independent{di::GroundTruth{}};
+  domains::double_integrator::GroundTruthBarrier barrier{di::GroundTruth{}}, independent{di::GroundTruth{}};
   p.options.aggregation = Aggregation::kMean;
   Shield mean_shield(p.options, barrier, dynamics);
   const Decision mean = mean_shield.Decide(p.state, p.mu, p.sigma);

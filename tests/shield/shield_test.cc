@@ -1,3 +1,4 @@
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/shield/shield.h"
 #include "tests/shield/shield_test_util.h"
 
@@ -18,7 +19,7 @@
 #include "secure/cbf/barrier_net.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
 #include "tests/test_util.h"
 
@@ -112,8 +113,8 @@ struct NowhereSafe {
 
 struct DoubleIntegrator {
   di::Dynamics dynamics{0.1};
-  cbf::DoubleIntegratorGroundTruth barrier{di::GroundTruth{}};
-  cbf::DoubleIntegratorGroundTruth independent{di::GroundTruth{}};  // for re-evaluation
+  domains::double_integrator::GroundTruthBarrier barrier{di::GroundTruth{}};
+  domains::double_integrator::GroundTruthBarrier independent{di::GroundTruth{}};  // for re-evaluation
 };
 
 // ------------------------------------------------------------------------------------------------

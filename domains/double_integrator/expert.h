@@ -70,8 +70,8 @@
 
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
-#include "secure/domains/double_integrator/double_integrator.h"
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/reach_avoid.h"
 
 namespace secure::domains::double_integrator {
 

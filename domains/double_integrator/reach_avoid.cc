@@ -1,4 +1,4 @@
-#include "secure/domains/double_integrator/reach_avoid.h"
+#include "domains/double_integrator/reach_avoid.h"
 
 #include <yaml-cpp/yaml.h>
 

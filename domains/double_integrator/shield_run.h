@@ -24,7 +24,7 @@
 //
 // Usage:
 //   eval::ShieldRunOptions options;  // the defaults below
-//   cbf::DoubleIntegratorGroundTruth barrier(options.truth);
+//   domains::double_integrator::GroundTruthBarrier barrier(options.truth);
 //   eval::ShieldRunResult r = eval::RunDoubleIntegratorShield(options, barrier);
 //   std::cout << r.Table();
 
@@ -34,9 +34,11 @@
 #include <string>
 #include <vector>
 
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/domains/dynamics.h"
+#include "secure/eval/latency.h"
 #include "secure/shield/shield.h"
 
 namespace secure::eval {
@@ -104,24 +106,6 @@ struct ShieldRunOptions {
   void Validate() const;
   nlohmann::json ToJson() const;
 };
-
-/// Latency percentiles (nearest rank) of the shield's decisions, in microseconds.
-struct LatencySummary {
-  long count = 0;
-  double p50 = 0.0;
-  double p90 = 0.0;
-  double p99 = 0.0;
-  double max = 0.0;
-  double mean = 0.0;
-
-  /// From unsorted values (all zeros when there are none).
-  static LatencySummary Of(std::vector<double> values);
-  nlohmann::json ToJson() const;
-};
-
-/// The nearest-rank percentile (0 < percent <= 100) of `sorted` (ascending, non-empty): the
-/// smallest value with at least percent % of the values <= it.
-double NearestRankPercentile(const std::vector<double>& sorted, double percent);
 
 struct ShieldRunResult {
   bool shielded = true;

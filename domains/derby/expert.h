@@ -57,7 +57,7 @@
 
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
-#include "secure/domains/derby/derby.h"
+#include "domains/derby/derby.h"
 
 namespace secure::domains::derby {
 

@@ -1,4 +1,4 @@
-#include "secure/domains/derby/derby.h"
+#include "domains/derby/derby.h"
 
 #include <yaml-cpp/yaml.h>
 

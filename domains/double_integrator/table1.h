@@ -8,9 +8,10 @@
 #include <string>
 #include <vector>
 
+#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/validation.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 
 namespace secure::cbf {
 

@@ -1,4 +1,4 @@
-#include "secure/cbf/double_integrator_study.h"
+#include "domains/double_integrator/table1.h"
 
 #include <cmath>
 #include <cstdio>
@@ -71,7 +71,7 @@ Table1Result RunTable1(const Table1Options& options) {
     BarrierTrainingSummary summary;
     const BarrierNet net = TrainBarrier(trainer, data.safe, data.unsafe, &summary);
     const Stopwatch clock;
-    const Confusion c = ValidateOnGrid([&] { return net.MakeEvaluator(); }, options.truth,
+    const Confusion c = di::ValidateAgainstGroundTruth([&] { return net.MakeEvaluator(); }, options.truth,
                                        options.grid, options.validation);
     result.grid_seconds.push_back(clock.Seconds());
     result.per_seed.push_back(c);

@@ -1,4 +1,4 @@
-#include "secure/domains/derby/expert.h"
+#include "domains/derby/expert.h"
 
 #include <algorithm>
 #include <array>

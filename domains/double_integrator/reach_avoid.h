@@ -48,7 +48,7 @@
 #include <vector>
 
 #include "secure/common/rng.h"
-#include "secure/domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/double_integrator.h"
 #include "secure/domains/environment.h"
 
 namespace YAML {

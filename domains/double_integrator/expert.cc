@@ -1,4 +1,4 @@
-#include "secure/domains/double_integrator/expert.h"
+#include "domains/double_integrator/expert.h"
 
 #include <algorithm>
 #include <cmath>
