@@ -6,7 +6,7 @@
 //                      dynamics: the clipped exact step (dt, --accel-bound); held-out and
 //                      near-dangerous states: --safe-states / --near-dangerous-states, or drawn
 //                      from the ground truth with the check's seed;
-//   derby              experiments::MakeDerbyCheckProblem (perturbed safe / near-dangerous
+//   derby              derby::MakeDerbyCheckProblem (perturbed safe / near-dangerous
 //                      observations, the collision test, DerbyShieldModel); held-out states:
 //                      the files, or those of `secure experiment` (data_seed 2000), so that a
 //                      saved seed's barrier gets the check its experiment recorded.
@@ -29,7 +29,7 @@
 #include "secure/data/data.h"
 #include "domains/derby/derby.h"
 #include "domains/double_integrator/double_integrator.h"
-#include "secure/experiments/derby_experiments.h"
+#include "domains/derby/domain.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::cli {
@@ -213,19 +213,19 @@ struct CheckCommand {
     cbf::BarrierCheckProblem problem;
     std::unique_ptr<domains::DynamicsModel> dynamics;
     if (domain == kDerbyDomain) {
-      options = Options(experiments::DerbyExperimentOptions::DerbyCheckDefaults());
-      experiments::DerbyExperimentOptions e = experiments::DerbyExperimentOptions::Default();
+      options = Options(derby::DerbyCheckDefaults());
+      const derby::DerbyDomain d;
+      experiments::ExperimentOptions e = d.Preset();
       if (data_seed != 0) e.data_seed = data_seed;
-      e.check_held_out = held_out;
       ApplyShieldFlags(&e.shield);
       data::StateSet safe, nd;
       if (!safe_path.empty()) {
         safe = data::ReadStateSet(safe_path, features);
         nd = data::ReadStateSet(nd_path, features);
       } else {
-        experiments::DerbyCheckHeldOut(e, &safe, &nd);
+        d.CheckHeldOut(e.data_seed, held_out, &safe, &nd);
       }
-      problem = experiments::MakeDerbyCheckProblem(e.task, e.shield, safe, nd, &dynamics);
+      problem = d.MakeCheckProblem(e.shield, safe, nd, &dynamics);
     } else {
       options = Options(cbf::BarrierCheckOptions{});
       FinishGroundTruth(obstacle, &truth);

@@ -13,12 +13,23 @@
 #include "secure/common/filesystem.h"
 #include "secure/common/strings.h"
 #include "secure/common/yaml_keys.h"
+#include "secure/experiments/domain.h"
 
 namespace secure::cli {
 
 const std::vector<std::string>& KnownConfigSections() {
-  static const std::vector<std::string> known = {"airl",     "bc",      "check", "derby",
-                                                 "double_integrator", "pipeline", "trainer"};
+  // The commands' own sections, then each registered domain's experiment section
+  // (Domain::ConfigSection: "pipeline" for the double integrator, "derby", ...). Computed once,
+  // after main() registered the domains.
+  static const std::vector<std::string> known = [] {
+    std::vector<std::string> names = {"airl", "bc", "check", "double_integrator", "trainer"};
+    const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+    for (const std::string& domain : registry.Names())
+      names.push_back(registry.Make(domain)->ConfigSection());
+    std::sort(names.begin(), names.end());
+    names.erase(std::unique(names.begin(), names.end()), names.end());
+    return names;
+  }();
   return known;
 }
 
@@ -124,32 +135,56 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   class_k = ToString(shield::kClassKNames, so->class_k);
   aggregation = ToString(shield::kAggregationNames, so->aggregation);
   resampling = ToString(shield::kResamplingNames, so->resampling);
-  cmd->add_option("--samples", so->num_samples, "M: actions drawn per round")
-      ->capture_default_str();
-  cmd->add_option("--safe-ratio", so->safe_ratio, "rho0: resample while #safe / M <= rho0")
-      ->capture_default_str();
-  cmd->add_option("--class-k", class_k, "class-K function: linear | cubic")->capture_default_str();
-  cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
-      ->capture_default_str();
-  cmd->add_option("--aggregation", aggregation, "mean | random-safe")->capture_default_str();
-  cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str();
-  cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
-      ->capture_default_str();
-  cmd->add_option("--time-budget-us", so->time_budget_us,
-                  "wall-time budget per decision in microseconds (0: none)")
-      ->capture_default_str();
-  cmd->add_option("--probes", so->num_probes, "N: probe actions per adaptive step")
-      ->capture_default_str();
-  cmd->add_option("--probe-extent", so->probe_extent, "R: probes are uniform in mu + [-R, R]^n")
-      ->capture_default_str();
-  cmd->add_option("--sigma-step", so->sigma_step, "alpha_sigma: sigma widening step")
-      ->capture_default_str();
+  using Copy = std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>;
+  auto track = [this](CLI::Option* option, Copy copy) { given_.emplace_back(option, copy); };
+#define SECURE_SHIELD_FIELD_COPY(field) \
+  [](const shield::ShieldOptions& from, shield::ShieldOptions* to) { to->field = from.field; }
+  track(cmd->add_option("--samples", so->num_samples, "M: actions drawn per round")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(num_samples));
+  track(cmd->add_option("--safe-ratio", so->safe_ratio, "rho0: resample while #safe / M <= rho0")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(safe_ratio));
+  track(cmd->add_option("--class-k", class_k, "class-K function: linear | cubic")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(class_k));
+  track(cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(class_k_gain));
+  track(cmd->add_option("--aggregation", aggregation, "mean | random-safe")->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(aggregation));
+  track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(resampling));
+  track(cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(max_iterations));
+  track(cmd->add_option("--time-budget-us", so->time_budget_us,
+                        "wall-time budget per decision in microseconds (0: none)")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(time_budget_us));
+  track(cmd->add_option("--probes", so->num_probes, "N: probe actions per adaptive step")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(num_probes));
+  track(cmd->add_option("--probe-extent", so->probe_extent,
+                        "R: probes are uniform in mu + [-R, R]^n")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(probe_extent));
+  track(cmd->add_option("--sigma-step", so->sigma_step, "alpha_sigma: sigma widening step")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(sigma_step));
+#undef SECURE_SHIELD_FIELD_COPY
 }
 
 void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
   so->class_k = FromString(shield::kClassKNames, class_k, "--class-k");
   so->aggregation = FromString(shield::kAggregationNames, aggregation, "--aggregation");
   so->resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
+}
+
+void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,
+                               shield::ShieldOptions* base) const {
+  for (const auto& [option, copy] : given_)
+    if (option->count() > 0) copy(parsed, base);
 }
 
 void CheckDoubleIntegratorDomain(const std::string& domain) {

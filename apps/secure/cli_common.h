@@ -4,6 +4,8 @@
 #include <yaml-cpp/yaml.h>
 #include <CLI/CLI.hpp>
 #include <cstdint>
+#include <functional>
+#include <utility>
 #include <exception>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -97,6 +99,14 @@ struct ShieldFlags {
   std::string class_k, aggregation, resampling;
   void Add(CLI::App* cmd, shield::ShieldOptions* options);
   void ApplyTo(shield::ShieldOptions* options) const;
+  /// Copies onto `base` (e.g. a domain's preset) the fields whose flags were given, from
+  /// `parsed` (the options Add() bound, after ApplyTo()).
+  void OverlayGiven(const shield::ShieldOptions& parsed, shield::ShieldOptions* base) const;
+
+ private:
+  std::vector<std::pair<CLI::Option*, std::function<void(const shield::ShieldOptions&,
+                                                         shield::ShieldOptions*)>>>
+      given_;
 };
 
 /// Prints `result` (with the build context added) as one JSON document on stdout.

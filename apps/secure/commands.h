@@ -10,8 +10,8 @@ void RegisterCbfCommands(CLI::App& app, const Config& config);
 void RegisterCbfCheckCommand(CLI::App& cbf, const Config& config);
 /// secure shield run.
 void RegisterShieldCommands(CLI::App& app, const Config& config);
-/// secure demo, secure demos generate, secure policy train, secure eval.
+/// secure demos generate, secure policy train, secure eval.
 void RegisterPipelineCommands(CLI::App& app, const Config& config);
-/// secure experiment derby-table3 | derby-joint | derby-ablation | derby-sensitivity.
+/// secure demo; secure experiment KIND --domain NAME (and the derby-* aliases).
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
 }  // namespace secure::cli

@@ -8,6 +8,7 @@
 #include "commands.h"
 #include "secure/common/build_info.h"
 #include "secure/common/error.h"
+#include "secure/experiments/domain.h"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -16,6 +17,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string(secure::Version()) + " (" + secure::GitSha() + ")");
   app.require_subcommand(1);
   try {
+    // The domain plug-ins first: the commands list them, and the config's sections include theirs.
+    secure::plugins::RegisterBuiltinDomains(secure::experiments::DomainRegistry::Global());
     const secure::cli::Config config = secure::cli::PreScanConfig(argc, argv);
     secure::cli::RegisterCbfCommands(app, config);
     secure::cli::RegisterShieldCommands(app, config);

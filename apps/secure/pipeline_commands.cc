@@ -1,8 +1,7 @@
 // The SECURE pipeline and its stages as commands:
-//   secure demo                   the whole pipeline on the double integrator (the main job)
 //   secure demos generate         expert demonstrations + safe and near-dangerous states
 //   secure policy train           BC or AIRL from a demonstrations CSV
-//   secure eval                   bc / airl / secure / ablations / bc+shield over seeds
+//   secure eval                   saved models of any domain over seeds (every method)
 // Every stage reads and writes files, so users can bring their own data at any stage.
 #include <cmath>
 #include <iostream>
@@ -23,7 +22,9 @@
 #include "domains/double_integrator/expert.h"
 #include "domains/double_integrator/reach_avoid.h"
 #include "secure/eval/policy_eval.h"
-#include "secure/experiments/double_integrator_pipeline.h"
+#include "secure/cbf/car_barrier.h"
+#include "secure/experiments/experiment.h"
+#include "secure/nn/model_file.h"
 #include "secure/nn/torch_threads.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/bc_trainer.h"
@@ -35,86 +36,6 @@ namespace di = domains::double_integrator;
 
 // Safe-state augmentation: slowed copies per state (each multiplies the safe set).
 constexpr long kMaxSlowedCopies = 100;
-
-// ------------------------------------------------------------------------------------------
-struct DemoCommand {
-  bool quick = false;
-  bool json = false;
-  int seeds = 0;
-  long episodes = 0;
-  std::uint64_t first_seed = 0;
-  int threads = 2;
-  std::string out;
-  std::string methods;
-  YAML::Node config_section;
-  std::string config_path;
-  CLI::Option* seeds_option = nullptr;
-  CLI::Option* episodes_option = nullptr;
-  DeferredError config_error;
-
-  void Register(CLI::App& app, const Config& config) {
-    CLI::App* cmd = app.add_subcommand(
-        "demo",
-        "The main job: the complete SECURE pipeline on the double-integrator reach-avoid task "
-        "(demonstrations, learned barrier, BC and AIRL, shielded evaluation over seeds) and "
-        "its results table");
-    config_error.Capture([&] { config_section = config.Section("pipeline"); });
-    config_path = config.path;
-    AddConfigFlag(cmd, config);
-    cmd->add_flag("--quick", quick, "a small profile (2 seeds x 20 episodes, short training)");
-    seeds_option = cmd->add_option(
-        "--seeds", seeds,
-        "seeds, at most " + std::to_string(kMaxSeeds) + " (default: 10; --quick: 2)");
-    episodes_option = cmd->add_option("--episodes", episodes,
-                                      "episodes per method and seed, at most " +
-                                          std::to_string(kMaxEpisodes) + " (default: 100)");
-    AddSeedOption(cmd, "--first-seed", &first_seed, "seeds first-seed, first-seed + 1, ...");
-    cmd->add_option("--threads", threads, "seeds run in parallel")->capture_default_str();
-    cmd->add_option("--methods", methods,
-                    "comma-separated subset of bc, airl, secure, secure-random-safe, "
-                    "secure-no-resampling, bc+shield (default: all)");
-    cmd->add_option("--out", out,
-                    "directory for the data, per-seed models and learning curves, result.json");
-    cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
-    cmd->callback([this] {
-      config_error.Rethrow();
-      Run();
-    });
-  }
-
-  void Run() {
-    // A given --seeds / --episodes must be usable (0 is not "the default").
-    if (seeds_option->count() > 0) CheckRange("--seeds", seeds, 1, kMaxSeeds);
-    if (episodes_option->count() > 0) CheckRange("--episodes", episodes, 1, kMaxEpisodes);
-    experiments::PipelineOptions options =
-        quick ? experiments::PipelineOptions::Quick() : experiments::PipelineOptions::Default();
-    if (config_section.IsMap()) options.ApplyYaml(config_section, config_path + " [pipeline]");
-    if (seeds_option->count() > 0) options.seeds = seeds;
-    if (episodes_option->count() > 0) options.episodes = episodes;
-    if (!methods.empty()) options.methods = eval::ParseMethods(methods);
-    options.first_seed = first_seed;
-    options.threads = threads;
-    options.output_dir = out;
-    options.Validate();      // before the first line of progress
-    CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
-    std::cerr << "secure demo: " << options.seeds << " seeds x " << options.episodes
-              << " episodes per method on " << options.threads << " threads"
-              << (out.empty() ? "" : ", writing to " + out) << "\n";
-    const experiments::PipelineResult result =
-        experiments::RunDoubleIntegratorPipeline(options, &std::cerr);
-    if (json) {
-      nlohmann::json r = result.ToJson();
-      r["command"] = "demo";
-      PrintJson(r);
-    } else {
-      std::cout << "\nSECURE on the double-integrator reach-avoid task (barrier learned from "
-                << result.safe_states << " safe + " << result.near_dangerous_states
-                << " near-dangerous states; " << result.demonstrations
-                << " expert demonstrations)\n\n"
-                << result.evaluation.Table() << "\nTotal " << result.seconds << " s.\n";
-    }
-  }
-};
 
 // ------------------------------------------------------------------------------------------
 struct DemosGenerateCommand {
@@ -345,30 +266,34 @@ struct PolicyTrainCommand {
 
 // ------------------------------------------------------------------------------------------
 struct EvalCommand {
-  std::string domain, run_dir, airl_path, bc_path, barrier_path, methods;
+  std::string domain, run_dir, airl_path, bc_path, joint_path, barrier_path, methods;
   int seeds = 10;
   long episodes = 100;
   std::uint64_t first_seed = 0;
   shield::ShieldOptions shield;
   ShieldFlags shield_flags;
-  di::ReachAvoidOptions task;
   double tost_bound = 0.10;
   bool json = false;
 
   void Register(CLI::App& app) {
     CLI::App* cmd = app.add_subcommand(
         "eval",
-        "Evaluate bc, airl, secure, the shield ablations and bc+shield: success and dangerous "
-        "rates over seeds, Mann-Whitney U and TOST of SECURE vs AIRL, Kruskal-Wallis + Dunn "
-        "across the ablations");
-    cmd->add_option("--domain", domain, "domain: double-integrator")->required();
+        "Evaluate saved models on any domain: bc, airl, secure, the shield ablations, bc+shield, "
+        "secure-myopic, joint; success and dangerous rates over seeds, Mann-Whitney U and TOST "
+        "of SECURE vs AIRL, Kruskal-Wallis + Dunn across the ablations");
+    cmd->add_option("--domain", domain,
+                    "the domain: " + experiments::DomainRegistry::Global().NameList())
+        ->required();
     cmd->add_option("--run", run_dir,
-                    "a `secure demo --out` directory: seed-<k>/{bc,airl,barrier}.model per "
-                    "training seed (the paper's protocol: a seed covers training)");
+                    "a `secure demo --out` or `secure experiment --out` directory: "
+                    "seed-<k>/{bc,airl,joint,barrier}.model per training seed (the paper's "
+                    "protocol: a seed covers training)");
     cmd->add_option("--airl", airl_path, "AIRL policy model (instead of --run)");
     cmd->add_option("--bc", bc_path, "BC policy model (instead of --run)");
+    cmd->add_option("--joint", joint_path, "joint-optimisation policy model (instead of --run)");
     cmd->add_option("--barrier", barrier_path,
-                    "barrier model, or 'ground-truth' (instead of / overriding --run)");
+                    "barrier model (flat or per-obstacle), or 'ground-truth' for a domain that "
+                    "has one (instead of / overriding --run)");
     cmd->add_option("--methods", methods, "comma-separated methods (default: those whose models "
                                           "are given)");
     cmd->add_option("--seeds", seeds,
@@ -392,15 +317,19 @@ struct EvalCommand {
   }
 
   void Run() {
-    CheckDoubleIntegratorDomain(domain);
+    const std::unique_ptr<experiments::Domain> d =
+        experiments::DomainRegistry::Global().Make(domain);
+    // The shield: the domain's experiment preset, with the flags given on top.
     shield_flags.ApplyTo(&shield);
+    shield::ShieldOptions shield_options = d->Preset().shield;
+    shield_flags.OverlayGiven(shield, &shield_options);
     CheckRange("--seeds", seeds, 1, kMaxSeeds);
     CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     SECURE_CHECK(std::isfinite(tost_bound) && tost_bound > 0,
                  "--tost-bound = " << tost_bound << ", must be > 0");
-    shield.Validate();
-    SECURE_CHECK(!run_dir.empty() || !airl_path.empty() || !bc_path.empty(),
-                 "give --run DIR or at least one of --airl, --bc");
+    shield_options.Validate();
+    SECURE_CHECK(!run_dir.empty() || !airl_path.empty() || !bc_path.empty() || !joint_path.empty(),
+                 "give --run DIR or at least one of --airl, --bc, --joint");
     std::vector<eval::Method> list;
     if (!methods.empty()) {
       list = eval::ParseMethods(methods);
@@ -411,37 +340,52 @@ struct EvalCommand {
                                                       : (!airl_path.empty() || !run_dir.empty());
         if (has_policy && (!eval::IsShielded(m) || has_barrier)) list.push_back(m);
       }
+      if (!joint_path.empty()) list.push_back(eval::Method::kJoint);
     }
-    const di::ReachAvoidEnv env(task);
+    const std::unique_ptr<domains::Environment> env = d->MakeEnvironment();
     eval::Evaluation evaluation(eval::EvaluationOptions{tost_bound, 0.05});
     for (int k = 0; k < seeds; ++k) {
       const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(k);
-      std::optional<policy::GaussianPolicy> bc, airl;
+      std::optional<policy::GaussianPolicy> bc, airl, joint;
       std::optional<cbf::BarrierNet> net;
-      bool need_bc = false, need_airl = false, need_barrier = false;
+      std::optional<cbf::CarBarrierNet> per_obstacle;
+      bool need_bc = false, need_airl = false, need_joint = false, need_barrier = false;
       for (eval::Method m : list) {
-        (eval::UsesBcPolicy(m) ? need_bc : need_airl) = true;
+        if (eval::UsesBcPolicy(m)) {
+          need_bc = true;
+        } else if (eval::UsesJointPolicy(m)) {
+          need_joint = true;
+        } else {
+          need_airl = true;
+        }
         need_barrier = need_barrier || eval::IsShielded(m);
       }
-      if (need_bc) bc = LoadPolicy(ModelPath(bc_path, "bc", seed), env);
-      if (need_airl) airl = LoadPolicy(ModelPath(airl_path, "airl", seed), env);
+      if (need_bc) bc = LoadPolicy(ModelPath(bc_path, "bc", seed), *env, domain);
+      if (need_airl) airl = LoadPolicy(ModelPath(airl_path, "airl", seed), *env, domain);
+      if (need_joint) joint = LoadPolicy(ModelPath(joint_path, "joint", seed), *env, domain);
       eval::SeedModels models;
       models.bc = bc ? &*bc : nullptr;
       models.airl = airl ? &*airl : nullptr;
+      models.joint = joint ? &*joint : nullptr;
       if (need_barrier) {
         const std::string path = ModelPath(barrier_path, "barrier", seed);
         SECURE_CHECK(!path.empty(), "the shielded methods need --barrier or --run");
+        const std::string where = "the " + domain + " domain";
         if (path == "ground-truth") {
-          models.make_barrier = [this] {
-            return std::make_unique<domains::double_integrator::GroundTruthBarrier>(task.truth);
-          };
+          SECURE_CHECK(d->MakeGroundTruth() != nullptr,
+                       "--barrier ground-truth: the " << domain << " domain has no ground truth");
+          models.make_barrier = [&d] { return d->MakeGroundTruth(); };
+        } else if (nn::ReadModelFile(path).kind == cbf::kCarBarrierModelKind) {
+          per_obstacle = cbf::CarBarrierNet::Load(path);
+          per_obstacle->CheckFeatures(env->ObservationFeatures(), where, path);
+          models.make_barrier = [&per_obstacle] { return per_obstacle->MakeEvaluator(256); };
         } else {
           net = cbf::BarrierNet::Load(path);
-          net->CheckFeatures(env.ObservationFeatures(), "the double-integrator domain", path);
+          net->CheckFeatures(env->ObservationFeatures(), where, path);
           models.make_barrier = [&net] { return net->MakeEvaluator(256); };
         }
       }
-      const auto results = eval::EvaluateMethods(env, list, models, shield, episodes,
+      const auto results = eval::EvaluateMethods(*env, list, models, shield_options, episodes,
                                                  seed ^ 0x5ec07e5eed5ULL);
       for (const auto& [method, r] : results) evaluation.Add(method, r);
       if (!json) std::cerr << "seed " << seed << " evaluated\n";
@@ -450,6 +394,7 @@ struct EvalCommand {
     if (json) {
       nlohmann::json r = evaluation.ToJson();
       r["command"] = "eval";
+      r["domain"] = domain;
       PrintJson(r);
     } else {
       std::cout << evaluation.Table();
@@ -457,11 +402,12 @@ struct EvalCommand {
   }
 
   static policy::GaussianPolicy LoadPolicy(const std::string& path,
-                                           const domains::Environment& env) {
+                                           const domains::Environment& env,
+                                           const std::string& domain) {
     policy::GaussianPolicy p = policy::GaussianPolicy::Load(path);
     SECURE_CHECK(p.observation_features == env.ObservationFeatures() &&
                      p.action_features == env.ActionFeatures(),
-                 path << ": the policy's features do not match the double-integrator domain's");
+                 path << ": the policy's features do not match the " << domain << " domain's");
     return p;
   }
 };
@@ -469,11 +415,9 @@ struct EvalCommand {
 }  // namespace
 
 void RegisterPipelineCommands(CLI::App& app, const Config& config) {
-  static DemoCommand demo;
   static DemosGenerateCommand generate;
   static PolicyTrainCommand train;
   static EvalCommand evaluate;
-  demo.Register(app, config);
   CLI::App* demos = app.add_subcommand("demos", "Generate demonstrations");
   demos->require_subcommand(1);
   generate.Register(*demos);

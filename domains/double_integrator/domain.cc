@@ -1,0 +1,180 @@
+#include "domains/double_integrator/domain.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+
+#include "domains/double_integrator/ground_truth_barrier.h"
+#include "domains/double_integrator/table1.h"
+#include "secure/common/error.h"
+#include "secure/common/limits.h"
+#include "secure/common/option_check.h"
+#include "secure/common/rng.h"
+#include "secure/common/yaml_value.h"
+
+namespace secure::domains::double_integrator {
+
+DomainOptions DomainOptions::For(experiments::Profile profile) {
+  DomainOptions o;
+  if (profile == experiments::Profile::kQuick) {
+    o.demonstrations.episodes = 30;
+    o.safe_states = 2000;
+    o.near_dangerous.count = 1000;
+  }
+  return o;
+}
+
+void DomainOptions::Validate() const {
+  task.Validate();
+  expert.Validate();
+  demonstrations.Validate();
+  near_dangerous.Validate();
+  grid.Validate();
+  SECURE_CHECK_FIELD(safe_states > 0 && safe_states <= kMaxStates, "DomainOptions",
+                     "safe_states", safe_states, "in [1, " << kMaxStates << "]");
+  SECURE_CHECK_FIELD(slowed_copies >= 0 && slowed_copies <= 100, "DomainOptions",
+                     "slowed_copies", slowed_copies, "in [0, 100]");
+  SECURE_CHECK_FIELD(safe_states * (1L + slowed_copies) <= kMaxStates, "DomainOptions",
+                     "safe_states x (1 + slowed_copies)", safe_states * (1L + slowed_copies),
+                     "<= " << kMaxStates);
+}
+
+void DomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  SECURE_CHECK(node.IsMap(), source << ": the double-integrator domain options must be a mapping");
+  for (const auto& entry : node) {
+    const std::string key = YamlKey(entry.first, source);
+    const std::string where = source + " [" + key + "]";
+    if (key == "task") {
+      task.ApplyYaml(entry.second, where);
+    } else if (key == "safe_states") {
+      safe_states = YamlValue<long>(entry.second, key, source);
+    } else if (key == "slowed_copies") {
+      slowed_copies = YamlValue<int>(entry.second, key, source);
+    } else if (key == "demonstrations" || key == "near_dangerous") {
+      SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping");
+      for (const auto& item : entry.second) {
+        const std::string name = YamlKey(item.first, where);
+        if (key == "demonstrations" && name == "episodes") {
+          demonstrations.episodes = YamlValue<long>(item.second, name, where);
+        } else if (key == "demonstrations" && name == "stop_at_goal") {
+          demonstrations.stop_at_goal = YamlValue<bool>(item.second, name, where);
+        } else if (key == "demonstrations" && name == "max_attempts") {
+          demonstrations.max_attempts = YamlValue<long>(item.second, name, where);
+        } else if (key == "near_dangerous" && name == "count") {
+          near_dangerous.count = YamlValue<long>(item.second, name, where);
+        } else if (key == "near_dangerous" && name == "rho_min") {
+          near_dangerous.rho_min = YamlValue<double>(item.second, name, where);
+        } else if (key == "near_dangerous" && name == "rho_max") {
+          near_dangerous.rho_max = YamlValue<double>(item.second, name, where);
+        } else if (key == "near_dangerous" && name == "velocity_lo") {
+          near_dangerous.velocity_lo = YamlValue<double>(item.second, name, where);
+        } else if (key == "near_dangerous" && name == "velocity_hi") {
+          near_dangerous.velocity_hi = YamlValue<double>(item.second, name, where);
+        } else {
+          SECURE_THROW(where << ": unknown key '" << name << "' (valid: "
+                             << (key == "demonstrations"
+                                     ? "episodes, stop_at_goal, max_attempts"
+                                     : "count, rho_min, rho_max, velocity_lo, velocity_hi")
+                             << ")");
+        }
+      }
+    } else {
+      SECURE_THROW(source << ": unknown key '" << key
+                          << "' (valid: task, safe_states, slowed_copies, demonstrations, "
+                             "near_dangerous)");
+    }
+  }
+}
+
+nlohmann::json DomainOptions::ToJson() const {
+  return {{"task", task.ToJson()},
+          {"expert", expert.ToJson()},
+          {"demonstrations", demonstrations.ToJson()},
+          {"near_dangerous", near_dangerous.ToJson()},
+          {"safe_states", safe_states},
+          {"slowed_copies", slowed_copies}};
+}
+
+// ---------------------------------------------------------------------------------------------
+DoubleIntegratorDomain::DoubleIntegratorDomain(experiments::Profile profile)
+    : profile_(profile), options_(DomainOptions::For(profile)) {}
+
+std::string DoubleIntegratorDomain::Describe() const {
+  return ReachAvoidEnv(options_.task).Describe();
+}
+
+void DoubleIntegratorDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  options_.ApplyYaml(node, source);
+}
+
+std::unique_ptr<Environment> DoubleIntegratorDomain::MakeEnvironment() const {
+  return std::make_unique<ReachAvoidEnv>(options_.task);
+}
+
+experiments::DomainData DoubleIntegratorDomain::GenerateData(std::uint64_t data_seed) const {
+  DemonstrationOptions demo_options = options_.demonstrations;
+  demo_options.seed = data_seed;
+  const Demonstrations demos = GenerateDemonstrations(options_.task, options_.expert, demo_options);
+  Rng rng(data_seed + 1);
+  experiments::DomainData d;
+  d.demonstrations = demos.trajectories;
+  // The safe states: the demonstrations' states on the way to the goal (not the holding at it).
+  d.safe = WithSlowedCopies(
+      SafeStatesFromDemonstrations(UntilGoal(demos), options_.safe_states, rng),
+      options_.slowed_copies, rng);
+  d.near_dangerous = GenerateNearDangerous(options_.task, options_.near_dangerous, rng);
+  d.discarded_demonstrations = demos.discarded_collisions + demos.discarded_no_goal;
+  return d;
+}
+
+experiments::ExperimentOptions DoubleIntegratorDomain::Preset() const {
+  experiments::ExperimentOptions o;
+  o.data_seed = 1000;
+  o.barrier_kind = experiments::BarrierKind::kFlat;
+  // The barrier settings tuned on the double integrator (table1.h), with larger minibatches for
+  // the ~28,000 states here (the preset's 128 is for Table 1's 1,600).
+  o.flat_barrier = cbf::DoubleIntegratorTrainerPreset();
+  o.flat_barrier.batch_size = 512;
+  // Twice the preset's near-dangerous margin (0.05, tuned for Table 1's uniform samples, where
+  // it trades conservativeness for accuracy): here the shield needs the barrier's zero level
+  // inside the data gap, not at its unsafe edge. Measured: with 0.05 the learned barrier of
+  // seed 11 stayed positive on the obstacle's edge for tangential grazing (2 of 100 SECURE
+  // episodes touched it); with 0.1, 0.
+  o.flat_barrier.unsafe_margin = 0.1;
+  o.shield.dt = options_.task.dt;
+  if (profile_ == experiments::Profile::kQuick) {
+    o.seeds = 2;
+    o.episodes = 20;
+    o.flat_barrier.max_epochs = 60;
+    o.bc.epochs = std::max(1, o.bc.epochs / 4);
+    o.airl.iterations = 5;
+  }
+  return o;
+}
+
+void DoubleIntegratorDomain::CheckExperiment(const experiments::ExperimentOptions& o) const {
+  SECURE_CHECK_FIELD(o.shield.dt == options_.task.dt, "ExperimentOptions", "shield.dt",
+                     o.shield.dt,
+                     "the task's dt = " << options_.task.dt << " (the shield looks one step ahead)");
+}
+
+std::unique_ptr<cbf::Barrier> DoubleIntegratorDomain::MakeGroundTruth() const {
+  return std::make_unique<GroundTruthBarrier>(options_.task.truth);
+}
+
+std::optional<cbf::StateSource> DoubleIntegratorDomain::ValidationGrid() const {
+  return GridStates(options_.grid);
+}
+
+}  // namespace secure::domains::double_integrator
+
+namespace secure::plugins {
+void Register_double_integrator(experiments::DomainRegistry& registry) {
+  registry.Add("double-integrator",
+               "a point mass with bounded acceleration reaches a goal past a round obstacle "
+               "(paper Section 6, Table 1)",
+               [](experiments::Profile p) {
+                 return std::make_unique<domains::double_integrator::DoubleIntegratorDomain>(p);
+               });
+}
+}  // namespace secure::plugins

@@ -1,0 +1,67 @@
+#pragma once
+// The double-integrator reach-avoid task as an experiments::Domain (the plug-in's face to the
+// generic driver and the CLI): exact dynamics, the CBF-QP expert, a flat barrier MLP, and the
+// analytic ground truth with its validation grid (Table 1).
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "domains/double_integrator/double_integrator.h"
+#include "domains/double_integrator/expert.h"
+#include "domains/double_integrator/reach_avoid.h"
+#include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
+
+namespace secure::domains::double_integrator {
+
+/// The domain's own options: the task, the expert and the data generators.
+struct DomainOptions {
+  ReachAvoidOptions task;
+  ExpertOptions expert;
+  DemonstrationOptions demonstrations;
+  NearDangerousOptions near_dangerous;
+  long safe_states = 20000;  // demonstration states (up to the goal) used as the safe class;
+                             // at random if there are more (100 demonstrations hold ~11,000)
+  int slowed_copies = 1;     // safe-state augmentation (WithSlowedCopies)
+  Grid grid;                 // the validation grid (Table 1)
+
+  /// The paper's protocol, or the small profile.
+  static DomainOptions For(experiments::Profile profile);
+  void Validate() const;
+  /// Keys: task (ReachAvoidOptions), safe_states, slowed_copies, demonstrations {episodes,
+  /// stop_at_goal, max_attempts}, near_dangerous {count, rho_min, rho_max, velocity_lo,
+  /// velocity_hi}.
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+  nlohmann::json ToJson() const;
+};
+
+class DoubleIntegratorDomain final : public experiments::Domain {
+ public:
+  explicit DoubleIntegratorDomain(experiments::Profile profile = experiments::Profile::kFull);
+
+  std::string name() const override { return "double-integrator"; }
+  std::string Describe() const override;
+  std::string Title() const override { return "the double-integrator reach-avoid task"; }
+  std::string ConfigSection() const override { return "pipeline"; }
+  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
+  void Validate() const override { options_.Validate(); }
+  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
+
+  std::unique_ptr<Environment> MakeEnvironment() const override;
+  experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
+  experiments::ExperimentOptions Preset() const override;
+  /// The shield looks ahead one control period: shield.dt == task.dt.
+  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
+
+  std::unique_ptr<cbf::Barrier> MakeGroundTruth() const override;
+  std::optional<cbf::StateSource> ValidationGrid() const override;
+
+  const DomainOptions& options() const { return options_; }
+  DomainOptions& mutable_options() { return options_; }
+
+ private:
+  experiments::Profile profile_;
+  DomainOptions options_;
+};
+
+}  // namespace secure::domains::double_integrator

@@ -1,0 +1,151 @@
+#pragma once
+// What a domain plug-in gives the generic experiments, and the registry the CLI (and any
+// program) finds domains in.
+//
+// A domain is one folder under domains/ with one CMake target (secure_add_domain) and one
+// registration line (add_subdirectory in domains/CMakeLists.txt); it implements this interface:
+//   - its own options (task, expert, data generators), profile-dependent (full | quick), read from
+//     a YAML mapping and recorded as JSON;
+//   - factories: the Environment (which also owns the shield's dynamics model and the backup
+//     action), the data an experiment learns from (task demonstrations, safe and near-dangerous
+//     states), held-out states for the barrier check;
+//   - the experiment preset: which barrier kind and which trainer settings, the shield, the
+//     evaluation size (ExperimentOptions);
+//   - optionally: the barrier check's problem (region, unsafe test), an analytic ground-truth
+//     barrier and a validation grid.
+// Generic modules never include a concrete domain; they see domains through this interface.
+//
+//   experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+//   std::unique_ptr<experiments::Domain> d = registry.Make("derby", experiments::Profile::kQuick);
+//   experiments::ExperimentOptions o = d->Preset();
+//   experiments::ExperimentResult r =
+//       experiments::RunExperiment(experiments::ExperimentKind::kMethodComparison, *d, o, &std::cerr);
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "secure/cbf/barrier.h"
+#include "secure/cbf/barrier_check.h"
+#include "secure/cbf/validation.h"
+#include "secure/common/enum_strings.h"
+#include "secure/data/data.h"
+#include "secure/domains/dynamics.h"
+#include "secure/domains/environment.h"
+#include "secure/shield/shield.h"
+
+namespace YAML {
+class Node;
+}
+
+namespace secure::experiments {
+
+struct ExperimentOptions;
+
+/// The size of a domain's data and of the experiment preset: the paper's protocol, or a small
+/// profile for tests and smoke runs.
+enum class Profile { kFull, kQuick };
+
+/// The data an experiment learns from, generated once from a data seed.
+struct DomainData {
+  data::TrajectorySet demonstrations;   // the expert's task demonstrations (collisions dropped)
+  data::StateSet safe, near_dangerous;  // the barrier's training data
+  long discarded_demonstrations = 0;    // expert episodes dropped (collided, or missed the goal)
+};
+
+class Domain {
+ public:
+  virtual ~Domain() = default;
+
+  /// The registry name ("double-integrator").
+  virtual std::string name() const = 0;
+  /// One line for reports ("Demolition Derby: 16 cars, ...").
+  virtual std::string Describe() const = 0;
+  /// A short title for tables ("the double-integrator reach-avoid task").
+  virtual std::string Title() const { return name(); }
+  /// The config-file section (`--config`) whose keys ExperimentOptions::ApplyYaml reads for this
+  /// domain's experiments (for example "derby").
+  virtual std::string ConfigSection() const = 0;
+
+  /// The domain's own options (a mapping; unknown keys are an error naming `source`).
+  virtual void ApplyYaml(const YAML::Node& node, const std::string& source) = 0;
+  /// @throws secure::Error naming the field, value and rule.
+  virtual void Validate() const = 0;
+  virtual nlohmann::json OptionsJson() const = 0;
+
+  /// A new environment with the domain's options.
+  virtual std::unique_ptr<domains::Environment> MakeEnvironment() const = 0;
+  /// The experiment's data from `data_seed` (deterministic).
+  virtual DomainData GenerateData(std::uint64_t data_seed) const = 0;
+
+  /// Checks experiment options against the domain (e.g. that the shield looks ahead exactly one
+  /// control period); called by RunExperiment. @throws secure::Error naming the field.
+  virtual void CheckExperiment(const ExperimentOptions& options) const {}
+
+  /// The experiment options this domain's experiments start from (barrier kind and trainer
+  /// settings, shield, seeds and episodes), for the domain's profile.
+  virtual ExperimentOptions Preset() const = 0;
+
+  /// The barrier check (cbf/barrier_check.h) on this domain: whether it has one.
+  virtual bool HasCheck() const { return false; }
+  /// `count` held-out safe and near-dangerous states for the check, drawn from streams other than
+  /// the training data's (deterministic for `data_seed`). Only if HasCheck().
+  virtual void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                            data::StateSet* near_dangerous) const;
+  /// The check's problem for a barrier used under `shield` with the given labelled states; the
+  /// dynamics model is returned through `dynamics` (it must outlive the check). Only if
+  /// HasCheck().
+  virtual cbf::BarrierCheckProblem MakeCheckProblem(
+      const shield::ShieldOptions& shield, const data::StateSet& safe,
+      const data::StateSet& near_dangerous,
+      std::unique_ptr<domains::DynamicsModel>* dynamics) const;
+
+  /// An analytic ground-truth barrier, or null if the domain has none.
+  virtual std::unique_ptr<cbf::Barrier> MakeGroundTruth() const { return nullptr; }
+  /// The states to validate a barrier on against the ground truth (only with a ground truth);
+  /// valid while the domain lives.
+  virtual std::optional<cbf::StateSource> ValidationGrid() const { return std::nullopt; }
+};
+
+/// Makes a domain with its options for a profile.
+using DomainFactory = std::function<std::unique_ptr<Domain>(Profile)>;
+
+/// The registered domains, by name. Built-in domains are added by RegisterBuiltinDomains()
+/// (generated from the plug-ins under domains/); programs and tests may add their own.
+class DomainRegistry {
+ public:
+  /// The process-wide registry (built-in domains are not added automatically: call
+  /// RegisterBuiltinDomains(), as the CLI does).
+  static DomainRegistry& Global();
+
+  /// Adds a domain. @throws secure::Error if the name is empty, malformed or taken.
+  void Add(const std::string& name, const std::string& summary, DomainFactory factory);
+  /// The domain `name` with its options for `profile`. @throws secure::Error naming `name` and
+  /// listing the registered domains if there is none.
+  std::unique_ptr<Domain> Make(const std::string& name, Profile profile = Profile::kFull) const;
+  bool Has(const std::string& name) const;
+  /// Registered names, sorted.
+  std::vector<std::string> Names() const;
+  /// "derby | double-integrator" for help texts and errors.
+  std::string NameList() const;
+  /// "  name  summary" lines, one per domain.
+  std::string Summaries() const;
+
+ private:
+  struct Entry {
+    std::string name, summary;
+    DomainFactory factory;
+  };
+  std::vector<Entry> entries_;
+};
+
+}  // namespace secure::experiments
+
+namespace secure::plugins {
+/// Adds every domain plug-in of this build to `registry` once (repeated calls do nothing);
+/// generated by CMake from the folders under domains/ (cmake/SecureHelpers.cmake).
+void RegisterBuiltinDomains(experiments::DomainRegistry& registry);
+}  // namespace secure::plugins

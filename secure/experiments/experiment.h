@@ -1,0 +1,175 @@
+#pragma once
+// The experiment driver: the paper's experiments on any registered domain (domain.h).
+//
+//   kind                 methods (default)                     paper
+//   method-comparison    bc, airl, secure                      Table 3 (Mann-Whitney U, TOST)
+//   joint                airl, secure, joint                   Section 4.1's baseline
+//   ablation             secure, secure-random-safe,           Figure 9 (Kruskal-Wallis + Dunn),
+//                        secure-no-resampling, secure-myopic   requirement R3 of Section 4.2
+//   sensitivity          secure, with barriers from reduced,   Section 6.3
+//                        imbalanced and label-flipped data
+//
+// Protocol (every kind, every domain):
+//   1. data, once, from data_seed (Domain::GenerateData): the expert's task demonstrations, the
+//      safe and near-dangerous states; with the barrier check on, held-out states for it;
+//   2. per seed (the seed covers all training and the evaluation): BC (a method, and the warm
+//      start of AIRL and the joint policy), AIRL, then per barrier-data variant (one outside
+//      `sensitivity`) the barrier (flat MLP or per-obstacle network), its check, the joint policy
+//      (kind `joint`), and every method on the same `episodes` episodes (common random numbers,
+//      eval::EvaluationSeed(seed));
+//   3. across seeds: eval::Evaluation (one per variant).
+// Only what the methods need is trained. Seeds run in parallel on `threads` workers; the results
+// do not depend on the number of workers.
+#include <cstdint>
+#include <iosfwd>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "secure/cbf/barrier_check.h"
+#include "secure/cbf/barrier_trainer.h"
+#include "secure/cbf/car_barrier_trainer.h"
+#include "secure/common/enum_strings.h"
+#include "secure/data/data.h"
+#include "secure/eval/policy_eval.h"
+#include "secure/experiments/domain.h"
+#include "secure/policy/airl_trainer.h"
+#include "secure/policy/bc_trainer.h"
+#include "secure/shield/shield.h"
+
+namespace YAML {
+class Node;
+}
+
+namespace secure::experiments {
+
+enum class ExperimentKind { kMethodComparison, kJoint, kAblation, kSensitivity };
+inline constexpr EnumTable<ExperimentKind, 4> kExperimentKindNames{{
+    {ExperimentKind::kMethodComparison, "method-comparison"},
+    {ExperimentKind::kJoint, "joint"},
+    {ExperimentKind::kAblation, "ablation"},
+    {ExperimentKind::kSensitivity, "sensitivity"},
+}};
+
+/// The methods a kind evaluates by default, in table order.
+std::vector<eval::Method> DefaultMethods(ExperimentKind kind);
+
+/// Which barrier SECURE learns: a plain MLP on the whole state (cbf::BarrierNet), or the
+/// permutation-invariant per-obstacle network (cbf::CarBarrierNet: one MLP per obstacle, the
+/// minimum over the obstacles in range; the released Derby architecture).
+enum class BarrierKind { kPerObstacle, kFlat };
+inline constexpr EnumTable<BarrierKind, 2> kBarrierKindNames{{
+    {BarrierKind::kPerObstacle, "per-obstacle"},
+    {BarrierKind::kFlat, "flat"},
+}};
+
+/// One barrier-data variant of the sensitivity study (Section 6.3).
+struct BarrierDataVariant {
+  std::string name;            // "data 10%", "imbalance 1:4", "label noise 30%"; the unmodified
+                               // data is "baseline"
+  double data_fraction = 1.0;  // keep this fraction of both classes (their ratio preserved)
+  int imbalance = 1;           // keep 1/imbalance of the near-dangerous states (safe : nd = 1:k)
+  double label_noise = 0.0;    // move this fraction of each class into the other class
+
+  nlohmann::json ToJson() const;
+};
+
+/// The baseline and the variants of the sensitivity study, in table order.
+std::vector<BarrierDataVariant> SensitivityVariants(const std::vector<double>& data_fractions,
+                                                    const std::vector<int>& imbalance_ratios,
+                                                    const std::vector<double>& label_noise);
+
+/// Applies `variant` to the barrier data (deterministic for `seed`; the subsets and flipped
+/// states are drawn at random). @throws secure::Error if a class would become empty.
+void ApplyBarrierDataVariant(const BarrierDataVariant& variant, std::uint64_t seed,
+                             data::StateSet* safe, data::StateSet* near_dangerous);
+
+/// Everything an experiment needs besides the domain. Domains give their defaults through
+/// Domain::Preset(); a config file's section and the CLI's flags override them.
+struct ExperimentOptions {
+  std::uint64_t data_seed = 1000;  // the data (Domain::GenerateData)
+
+  // Learning (each seed overrides the seeds inside these).
+  BarrierKind barrier_kind = BarrierKind::kFlat;
+  cbf::BarrierTrainerOptions flat_barrier;
+  cbf::CarBarrierTrainerOptions per_obstacle_barrier;
+  policy::BcOptions bc;
+  policy::AirlOptions airl;
+  bool airl_warm_start = true;    // AIRL (and the joint policy) start from the seed's BC policy
+  policy::JointCbfOptions joint;  // kind `joint` only
+
+  // Evaluation.
+  shield::ShieldOptions shield;
+  eval::EvaluationOptions evaluation;
+  std::vector<eval::Method> methods;  // empty: DefaultMethods(kind)
+  int seeds = 10;
+  long episodes = 100;
+  std::uint64_t first_seed = 0;  // seeds first_seed, first_seed + 1, ...
+
+  // The pre-deployment barrier check (cbf/barrier_check.h) of every seed's barrier(s), on domains
+  // that have one (Domain::HasCheck), recorded in the seed's summary ("barriers": {variant:
+  // {"check": ...}}, and "check" for the first variant) and in Table(). Its own streams
+  // (Domain::CheckHeldOut, check.seed); the experiment's numbers do not depend on it.
+  bool check_enabled = true;
+  long check_held_out = 256;  // held-out safe and near-dangerous states (each)
+  cbf::BarrierCheckOptions check;
+  // If a seed's barrier is flagged: add its counterexamples to the near-dangerous states, retrain
+  // the barrier once (same seed), check it again, and evaluate with the retrained barrier.
+  bool augment_flagged = false;
+
+  // Kind `sensitivity`.
+  std::vector<double> data_fractions = {1.0, 0.1, 0.01};
+  std::vector<int> imbalance_ratios = {1, 2, 4, 8};
+  std::vector<double> label_noise = {0.0, 0.1, 0.3, 0.5};
+
+  int threads = 2;         // seeds trained and evaluated in parallel
+  std::string output_dir;  // if set: data CSVs, per-seed models and curves, result.json
+  bool verbose = true;     // progress lines on the progress stream
+
+  /// Throws secure::Error naming the field, value and rule.
+  void Validate() const;
+  /// Sections of a YAML mapping: barrier (the trainer of the current barrier_kind),
+  /// flat_barrier, per_obstacle_barrier, bc, airl, joint (policy::JointCbfOptions), check
+  /// (cbf::BarrierCheckOptions plus `enabled`, `held_out` and `augment`), domain (the domain's
+  /// own options: Domain::ApplyYaml, when `domain` is given); unknown sections are an error
+  /// naming `source`.
+  void ApplyYaml(const YAML::Node& node, const std::string& source, Domain* domain = nullptr);
+  nlohmann::json ToJson() const;
+};
+
+struct ExperimentResult {
+  ExperimentKind kind = ExperimentKind::kMethodComparison;
+  std::string domain;        // Domain::name()
+  std::string domain_title;  // Domain::Title()
+  nlohmann::json domain_options;
+  /// (name, evaluation): one ("main") outside `sensitivity`; one per barrier-data variant there
+  /// (SECURE only).
+  std::vector<std::pair<std::string, eval::Evaluation>> evaluations;
+  std::vector<BarrierDataVariant> variants;  // in order
+  std::vector<eval::Method> methods;
+  long demonstrations = 0, discarded_demonstrations = 0, demonstration_steps = 0;
+  long safe_states = 0, near_dangerous_states = 0;
+  std::vector<nlohmann::json> seed_summaries;  // per seed: training summaries and timings
+  double data_seconds = 0.0;
+  double seconds = 0.0;
+  ExperimentOptions options;
+
+  /// Outside `sensitivity`: the evaluation's eval::Evaluation::ToJson() (the format of
+  /// `secure eval`) plus "experiment": {kind, domain, data counts, per-seed summaries, options}.
+  /// `sensitivity`: "variants": {name: {"variant": ..., evaluation JSON}} plus "experiment".
+  nlohmann::json ToJson() const;
+  /// Markdown: a title line, the method table(s) with the tests (sensitivity: one row per
+  /// variant), then, when the barrier check ran, one row per seed.
+  std::string Table() const;
+  /// The per-seed barrier-check table of Table() (empty when the check did not run).
+  std::string CheckTable() const;
+};
+
+/// Runs one experiment of `kind` on `domain`; progress lines go to `progress` when
+/// options.verbose (may be null). @throws secure::Error on invalid options, or if any stage fails
+/// (naming the seed and stage).
+ExperimentResult RunExperiment(ExperimentKind kind, const Domain& domain,
+                               const ExperimentOptions& options, std::ostream* progress);
+
+}  // namespace secure::experiments
