@@ -9,13 +9,11 @@
 #include <sstream>
 
 #include "secure/common/error.h"
+#include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::domains::derby {
 namespace {
-
-#define SECURE_DERBY_OPTION_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, "DerbyOptions::" << field << " = " << value << ", must be " << rule)
 
 // Rejection sampling gives up after this many draws per car (the defaults almost never reject).
 constexpr int kMaxPlacementDraws = 10000;
@@ -58,33 +56,34 @@ const std::vector<std::string>& ActionFeatures() {
 // Options
 
 void DerbyOptions::Validate() const {
-  SECURE_DERBY_OPTION_CHECK(num_cars >= kObservedCars && num_cars <= kMaxCars, "num_cars",
-                            num_cars, "in [" << kObservedCars << ", " << kMaxCars << "]");
-  SECURE_DERBY_OPTION_CHECK(Finite(dt) && dt > 0, "dt", dt, "> 0");
-  SECURE_DERBY_OPTION_CHECK(max_steps > 0, "max_steps", max_steps, "> 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(arena_side) && arena_side > 0, "arena_side", arena_side, "> 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(start_jitter) && start_jitter >= 0, "start_jitter",
-                            start_jitter, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(goal_jitter) && goal_jitter >= 0, "goal_jitter", goal_jitter,
-                            ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(goal_radius) && goal_radius > 0, "goal_radius", goal_radius,
-                            "> 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(collision_radius) && collision_radius > 0, "collision_radius",
-                            collision_radius, "> 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(accel_bound) && accel_bound > 0, "accel_bound", accel_bound,
-                            "> 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(min_separation) && min_separation >= 0, "min_separation",
-                            min_separation, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(ego_clearance) && ego_clearance >= 0, "ego_clearance",
-                            ego_clearance, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(car_goal_offset) && car_goal_offset >= 0, "car_goal_offset",
-                            car_goal_offset, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(car_kp) && car_kp >= 0, "car_kp", car_kp, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(car_kd) && car_kd >= 0, "car_kd", car_kd, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(Finite(car_noise) && car_noise >= 0, "car_noise", car_noise, ">= 0");
-  SECURE_DERBY_OPTION_CHECK(lookahead_steps >= 1 && lookahead_steps <= kLookaheadFrames,
-                            "lookahead_steps", lookahead_steps,
-                            "in [1, " << kLookaheadFrames << "]");
+  SECURE_CHECK_FIELD(num_cars >= kObservedCars && num_cars <= kMaxCars, "DerbyOptions", "num_cars",
+                     num_cars, "in [" << kObservedCars << ", " << kMaxCars << "]");
+  SECURE_CHECK_FIELD(Finite(dt) && dt > 0, "DerbyOptions", "dt", dt, "> 0");
+  SECURE_CHECK_FIELD(max_steps > 0, "DerbyOptions", "max_steps", max_steps, "> 0");
+  SECURE_CHECK_FIELD(Finite(arena_side) && arena_side > 0, "DerbyOptions", "arena_side", arena_side,
+                     "> 0");
+  SECURE_CHECK_FIELD(Finite(start_jitter) && start_jitter >= 0, "DerbyOptions", "start_jitter",
+                     start_jitter, ">= 0");
+  SECURE_CHECK_FIELD(Finite(goal_jitter) && goal_jitter >= 0, "DerbyOptions", "goal_jitter",
+                     goal_jitter, ">= 0");
+  SECURE_CHECK_FIELD(Finite(goal_radius) && goal_radius > 0, "DerbyOptions", "goal_radius",
+                     goal_radius, "> 0");
+  SECURE_CHECK_FIELD(Finite(collision_radius) && collision_radius > 0, "DerbyOptions",
+                     "collision_radius", collision_radius, "> 0");
+  SECURE_CHECK_FIELD(Finite(accel_bound) && accel_bound > 0, "DerbyOptions", "accel_bound",
+                     accel_bound, "> 0");
+  SECURE_CHECK_FIELD(Finite(min_separation) && min_separation >= 0, "DerbyOptions",
+                     "min_separation", min_separation, ">= 0");
+  SECURE_CHECK_FIELD(Finite(ego_clearance) && ego_clearance >= 0, "DerbyOptions", "ego_clearance",
+                     ego_clearance, ">= 0");
+  SECURE_CHECK_FIELD(Finite(car_goal_offset) && car_goal_offset >= 0, "DerbyOptions",
+                     "car_goal_offset", car_goal_offset, ">= 0");
+  SECURE_CHECK_FIELD(Finite(car_kp) && car_kp >= 0, "DerbyOptions", "car_kp", car_kp, ">= 0");
+  SECURE_CHECK_FIELD(Finite(car_kd) && car_kd >= 0, "DerbyOptions", "car_kd", car_kd, ">= 0");
+  SECURE_CHECK_FIELD(Finite(car_noise) && car_noise >= 0, "DerbyOptions", "car_noise", car_noise,
+                     ">= 0");
+  SECURE_CHECK_FIELD(lookahead_steps >= 1 && lookahead_steps <= kLookaheadFrames, "DerbyOptions",
+                     "lookahead_steps", lookahead_steps, "in [1, " << kLookaheadFrames << "]");
 }
 
 nlohmann::json DerbyOptions::ToJson() const {

@@ -7,13 +7,11 @@
 #include <numeric>
 
 #include "secure/common/error.h"
+#include "secure/common/option_check.h"
 #include "secure/common/timer.h"
 
 namespace secure::domains::derby {
 namespace {
-
-#define SECURE_DERBY_EXPERT_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, "DerbyExpertOptions::" << field << " = " << value << ", must be " << rule)
 
 bool Finite(double x) { return std::isfinite(x); }
 
@@ -34,22 +32,24 @@ constexpr double kFeasibleTolerance = 1e-9;
 // Options
 
 void DerbyExpertOptions::Validate() const {
-  SECURE_DERBY_EXPERT_CHECK(Finite(kp) && kp > 0, "kp", kp, "> 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(kd) && kd > 0, "kd", kd, "> 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(speed_limit) && speed_limit > 0, "speed_limit", speed_limit,
-                            "> 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(gain_spread) && gain_spread >= 0 && gain_spread < 1,
-                            "gain_spread", gain_spread, "in [0, 1)");
-  SECURE_DERBY_EXPERT_CHECK(Finite(speed_spread) && speed_spread >= 0 && speed_spread < 1,
-                            "speed_spread", speed_spread, "in [0, 1)");
-  SECURE_DERBY_EXPERT_CHECK(Finite(noise_sigma) && noise_sigma >= 0, "noise_sigma", noise_sigma,
-                            ">= 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(braking_accel) && braking_accel > 0, "braking_accel",
-                            braking_accel, "> 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(clearance) && clearance >= 0, "clearance", clearance, ">= 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(cbf_rate) && cbf_rate > 0, "cbf_rate", cbf_rate, "> 0");
-  SECURE_DERBY_EXPERT_CHECK(Finite(filter_margin) && filter_margin >= 0, "filter_margin",
-                            filter_margin, ">= 0");
+  SECURE_CHECK_FIELD(Finite(kp) && kp > 0, "DerbyExpertOptions", "kp", kp, "> 0");
+  SECURE_CHECK_FIELD(Finite(kd) && kd > 0, "DerbyExpertOptions", "kd", kd, "> 0");
+  SECURE_CHECK_FIELD(Finite(speed_limit) && speed_limit > 0, "DerbyExpertOptions", "speed_limit",
+                     speed_limit, "> 0");
+  SECURE_CHECK_FIELD(Finite(gain_spread) && gain_spread >= 0 && gain_spread < 1,
+                     "DerbyExpertOptions", "gain_spread", gain_spread, "in [0, 1)");
+  SECURE_CHECK_FIELD(Finite(speed_spread) && speed_spread >= 0 && speed_spread < 1,
+                     "DerbyExpertOptions", "speed_spread", speed_spread, "in [0, 1)");
+  SECURE_CHECK_FIELD(Finite(noise_sigma) && noise_sigma >= 0, "DerbyExpertOptions", "noise_sigma",
+                     noise_sigma, ">= 0");
+  SECURE_CHECK_FIELD(Finite(braking_accel) && braking_accel > 0, "DerbyExpertOptions",
+                     "braking_accel", braking_accel, "> 0");
+  SECURE_CHECK_FIELD(Finite(clearance) && clearance >= 0, "DerbyExpertOptions", "clearance",
+                     clearance, ">= 0");
+  SECURE_CHECK_FIELD(Finite(cbf_rate) && cbf_rate > 0, "DerbyExpertOptions", "cbf_rate", cbf_rate,
+                     "> 0");
+  SECURE_CHECK_FIELD(Finite(filter_margin) && filter_margin >= 0, "DerbyExpertOptions",
+                     "filter_margin", filter_margin, ">= 0");
 }
 
 nlohmann::json DerbyExpertOptions::ToJson() const {
@@ -67,10 +67,9 @@ nlohmann::json DerbyExpertOptions::ToJson() const {
 }
 
 void DerbyDemonstrationOptions::Validate() const {
-  SECURE_CHECK(episodes > 0,
-               "DerbyDemonstrationOptions::episodes = " << episodes << ", must be > 0");
-  SECURE_CHECK(max_attempts >= 0,
-               "DerbyDemonstrationOptions::max_attempts = " << max_attempts << ", must be >= 0");
+  SECURE_CHECK_FIELD(episodes > 0, "DerbyDemonstrationOptions", "episodes", episodes, "> 0");
+  SECURE_CHECK_FIELD(max_attempts >= 0, "DerbyDemonstrationOptions", "max_attempts", max_attempts,
+                     ">= 0");
 }
 
 nlohmann::json DerbyDemonstrationOptions::ToJson() const {
@@ -101,27 +100,26 @@ nlohmann::json DerbyDemonstrations::ToJson() const {
 }
 
 void DerbyNearDangerousOptions::Validate() const {
-  SECURE_CHECK(count > 0, "DerbyNearDangerousOptions::count = " << count << ", must be > 0");
+  SECURE_CHECK_FIELD(count > 0, "DerbyNearDangerousOptions", "count", count, "> 0");
   SECURE_CHECK(!rho.empty() && rho.size() == probabilities.size(),
                "DerbyNearDangerousOptions::rho has " << rho.size() << " values and probabilities "
                                                      << probabilities.size()
                                                      << ", must be as many, at least one");
   double sum = 0.0;
   for (std::size_t i = 0; i < rho.size(); ++i) {
-    SECURE_CHECK(Finite(rho[i]) && rho[i] > 0,
-                 "DerbyNearDangerousOptions::rho[" << i << "] = " << rho[i] << ", must be > 0");
-    SECURE_CHECK(Finite(probabilities[i]) && probabilities[i] >= 0,
-                 "DerbyNearDangerousOptions::probabilities[" << i << "] = " << probabilities[i]
-                                                             << ", must be >= 0");
+    SECURE_CHECK_FIELD(Finite(rho[i]) && rho[i] > 0, "DerbyNearDangerousOptions",
+                       "rho[" << i << "]", rho[i], "> 0");
+    SECURE_CHECK_FIELD(Finite(probabilities[i]) && probabilities[i] >= 0,
+                       "DerbyNearDangerousOptions", "probabilities[" << i << "]", probabilities[i],
+                       ">= 0");
     sum += probabilities[i];
   }
   SECURE_CHECK(std::abs(sum - 1.0) <= 1e-6, "DerbyNearDangerousOptions::probabilities sum to "
                                                 << sum << ", must sum to 1");
-  SECURE_CHECK(nearest >= 1 && nearest <= kObservedCars,
-               "DerbyNearDangerousOptions::nearest = " << nearest << ", must be in [1, "
-                                                       << kObservedCars << "]");
-  SECURE_CHECK(max_redraws >= 1, "DerbyNearDangerousOptions::max_redraws = " << max_redraws
-                                                                             << ", must be >= 1");
+  SECURE_CHECK_FIELD(nearest >= 1 && nearest <= kObservedCars, "DerbyNearDangerousOptions",
+                     "nearest", nearest, "in [1, " << kObservedCars << "]");
+  SECURE_CHECK_FIELD(max_redraws >= 1, "DerbyNearDangerousOptions", "max_redraws", max_redraws,
+                     ">= 1");
 }
 
 nlohmann::json DerbyNearDangerousOptions::ToJson() const {

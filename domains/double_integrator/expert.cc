@@ -8,13 +8,11 @@
 
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
 #include "secure/common/timer.h"
 
 namespace secure::domains::double_integrator {
 namespace {
-
-#define SECURE_FIELD_CHECK(type, cond, field, value, rule) \
-  SECURE_CHECK(cond, type "::" << field << " = " << value << ", must be " << rule)
 
 constexpr double kTwoPi = 6.283185307179586;
 
@@ -29,26 +27,24 @@ Rng AttemptRng(std::uint64_t seed, long attempt) {
 // Options
 
 void ExpertOptions::Validate() const {
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(kp) && kp > 0, "kp", kp, "> 0");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(speed_limit) && speed_limit > 0, "speed_limit",
+  SECURE_CHECK_FIELD(std::isfinite(kp) && kp > 0, "ExpertOptions", "kp", kp, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(speed_limit) && speed_limit > 0, "ExpertOptions", "speed_limit",
                      speed_limit, "> 0");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(detour_gain) && detour_gain >= 0, "detour_gain",
+  SECURE_CHECK_FIELD(std::isfinite(detour_gain) && detour_gain >= 0, "ExpertOptions", "detour_gain",
                      detour_gain, ">= 0");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(detour_range) && detour_range > 0,
+  SECURE_CHECK_FIELD(std::isfinite(detour_range) && detour_range > 0, "ExpertOptions",
                      "detour_range", detour_range, "> 0");
-  SECURE_FIELD_CHECK("ExpertOptions",
-                     std::isfinite(gain_spread) && gain_spread >= 0 && gain_spread < 1,
-                     "gain_spread", gain_spread, "in [0, 1)");
-  SECURE_FIELD_CHECK("ExpertOptions",
-                     std::isfinite(speed_spread) && speed_spread >= 0 && speed_spread < 1,
-                     "speed_spread", speed_spread, "in [0, 1)");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(noise_sigma) && noise_sigma >= 0, "noise_sigma",
+  SECURE_CHECK_FIELD(std::isfinite(gain_spread) && gain_spread >= 0 && gain_spread < 1,
+                     "ExpertOptions", "gain_spread", gain_spread, "in [0, 1)");
+  SECURE_CHECK_FIELD(std::isfinite(speed_spread) && speed_spread >= 0 && speed_spread < 1,
+                     "ExpertOptions", "speed_spread", speed_spread, "in [0, 1)");
+  SECURE_CHECK_FIELD(std::isfinite(noise_sigma) && noise_sigma >= 0, "ExpertOptions", "noise_sigma",
                      noise_sigma, ">= 0");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(cbf_rate) && cbf_rate > 0, "cbf_rate", cbf_rate,
+  SECURE_CHECK_FIELD(std::isfinite(cbf_rate) && cbf_rate > 0, "ExpertOptions", "cbf_rate", cbf_rate,
                      "> 0");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(filter_margin) && filter_margin >= 0,
+  SECURE_CHECK_FIELD(std::isfinite(filter_margin) && filter_margin >= 0, "ExpertOptions",
                      "filter_margin", filter_margin, ">= 0");
-  SECURE_FIELD_CHECK("ExpertOptions", std::isfinite(clearance) && clearance >= 0, "clearance",
+  SECURE_CHECK_FIELD(std::isfinite(clearance) && clearance >= 0, "ExpertOptions", "clearance",
                      clearance, ">= 0");
 }
 
@@ -67,10 +63,10 @@ nlohmann::json ExpertOptions::ToJson() const {
 }
 
 void DemonstrationOptions::Validate() const {
-  SECURE_FIELD_CHECK("DemonstrationOptions", episodes > 0, "episodes", episodes, "> 0");
-  SECURE_FIELD_CHECK("DemonstrationOptions", episodes <= kMaxEpisodes, "episodes", episodes,
+  SECURE_CHECK_FIELD(episodes > 0, "DemonstrationOptions", "episodes", episodes, "> 0");
+  SECURE_CHECK_FIELD(episodes <= kMaxEpisodes, "DemonstrationOptions", "episodes", episodes,
                      "in [1, " << kMaxEpisodes << "]");
-  SECURE_FIELD_CHECK("DemonstrationOptions", max_attempts >= 0, "max_attempts", max_attempts,
+  SECURE_CHECK_FIELD(max_attempts >= 0, "DemonstrationOptions", "max_attempts", max_attempts,
                      ">= 0 (0: 10 x episodes + 10)");
 }
 
@@ -83,16 +79,15 @@ nlohmann::json DemonstrationOptions::ToJson() const {
 }
 
 void NearDangerousOptions::Validate() const {
-  SECURE_FIELD_CHECK("NearDangerousOptions", count > 0, "count", count, "> 0");
-  SECURE_FIELD_CHECK("NearDangerousOptions", count <= kMaxStates, "count", count,
+  SECURE_CHECK_FIELD(count > 0, "NearDangerousOptions", "count", count, "> 0");
+  SECURE_CHECK_FIELD(count <= kMaxStates, "NearDangerousOptions", "count", count,
                      "in [1, " << kMaxStates << "]");
-  SECURE_FIELD_CHECK(
-      "NearDangerousOptions", std::isfinite(rho_min) && std::isfinite(rho_max) && rho_min < rho_max,
-      "rho_min, rho_max", rho_min << ", " << rho_max, "finite with rho_min < rho_max");
-  SECURE_FIELD_CHECK(
-      "NearDangerousOptions",
+  SECURE_CHECK_FIELD(std::isfinite(rho_min) && std::isfinite(rho_max) && rho_min < rho_max,
+                     "NearDangerousOptions", "rho_min, rho_max", rho_min << ", " << rho_max,
+                     "finite with rho_min < rho_max");
+  SECURE_CHECK_FIELD(
       std::isfinite(velocity_lo) && std::isfinite(velocity_hi) && velocity_lo < velocity_hi,
-      "velocity_lo, velocity_hi", velocity_lo << ", " << velocity_hi,
+      "NearDangerousOptions", "velocity_lo, velocity_hi", velocity_lo << ", " << velocity_hi,
       "finite with velocity_lo < velocity_hi");
 }
 
@@ -447,9 +442,8 @@ data::StateSet GenerateNearDangerous(const ReachAvoidOptions& task,
   task.Validate();
   options.Validate();
   const GroundTruth& t = task.truth;
-  SECURE_CHECK(options.rho_min > -t.radius,
-               "NearDangerousOptions::rho_min = " << options.rho_min
-                                                  << ", must be > -radius = " << -t.radius);
+  SECURE_CHECK_FIELD(options.rho_min > -t.radius, "NearDangerousOptions", "rho_min",
+                     options.rho_min, "> -radius = " << -t.radius);
   data::StateSet set;
   set.source = "near-dangerous states (generated)";
   set.features = StateFeatures();

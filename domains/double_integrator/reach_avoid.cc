@@ -9,13 +9,11 @@
 #include <type_traits>
 
 #include "secure/common/error.h"
+#include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::domains::double_integrator {
 namespace {
-
-#define SECURE_TASK_OPTION_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, "ReachAvoidOptions::" << field << " = " << value << ", must be " << rule)
 
 // Start states are drawn by rejection; give up after this many draws (the default square never
 // rejects).
@@ -42,34 +40,36 @@ const std::vector<std::string>& ActionFeatures() {
 // ---------------------------------------------------------------------------------------------
 void ReachAvoidOptions::Validate() const {
   const GroundTruth& t = truth;
-  SECURE_TASK_OPTION_CHECK(std::isfinite(t.obstacle_x) && std::isfinite(t.obstacle_y),
-                           "truth.obstacle", "(" << t.obstacle_x << ", " << t.obstacle_y << ")",
-                           "finite");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(t.radius) && t.radius > 0, "truth.radius", t.radius,
-                           "> 0");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(t.gamma) && t.gamma > 0, "truth.gamma", t.gamma, "> 0");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(goal_x) && std::isfinite(goal_y), "goal",
-                           "(" << goal_x << ", " << goal_y << ")", "finite");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(goal_radius) && goal_radius > 0, "goal_radius",
-                           goal_radius, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(t.obstacle_x) && std::isfinite(t.obstacle_y),
+                     "ReachAvoidOptions", "truth.obstacle",
+                     "(" << t.obstacle_x << ", " << t.obstacle_y << ")", "finite");
+  SECURE_CHECK_FIELD(std::isfinite(t.radius) && t.radius > 0, "ReachAvoidOptions", "truth.radius",
+                     t.radius, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(t.gamma) && t.gamma > 0, "ReachAvoidOptions", "truth.gamma",
+                     t.gamma, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(goal_x) && std::isfinite(goal_y), "ReachAvoidOptions", "goal",
+                     "(" << goal_x << ", " << goal_y << ")", "finite");
+  SECURE_CHECK_FIELD(std::isfinite(goal_radius) && goal_radius > 0, "ReachAvoidOptions",
+                     "goal_radius", goal_radius, "> 0");
   const double goal_distance = std::hypot(goal_x - t.obstacle_x, goal_y - t.obstacle_y);
-  SECURE_TASK_OPTION_CHECK(
-      goal_distance >= t.radius + goal_radius, "goal", "(" << goal_x << ", " << goal_y << ")",
-      "at least radius + goal_radius = "
-          << t.radius + goal_radius << " from the obstacle centre (is " << goal_distance << ")");
-  SECURE_TASK_OPTION_CHECK(
-      std::isfinite(start_lo) && std::isfinite(start_hi) && start_lo < start_hi,
-      "start_lo, start_hi", start_lo << ", " << start_hi, "finite with start_lo < start_hi");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(start_speed) && start_speed >= 0, "start_speed",
-                           start_speed, ">= 0");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(start_clearance) && start_clearance >= 0,
-                           "start_clearance", start_clearance, ">= 0");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(dt) && dt > 0, "dt", dt, "> 0");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(accel_bound) && accel_bound > 0, "accel_bound",
-                           accel_bound, "> 0");
-  SECURE_TASK_OPTION_CHECK(std::isfinite(brake_gain) && brake_gain >= 0, "brake_gain", brake_gain,
-                           ">= 0");
-  SECURE_TASK_OPTION_CHECK(max_steps > 0, "max_steps", max_steps, "> 0");
+  SECURE_CHECK_FIELD(goal_distance >= t.radius + goal_radius, "ReachAvoidOptions", "goal",
+                     "(" << goal_x << ", " << goal_y << ")",
+                     "at least radius + goal_radius = " << t.radius + goal_radius
+                                                        << " from the obstacle centre (is "
+                                                        << goal_distance << ")");
+  SECURE_CHECK_FIELD(std::isfinite(start_lo) && std::isfinite(start_hi) && start_lo < start_hi,
+                     "ReachAvoidOptions", "start_lo, start_hi", start_lo << ", " << start_hi,
+                     "finite with start_lo < start_hi");
+  SECURE_CHECK_FIELD(std::isfinite(start_speed) && start_speed >= 0, "ReachAvoidOptions",
+                     "start_speed", start_speed, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(start_clearance) && start_clearance >= 0, "ReachAvoidOptions",
+                     "start_clearance", start_clearance, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, "ReachAvoidOptions", "dt", dt, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(accel_bound) && accel_bound > 0, "ReachAvoidOptions",
+                     "accel_bound", accel_bound, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(brake_gain) && brake_gain >= 0, "ReachAvoidOptions",
+                     "brake_gain", brake_gain, ">= 0");
+  SECURE_CHECK_FIELD(max_steps > 0, "ReachAvoidOptions", "max_steps", max_steps, "> 0");
 }
 
 nlohmann::json ReachAvoidOptions::ToJson() const {

@@ -6,19 +6,17 @@
 #include <optional>
 #include <sstream>
 
+#include "domains/double_integrator/reach_avoid.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
-#include "domains/double_integrator/reach_avoid.h"
 
 namespace secure::eval {
 namespace {
 
 namespace di = domains::double_integrator;
-
-#define SECURE_RUN_OPTION_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, "ShieldRunOptions::" << field << " = " << value << ", must be " << rule)
 
 // Episode i's stream: the seed and the index mixed (Rng::Seed runs splitmix64 over the result).
 Rng EpisodeRng(std::uint64_t seed, long episode) {
@@ -45,44 +43,46 @@ Eigen::Vector4f DrawStart(const ShieldRunOptions& o, Rng& rng) {
 // ---------------------------------------------------------------------------------------------
 void ShieldRunOptions::Validate() const {
   const di::GroundTruth& t = truth;
-  SECURE_RUN_OPTION_CHECK(std::isfinite(t.obstacle_x) && std::isfinite(t.obstacle_y),
-                          "truth.obstacle", "(" << t.obstacle_x << ", " << t.obstacle_y << ")",
-                          "finite");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(t.radius) && t.radius > 0, "truth.radius", t.radius, "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(t.gamma) && t.gamma > 0, "truth.gamma", t.gamma, "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(goal_radius) && goal_radius > 0, "goal_radius", goal_radius,
-                          "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(goal_x) && std::isfinite(goal_y), "goal",
-                          "(" << goal_x << ", " << goal_y << ")", "finite");
+  SECURE_CHECK_FIELD(std::isfinite(t.obstacle_x) && std::isfinite(t.obstacle_y), "ShieldRunOptions",
+                     "truth.obstacle", "(" << t.obstacle_x << ", " << t.obstacle_y << ")",
+                     "finite");
+  SECURE_CHECK_FIELD(std::isfinite(t.radius) && t.radius > 0, "ShieldRunOptions", "truth.radius",
+                     t.radius, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(t.gamma) && t.gamma > 0, "ShieldRunOptions", "truth.gamma",
+                     t.gamma, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(goal_radius) && goal_radius > 0, "ShieldRunOptions",
+                     "goal_radius", goal_radius, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(goal_x) && std::isfinite(goal_y), "ShieldRunOptions", "goal",
+                     "(" << goal_x << ", " << goal_y << ")", "finite");
   const double goal_distance = std::hypot(goal_x - t.obstacle_x, goal_y - t.obstacle_y);
-  SECURE_RUN_OPTION_CHECK(
-      goal_distance >= t.radius + goal_radius, "goal", "(" << goal_x << ", " << goal_y << ")",
-      "at least radius + goal_radius = "
-          << t.radius + goal_radius << " from the obstacle centre (is " << goal_distance << ")");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(start_lo) && std::isfinite(start_hi) && start_lo < start_hi,
-                          "start_lo, start_hi", start_lo << ", " << start_hi,
-                          "finite with start_lo < start_hi");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(start_speed) && start_speed >= 0, "start_speed",
-                          start_speed, ">= 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(start_clearance) && start_clearance >= 0, "start_clearance",
-                          start_clearance, ">= 0");
-  SECURE_RUN_OPTION_CHECK(episodes > 0, "episodes", episodes, "> 0");
-  SECURE_RUN_OPTION_CHECK(episodes <= kMaxEpisodes, "episodes", episodes,
-                          "in [1, " << kMaxEpisodes << "]");
-  SECURE_RUN_OPTION_CHECK(max_steps > 0, "max_steps", max_steps, "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(dt) && dt > 0, "dt", dt, "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(accel_bound) && accel_bound > 0, "accel_bound", accel_bound,
-                          "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(kp) && kp > 0, "kp", kp, "> 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(kd) && kd >= 0, "kd", kd, ">= 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(policy_sigma) && policy_sigma >= 0, "policy_sigma",
-                          policy_sigma, ">= 0");
-  SECURE_RUN_OPTION_CHECK(std::isfinite(brake_gain) && brake_gain >= 0, "brake_gain", brake_gain,
-                          ">= 0");
+  SECURE_CHECK_FIELD(goal_distance >= t.radius + goal_radius, "ShieldRunOptions", "goal",
+                     "(" << goal_x << ", " << goal_y << ")",
+                     "at least radius + goal_radius = " << t.radius + goal_radius
+                                                        << " from the obstacle centre (is "
+                                                        << goal_distance << ")");
+  SECURE_CHECK_FIELD(std::isfinite(start_lo) && std::isfinite(start_hi) && start_lo < start_hi,
+                     "ShieldRunOptions", "start_lo, start_hi", start_lo << ", " << start_hi,
+                     "finite with start_lo < start_hi");
+  SECURE_CHECK_FIELD(std::isfinite(start_speed) && start_speed >= 0, "ShieldRunOptions",
+                     "start_speed", start_speed, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(start_clearance) && start_clearance >= 0, "ShieldRunOptions",
+                     "start_clearance", start_clearance, ">= 0");
+  SECURE_CHECK_FIELD(episodes > 0, "ShieldRunOptions", "episodes", episodes, "> 0");
+  SECURE_CHECK_FIELD(episodes <= kMaxEpisodes, "ShieldRunOptions", "episodes", episodes,
+                     "in [1, " << kMaxEpisodes << "]");
+  SECURE_CHECK_FIELD(max_steps > 0, "ShieldRunOptions", "max_steps", max_steps, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, "ShieldRunOptions", "dt", dt, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(accel_bound) && accel_bound > 0, "ShieldRunOptions",
+                     "accel_bound", accel_bound, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(kp) && kp > 0, "ShieldRunOptions", "kp", kp, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(kd) && kd >= 0, "ShieldRunOptions", "kd", kd, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(policy_sigma) && policy_sigma >= 0, "ShieldRunOptions",
+                     "policy_sigma", policy_sigma, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(brake_gain) && brake_gain >= 0, "ShieldRunOptions", "brake_gain",
+                     brake_gain, ">= 0");
   shield.Validate();
-  SECURE_RUN_OPTION_CHECK(
-      shield.dt == dt, "shield.dt", shield.dt,
-      "equal to dt = " << dt << " (the shield looks one environment step ahead)");
+  SECURE_CHECK_FIELD(shield.dt == dt, "ShieldRunOptions", "shield.dt", shield.dt,
+                     "equal to dt = " << dt << " (the shield looks one environment step ahead)");
 }
 
 nlohmann::json ShieldRunOptions::ToJson() const {

@@ -14,15 +14,13 @@
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-
-#define SECURE_CHECK_OPTION(cond, field, value, rule) \
-  SECURE_CHECK(cond, "BarrierCheckOptions::" << field << " = " << value << ", must be " << rule)
 
 // Per-feature standard deviation of the columns of `x` (population std, in double).
 Eigen::VectorXd FeatureStd(const Eigen::Ref<const Eigen::MatrixXf>& x) {
@@ -219,8 +217,8 @@ std::string FormatNumber(double v) {
 // ---------------------------------------------------------------------------------------------
 void CheckThresholds::Validate() const {
   auto check = [](double v, const char* field) {
-    SECURE_CHECK(std::isfinite(v) && v >= 0 && v <= 1,
-                 "CheckThresholds::" << field << " = " << v << ", must be in [0, 1]");
+    SECURE_CHECK_FIELD(std::isfinite(v) && v >= 0 && v <= 1, "CheckThresholds", field, v,
+                       "in [0, 1]");
   };
   check(no_safe_action, "no_safe_action");
   check(near_dangerous, "near_dangerous");
@@ -238,28 +236,33 @@ nlohmann::json CheckThresholds::ToJson() const {
 }
 
 void BarrierCheckOptions::Validate() const {
-  SECURE_CHECK_OPTION(region_samples > 0 && region_samples <= kMaxStates, "region_samples",
-                      region_samples, "in [1, " << kMaxStates << "]");
-  SECURE_CHECK_OPTION(near_samples > 0 && near_samples <= kMaxStates, "near_samples",
-                      near_samples, "in [1, " << kMaxStates << "]");
-  SECURE_CHECK_OPTION(std::isfinite(near_radius) && near_radius > 0, "near_radius", near_radius,
-                      "finite and > 0");
-  SECURE_CHECK_OPTION(action_grid == 0 || (action_grid >= 2 && action_grid <= 1000), "action_grid",
-                      action_grid, "0 (no grid) or in [2, 1000]");
-  SECURE_CHECK_OPTION(action_samples >= 0 && action_samples <= kMaxShieldSamples, "action_samples",
-                      action_samples, "in [0, " << kMaxShieldSamples << "]");
-  SECURE_CHECK_OPTION(action_grid > 0 || action_samples > 0, "action_samples", action_samples,
-                      "> 0 when action_grid is 0");
-  SECURE_CHECK_OPTION(action_refine_rounds >= 0, "action_refine_rounds", action_refine_rounds,
-                      ">= 0");
-  SECURE_CHECK_OPTION(search_starts >= 0, "search_starts", search_starts, ">= 0");
-  SECURE_CHECK_OPTION(search_steps >= 0, "search_steps", search_steps, ">= 0");
-  SECURE_CHECK_OPTION(search_population > 0 && search_population <= kMaxShieldSamples,
-                      "search_population", search_population,
-                      "in [1, " << kMaxShieldSamples << "]");
-  SECURE_CHECK_OPTION(std::isfinite(search_step) && search_step > 0, "search_step", search_step,
-                      "finite and > 0");
-  SECURE_CHECK_OPTION(worst_examples >= 0, "worst_examples", worst_examples, ">= 0");
+  SECURE_CHECK_FIELD(region_samples > 0 && region_samples <= kMaxStates, "BarrierCheckOptions",
+                     "region_samples", region_samples, "in [1, " << kMaxStates << "]");
+  SECURE_CHECK_FIELD(near_samples > 0 && near_samples <= kMaxStates, "BarrierCheckOptions",
+                     "near_samples", near_samples, "in [1, " << kMaxStates << "]");
+  SECURE_CHECK_FIELD(std::isfinite(near_radius) && near_radius > 0, "BarrierCheckOptions",
+                     "near_radius", near_radius, "finite and > 0");
+  SECURE_CHECK_FIELD(action_grid == 0 || (action_grid >= 2 && action_grid <= 1000),
+                     "BarrierCheckOptions", "action_grid", action_grid,
+                     "0 (no grid) or in [2, 1000]");
+  SECURE_CHECK_FIELD(action_samples >= 0 && action_samples <= kMaxShieldSamples,
+                     "BarrierCheckOptions", "action_samples", action_samples,
+                     "in [0, " << kMaxShieldSamples << "]");
+  SECURE_CHECK_FIELD(action_grid > 0 || action_samples > 0, "BarrierCheckOptions", "action_samples",
+                     action_samples, "> 0 when action_grid is 0");
+  SECURE_CHECK_FIELD(action_refine_rounds >= 0, "BarrierCheckOptions", "action_refine_rounds",
+                     action_refine_rounds, ">= 0");
+  SECURE_CHECK_FIELD(search_starts >= 0, "BarrierCheckOptions", "search_starts", search_starts,
+                     ">= 0");
+  SECURE_CHECK_FIELD(search_steps >= 0, "BarrierCheckOptions", "search_steps", search_steps,
+                     ">= 0");
+  SECURE_CHECK_FIELD(search_population > 0 && search_population <= kMaxShieldSamples,
+                     "BarrierCheckOptions", "search_population", search_population,
+                     "in [1, " << kMaxShieldSamples << "]");
+  SECURE_CHECK_FIELD(std::isfinite(search_step) && search_step > 0, "BarrierCheckOptions",
+                     "search_step", search_step, "finite and > 0");
+  SECURE_CHECK_FIELD(worst_examples >= 0, "BarrierCheckOptions", "worst_examples", worst_examples,
+                     ">= 0");
   thresholds.Validate();
 }
 

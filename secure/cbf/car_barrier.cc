@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "secure/common/error.h"
+#include "secure/common/option_check.h"
 #include "secure/common/strings.h"
 #include "secure/nn/model_file.h"
 
@@ -58,26 +59,23 @@ std::string Widths(const nn::MlpSpec& spec) {
 // ObstacleLayout
 
 void ObstacleLayout::Validate(const std::string& what) const {
-#define SECURE_LAYOUT_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, what << ": layout." << field << " = " << value << ", must be " << rule)
-  SECURE_LAYOUT_CHECK(obs_dim > 0, "obs_dim", obs_dim, "> 0");
-  SECURE_LAYOUT_CHECK(num_obstacles > 0, "num_obstacles", num_obstacles, "> 0");
-  SECURE_LAYOUT_CHECK(first_obstacle_offset >= 0, "first_obstacle_offset", first_obstacle_offset,
-                      ">= 0");
-  SECURE_LAYOUT_CHECK(obstacle_stride >= 2, "obstacle_stride", obstacle_stride,
-                      ">= 2 (a block holds at least a relative position)");
-  SECURE_LAYOUT_CHECK(position_offset >= 0 && position_offset + 2 <= obstacle_stride,
-                      "position_offset", position_offset,
-                      "in [0, obstacle_stride - 2 = " << obstacle_stride - 2 << "]");
+  SECURE_CHECK_FIELD(obs_dim > 0, what << ": layout", "obs_dim", obs_dim, "> 0");
+  SECURE_CHECK_FIELD(num_obstacles > 0, what << ": layout", "num_obstacles", num_obstacles, "> 0");
+  SECURE_CHECK_FIELD(first_obstacle_offset >= 0, what << ": layout", "first_obstacle_offset",
+                     first_obstacle_offset, ">= 0");
+  SECURE_CHECK_FIELD(obstacle_stride >= 2, what << ": layout", "obstacle_stride", obstacle_stride,
+                     ">= 2 (a block holds at least a relative position)");
+  SECURE_CHECK_FIELD(position_offset >= 0 && position_offset + 2 <= obstacle_stride,
+                     what << ": layout", "position_offset", position_offset,
+                     "in [0, obstacle_stride - 2 = " << obstacle_stride - 2 << "]");
   if (velocity_offset != -1) {
-    SECURE_LAYOUT_CHECK(velocity_offset >= 0 && velocity_offset + 2 <= obstacle_stride,
-                        "velocity_offset", velocity_offset,
-                        "-1 (none) or in [0, obstacle_stride - 2 = " << obstacle_stride - 2
-                                                                     << "]");
-    SECURE_LAYOUT_CHECK(velocity_offset + 2 <= position_offset ||
-                            position_offset + 2 <= velocity_offset,
-                        "velocity_offset", velocity_offset,
-                        "a pair not overlapping the position pair at " << position_offset);
+    SECURE_CHECK_FIELD(velocity_offset >= 0 && velocity_offset + 2 <= obstacle_stride,
+                       what << ": layout", "velocity_offset", velocity_offset,
+                       "-1 (none) or in [0, obstacle_stride - 2 = " << obstacle_stride - 2 << "]");
+    SECURE_CHECK_FIELD(
+        velocity_offset + 2 <= position_offset || position_offset + 2 <= velocity_offset,
+        what << ": layout", "velocity_offset", velocity_offset,
+        "a pair not overlapping the position pair at " << position_offset);
   }
   const long end = static_cast<long>(first_obstacle_offset) +
                    static_cast<long>(num_obstacles) * static_cast<long>(obstacle_stride);
@@ -85,7 +83,6 @@ void ObstacleLayout::Validate(const std::string& what) const {
                                     << obstacle_stride << " values from index "
                                     << first_obstacle_offset << " up to index " << end
                                     << ", beyond layout.obs_dim = " << obs_dim);
-#undef SECURE_LAYOUT_CHECK
 }
 
 nlohmann::json ObstacleLayout::ToJson() const {

@@ -12,6 +12,7 @@
 
 #include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/error.h"
+#include "secure/common/option_check.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/common/yaml_value.h"
@@ -21,10 +22,6 @@
 
 namespace secure::cbf {
 namespace {
-
-#define SECURE_CAR_OPTION_CHECK(cond, field, value, rule)                                    \
-  SECURE_CHECK(cond, "CarBarrierTrainerOptions::" << field << " = " << value << ", must be " \
-                                                  << rule)
 
 // Restores the calling thread's LibTorch (and OpenBLAS) thread count on scope exit.
 class TorchThreadsGuard {
@@ -191,34 +188,37 @@ CarBarrierTrainerOptions CarBarrierTrainerOptions::Released() {
 
 void CarBarrierTrainerOptions::Validate() const {
   input.Validate("CarBarrierTrainerOptions::input");
-  SECURE_CAR_OPTION_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
+  SECURE_CHECK_FIELD(!hidden.empty(), "CarBarrierTrainerOptions", "hidden", "[]",
+                     "a non-empty list of layer widths");
   for (std::size_t i = 0; i < hidden.size(); ++i)
-    SECURE_CAR_OPTION_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
+    SECURE_CHECK_FIELD(hidden[i] > 0, "CarBarrierTrainerOptions", "hidden[" << i << "]", hidden[i],
+                       "> 0");
   if (cap.has_value())
-    SECURE_CAR_OPTION_CHECK(std::isfinite(*cap) && *cap >= 0, "cap", *cap,
-                            ">= 0 (or unset: the safe margin)");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(danger_margin) && danger_margin >= 0, "danger_margin",
-                          danger_margin, ">= 0");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(safe_margin) && safe_margin >= 0, "safe_margin",
-                          safe_margin, ">= 0");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(danger_weight) && danger_weight > 0, "danger_weight",
-                          danger_weight, "> 0");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(safe_weight) && safe_weight > 0, "safe_weight",
-                          safe_weight, "> 0");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(learning_rate) && learning_rate > 0, "learning_rate",
-                          learning_rate, "> 0");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
-                              final_learning_rate <= learning_rate,
-                          "final_learning_rate", final_learning_rate, "in (0, learning_rate]");
-  SECURE_CAR_OPTION_CHECK(std::isfinite(weight_decay) && weight_decay >= 0, "weight_decay",
-                          weight_decay, ">= 0");
-  SECURE_CAR_OPTION_CHECK(batch_size > 0, "batch_size", batch_size, "> 0");
-  SECURE_CAR_OPTION_CHECK(max_epochs > 0, "max_epochs", max_epochs, "> 0");
-  SECURE_CAR_OPTION_CHECK(patience >= 0, "patience", patience, ">= 0");
-  SECURE_CAR_OPTION_CHECK(
+    SECURE_CHECK_FIELD(std::isfinite(*cap) && *cap >= 0, "CarBarrierTrainerOptions", "cap", *cap,
+                       ">= 0 (or unset: the safe margin)");
+  SECURE_CHECK_FIELD(std::isfinite(danger_margin) && danger_margin >= 0, "CarBarrierTrainerOptions",
+                     "danger_margin", danger_margin, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(safe_margin) && safe_margin >= 0, "CarBarrierTrainerOptions",
+                     "safe_margin", safe_margin, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(danger_weight) && danger_weight > 0, "CarBarrierTrainerOptions",
+                     "danger_weight", danger_weight, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(safe_weight) && safe_weight > 0, "CarBarrierTrainerOptions",
+                     "safe_weight", safe_weight, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(learning_rate) && learning_rate > 0, "CarBarrierTrainerOptions",
+                     "learning_rate", learning_rate, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
+                         final_learning_rate <= learning_rate,
+                     "CarBarrierTrainerOptions", "final_learning_rate", final_learning_rate,
+                     "in (0, learning_rate]");
+  SECURE_CHECK_FIELD(std::isfinite(weight_decay) && weight_decay >= 0, "CarBarrierTrainerOptions",
+                     "weight_decay", weight_decay, ">= 0");
+  SECURE_CHECK_FIELD(batch_size > 0, "CarBarrierTrainerOptions", "batch_size", batch_size, "> 0");
+  SECURE_CHECK_FIELD(max_epochs > 0, "CarBarrierTrainerOptions", "max_epochs", max_epochs, "> 0");
+  SECURE_CHECK_FIELD(patience >= 0, "CarBarrierTrainerOptions", "patience", patience, ">= 0");
+  SECURE_CHECK_FIELD(
       std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
-      "validation_fraction", validation_fraction, "in [0, 1)");
-  SECURE_CAR_OPTION_CHECK(threads > 0, "threads", threads, "> 0");
+      "CarBarrierTrainerOptions", "validation_fraction", validation_fraction, "in [0, 1)");
+  SECURE_CHECK_FIELD(threads > 0, "CarBarrierTrainerOptions", "threads", threads, "> 0");
 }
 
 void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {

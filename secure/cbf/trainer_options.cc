@@ -10,46 +10,47 @@
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
 namespace {
 
-#define SECURE_OPTION_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, "BarrierTrainerOptions::" << field << " = " << value << ", must be " << rule)
-
 
 }  // namespace
 
 void BarrierTrainerOptions::Validate() const {
-  SECURE_OPTION_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
+  SECURE_CHECK_FIELD(!hidden.empty(), "BarrierTrainerOptions", "hidden", "[]",
+                     "a non-empty list of layer widths");
   for (std::size_t i = 0; i < hidden.size(); ++i) {
-    SECURE_OPTION_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
-    SECURE_OPTION_CHECK(hidden[i] <= kMaxLayerWidth, "hidden[" << i << "]", hidden[i],
-                        "in [1, " << kMaxLayerWidth << "]");
+    SECURE_CHECK_FIELD(hidden[i] > 0, "BarrierTrainerOptions", "hidden[" << i << "]", hidden[i],
+                       "> 0");
+    SECURE_CHECK_FIELD(hidden[i] <= kMaxLayerWidth, "BarrierTrainerOptions", "hidden[" << i << "]",
+                       hidden[i], "in [1, " << kMaxLayerWidth << "]");
   }
-  SECURE_OPTION_CHECK(std::isfinite(safe_margin) && safe_margin >= 0, "safe_margin", safe_margin,
-                      ">= 0");
-  SECURE_OPTION_CHECK(std::isfinite(unsafe_margin) && unsafe_margin >= 0, "unsafe_margin",
-                      unsafe_margin, ">= 0");
-  SECURE_OPTION_CHECK(std::isfinite(safe_weight) && safe_weight > 0, "safe_weight", safe_weight,
-                      "> 0");
-  SECURE_OPTION_CHECK(std::isfinite(unsafe_weight) && unsafe_weight > 0, "unsafe_weight",
-                      unsafe_weight, "> 0");
-  SECURE_OPTION_CHECK(std::isfinite(learning_rate) && learning_rate > 0, "learning_rate",
-                      learning_rate, "> 0");
-  SECURE_OPTION_CHECK(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
-                          final_learning_rate <= learning_rate,
-                      "final_learning_rate", final_learning_rate, "in (0, learning_rate]");
-  SECURE_OPTION_CHECK(std::isfinite(weight_decay) && weight_decay >= 0, "weight_decay",
-                      weight_decay, ">= 0");
-  SECURE_OPTION_CHECK(batch_size > 0, "batch_size", batch_size, "> 0");
-  SECURE_OPTION_CHECK(max_epochs > 0, "max_epochs", max_epochs, "> 0");
-  SECURE_OPTION_CHECK(patience >= 0, "patience", patience, ">= 0");
-  SECURE_OPTION_CHECK(
+  SECURE_CHECK_FIELD(std::isfinite(safe_margin) && safe_margin >= 0, "BarrierTrainerOptions",
+                     "safe_margin", safe_margin, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(unsafe_margin) && unsafe_margin >= 0, "BarrierTrainerOptions",
+                     "unsafe_margin", unsafe_margin, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(safe_weight) && safe_weight > 0, "BarrierTrainerOptions",
+                     "safe_weight", safe_weight, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(unsafe_weight) && unsafe_weight > 0, "BarrierTrainerOptions",
+                     "unsafe_weight", unsafe_weight, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(learning_rate) && learning_rate > 0, "BarrierTrainerOptions",
+                     "learning_rate", learning_rate, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
+                         final_learning_rate <= learning_rate,
+                     "BarrierTrainerOptions", "final_learning_rate", final_learning_rate,
+                     "in (0, learning_rate]");
+  SECURE_CHECK_FIELD(std::isfinite(weight_decay) && weight_decay >= 0, "BarrierTrainerOptions",
+                     "weight_decay", weight_decay, ">= 0");
+  SECURE_CHECK_FIELD(batch_size > 0, "BarrierTrainerOptions", "batch_size", batch_size, "> 0");
+  SECURE_CHECK_FIELD(max_epochs > 0, "BarrierTrainerOptions", "max_epochs", max_epochs, "> 0");
+  SECURE_CHECK_FIELD(patience >= 0, "BarrierTrainerOptions", "patience", patience, ">= 0");
+  SECURE_CHECK_FIELD(
       std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
-      "validation_fraction", validation_fraction, "in [0, 1)");
-  SECURE_OPTION_CHECK(threads > 0, "threads", threads, "> 0");
+      "BarrierTrainerOptions", "validation_fraction", validation_fraction, "in [0, 1)");
+  SECURE_CHECK_FIELD(threads > 0, "BarrierTrainerOptions", "threads", threads, "> 0");
 }
 
 void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {

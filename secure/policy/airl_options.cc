@@ -4,29 +4,28 @@
 #include <cstdio>
 #include <set>
 
-#include "secure/common/yaml_value.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_value.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/internal/options_util.h"
 
 namespace secure::policy {
 namespace {
 
-#define AIRL_CHECK(cond, field, value, rule) \
-  SECURE_POLICY_OPTION_CHECK(cond, "AirlOptions", field, value, rule)
-
 void CheckWidths(const std::vector<int>& widths, const char* field) {
-  AIRL_CHECK(!widths.empty(), field, "[]", "a non-empty list of layer widths");
+  SECURE_CHECK_FIELD(!widths.empty(), "AirlOptions", field, "[]",
+                     "a non-empty list of layer widths");
   for (std::size_t i = 0; i < widths.size(); ++i) {
-    AIRL_CHECK(widths[i] > 0, field << "[" << i << "]", widths[i], "> 0");
-    AIRL_CHECK(widths[i] <= kMaxLayerWidth, field << "[" << i << "]", widths[i],
-               "in [1, " << kMaxLayerWidth << "]");
+    SECURE_CHECK_FIELD(widths[i] > 0, "AirlOptions", field << "[" << i << "]", widths[i], "> 0");
+    SECURE_CHECK_FIELD(widths[i] <= kMaxLayerWidth, "AirlOptions", field << "[" << i << "]",
+                       widths[i], "in [1, " << kMaxLayerWidth << "]");
   }
 }
 
 void CheckPositive(double x, const char* field) {
-  AIRL_CHECK(std::isfinite(x) && x > 0, field, x, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(x) && x > 0, "AirlOptions", field, x, "> 0");
 }
 
 }  // namespace
@@ -36,36 +35,44 @@ void AirlOptions::Validate() const {
   CheckWidths(value_hidden, "value_hidden");
   CheckWidths(reward_hidden, "reward_hidden");
   CheckWidths(shaping_hidden, "shaping_hidden");
-  AIRL_CHECK(std::isfinite(init_log_std), "init_log_std", init_log_std, "finite");
-  AIRL_CHECK(std::isfinite(min_log_std) && min_log_std <= init_log_std, "min_log_std", min_log_std,
-             "finite and <= init_log_std (" << init_log_std << ")");
-  AIRL_CHECK(iterations > 0, "iterations", iterations, "> 0");
-  AIRL_CHECK(steps_per_iteration > 0, "steps_per_iteration", steps_per_iteration, "> 0");
-  AIRL_CHECK(std::isfinite(gamma) && gamma > 0 && gamma <= 1, "gamma", gamma, "in (0, 1]");
-  AIRL_CHECK(std::isfinite(gae_lambda) && gae_lambda >= 0 && gae_lambda <= 1, "gae_lambda",
-             gae_lambda, "in [0, 1]");
-  AIRL_CHECK(std::isfinite(clip) && clip > 0 && clip < 1, "clip", clip, "in (0, 1)");
-  AIRL_CHECK(ppo_epochs > 0, "ppo_epochs", ppo_epochs, "> 0");
-  AIRL_CHECK(minibatch_size > 0, "minibatch_size", minibatch_size, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(init_log_std), "AirlOptions", "init_log_std", init_log_std,
+                     "finite");
+  SECURE_CHECK_FIELD(std::isfinite(min_log_std) && min_log_std <= init_log_std, "AirlOptions",
+                     "min_log_std", min_log_std,
+                     "finite and <= init_log_std (" << init_log_std << ")");
+  SECURE_CHECK_FIELD(iterations > 0, "AirlOptions", "iterations", iterations, "> 0");
+  SECURE_CHECK_FIELD(steps_per_iteration > 0, "AirlOptions", "steps_per_iteration",
+                     steps_per_iteration, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(gamma) && gamma > 0 && gamma <= 1, "AirlOptions", "gamma", gamma,
+                     "in (0, 1]");
+  SECURE_CHECK_FIELD(std::isfinite(gae_lambda) && gae_lambda >= 0 && gae_lambda <= 1, "AirlOptions",
+                     "gae_lambda", gae_lambda, "in [0, 1]");
+  SECURE_CHECK_FIELD(std::isfinite(clip) && clip > 0 && clip < 1, "AirlOptions", "clip", clip,
+                     "in (0, 1)");
+  SECURE_CHECK_FIELD(ppo_epochs > 0, "AirlOptions", "ppo_epochs", ppo_epochs, "> 0");
+  SECURE_CHECK_FIELD(minibatch_size > 0, "AirlOptions", "minibatch_size", minibatch_size, "> 0");
   CheckPositive(policy_lr, "policy_lr");
   CheckPositive(value_lr, "value_lr");
-  AIRL_CHECK(std::isfinite(entropy_coef) && entropy_coef >= 0, "entropy_coef", entropy_coef,
-             ">= 0");
-  AIRL_CHECK(std::isfinite(bc_weight) && bc_weight >= 0, "bc_weight", bc_weight,
-             "finite and >= 0");
-  AIRL_CHECK(std::isfinite(max_grad_norm) && max_grad_norm >= 0, "max_grad_norm", max_grad_norm,
-             ">= 0 (0: no clipping)");
+  SECURE_CHECK_FIELD(std::isfinite(entropy_coef) && entropy_coef >= 0, "AirlOptions",
+                     "entropy_coef", entropy_coef, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(bc_weight) && bc_weight >= 0, "AirlOptions", "bc_weight",
+                     bc_weight, "finite and >= 0");
+  SECURE_CHECK_FIELD(std::isfinite(max_grad_norm) && max_grad_norm >= 0, "AirlOptions",
+                     "max_grad_norm", max_grad_norm, ">= 0 (0: no clipping)");
   CheckPositive(discriminator_lr, "discriminator_lr");
-  AIRL_CHECK(discriminator_updates >= 0, "discriminator_updates", discriminator_updates, ">= 0");
-  AIRL_CHECK(discriminator_batch > 0, "discriminator_batch", discriminator_batch, "> 0");
-  AIRL_CHECK(std::isfinite(discriminator_discount) && discriminator_discount >= 0 &&
-                 discriminator_discount <= 1,
-             "discriminator_discount", discriminator_discount, "in [0, 1]");
-  AIRL_CHECK(checkpoint_every > 0, "checkpoint_every", checkpoint_every, "> 0");
-  AIRL_CHECK(stop_after_iterations >= 0, "stop_after_iterations", stop_after_iterations,
-             ">= 0 (0: off)");
-  AIRL_CHECK(!resume || !checkpoint_path.empty(), "resume", "true",
-             "false when checkpoint_path is empty");
+  SECURE_CHECK_FIELD(discriminator_updates >= 0, "AirlOptions", "discriminator_updates",
+                     discriminator_updates, ">= 0");
+  SECURE_CHECK_FIELD(discriminator_batch > 0, "AirlOptions", "discriminator_batch",
+                     discriminator_batch, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(discriminator_discount) && discriminator_discount >= 0 &&
+                         discriminator_discount <= 1,
+                     "AirlOptions", "discriminator_discount", discriminator_discount, "in [0, 1]");
+  SECURE_CHECK_FIELD(checkpoint_every > 0, "AirlOptions", "checkpoint_every", checkpoint_every,
+                     "> 0");
+  SECURE_CHECK_FIELD(stop_after_iterations >= 0, "AirlOptions", "stop_after_iterations",
+                     stop_after_iterations, ">= 0 (0: off)");
+  SECURE_CHECK_FIELD(!resume || !checkpoint_path.empty(), "AirlOptions", "resume", "true",
+                     "false when checkpoint_path is empty");
 }
 
 void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -287,16 +294,15 @@ nlohmann::json AirlSummary::ToJson() const {
 }
 
 void JointCbfOptions::Validate() const {
-  SECURE_POLICY_OPTION_CHECK(std::isfinite(weight) && weight >= 0, "JointCbfOptions", "weight",
-                             weight, "finite and >= 0");
-  SECURE_POLICY_OPTION_CHECK(std::isfinite(class_k_gain) && class_k_gain > 0, "JointCbfOptions",
-                             "class_k_gain", class_k_gain, "finite and > 0");
-  SECURE_POLICY_OPTION_CHECK(std::isfinite(dt) && dt > 0, "JointCbfOptions", "dt", dt,
-                             "finite and > 0");
-  SECURE_POLICY_OPTION_CHECK(std::isfinite(unsafe_weight) && unsafe_weight > 0,
-                             "JointCbfOptions", "unsafe_weight", unsafe_weight, "finite and > 0");
-  SECURE_POLICY_OPTION_CHECK(std::isfinite(unsafe_margin) && unsafe_margin >= 0,
-                             "JointCbfOptions", "unsafe_margin", unsafe_margin, "finite and >= 0");
+  SECURE_CHECK_FIELD(std::isfinite(weight) && weight >= 0, "JointCbfOptions", "weight", weight,
+                     "finite and >= 0");
+  SECURE_CHECK_FIELD(std::isfinite(class_k_gain) && class_k_gain > 0, "JointCbfOptions",
+                     "class_k_gain", class_k_gain, "finite and > 0");
+  SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, "JointCbfOptions", "dt", dt, "finite and > 0");
+  SECURE_CHECK_FIELD(std::isfinite(unsafe_weight) && unsafe_weight > 0, "JointCbfOptions",
+                     "unsafe_weight", unsafe_weight, "finite and > 0");
+  SECURE_CHECK_FIELD(std::isfinite(unsafe_margin) && unsafe_margin >= 0, "JointCbfOptions",
+                     "unsafe_margin", unsafe_margin, "finite and >= 0");
 }
 
 void JointCbfOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {

@@ -3,41 +3,42 @@
 #include <cstdio>
 #include <set>
 
-#include "secure/common/yaml_value.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_value.h"
 #include "secure/policy/bc_trainer.h"
 #include "secure/policy/internal/options_util.h"
 
 namespace secure::policy {
 namespace {
 
-#define BC_CHECK(cond, field, value, rule) \
-  SECURE_POLICY_OPTION_CHECK(cond, "BcOptions", field, value, rule)
-
 nlohmann::json NumberOrNull(double x) { return std::isfinite(x) ? nlohmann::json(x) : nullptr; }
 
 }  // namespace
 
 void BcOptions::Validate() const {
-  BC_CHECK(!hidden.empty(), "hidden", "[]", "a non-empty list of layer widths");
+  SECURE_CHECK_FIELD(!hidden.empty(), "BcOptions", "hidden", "[]",
+                     "a non-empty list of layer widths");
   for (std::size_t i = 0; i < hidden.size(); ++i) {
-    BC_CHECK(hidden[i] > 0, "hidden[" << i << "]", hidden[i], "> 0");
-    BC_CHECK(hidden[i] <= kMaxLayerWidth, "hidden[" << i << "]", hidden[i],
-             "in [1, " << kMaxLayerWidth << "]");
+    SECURE_CHECK_FIELD(hidden[i] > 0, "BcOptions", "hidden[" << i << "]", hidden[i], "> 0");
+    SECURE_CHECK_FIELD(hidden[i] <= kMaxLayerWidth, "BcOptions", "hidden[" << i << "]", hidden[i],
+                       "in [1, " << kMaxLayerWidth << "]");
   }
-  BC_CHECK(std::isfinite(learning_rate) && learning_rate > 0, "learning_rate", learning_rate,
-           "> 0");
-  BC_CHECK(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
-               final_learning_rate <= learning_rate,
-           "final_learning_rate", final_learning_rate, "in (0, learning_rate]");
-  BC_CHECK(epochs > 0, "epochs", epochs, "> 0");
-  BC_CHECK(batch_size > 0, "batch_size", batch_size, "> 0");
-  BC_CHECK(std::isfinite(weight_decay) && weight_decay >= 0, "weight_decay", weight_decay, ">= 0");
-  BC_CHECK(
+  SECURE_CHECK_FIELD(std::isfinite(learning_rate) && learning_rate > 0, "BcOptions",
+                     "learning_rate", learning_rate, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
+                         final_learning_rate <= learning_rate,
+                     "BcOptions", "final_learning_rate", final_learning_rate,
+                     "in (0, learning_rate]");
+  SECURE_CHECK_FIELD(epochs > 0, "BcOptions", "epochs", epochs, "> 0");
+  SECURE_CHECK_FIELD(batch_size > 0, "BcOptions", "batch_size", batch_size, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(weight_decay) && weight_decay >= 0, "BcOptions", "weight_decay",
+                     weight_decay, ">= 0");
+  SECURE_CHECK_FIELD(
       std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
-      "validation_fraction", validation_fraction, "in [0, 1)");
-  BC_CHECK(std::isfinite(min_log_std), "min_log_std", min_log_std, "finite");
+      "BcOptions", "validation_fraction", validation_fraction, "in [0, 1)");
+  SECURE_CHECK_FIELD(std::isfinite(min_log_std), "BcOptions", "min_log_std", min_log_std, "finite");
 }
 
 void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {

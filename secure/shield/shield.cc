@@ -5,37 +5,35 @@
 
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
+#include "secure/common/option_check.h"
 #include "secure/common/timer.h"
 
 namespace secure::shield {
 namespace {
-
-#define SECURE_SHIELD_OPTION_CHECK(cond, field, value, rule) \
-  SECURE_CHECK(cond, "ShieldOptions::" << field << " = " << value << ", must be " << rule)
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
 
 }  // namespace
 
 void ShieldOptions::Validate() const {
-  SECURE_SHIELD_OPTION_CHECK(num_samples > 0, "num_samples", num_samples, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(num_samples <= kMaxShieldSamples, "num_samples", num_samples,
-                             "in [1, " << kMaxShieldSamples << "]");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(safe_ratio) && safe_ratio >= 0 && safe_ratio < 1,
-                             "safe_ratio", safe_ratio, "in [0, 1)");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(dt) && dt > 0, "dt", dt, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(class_k_gain) && class_k_gain > 0, "class_k_gain",
-                             class_k_gain, "> 0 (alpha must be strictly increasing)");
-  SECURE_SHIELD_OPTION_CHECK(num_probes > 0, "num_probes", num_probes, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(num_probes <= kMaxShieldSamples, "num_probes", num_probes,
-                             "in [1, " << kMaxShieldSamples << "]");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(probe_extent) && probe_extent > 0, "probe_extent",
-                             probe_extent, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(sigma_step) && sigma_step > 0, "sigma_step", sigma_step,
-                             "> 0");
-  SECURE_SHIELD_OPTION_CHECK(max_iterations > 0, "max_iterations", max_iterations, "> 0");
-  SECURE_SHIELD_OPTION_CHECK(std::isfinite(time_budget_us) && time_budget_us >= 0, "time_budget_us",
-                             time_budget_us, ">= 0");
+  SECURE_CHECK_FIELD(num_samples > 0, "ShieldOptions", "num_samples", num_samples, "> 0");
+  SECURE_CHECK_FIELD(num_samples <= kMaxShieldSamples, "ShieldOptions", "num_samples", num_samples,
+                     "in [1, " << kMaxShieldSamples << "]");
+  SECURE_CHECK_FIELD(std::isfinite(safe_ratio) && safe_ratio >= 0 && safe_ratio < 1,
+                     "ShieldOptions", "safe_ratio", safe_ratio, "in [0, 1)");
+  SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, "ShieldOptions", "dt", dt, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(class_k_gain) && class_k_gain > 0, "ShieldOptions",
+                     "class_k_gain", class_k_gain, "> 0 (alpha must be strictly increasing)");
+  SECURE_CHECK_FIELD(num_probes > 0, "ShieldOptions", "num_probes", num_probes, "> 0");
+  SECURE_CHECK_FIELD(num_probes <= kMaxShieldSamples, "ShieldOptions", "num_probes", num_probes,
+                     "in [1, " << kMaxShieldSamples << "]");
+  SECURE_CHECK_FIELD(std::isfinite(probe_extent) && probe_extent > 0, "ShieldOptions",
+                     "probe_extent", probe_extent, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(sigma_step) && sigma_step > 0, "ShieldOptions", "sigma_step",
+                     sigma_step, "> 0");
+  SECURE_CHECK_FIELD(max_iterations > 0, "ShieldOptions", "max_iterations", max_iterations, "> 0");
+  SECURE_CHECK_FIELD(std::isfinite(time_budget_us) && time_budget_us >= 0, "ShieldOptions",
+                     "time_budget_us", time_budget_us, ">= 0");
 }
 
 nlohmann::json ShieldOptions::ToJson() const {

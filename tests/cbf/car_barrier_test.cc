@@ -292,7 +292,7 @@ TEST(CarBarrierTest, LoadRejectsCorruptAndMismatchedFiles) {
     f.metadata["input"]["layout"]["num_obstacles"] = 0;
   });
   std::string e = ErrorOf([&] { CarBarrierNet::Load(path); });
-  EXPECT_NE(e.find("layout.num_obstacles = 0"), std::string::npos) << e;
+  EXPECT_NE(e.find("layout::num_obstacles = 0, must be > 0"), std::string::npos) << e;
   EXPECT_NE(e.find(path), std::string::npos) << e;
   // A missing field.
   path = Edited(net, "missing.model",

@@ -31,7 +31,3 @@ inline std::string WidthsString(const std::vector<int>& widths) {
 }
 
 }  // namespace secure::policy::internal
-
-/// SECURE_CHECK for an option: "<Struct>::<field> = <value>, must be <rule>".
-#define SECURE_POLICY_OPTION_CHECK(cond, type, field, value, rule) \
-  SECURE_CHECK(cond, type "::" << field << " = " << value << ", must be " << rule)
