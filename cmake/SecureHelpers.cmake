@@ -1,7 +1,13 @@
+# The layering check (cmake/SecureArchitecture.cmake): every target made here is checked.
+include(${CMAKE_CURRENT_LIST_DIR}/SecureArchitecture.cmake)
+
 # secure_add_library(<module> SOURCES ... DEPS ...)
 # Creates target secure_<module> with alias secure::<module>. Includes are rooted at the repo
-# ("secure/<module>/x.h"), and DEPS are linked PUBLIC so the module order is visible in CMake:
-# a module that includes a header of a module it does not depend on fails to build.
+# ("secure/<module>/x.h"), and DEPS are linked PUBLIC so the module order is visible in CMake.
+# The repository root is an include directory of every target, so the compiler alone would
+# accept any include: the build checks each target's includes against its links instead
+# (SecureArchitecture.cmake), and a module that includes a header of a target it does not link
+# fails to build, naming the file, the include and the rule.
 function(secure_add_library module)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(secure_${module} STATIC ${ARG_SOURCES})
@@ -9,6 +15,7 @@ function(secure_add_library module)
   target_include_directories(secure_${module} PUBLIC ${PROJECT_SOURCE_DIR})
   target_compile_options(secure_${module} PRIVATE ${SECURE_WARNINGS} PUBLIC ${SECURE_ARCH_FLAGS})
   target_link_libraries(secure_${module} PUBLIC ${ARG_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
+  secure_check_includes(secure_${module})
 endfunction()
 
 # secure_add_test(<name> <module-label> SOURCES ... DEPS ...)
@@ -32,6 +39,8 @@ endfunction()
 # them. The plug-in defines `void secure::plugins::Register_<name>(experiments::DomainRegistry&)`
 # (it adds its experiments::Domain); secure_generate_domain_registry() calls every one of them
 # from secure::plugins::RegisterBuiltinDomains().
+# Its includes are checked like a module's: it may include the generic modules it links (DEPS),
+# and generic code may include it only by linking it.
 function(secure_add_domain name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
   secure_add_library(domain_${name} SOURCES ${ARG_SOURCES} DEPS ${ARG_DEPS}
