@@ -1,7 +1,8 @@
 // The Demolition Derby experiments on tiny profiles: the result structure of each experiment,
 // independence from the number of worker threads, and the barrier-data variants of the
 // sensitivity study.
-#include "secure/experiments/derby_experiments.h"
+#include "domains/derby/domain.h"
+#include "secure/experiments/experiment.h"
 
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
@@ -16,16 +17,30 @@ namespace {
 
 using test::ErrorOf;
 
-DerbyExperimentOptions Tiny() {
-  DerbyExperimentOptions o = DerbyExperimentOptions::Quick();
+// The Derby domain on its quick profile, made smaller still (shared by every test: the domain's
+// options are not changed by a test).
+const domains::derby::DerbyDomain& TinyDomain() {
+  static const domains::derby::DerbyDomain domain = [] {
+    domains::derby::DerbyDomain d(Profile::kQuick);
+    d.mutable_options().demonstrations.episodes = 12;
+    d.mutable_options().safe_states = 200;
+    d.mutable_options().near_dangerous.count = 200;
+    return d;
+  }();
+  return domain;
+}
+
+ExperimentOptions Tiny() {
+  ExperimentOptions o = TinyDomain().Preset();
   o.episodes = 4;
-  o.demonstrations.episodes = 12;
-  o.safe_states = 200;
-  o.near_dangerous.count = 200;
   o.airl.iterations = 1;
   o.airl.steps_per_iteration = 400;
   o.verbose = false;
   return o;
+}
+
+ExperimentResult RunTiny(ExperimentKind kind, const ExperimentOptions& o) {
+  return RunExperiment(kind, TinyDomain(), o, nullptr);
 }
 
 void ExpectRates(const nlohmann::json& methods, const std::string& name, std::size_t seeds) {
@@ -41,12 +56,12 @@ void ExpectRates(const nlohmann::json& methods, const std::string& name, std::si
 }
 
 TEST(DerbyExperimentsTest, Table3RunsBcAirlSecureAndDoesNotDependOnTheWorkerCount) {
-  DerbyExperimentOptions one = Tiny();
+  ExperimentOptions one = Tiny();
   one.threads = 1;
-  DerbyExperimentOptions two = Tiny();
+  ExperimentOptions two = Tiny();
   two.threads = 2;
-  const DerbyExperimentResult a = RunDerbyExperiment(DerbyExperiment::kTable3, one, nullptr);
-  const DerbyExperimentResult b = RunDerbyExperiment(DerbyExperiment::kTable3, two, nullptr);
+  const ExperimentResult a = RunTiny(ExperimentKind::kMethodComparison, one);
+  const ExperimentResult b = RunTiny(ExperimentKind::kMethodComparison, two);
   const nlohmann::json ja = a.ToJson(), jb = b.ToJson();
   EXPECT_EQ(ja["methods"].size(), 3u);
   for (const char* name : {"bc", "airl", "secure"}) {
@@ -55,7 +70,8 @@ TEST(DerbyExperimentsTest, Table3RunsBcAirlSecureAndDoesNotDependOnTheWorkerCoun
       EXPECT_EQ(ja["methods"][name][metric], jb["methods"][name][metric]) << name << metric;
   }
   EXPECT_TRUE(ja["comparisons"].contains("secure_vs_airl"));
-  EXPECT_EQ(ja["experiment"]["name"], "derby-table3");
+  EXPECT_EQ(ja["experiment"]["kind"], "method-comparison");
+  EXPECT_EQ(ja["experiment"]["domain"], "derby");
   EXPECT_EQ(a.demonstrations, 12);
   EXPECT_EQ(a.safe_states, 200);
   EXPECT_EQ(a.near_dangerous_states, 200);
@@ -67,16 +83,16 @@ TEST(DerbyExperimentsTest, Table3RunsBcAirlSecureAndDoesNotDependOnTheWorkerCoun
 }
 
 TEST(DerbyExperimentsTest, AblationAndJointExperimentsRunTheirMethods) {
-  DerbyExperimentOptions o = Tiny();
+  ExperimentOptions o = Tiny();
   o.seeds = 2;
-  const nlohmann::json ablation = RunDerbyExperiment(DerbyExperiment::kAblation, o, nullptr).ToJson();
+  const nlohmann::json ablation = RunTiny(ExperimentKind::kAblation, o).ToJson();
   for (const char* name : {"secure", "secure-random-safe", "secure-no-resampling", "secure-myopic"})
     ExpectRates(ablation["methods"], name, 2);
   EXPECT_TRUE(ablation["comparisons"].contains("ablations"));
   EXPECT_EQ(ablation["comparisons"]["ablations"]["methods"].size(), 3u);
 
   o.seeds = 1;
-  const DerbyExperimentResult joint = RunDerbyExperiment(DerbyExperiment::kJoint, o, nullptr);
+  const ExperimentResult joint = RunTiny(ExperimentKind::kJoint, o);
   const nlohmann::json jj = joint.ToJson();
   for (const char* name : {"airl", "secure", "joint"}) ExpectRates(jj["methods"], name, 1);
   EXPECT_EQ(jj["methods"]["joint"]["seeds"][0]["decisions"], 0);  // unshielded
@@ -84,12 +100,12 @@ TEST(DerbyExperimentsTest, AblationAndJointExperimentsRunTheirMethods) {
 }
 
 TEST(DerbyExperimentsTest, SensitivityEvaluatesSecureOncePerDataVariant) {
-  DerbyExperimentOptions o = Tiny();
+  ExperimentOptions o = Tiny();
   o.seeds = 1;
   o.data_fractions = {1.0, 0.1};
   o.imbalance_ratios = {1, 4};
   o.label_noise = {0.0, 0.5};
-  const DerbyExperimentResult r = RunDerbyExperiment(DerbyExperiment::kSensitivity, o, nullptr);
+  const ExperimentResult r = RunTiny(ExperimentKind::kSensitivity, o);
   ASSERT_EQ(r.evaluations.size(), 4u);  // baseline, data 10%, imbalance 1:4, label noise 50%
   const nlohmann::json j = r.ToJson();
   for (const char* name : {"baseline", "data 10%", "imbalance 1:4", "label noise 50%"}) {
@@ -105,16 +121,16 @@ TEST(DerbyExperimentsTest, SensitivityEvaluatesSecureOncePerDataVariant) {
 }
 
 TEST(DerbyExperimentsTest, BarrierCheckIsRecordedPerSeedAndChangesNoNumber) {
-  DerbyExperimentOptions off = Tiny();
+  ExperimentOptions off = Tiny();
   off.seeds = 1;
   off.check_enabled = false;
-  DerbyExperimentOptions on = off;
+  ExperimentOptions on = off;
   on.check_enabled = true;
   on.check.region_samples = 100;
   on.check.near_samples = 100;
   on.check_held_out = 50;
-  const DerbyExperimentResult a = RunDerbyExperiment(DerbyExperiment::kTable3, off, nullptr);
-  const DerbyExperimentResult b = RunDerbyExperiment(DerbyExperiment::kTable3, on, nullptr);
+  const ExperimentResult a = RunTiny(ExperimentKind::kMethodComparison, off);
+  const ExperimentResult b = RunTiny(ExperimentKind::kMethodComparison, on);
   const nlohmann::json ja = a.ToJson(), jb = b.ToJson();
   // The check draws from its own streams only: every number is unchanged.
   for (const char* name : {"bc", "airl", "secure"})
@@ -135,14 +151,14 @@ TEST(DerbyExperimentsTest, BarrierCheckIsRecordedPerSeedAndChangesNoNumber) {
   EXPECT_NE(b.Table().find("| 0 | "), std::string::npos) << b.Table();
 
   // Thresholds 0 flag any counterexample; `augment` then retrains once with them.
-  DerbyExperimentOptions augment = on;
+  ExperimentOptions augment = on;
   augment.check.thresholds.no_safe_action = 0;
   augment.check.thresholds.near_dangerous = 0;
   augment.check.thresholds.unsafe = 0;
   augment.check.thresholds.min_accuracy_safe = 1;
   augment.check.thresholds.min_accuracy_near_dangerous = 1;
   augment.augment_flagged = true;
-  const nlohmann::json jc = RunDerbyExperiment(DerbyExperiment::kTable3, augment, nullptr).ToJson();
+  const nlohmann::json jc = RunTiny(ExperimentKind::kMethodComparison, augment).ToJson();
   const nlohmann::json& seed = jc["experiment"]["seeds"][0];
   ASSERT_TRUE(seed["check"]["flagged"].get<bool>()) << seed["check"].dump();
   if (seed["check"]["kinds"]["unsafe"]["examples"].get<long>() +
@@ -158,7 +174,7 @@ TEST(DerbyExperimentsTest, BarrierCheckIsRecordedPerSeedAndChangesNoNumber) {
 }
 
 TEST(DerbyExperimentsTest, CheckOptionsFromYaml) {
-  DerbyExperimentOptions o = Tiny();
+  ExperimentOptions o = Tiny();
   o.ApplyYaml(YAML::Load("{check: {enabled: false, held_out: 32, augment: true, "
                          "region_samples: 10, thresholds: {unsafe: 0.5}}}"),
               "x.yaml");
@@ -237,10 +253,10 @@ TEST(DerbyExperimentsTest, BarrierDataVariantsKeepFlipAndValidate) {
 }
 
 TEST(DerbyExperimentsTest, OptionsAreValidated) {
-  DerbyExperimentOptions o = Tiny();
+  ExperimentOptions o = Tiny();
   o.seeds = 0;
-  EXPECT_HAS(ErrorOf([&] { RunDerbyExperiment(DerbyExperiment::kTable3, o, nullptr); }),
-             "DerbyExperimentOptions::seeds = 0");
+  EXPECT_HAS(ErrorOf([&] { RunTiny(ExperimentKind::kMethodComparison, o); }),
+             "ExperimentOptions::seeds = 0");
   o = Tiny();
   o.label_noise = {0.0, 1.5};
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "label_noise[] = 1.5");
@@ -250,7 +266,7 @@ TEST(DerbyExperimentsTest, OptionsAreValidated) {
 }
 
 TEST(DerbyExperimentsTest, JointSectionSetsTheCbfWeight) {
-  DerbyExperimentOptions o = Tiny();
+  ExperimentOptions o = Tiny();
   o.ApplyYaml(YAML::Load("{joint: {weight: 25, class_k_gain: 2}, airl: {iterations: 3}}"),
               "cfg.yaml");
   EXPECT_EQ(o.joint.weight, 25.0);

@@ -1,6 +1,8 @@
-// The SECURE pipeline end to end on a tiny profile: structure of the result, determinism, and
-// independence from the number of worker threads.
-#include "secure/experiments/double_integrator_pipeline.h"
+// The SECURE pipeline (`secure demo`: the method comparison with every method) end to end on the
+// double integrator's tiny profile: structure of the result, determinism, independence from the
+// number of worker threads, and that the shield does its job.
+#include "domains/double_integrator/domain.h"
+#include "secure/experiments/experiment.h"
 
 #include <gtest/gtest.h>
 
@@ -14,23 +16,36 @@ namespace {
 
 using test::ErrorOf;
 
-PipelineOptions Tiny() {
-  PipelineOptions o = PipelineOptions::Quick();
+const domains::double_integrator::DoubleIntegratorDomain& TinyDomain() {
+  static const domains::double_integrator::DoubleIntegratorDomain domain = [] {
+    domains::double_integrator::DoubleIntegratorDomain d(Profile::kQuick);
+    d.mutable_options().demonstrations.episodes = 20;
+    return d;
+  }();
+  return domain;
+}
+
+ExperimentOptions Tiny() {
+  ExperimentOptions o = TinyDomain().Preset();
+  o.methods = eval::AllMethods();
   o.episodes = 8;
-  o.demonstrations.episodes = 20;
   o.airl.iterations = 3;
-  o.barrier.max_epochs = 30;
+  o.flat_barrier.max_epochs = 30;
   o.verbose = false;
   return o;
 }
 
+ExperimentResult RunTiny(const ExperimentOptions& o) {
+  return RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), o, nullptr);
+}
+
 TEST(PipelineTest, RunsEveryMethodOverSeedsAndDoesNotDependOnTheWorkerCount) {
-  PipelineOptions one = Tiny();
+  ExperimentOptions one = Tiny();
   one.threads = 1;
-  PipelineOptions two = Tiny();
+  ExperimentOptions two = Tiny();
   two.threads = 2;
-  const PipelineResult a = RunDoubleIntegratorPipeline(one, nullptr);
-  const PipelineResult b = RunDoubleIntegratorPipeline(two, nullptr);
+  const ExperimentResult a = RunTiny(one);
+  const ExperimentResult b = RunTiny(two);
   const nlohmann::json ja = a.ToJson(), jb = b.ToJson();
   for (eval::Method m : eval::AllMethods()) {
     const std::string name = ToString(eval::kMethodNames, m);
@@ -49,10 +64,19 @@ TEST(PipelineTest, RunsEveryMethodOverSeedsAndDoesNotDependOnTheWorkerCount) {
   }
   EXPECT_TRUE(ja["comparisons"].contains("secure_vs_airl"));
   EXPECT_TRUE(ja["comparisons"].contains("ablations"));
-  EXPECT_EQ(ja["pipeline"]["timings"].size(), 2u);
+  EXPECT_EQ(ja["experiment"]["seeds"].size(), 2u);
+  EXPECT_EQ(ja["experiment"]["domain"], "double-integrator");
   EXPECT_EQ(a.demonstrations, 20);
   EXPECT_GT(a.safe_states, a.demonstrations);  // states of the demonstrations, plus copies
-  EXPECT_EQ(a.near_dangerous_states, one.near_dangerous.count);
+  EXPECT_EQ(a.near_dangerous_states, TinyDomain().options().near_dangerous.count);
+  // The shield does its job: SECURE (AIRL under the shield) is dangerous less often than AIRL
+  // alone, over both seeds, and never more often than AIRL on any seed.
+  const nlohmann::json& airl_danger = ja["methods"]["airl"]["dangerous_rate"];
+  const nlohmann::json& secure_danger = ja["methods"]["secure"]["dangerous_rate"];
+  EXPECT_LE(secure_danger["mean"].get<double>(), airl_danger["mean"].get<double>());
+  for (std::size_t i = 0; i < 2; ++i)
+    EXPECT_LE(secure_danger["per_seed"][i].get<double>(),
+              airl_danger["per_seed"][i].get<double>());
   // Unshielded methods make no shield decisions; shielded ones decide every step.
   const nlohmann::json& seed0 = ja["methods"]["secure"]["seeds"][0];
   EXPECT_EQ(seed0["decisions"], seed0["steps"]);
@@ -60,32 +84,42 @@ TEST(PipelineTest, RunsEveryMethodOverSeedsAndDoesNotDependOnTheWorkerCount) {
 }
 
 TEST(PipelineTest, OptionsAreValidated) {
-  PipelineOptions o = Tiny();
+  ExperimentOptions o = Tiny();
   o.seeds = 0;
-  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "PipelineOptions::seeds = 0");
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "ExperimentOptions::seeds = 0");
   o = Tiny();
   o.episodes = 2147483648L;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }),
-             "PipelineOptions::episodes = 2147483648, must be in [1, 1000000]");
+             "ExperimentOptions::episodes = 2147483648, must be in [1, 1000000]");
   o = Tiny();
   o.seeds = 10001;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }),
-             "PipelineOptions::seeds = 10001, must be in [1, 10000]");
+             "ExperimentOptions::seeds = 10001, must be in [1, 10000]");
   o = Tiny();
   o.evaluation.tost_bound = std::numeric_limits<double>::infinity();
-  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "PipelineOptions::evaluation.tost_bound = inf");
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "ExperimentOptions::evaluation.tost_bound = inf");
   o = Tiny();
   o.shield.dt = 0.05;
-  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "PipelineOptions::shield.dt = 0.05");
-  o = Tiny();
-  o.methods.clear();
-  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "methods");
+  EXPECT_HAS(ErrorOf([&] { TinyDomain().CheckExperiment(o); }),
+             "ExperimentOptions::shield.dt = 0.05");
+  EXPECT_HAS(ErrorOf([&] { RunTiny(o); }), "ExperimentOptions::shield.dt = 0.05");
   o = Tiny();
   EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{policy: {epochs: 3}}"), "x.yaml"); }),
              "unknown section 'policy'");
-  o.ApplyYaml(YAML::Load("{bc: {epochs: 3}, airl: {iterations: 2}}"), "x.yaml");
+  o.ApplyYaml(YAML::Load("{bc: {epochs: 3}, airl: {iterations: 2}, barrier: {max_epochs: 7}}"),
+              "x.yaml");
   EXPECT_EQ(o.bc.epochs, 3);
   EXPECT_EQ(o.airl.iterations, 2);
+  EXPECT_EQ(o.flat_barrier.max_epochs, 7);  // `barrier` is the preset's kind: flat here
+  // The domain's own options through `domain:`, only when the domain is given.
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{domain: {safe_states: 5}}"), "x.yaml"); }),
+             "unknown section 'domain'");
+  domains::double_integrator::DoubleIntegratorDomain d(Profile::kQuick);
+  o.ApplyYaml(YAML::Load("{domain: {safe_states: 5, near_dangerous: {count: 9}}}"), "x.yaml", &d);
+  EXPECT_EQ(d.options().safe_states, 5);
+  EXPECT_EQ(d.options().near_dangerous.count, 9);
+  EXPECT_HAS(ErrorOf([&] { d.ApplyYaml(YAML::Load("{near_dangerous: {rho: 1}}"), "x.yaml"); }),
+             "unknown key 'rho'");
 }
 
 }  // namespace

@@ -14,8 +14,9 @@
 #include "secure/common/error.h"
 #include "domains/derby/derby.h"
 #include "domains/double_integrator/reach_avoid.h"
-#include "secure/experiments/derby_experiments.h"
-#include "secure/experiments/double_integrator_pipeline.h"
+#include "domains/derby/domain.h"
+#include "domains/double_integrator/domain.h"
+#include "secure/experiments/experiment.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/bc_trainer.h"
 
@@ -28,6 +29,22 @@ void Apply(const YAML::Node& node) {
     options.ApplyYaml(node, "fuzz.yaml");
     options.Validate();
     (void)options.ToJson().dump();
+  } catch (const secure::Error&) {
+  }
+}
+
+// An experiment's section with its domain (the `domain:` key reaches the domain's own options).
+template <typename Domain>
+void ApplyExperiment(const YAML::Node& node) {
+  Domain domain(secure::experiments::Profile::kQuick);
+  secure::experiments::ExperimentOptions options = domain.Preset();
+  try {
+    options.ApplyYaml(node, "fuzz.yaml", &domain);
+    domain.Validate();
+    options.Validate();
+    domain.CheckExperiment(options);
+    (void)options.ToJson().dump();
+    (void)domain.OptionsJson().dump();
   } catch (const secure::Error&) {
   }
 }
@@ -54,8 +71,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     else if (key == "joint") Apply<policy::JointCbfOptions>(node);
     else if (key == "reach_avoid") Apply<domains::double_integrator::ReachAvoidOptions>(node);
     else if (key == "derby_task") Apply<domains::derby::DerbyOptions>(node);
-    else if (key == "pipeline") Apply<experiments::PipelineOptions>(node);
-    else if (key == "derby") Apply<experiments::DerbyExperimentOptions>(node);
+    else if (key == "pipeline")
+      ApplyExperiment<domains::double_integrator::DoubleIntegratorDomain>(node);
+    else if (key == "derby") ApplyExperiment<domains::derby::DerbyDomain>(node);
   }
   return 0;
 }
