@@ -3,13 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <numeric>
 
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
+#include "secure/nn/training_loop.h"
 
 namespace secure::cbf {
 namespace {
@@ -127,15 +127,9 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   spec.hidden = options.hidden;
   spec.output_dim = 1;
   spec.activation = options.activation;
-  // The initial weights come from LibTorch's global generator (seeded here; nothing else in
-  // training draws from it): the lock makes concurrent trainings in several threads safe and
-  // each one's initialisation a function of its own seed only.
-  nn::TorchMlp model = [&] {
-    static std::mutex mutex;
-    const std::lock_guard<std::mutex> lock(mutex);
-    torch::manual_seed(options.seed);
-    return nn::TorchMlp(spec);
-  }();
+  // Initial weights from the seed, through a generator of the model's own (never LibTorch's
+  // global one): concurrent trainings need no lock.
+  nn::TorchMlp model(spec, options.seed);
   torch::optim::Adam optimizer(
       model->parameters(),
       torch::optim::AdamOptions(options.learning_rate).weight_decay(options.weight_decay));
@@ -145,71 +139,55 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   s.train_near_dangerous = train_nd.cols();
   s.validation_safe = val_safe.cols();
   s.validation_near_dangerous = val_nd.cols();
-  s.stop_reason = "max_epochs";
-  Score best;
-  bool have_best = false;
   nn::MlpParams best_params;
-  int epochs_since_best = 0;
 
-  const long n = train.x.size(0);
-  std::vector<std::int64_t> order(n);
-  std::iota(order.begin(), order.end(), std::int64_t{0});
-  for (int epoch = 1; epoch <= options.max_epochs; ++epoch) {
-    // Cosine learning-rate decay.
-    const double progress = static_cast<double>(epoch - 1) / std::max(1, options.max_epochs - 1);
-    const double lr =
-        options.final_learning_rate + 0.5 * (options.learning_rate - options.final_learning_rate) *
-                                          (1.0 + std::cos(M_PI * progress));
+  nn::TrainingLoopOptions loop;
+  loop.max_epochs = options.max_epochs;
+  loop.num_samples = train.x.size(0);
+  loop.batch_size = options.batch_size;
+  loop.patience = options.patience;
+  loop.learning_rate = options.learning_rate;
+  loop.final_learning_rate = options.final_learning_rate;
+  loop.name = "cbf::TrainBarrier";
+  nn::TrainingSteps<Score> steps;
+  steps.set_learning_rate = [&](double lr) {
     for (auto& group : optimizer.param_groups())
       static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
-
-    Shuffle(order.begin(), order.end(), rng);
-    const torch::Tensor perm = torch::from_blob(order.data(), {n}, torch::kInt64);
-    double epoch_loss = 0.0;
-    for (long first = 0; first < n; first += options.batch_size) {
-      const long m = std::min<long>(options.batch_size, n - first);
-      const torch::Tensor idx = perm.slice(0, first, first + m);
-      const torch::Tensor h = model->forward(train.x.index_select(0, idx)).squeeze(1);
-      const torch::Tensor loss =
-          HingeLoss(h, train.y.index_select(0, idx), train.w.index_select(0, idx),
-                    train.margin.index_select(0, idx));
-      optimizer.zero_grad();
-      loss.backward();
-      optimizer.step();
-      epoch_loss += loss.item<double>() * static_cast<double>(m);
-      ++s.iterations;
-    }
-    epoch_loss /= static_cast<double>(n);
-    s.epochs = epoch;
-
-    // Best checkpoint on the validation split (or on the training split without one).
-    const Score score = Evaluate(model, has_validation ? val : train);
-    if (!have_best || Better(score, best)) {
-      best = score;
-      have_best = true;
-      best_params = model->ToParams();
-      s.best_epoch = epoch;
-      epochs_since_best = 0;
-    } else {
-      ++epochs_since_best;
-    }
-    if (options.verbose && (epoch % 50 == 0 || epoch == options.max_epochs)) {
+  };
+  steps.train_batch = [&](const std::int64_t* indices, long m) {
+    const torch::Tensor idx =
+        torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
+    const torch::Tensor h = model->forward(train.x.index_select(0, idx)).squeeze(1);
+    const torch::Tensor loss =
+        HingeLoss(h, train.y.index_select(0, idx), train.w.index_select(0, idx),
+                  train.margin.index_select(0, idx));
+    optimizer.zero_grad();
+    loss.backward();
+    optimizer.step();
+    return loss.item<double>();
+  };
+  // Best checkpoint on the validation split (or on the training split without one).
+  steps.evaluate = [&](int) { return Evaluate(model, has_validation ? val : train); };
+  steps.better = Better;
+  steps.save_best = [&] { best_params = model->ToParams(); };
+  steps.restore_best = [&] { model->LoadParams(best_params); };
+  steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
+    if (options.verbose && (r.epoch % 50 == 0 || r.epoch == options.max_epochs)) {
       std::fprintf(stderr,
                    "[cbf train] epoch %d/%d loss %.5f %s balanced acc %.4f (best %.4f @ %d)\n",
-                   epoch, options.max_epochs, epoch_loss, has_validation ? "val" : "train",
-                   score.accuracy.Balanced(), best.accuracy.Balanced(), s.best_epoch);
+                   r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
+                   r.score->accuracy.Balanced(), r.best->accuracy.Balanced(), r.best_epoch);
     }
-    if (callback && !callback(epoch, epoch_loss, score.accuracy.Balanced())) {
-      s.stop_reason = "callback";
-      break;
-    }
-    if (options.patience > 0 && epochs_since_best >= options.patience) {
-      s.stop_reason = "early_stopping";
-      break;
-    }
-  }
+    if (callback && !callback(r.epoch, r.train_loss, r.score->accuracy.Balanced()))
+      return nn::EpochDecision::kStop;
+    return nn::EpochDecision::kContinue;
+  };
+  const nn::TrainingLoopResult result = nn::RunTrainingLoop(loop, rng, steps);
+  s.epochs = result.epochs;
+  s.best_epoch = result.best_epoch;
+  s.iterations = result.steps;
+  s.stop_reason = nn::ToString(result.stop_reason);
 
-  model->LoadParams(best_params);
   const Score train_score = Evaluate(model, train);
   s.train_loss = train_score.loss;
   s.train_accuracy = train_score.accuracy;

@@ -5,8 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <mutex>
-#include <numeric>
 #include <set>
 #include <sstream>
 
@@ -19,6 +17,7 @@
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
 #include "secure/nn/torch_threads.h"
+#include "secure/nn/training_loop.h"
 
 namespace secure::cbf {
 namespace {
@@ -487,14 +486,10 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   spec.output_dim = 1;
   spec.activation = options.activation;
   const double cap = options.EffectiveCap();
-  // Initial weights from LibTorch's global generator, seeded under a lock (as TrainBarrier): the
-  // initialisation of concurrent trainings depends on their own seed only.
-  internal::CarBarrierTorch model = [&] {
-    static std::mutex mutex;
-    const std::lock_guard<std::mutex> lock(mutex);
-    torch::manual_seed(options.seed);
-    return internal::CarBarrierTorch(options.input, spec, normalizer, cap);
-  }();
+  // Initial weights from the seed, through a generator of their own (never LibTorch's global
+  // one): concurrent trainings need no lock.
+  internal::CarBarrierTorch model(options.input, spec, normalizer, cap);
+  model->LoadMlpParams(nn::TorchMlp(spec, options.seed)->ToParams());
   torch::optim::Adam optimizer(
       model->parameters(),
       torch::optim::AdamOptions(options.learning_rate).weight_decay(options.weight_decay));
@@ -511,70 +506,54 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
     s.validation_danger_entries = val.danger.sum().item<long>();
   }
   s.cap = cap;
-  s.stop_reason = "max_epochs";
-  Score best;
-  bool have_best = false;
   nn::MlpParams best_params;
-  int epochs_since_best = 0;
 
-  const long n = train.n_safe + train.n_nd;
-  std::vector<std::int64_t> order(n);
-  std::iota(order.begin(), order.end(), std::int64_t{0});
-  for (int epoch = 1; epoch <= options.max_epochs; ++epoch) {
-    const double progress = static_cast<double>(epoch - 1) / std::max(1, options.max_epochs - 1);
-    const double lr =
-        options.final_learning_rate + 0.5 * (options.learning_rate - options.final_learning_rate) *
-                                          (1.0 + std::cos(M_PI * progress));
+  nn::TrainingLoopOptions loop;
+  loop.max_epochs = options.max_epochs;
+  loop.num_samples = train.n_safe + train.n_nd;
+  loop.batch_size = options.batch_size;
+  loop.patience = options.patience;
+  loop.learning_rate = options.learning_rate;
+  loop.final_learning_rate = options.final_learning_rate;
+  loop.name = "cbf::TrainCarBarrier";
+  nn::TrainingSteps<Score> steps;
+  steps.set_learning_rate = [&](double lr) {
     for (auto& group : optimizer.param_groups())
       static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
+  };
+  steps.train_batch = [&](const std::int64_t* indices, long m) {
+    const torch::Tensor idx =
+        torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
+    const torch::Tensor entry_h = model->EntryValues(train.features.index_select(0, idx));
+    const torch::Tensor loss =
+        Loss(entry_h, train.danger.index_select(0, idx), train.safe.index_select(0, idx),
+             train.weight.index_select(0, idx), options);
+    optimizer.zero_grad();
+    loss.backward();
+    optimizer.step();
+    return loss.item<double>();
+  };
+  steps.evaluate = [&](int) { return Evaluate(model, has_validation ? val : train, options); };
+  steps.better = Better;
+  steps.save_best = [&] { best_params = model->MlpParams(); };
+  steps.restore_best = [&] { model->LoadMlpParams(best_params); };
+  steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
+    if (options.verbose && (r.epoch % 10 == 0 || r.epoch == options.max_epochs)) {
+      std::fprintf(
+          stderr, "[car cbf train] epoch %d/%d loss %.5f %s state acc %.4f (best %.4f @ %d)\n",
+          r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
+          r.score->accuracy.states.Balanced(), r.best->accuracy.states.Balanced(), r.best_epoch);
+    }
+    if (callback && !callback(r.epoch, r.train_loss, r.score->accuracy.states.Balanced()))
+      return nn::EpochDecision::kStop;
+    return nn::EpochDecision::kContinue;
+  };
+  const nn::TrainingLoopResult result = nn::RunTrainingLoop(loop, rng, steps);
+  s.epochs = result.epochs;
+  s.best_epoch = result.best_epoch;
+  s.iterations = result.steps;
+  s.stop_reason = nn::ToString(result.stop_reason);
 
-    Shuffle(order.begin(), order.end(), rng);
-    const torch::Tensor perm = torch::from_blob(order.data(), {n}, torch::kInt64);
-    double epoch_loss = 0.0;
-    for (long first = 0; first < n; first += options.batch_size) {
-      const long m = std::min<long>(options.batch_size, n - first);
-      const torch::Tensor idx = perm.slice(0, first, first + m);
-      const torch::Tensor entry_h = model->EntryValues(train.features.index_select(0, idx));
-      const torch::Tensor loss =
-          Loss(entry_h, train.danger.index_select(0, idx), train.safe.index_select(0, idx),
-               train.weight.index_select(0, idx), options);
-      optimizer.zero_grad();
-      loss.backward();
-      optimizer.step();
-      epoch_loss += loss.item<double>() * static_cast<double>(m);
-      ++s.iterations;
-    }
-    epoch_loss /= static_cast<double>(n);
-    s.epochs = epoch;
-
-    const Score score = Evaluate(model, has_validation ? val : train, options);
-    if (!have_best || Better(score, best)) {
-      best = score;
-      have_best = true;
-      best_params = model->MlpParams();
-      s.best_epoch = epoch;
-      epochs_since_best = 0;
-    } else {
-      ++epochs_since_best;
-    }
-    if (options.verbose && (epoch % 10 == 0 || epoch == options.max_epochs)) {
-      std::fprintf(stderr,
-                   "[car cbf train] epoch %d/%d loss %.5f %s state acc %.4f (best %.4f @ %d)\n",
-                   epoch, options.max_epochs, epoch_loss, has_validation ? "val" : "train",
-                   score.accuracy.states.Balanced(), best.accuracy.states.Balanced(),
-                   s.best_epoch);
-    }
-    if (callback && !callback(epoch, epoch_loss, score.accuracy.states.Balanced())) {
-      s.stop_reason = "callback";
-      break;
-    }
-    if (options.patience > 0 && epochs_since_best >= options.patience) {
-      s.stop_reason = "early_stopping";
-      break;
-    }
-  }
-
-  model->LoadMlpParams(best_params);
   const Score train_score = Evaluate(model, train, options);
   s.train_loss = train_score.loss;
   s.train_accuracy = train_score.accuracy;

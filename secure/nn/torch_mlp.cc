@@ -1,18 +1,64 @@
 #include "secure/nn/torch_mlp.h"
 #include "secure/nn/torch_threads.h"
 
+#include <ATen/CPUGeneratorImpl.h>
 #include <dlfcn.h>
+
+#include <cmath>
+#include <cstdint>
 
 #include "secure/common/error.h"
 
 namespace secure::nn {
 
-TorchMlpImpl::TorchMlpImpl(const MlpSpec& spec) : spec_(spec) {
+TorchLinearImpl::TorchLinearImpl(std::int64_t in_features, std::int64_t out_features) {
+  weight = register_parameter("weight", torch::empty({out_features, in_features}));
+  bias = register_parameter("bias", torch::empty({out_features}));
+}
+
+torch::Tensor TorchLinearImpl::forward(const torch::Tensor& x) {
+  return torch::linear(x, weight, bias);  // what torch::nn::Linear computes
+}
+
+namespace {
+
+// torch::nn::Linear::reset_parameters of LibTorch 1.13 (nn/modules/linear.cpp, nn/init.cpp),
+// with the same arithmetic, drawing from `generator` instead of the global one:
+//   weight: kaiming_uniform_(a = sqrt(5), fan_in, leaky_relu) = U(-bound, bound),
+//           bound = sqrt(3) * gain / sqrt(fan_in), gain = sqrt(2 / (1 + a^2));
+//   bias:   U(-1 / sqrt(fan_in), 1 / sqrt(fan_in)).
+// TorchMlpTest.SeededInitialisationEqualsLinearAfterManualSeed checks the values bit for bit.
+void LinearDefaultInit(TorchLinearImpl& layer, const at::Generator& generator) {
+  torch::NoGradGuard no_grad;
+  const std::int64_t fan_in = layer.weight.size(1);
+  const double a = std::sqrt(5);
+  const double gain = std::sqrt(2.0 / (1 + std::pow(a, 2)));
+  const double std_dev = gain / std::sqrt(fan_in);
+  const double bound = std::sqrt(3.0) * std_dev;
+  layer.weight.uniform_(-bound, bound, generator);
+  const double bias_bound = 1 / std::sqrt(fan_in);
+  layer.bias.uniform_(-bias_bound, bias_bound, generator);
+}
+
+}  // namespace
+
+TorchMlpImpl::TorchMlpImpl(const MlpSpec& spec, std::uint64_t seed) : spec_(spec) {
+  Build();
+  const at::Generator generator = at::make_generator<at::CPUGeneratorImpl>(seed);
+  for (auto& layer : layers_) LinearDefaultInit(*layer, generator);
+}
+
+TorchMlpImpl::TorchMlpImpl(const MlpParams& params) : spec_(params.spec) {
+  Build();
+  LoadParams(params);
+}
+
+void TorchMlpImpl::Build() {
   spec_.Validate();
   const auto widths = spec_.Widths();
   for (std::size_t i = 0; i + 1 < widths.size(); ++i) {
     layers_.push_back(
-        register_module("layer" + std::to_string(i), torch::nn::Linear(widths[i], widths[i + 1])));
+        register_module("layer" + std::to_string(i), TorchLinear(widths[i], widths[i + 1])));
   }
 }
 

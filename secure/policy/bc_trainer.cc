@@ -14,6 +14,7 @@
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
+#include "secure/nn/training_loop.h"
 #include "secure/policy/internal/torch_policy.h"
 
 namespace secure::policy {
@@ -139,61 +140,64 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   s.train_pairs = train.size();
   s.validation_pairs = val.size();
   std::vector<std::array<double, 5>> curve;
-  double best_nll = std::numeric_limits<double>::infinity();
+  // The initial weights are the checkpoint until an epoch beats the baseline (with a validation
+  // split: the first epoch with a finite NLL; without one: every epoch, so the last is kept).
   GaussianPolicy best = model->Export(normalizer);
 
-  const long n = train.size();
-  std::vector<std::int64_t> order(n);
-  std::iota(order.begin(), order.end(), std::int64_t{0});
-  const int report_every = std::max(1, options.epochs / 10);
-  for (int epoch = 1; epoch <= options.epochs; ++epoch) {
-    const double progress = static_cast<double>(epoch - 1) / std::max(1, options.epochs - 1);
-    internal::SetLearningRate(
-        optimizer,
-        options.final_learning_rate + 0.5 * (options.learning_rate - options.final_learning_rate) *
-                                          (1.0 + std::cos(M_PI * progress)));
-    Shuffle(order.begin(), order.end(), rng);
-    const torch::Tensor perm = torch::from_blob(order.data(), {n}, torch::kInt64);
-    double epoch_nll = 0.0;
-    for (long first = 0; first < n; first += options.batch_size) {
-      const long m = std::min<long>(options.batch_size, n - first);
-      const torch::Tensor idx = perm.slice(0, first, first + m);
-      const torch::Tensor loss =
-          -model->LogProb(train.x.index_select(0, idx), train.a.index_select(0, idx)).mean();
-      optimizer.zero_grad();
-      loss.backward();
-      optimizer.step();
-      epoch_nll += loss.item<double>() * static_cast<double>(m);
-      ++s.optimizer_steps;
-    }
-    epoch_nll /= static_cast<double>(n);
-    s.epochs = epoch;
-
-    const Score val_score = has_validation ? Evaluate(model, val) : Score{};
-    const double action_mse = has_validation ? val_score.mse : Evaluate(model, train).mse;
-    curve.push_back(
-        {static_cast<double>(epoch), epoch_nll, val_score.nll, action_mse, clock.Seconds()});
-    // Best epoch by validation NLL; without validation, the last epoch.
-    if (!has_validation || val_score.nll < best_nll) {
-      best_nll = has_validation ? val_score.nll : best_nll;
-      best = model->Export(normalizer);
-      s.best_epoch = epoch;
-    }
-    if (options.verbose && (epoch % report_every == 0 || epoch == options.epochs)) {
-      std::fprintf(stderr,
-                   "[bc] epoch %d/%d train NLL %.4f val NLL %.4f action MSE %.5f (best %d) "
-                   "%.1f s\n",
-                   epoch, options.epochs, epoch_nll, val_score.nll, action_mse, s.best_epoch,
-                   clock.Seconds());
-    }
-  }
-
-  // Score the kept weights.
-  {
+  nn::TrainingLoopOptions loop;
+  loop.max_epochs = options.epochs;
+  loop.num_samples = train.size();
+  loop.batch_size = options.batch_size;
+  loop.learning_rate = options.learning_rate;
+  loop.final_learning_rate = options.final_learning_rate;
+  loop.name = "policy::TrainBc";
+  nn::TrainingSteps<Score> steps;
+  steps.set_learning_rate = [&](double lr) { internal::SetLearningRate(optimizer, lr); };
+  steps.train_batch = [&](const std::int64_t* indices, long m) {
+    const torch::Tensor idx =
+        torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
+    const torch::Tensor loss =
+        -model->LogProb(train.x.index_select(0, idx), train.a.index_select(0, idx)).mean();
+    optimizer.zero_grad();
+    loss.backward();
+    optimizer.step();
+    return loss.item<double>();
+  };
+  // Validation NLL and action MSE (the action MSE on the training pairs without a validation
+  // split).
+  steps.evaluate = [&](int) {
+    Score score = has_validation ? Evaluate(model, val) : Score{};
+    score.mse = has_validation ? score.mse : Evaluate(model, train).mse;
+    return score;
+  };
+  // Best epoch by validation NLL; without validation, the last epoch.
+  steps.better = [&](const Score& a, const Score& b) { return !has_validation || a.nll < b.nll; };
+  if (has_validation) steps.baseline = Score{std::numeric_limits<double>::infinity(), kNaN};
+  steps.save_best = [&] { best = model->Export(normalizer); };
+  steps.restore_best = [&] {
     torch::NoGradGuard no_grad;
     model->mean->LoadParams(best.mean);
     model->log_std.copy_(torch::from_blob(best.log_std.data(), {act_dim}, torch::kFloat32));
-  }
+  };
+  const int report_every = std::max(1, options.epochs / 10);
+  steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
+    curve.push_back(
+        {static_cast<double>(r.epoch), r.train_loss, r.score->nll, r.score->mse, clock.Seconds()});
+    if (options.verbose && (r.epoch % report_every == 0 || r.epoch == options.epochs)) {
+      std::fprintf(stderr,
+                   "[bc] epoch %d/%d train NLL %.4f val NLL %.4f action MSE %.5f (best %d) "
+                   "%.1f s\n",
+                   r.epoch, options.epochs, r.train_loss, r.score->nll, r.score->mse, r.best_epoch,
+                   clock.Seconds());
+    }
+    return nn::EpochDecision::kContinue;
+  };
+  const nn::TrainingLoopResult result = nn::RunTrainingLoop(loop, rng, steps);
+  s.epochs = result.epochs;
+  s.best_epoch = result.best_epoch;
+  s.optimizer_steps = result.steps;
+
+  // Score the kept weights (restored by the loop).
   const Score train_score = Evaluate(model, train);
   const Score val_score = Evaluate(model, val);
   s.train_nll = train_score.nll;

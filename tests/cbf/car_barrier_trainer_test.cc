@@ -7,12 +7,16 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <string>
 #include <thread>
+#include <utility>
 
+#include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/internal/car_barrier_torch.h"
-#include "secure/common/error.h"
 #include "secure/common/atomic_file.h"
+#include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/nn/torch_mlp.h"
 
@@ -271,6 +275,83 @@ TEST(CarBarrierTrainerTest, VelocityFeaturesTrainAndCallbackStops) {
   EXPECT_EQ(s.stop_reason, "callback");
   EXPECT_EQ(net.mlp.spec.input_dim, 5);
   EXPECT_TRUE(net.input.use_velocity);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Weights from the options' seed only: LibTorch's global generator plays no part.
+
+// 2-D states: near-dangerous inside the unit disk, safe outside (for the flat trainer).
+std::pair<data::StateSet, data::StateSet> DiskSets(int n, std::uint64_t seed) {
+  Rng rng(seed);
+  data::StateSet safe{"outside", {"px", "py"}, Eigen::MatrixXf(2, n)};
+  data::StateSet nd{"inside", {"px", "py"}, Eigen::MatrixXf(2, n)};
+  for (int i = 0; i < n; ++i) {
+    const double a = rng.Uniform(0, 2 * M_PI), r_in = rng.Uniform(0, 0.9),
+                 r_out = rng.Uniform(1.1, 2.0);
+    nd.states.col(i) << static_cast<float>(r_in * std::cos(a)),
+        static_cast<float>(r_in * std::sin(a));
+    safe.states.col(i) << static_cast<float>(r_out * std::sin(a)),
+        static_cast<float>(r_out * std::cos(a));
+  }
+  return {safe, nd};
+}
+
+class TrainerGeneratorTest : public secure::test::TempDirTest {
+ protected:
+  // The model file bytes of a flat barrier (TrainBarrier) and of a per-car barrier.
+  std::string FlatBytes(std::uint64_t seed) {
+    BarrierTrainerOptions o;
+    o.hidden = {16, 16};
+    o.max_epochs = 3;
+    o.batch_size = 32;
+    o.seed = seed;
+    const auto [safe, nd] = DiskSets(150, 5);
+    const std::string path = PathOf("flat_" + std::to_string(seed) + "_" + Tag() + ".model");
+    TrainBarrier(o, safe, nd, nullptr).Save(path);
+    return ReadFile(path);
+  }
+  std::string CarBytes(std::uint64_t seed) {
+    CarBarrierTrainerOptions o = Fast();
+    o.hidden = {16, 16};
+    o.max_epochs = 2;
+    o.seed = seed;
+    const std::string path = PathOf("car_" + std::to_string(seed) + "_" + Tag() + ".model");
+    TrainCarBarrier(o, Synthetic(false, 120, 3), Synthetic(true, 120, 4), nullptr).Save(path);
+    return ReadFile(path);
+  }
+
+ private:
+  static std::string Tag() {
+    return std::to_string(std::hash<std::thread::id>{}(std::this_thread::get_id()));
+  }
+};
+
+// The two trainers used to seed the global generator under two different mutexes, so one's
+// initialisation could draw from the other's seed. Now each run alone and both runs together
+// on two threads give the same model file bytes.
+TEST_F(TrainerGeneratorTest, ConcurrentFlatAndPerCarTrainingsGiveTheSoloBytes) {
+  const std::string flat = FlatBytes(11), car = CarBytes(12);
+  for (int round = 0; round < 4; ++round) {
+    SCOPED_TRACE(round);
+    std::string flat_2, car_2;
+    std::thread t1([&] { flat_2 = FlatBytes(11); });
+    std::thread t2([&] { car_2 = CarBytes(12); });
+    t1.join();
+    t2.join();
+    EXPECT_TRUE(flat_2 == flat);
+    EXPECT_TRUE(car_2 == car);
+  }
+  EXPECT_FALSE(FlatBytes(13) == flat);  // and the seed matters
+  EXPECT_FALSE(CarBytes(13) == car);
+}
+
+TEST_F(TrainerGeneratorTest, TrainingLeavesTheGlobalGeneratorAlone) {
+  torch::manual_seed(2024);
+  const torch::Tensor expected = torch::rand({32});
+  torch::manual_seed(2024);
+  FlatBytes(3);
+  CarBytes(4);
+  EXPECT_TRUE(torch::equal(torch::rand({32}), expected));
 }
 
 // Manual: a small sweep of the optimisation defaults on a harder variant of the synthetic data

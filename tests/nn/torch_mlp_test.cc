@@ -72,8 +72,7 @@ TEST(TorchMlpTest, EigenInferenceEqualsTorchForward) {
   std::uint64_t seed = 1;
   for (const Case& c : Architectures()) {
     SCOPED_TRACE(c.name);
-    torch::manual_seed(static_cast<std::uint64_t>(seed));
-    TorchMlp model(c.spec);
+    TorchMlp model(c.spec, seed);
     const MlpParams params = model->ToParams();
     ASSERT_NO_THROW(params.Validate());
     for (int n : {1, 33, 257}) {
@@ -112,22 +111,64 @@ TEST(TorchMlpTest, EigenInferenceEqualsTorchForwardForLargeWeightsAndInputs) {
   }
 }
 
-TEST(TorchMlpTest, ManualSeedMakesInitialisationDeterministic) {
+TEST(TorchMlpTest, TheSeedMakesInitialisationDeterministic) {
   const MlpSpec spec = Spec(4, {64, 64, 64}, 1, Activation::kTanh);
-  torch::manual_seed(123);
-  TorchMlp a(spec);
-  torch::manual_seed(123);
-  TorchMlp b(spec);
-  torch::manual_seed(124);
-  TorchMlp c(spec);
+  torch::manual_seed(1);
+  TorchMlp a(spec, 123);
+  torch::manual_seed(2);  // the global generator plays no part
+  TorchMlp b(spec, 123);
+  TorchMlp c(spec, 124);
   EXPECT_TRUE(ParamsBitEqual(a->ToParams(), b->ToParams()));
   EXPECT_FALSE(ParamsBitEqual(a->ToParams(), c->ToParams()));
 }
 
+// The seeded initialisation reproduces what the trainers used to do — torch::manual_seed(seed),
+// then torch::nn::Linear layers — bit for bit, so model files trained before keep their bytes.
+TEST(TorchMlpTest, SeededInitialisationEqualsLinearAfterManualSeed) {
+  std::vector<Case> cases = Architectures();
+  cases.push_back({"one_hidden", Spec(52, {1}, 1, Activation::kRelu)});
+  cases.push_back({"wide_input", Spec(300, {7, 5}, 3, Activation::kTanh)});
+  for (const Case& c : cases) {
+    for (std::uint64_t seed : {0ull, 1ull, 20261129ull, 0xffffffffffffffffull}) {
+      SCOPED_TRACE(c.name + " seed " + std::to_string(seed));
+      torch::manual_seed(seed);
+      MlpParams legacy{c.spec, {}};
+      const auto widths = c.spec.Widths();
+      for (std::size_t i = 0; i + 1 < widths.size(); ++i) {
+        torch::nn::Linear linear(widths[i], widths[i + 1]);
+        DenseLayer layer;
+        layer.weight = ToEigen(linear->weight.t());  // (out x in)
+        layer.bias = ToEigen(linear->bias.unsqueeze(0)).col(0);
+        legacy.layers.push_back(std::move(layer));
+      }
+      EXPECT_TRUE(ParamsBitEqual(TorchMlp(c.spec, seed)->ToParams(), legacy));
+    }
+  }
+}
+
+TEST(TorchMlpTest, ConstructionLeavesTheGlobalGeneratorAlone) {
+  torch::manual_seed(42);
+  const torch::Tensor expected = torch::rand({16});
+  torch::manual_seed(42);
+  TorchMlp a(Spec(4, {64, 64}, 1, Activation::kTanh), 7);
+  TorchMlp b(Spec(4, {64, 64}, 1, Activation::kTanh));
+  TorchMlp c(a->ToParams());
+  EXPECT_TRUE(torch::equal(torch::rand({16}), expected));
+}
+
+TEST(TorchMlpTest, TheParamsConstructorCopiesTheWeights) {
+  const MlpParams params = RandomMlpParams(Spec(3, {6, 5}, 2, Activation::kRelu), 12);
+  TorchMlp model(params);
+  EXPECT_TRUE(model->spec() == params.spec);
+  EXPECT_TRUE(ParamsBitEqual(model->ToParams(), params));
+  MlpParams bad = params;
+  bad.layers[1].weight(0, 0) = std::nanf("");
+  EXPECT_HAS(ErrorOf([&] { TorchMlp invalid(bad); }), "non-finite");
+}
+
 TEST(TorchMlpTest, ToParamsHasTheSpecsShapesAndTorchsValues) {
   const MlpSpec spec = Spec(3, {5, 7}, 2, Activation::kRelu);
-  torch::manual_seed(9);
-  TorchMlp model(spec);
+  TorchMlp model(spec, 9);
   EXPECT_TRUE(model->spec() == spec);
   const MlpParams p = model->ToParams();
   EXPECT_TRUE(p.spec == spec);
@@ -161,10 +202,8 @@ TEST(TorchMlpTest, LoadParamsThenToParamsRoundTripsExactly) {
 
 TEST(TorchMlpTest, ToParamsThenLoadParamsIntoAFreshModelGivesTheSameForward) {
   const MlpSpec spec = Spec(4, {64, 64, 64}, 1, Activation::kRelu);
-  torch::manual_seed(5);
-  TorchMlp a(spec);
-  torch::manual_seed(6);
-  TorchMlp b(spec);
+  TorchMlp a(spec, 5);
+  TorchMlp b(spec, 6);
   const MlpParams pa = a->ToParams();
   b->LoadParams(pa);
   EXPECT_TRUE(ParamsBitEqual(b->ToParams(), pa));
@@ -206,8 +245,7 @@ TEST(TorchMlpTest, LoadParamsWithADifferentArchitectureThrows) {
 
 TEST(TorchMlpTest, FailedLoadParamsLeavesTheWeightsUntouched) {
   const MlpSpec spec = Spec(4, {8, 8}, 1, Activation::kTanh);
-  torch::manual_seed(3);
-  TorchMlp model(spec);
+  TorchMlp model(spec, 3);
   const MlpParams before = model->ToParams();
   MlpParams bad = RandomMlpParams(spec, 2);
   bad.layers[2].bias[0] = std::nanf("");  // validated before any copy
@@ -232,8 +270,8 @@ TEST(TorchMlpTest, ForwardMapsNByInputToNByOutput) {
 
 TEST(TorchMlpTest, ForwardIsDifferentiable) {
   // Training needs gradients through the module: every parameter receives one.
-  torch::manual_seed(1);
-  TorchMlp model(Spec(4, {16, 16}, 1, Activation::kTanh));
+  torch::manual_seed(1);  // the inputs
+  TorchMlp model(Spec(4, {16, 16}, 1, Activation::kTanh), 1);
   const torch::Tensor loss = model->forward(torch::randn({32, 4})).pow(2).mean();
   loss.backward();
   const auto params = model->parameters();
@@ -312,8 +350,8 @@ TEST(TorchConversionTest, ToEigenHandlesNonContiguousAndDoubleTensors) {
 }
 
 TEST(TorchConversionTest, ToEigenAcceptsATensorThatRequiresGrad) {
-  torch::manual_seed(2);
-  TorchMlp model(Spec(2, {4}, 1, Activation::kTanh));
+  torch::manual_seed(2);  // the inputs
+  TorchMlp model(Spec(2, {4}, 1, Activation::kTanh), 2);
   const torch::Tensor y = model->forward(torch::randn({3, 2}));  // requires grad
   ASSERT_TRUE(y.requires_grad());
   const Eigen::MatrixXf e = ToEigen(y);

@@ -215,6 +215,17 @@ TEST(BcTest, DeterministicForASeed) {
   EXPECT_FALSE(BitEqual(a, TrainBc(o, demos)));
 }
 
+TEST(BcTest, TrainingLeavesTheGlobalGeneratorAlone) {
+  const data::TrajectorySet demos = LinearDemos(6, 20, 3);
+  BcOptions o = FastBc();
+  o.epochs = 2;
+  torch::manual_seed(77);
+  const torch::Tensor expected = torch::rand({32});
+  torch::manual_seed(77);
+  TrainBc(o, demos, nullptr);
+  EXPECT_TRUE(torch::equal(torch::rand({32}), expected));
+}
+
 TEST(BcTest, InvalidOptionsAreRejectedNamingTheField) {
   const data::TrajectorySet demos = LinearDemos(4, 10, 5);
   auto error = [&](auto mutate) {

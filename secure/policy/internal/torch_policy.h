@@ -36,8 +36,7 @@ class TorchGaussianImpl : public torch::nn::Module {
  public:
   TorchGaussianImpl(const nn::MlpParams& mean_params, const Eigen::VectorXf& log_std_init,
                     double min_log_std)
-      : mean(register_module("mean", nn::TorchMlp(mean_params.spec))), min_log_std_(min_log_std) {
-    mean->LoadParams(mean_params);
+      : mean(register_module("mean", nn::TorchMlp(mean_params))), min_log_std_(min_log_std) {
     SECURE_INTERNAL_CHECK(log_std_init.size() == mean_params.spec.output_dim, "log_std size");
     log_std =
         register_parameter("log_std", torch::from_blob(const_cast<float*>(log_std_init.data()),
@@ -78,12 +77,9 @@ class AirlDiscriminatorImpl : public torch::nn::Module {
  public:
   AirlDiscriminatorImpl(const nn::MlpParams& reward_params, const nn::MlpParams& shaping_params,
                         double discount)
-      : reward(register_module("reward", nn::TorchMlp(reward_params.spec))),
-        shaping(register_module("shaping", nn::TorchMlp(shaping_params.spec))),
-        discount_(discount) {
-    reward->LoadParams(reward_params);
-    shaping->LoadParams(shaping_params);
-  }
+      : reward(register_module("reward", nn::TorchMlp(reward_params))),
+        shaping(register_module("shaping", nn::TorchMlp(shaping_params))),
+        discount_(discount) {}
 
   torch::Tensor G(const torch::Tensor& x) { return reward->forward(x).squeeze(1); }
   torch::Tensor F(const torch::Tensor& x, const torch::Tensor& x_next) {

@@ -1,0 +1,48 @@
+#include "secure/nn/training_loop.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+
+namespace secure::nn {
+
+const char* ToString(StopReason reason) {
+  switch (reason) {
+    case StopReason::kMaxEpochs:
+      return "max_epochs";
+    case StopReason::kEarlyStopping:
+      return "early_stopping";
+    case StopReason::kCallback:
+      return "callback";
+  }
+  return "?";
+}
+
+void TrainingLoopOptions::Validate() const {
+  SECURE_CHECK_FIELD(max_epochs > 0, "TrainingLoopOptions", "max_epochs", max_epochs, "> 0");
+  SECURE_CHECK_FIELD(num_samples >= 0, "TrainingLoopOptions", "num_samples", num_samples, ">= 0");
+  SECURE_CHECK_FIELD(batch_size > 0, "TrainingLoopOptions", "batch_size", batch_size, "> 0");
+  SECURE_CHECK_FIELD(patience >= 0, "TrainingLoopOptions", "patience", patience, ">= 0");
+}
+
+double CosineLearningRate(double initial, double final_rate, int epoch, int max_epochs) {
+  // The trainers' schedule, term for term (their model files depend on the exact doubles).
+  const double progress = static_cast<double>(epoch - 1) / std::max(1, max_epochs - 1);
+  return final_rate + 0.5 * (initial - final_rate) * (1.0 + std::cos(M_PI * progress));
+}
+
+namespace internal {
+
+void ThrowTrainingAborted(const TrainingLoopOptions& options, int epoch) {
+  SECURE_THROW(options.name << ": aborted by the epoch callback after epoch " << epoch << " of "
+                            << options.max_epochs);
+}
+
+void ThrowMissingStep(const TrainingLoopOptions& options, const char* step) {
+  SECURE_THROW(options.name << ": the training loop needs the step '" << step << "'");
+}
+
+}  // namespace internal
+}  // namespace secure::nn
