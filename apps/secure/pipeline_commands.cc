@@ -386,7 +386,7 @@ struct EvalCommand {
         }
       }
       const auto results = eval::EvaluateMethods(*env, list, models, shield_options, episodes,
-                                                 seed ^ 0x5ec07e5eed5ULL);
+                                                 eval::EvaluationSeed(seed));
       for (const auto& [method, r] : results) evaluation.Add(method, r);
       if (!json) std::cerr << "seed " << seed << " evaluated\n";
     }

@@ -75,12 +75,24 @@ nlohmann::json SeedResult::ToJson() const {
           {"seconds", seconds}};
 }
 
-EpisodeRunner::EpisodeRunner(domains::Environment& env)
+void EpisodePolicy::Sample(const Eigen::Ref<const Eigen::VectorXf>& observation, Rng& rng,
+                           Eigen::Ref<Eigen::VectorXf> action) {
+  Mean(observation, action);
+  const Eigen::VectorXf& s = sigma();
+  for (Eigen::Index i = 0; i < action.size(); ++i)
+    action[i] = action[i] + s[i] * static_cast<float>(rng.Normal());
+}
+
+EpisodeRunner::EpisodeRunner(domains::Environment& env, EpisodeRunnerOptions options)
     : env_(env),
+      options_(options),
       observation_(env.observation_dim()),
       mu_(env.action_dim()),
       action_(env.action_dim()),
-      backup_(env.action_dim()) {}
+      backup_(env.action_dim()) {
+  SECURE_CHECK(options_.episode_seed != nullptr,
+               "EpisodeRunnerOptions::episode_seed = null, must be a function");
+}
 
 std::uint64_t EpisodeSeed(std::uint64_t seed, long episode) {
   // Mixed once more by Rng::Seed (splitmix64), so neighbouring indices give unrelated streams.
@@ -88,7 +100,13 @@ std::uint64_t EpisodeSeed(std::uint64_t seed, long episode) {
 }
 
 SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* shield,
-                              long episodes, std::uint64_t seed) {
+                              long episodes, std::uint64_t seed, StepObserver* observer) {
+  GaussianEpisodePolicy adapter(policy);
+  return Run(adapter, shield, episodes, seed, observer);
+}
+
+SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, long episodes,
+                              std::uint64_t seed, StepObserver* observer) {
   SECURE_CHECK(episodes > 0, "EpisodeRunner::Run: episodes = " << episodes << ", must be > 0");
   SECURE_CHECK(policy.observation_dim() == env_.observation_dim() &&
                    policy.action_dim() == env_.action_dim(),
@@ -97,6 +115,9 @@ SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* s
                                                  << " but the environment has observations of "
                                                  << env_.observation_dim() << " and actions of "
                                                  << env_.action_dim());
+  SECURE_CHECK(policy.sigma().size() == env_.action_dim(),
+               "EpisodeRunner: the policy's sigma has "
+                   << policy.sigma().size() << " values, expected " << env_.action_dim());
   if (shield != nullptr) {
     SECURE_CHECK(shield->state_dim() == env_.observation_dim() &&
                      shield->action_dim() == env_.action_dim(),
@@ -114,12 +135,14 @@ SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* s
   long iterations_sum = 0;
   const Eigen::VectorXf& sigma = policy.sigma();
   for (long episode = 0; episode < episodes; ++episode) {
-    Rng rng(EpisodeSeed(seed, episode));
+    Rng rng(options_.episode_seed(seed, episode));
     env_.Reset(rng, observation_);
     if (shield != nullptr) shield->Seed(rng.NextU64());
+    if (observer != nullptr) observer->OnEpisodeStart(episode, observation_);
     bool collided = false;
     for (int step = 0; step < env_.max_steps(); ++step) {
       const Stopwatch decision_clock;
+      const shield::Decision* decision = nullptr;
       if (shield != nullptr) {
         policy.Mean(observation_, mu_);
         if (env_.BackupAction(observation_, backup_)) {
@@ -130,6 +153,7 @@ SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* s
         const shield::Decision& d = shield->Decide(observation_, mu_, sigma);
         latencies_us.push_back(decision_clock.Microseconds());
         action_ = d.action;
+        decision = &d;
         ++result.decisions;
         iterations_sum += d.iterations;
         if (d.intervened) ++result.interventions;
@@ -145,9 +169,13 @@ SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* s
       }
       const domains::StepOutcome outcome = env_.Step(action_, observation_);
       ++result.steps;
+      if (observer != nullptr) {
+        observer->OnStep(StepView{episode, step, observation_, action_, outcome, decision});
+      }
       if (outcome.collided) {
         collided = true;
         result.collision_events += std::max(1, outcome.collisions);
+        if (options_.stop_on_collision) break;
       }
       if (outcome.reached_goal) {
         ++result.successes;
@@ -156,6 +184,7 @@ SeedResult EpisodeRunner::Run(policy::PolicyEvaluator& policy, shield::Shield* s
       }
     }
     if (collided) ++result.dangerous;
+    if (observer != nullptr) observer->OnEpisodeEnd(episode);
   }
   if (result.successes > 0) {
     result.mean_steps_to_goal = double(steps_to_goal_sum) / double(result.successes);

@@ -20,10 +20,16 @@
 //
 // One episode: Reset(), then up to env.max_steps() steps; it ends early when the goal is
 // reached (success). Dangerous = at least one collision in the episode (the number of events is
-// kept too); the episode continues after a collision, which is how "at least once" is counted.
+// kept too); the episode continues after a collision, which is how "at least once" is counted
+// (EpisodeRunnerOptions::stop_on_collision ends it at the first one instead, a crash).
+//
+// The runner is the one episode loop of the project: the methods above run through it with
+// their learned Gaussian policies (GaussianEpisodePolicy), and domain harnesses with their own
+// EpisodePolicy (e.g. the double integrator's PD controller with fixed noise in
+// domains/double_integrator/shield_run.h), counting what they need more with a StepObserver.
 //
 //   eval::EpisodeRunner runner(env);                       // one per thread
-//   eval::SeedResult r = runner.Run(policy, &shield, 100, rng);   // shield = nullptr: unshielded
+//   eval::SeedResult r = runner.Run(policy, &shield, 100, seed);  // shield = nullptr: unshielded
 //   eval::Evaluation ev;  ev.Add(Method::kSecure, r);  ...  ev.Finish();
 //   std::cout << ev.Table();  nlohmann::json j = ev.ToJson();
 #include <Eigen/Core>
@@ -107,28 +113,122 @@ struct SeedResult {
   nlohmann::json ToJson() const;
 };
 
+/// The random stream of episode `episode` of an evaluation with `seed`.
+std::uint64_t EpisodeSeed(std::uint64_t seed, long episode);
+
+/// The evaluation seed of a training seed: the stream EvaluateMethods() draws the evaluation
+/// episodes from, distinct from every stream the training of `training_seed` uses (those are
+/// derived from the training seed itself), so a seed's evaluation episodes are fresh start states
+/// and noise. training_seed ^ 0x5ec07e5eed5 (the value `secure demo`, `secure eval` and the
+/// experiments have always used; changing it changes every published evaluation figure).
+constexpr std::uint64_t EvaluationSeed(std::uint64_t training_seed) {
+  return training_seed ^ 0x5ec07e5eed5ULL;
+}
+
+/// What the episode runner asks of a policy: a Gaussian N(mu(o), diag(sigma^2)) over actions.
+/// Unshielded runs apply a sample of it; shielded runs pass (mu(o), sigma) to the shield.
+/// Implementations must not allocate in Mean() or Sample() (they are called every step).
+class EpisodePolicy {
+ public:
+  virtual ~EpisodePolicy() = default;
+  virtual int observation_dim() const = 0;
+  virtual int action_dim() const = 0;
+  /// mu = mu(observation) (action_dim values).
+  virtual void Mean(const Eigen::Ref<const Eigen::VectorXf>& observation,
+                    Eigen::Ref<Eigen::VectorXf> mu) = 0;
+  /// The per-axis standard deviation (action_dim values), the same for every observation.
+  virtual const Eigen::VectorXf& sigma() const = 0;
+  /// a ~ N(mu(o), sigma): by default action = Mean(o), then action[i] += sigma[i] * eps_i with
+  /// one rng.Normal() per action dimension, in order.
+  virtual void Sample(const Eigen::Ref<const Eigen::VectorXf>& observation, Rng& rng,
+                      Eigen::Ref<Eigen::VectorXf> action);
+};
+
+/// A learned Gaussian policy (policy::PolicyEvaluator) as an EpisodePolicy: Mean() and Sample()
+/// are the evaluator's own.
+class GaussianEpisodePolicy final : public EpisodePolicy {
+ public:
+  /// `evaluator` must outlive this object.
+  explicit GaussianEpisodePolicy(policy::PolicyEvaluator& evaluator) : evaluator_(evaluator) {}
+  int observation_dim() const override { return evaluator_.observation_dim(); }
+  int action_dim() const override { return evaluator_.action_dim(); }
+  void Mean(const Eigen::Ref<const Eigen::VectorXf>& observation,
+            Eigen::Ref<Eigen::VectorXf> mu) override {
+    evaluator_.Mean(observation, mu);
+  }
+  const Eigen::VectorXf& sigma() const override { return evaluator_.sigma(); }
+  void Sample(const Eigen::Ref<const Eigen::VectorXf>& observation, Rng& rng,
+              Eigen::Ref<Eigen::VectorXf> action) override {
+    evaluator_.Sample(observation, rng, action);
+  }
+
+ private:
+  policy::PolicyEvaluator& evaluator_;
+};
+
+/// One step as the runner reports it to a StepObserver, after env.Step(). The references are
+/// valid only during the call.
+struct StepView {
+  long episode = 0;                    // 0-based
+  int step = 0;                        // 0-based index of the step within the episode
+  const Eigen::VectorXf& observation;  // after the step
+  const Eigen::VectorXf& action;       // the action passed to env.Step()
+  const domains::StepOutcome& outcome;
+  const shield::Decision* decision = nullptr;  // the shield's decision; null unshielded
+};
+
+/// Watches a run step by step, e.g. to count what SeedResult does not (states outside a
+/// reference safe set, the shield's fallbacks). Called on the runner's thread; an exception it
+/// throws propagates out of Run().
+class StepObserver {
+ public:
+  virtual ~StepObserver() = default;
+  /// After Reset(): `observation` is the start observation.
+  virtual void OnEpisodeStart(long /*episode*/, const Eigen::VectorXf& /*observation*/) {}
+  virtual void OnStep(const StepView& step) = 0;
+  /// After the episode's last step (goal, collision with stop_on_collision, or max_steps).
+  virtual void OnEpisodeEnd(long /*episode*/) {}
+};
+
+struct EpisodeRunnerOptions {
+  // End an episode at its first collision (a crash), as a physical run would. Off by default:
+  // the paper's evaluation continues after a collision and counts the episode as dangerous if
+  // one happened at least once (collision_events counts every step with one).
+  bool stop_on_collision = false;
+  // The stream of episode i of a run with seed s is episode_seed(s, i). EpisodeSeed by default;
+  // a harness with published figures may keep the streams it was measured with.
+  std::uint64_t (*episode_seed)(std::uint64_t seed, long episode) = &EpisodeSeed;
+};
+
 /// Runs episodes in one environment (not thread-safe; one runner per thread).
 class EpisodeRunner {
  public:
   /// `env` must outlive the runner.
-  explicit EpisodeRunner(domains::Environment& env);
+  explicit EpisodeRunner(domains::Environment& env, EpisodeRunnerOptions options = {});
 
   /// `episodes` episodes of `policy`, shielded by `shield` if non-null (its Decide() is used with
   /// the policy's mu and sigma; its backup action is set per step from env.BackupAction()).
   /// Episode i draws everything (its start first, then policy noise and the shield's samples)
-  /// from its own stream EpisodeSeed(seed, i): every method sees the same start states for the
-  /// same seed (common random numbers), and any episode can be replayed alone.
+  /// from its own stream options.episode_seed(seed, i) (EpisodeSeed by default): every method
+  /// sees the same start states for the same seed (common random numbers), and any episode can
+  /// be replayed alone. `observer`, if non-null, sees every episode start, step and end.
+  /// latency_us: per step, the time from the observation to the action (policy mean + backup
+  /// action + Decide shielded; the policy's sample unshielded). No allocation per step beyond
+  /// the latency record (reserved up front).
   /// @throws secure::Error if the policy's or shield's dimensions disagree with the environment.
+  SeedResult Run(EpisodePolicy& policy, shield::Shield* shield, long episodes, std::uint64_t seed,
+                 StepObserver* observer = nullptr);
+  /// The same with a learned policy (GaussianEpisodePolicy).
   SeedResult Run(policy::PolicyEvaluator& policy, shield::Shield* shield, long episodes,
-                 std::uint64_t seed);
+                 std::uint64_t seed, StepObserver* observer = nullptr);
+
+  const EpisodeRunnerOptions& options() const { return options_; }
 
  private:
   domains::Environment& env_;
+  EpisodeRunnerOptions options_;
   Eigen::VectorXf observation_, mu_, action_, backup_;
 };
-
-/// The random stream of episode `episode` of an evaluation with `seed`.
-std::uint64_t EpisodeSeed(std::uint64_t seed, long episode);
 
 /// What one seed's evaluation needs: the policies (any may be null when no listed method uses
 /// it) and a barrier factory (one evaluator per shield; null when no method is shielded).

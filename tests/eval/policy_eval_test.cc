@@ -243,3 +243,235 @@ TEST(PolicyEvalTest, EvaluationRejectsUnequalSeedCounts) {
 
 }  // namespace
 }  // namespace secure::eval
+
+namespace secure::eval {
+namespace {
+
+// The counts of EvaluateMethods for a fixed run, recorded before the episode runner took
+// EpisodePolicy, step observers and runner options: the existing path must not change (the
+// numbers of `secure demo` and the experiments depend on it).
+TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
+  SeedModels models;
+  models.bc = &pd;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
+  const auto r = EvaluateMethods(
+      env, {Method::kAirl, Method::kSecure, Method::kSecureNoResampling, Method::kSecureMyopic},
+      models, shield::ShieldOptions{}, 25, 0x5eed);
+  const SeedResult& airl = r.at(Method::kAirl);
+  EXPECT_EQ(airl.steps, 2883);
+  EXPECT_EQ(airl.successes, 25);
+  EXPECT_EQ(airl.dangerous, 25);
+  EXPECT_EQ(airl.collision_events, 679);  // the episodes go on through the obstacle
+  const SeedResult& secure = r.at(Method::kSecure);
+  EXPECT_EQ(secure.steps, 4435);
+  EXPECT_EQ(secure.successes, 25);
+  EXPECT_EQ(secure.dangerous, 0);
+  EXPECT_EQ(secure.interventions, 2192);
+  EXPECT_EQ(secure.resampled_decisions, 1968);
+  const SeedResult& no_resampling = r.at(Method::kSecureNoResampling);
+  EXPECT_EQ(no_resampling.steps, 2679);
+  EXPECT_EQ(no_resampling.collision_events, 670);
+  EXPECT_EQ(no_resampling.no_safe_action_decisions, 724);
+  const SeedResult& myopic = r.at(Method::kSecureMyopic);
+  EXPECT_EQ(myopic.steps, 3607);
+  EXPECT_EQ(myopic.interventions, 1162);
+}
+
+TEST(EvaluationSeedTest, IsTheTrainingSeedWithTheEvaluationSalt) {
+  static_assert(EvaluationSeed(0) == 0x5ec07e5eed5ULL, "the salt of every published evaluation");
+  EXPECT_EQ(EvaluationSeed(3), 3ULL ^ 0x5ec07e5eed5ULL);
+  EXPECT_NE(EvaluationSeed(1), 1ULL);
+  EXPECT_NE(EvaluationSeed(1), EvaluationSeed(2));
+}
+
+// Records what a StepObserver sees.
+class Recorder final : public StepObserver {
+ public:
+  explicit Recorder(const di::ReachAvoidEnv& env) : env_(env) {}
+  void OnEpisodeStart(long episode, const Eigen::VectorXf& observation) override {
+    EXPECT_EQ(episode, starts);
+    EXPECT_EQ(ends, starts);  // the previous episode was closed
+    ++starts;
+    start_observations.push_back(observation);
+    next_step = 0;
+  }
+  void OnStep(const StepView& v) override {
+    EXPECT_EQ(v.episode, starts - 1);
+    EXPECT_EQ(v.step, next_step++);
+    EXPECT_EQ(v.observation, Eigen::VectorXf(env_.state()));  // after the step
+    EXPECT_TRUE(v.action.allFinite());
+    ++steps;
+    if (v.decision != nullptr) {
+      ++decisions;
+      EXPECT_EQ(v.action, v.decision->action);  // the shield's action is applied
+    }
+    if (v.outcome.collided) ++collisions;
+    last_collided = v.outcome.collided;
+    last_reached_goal = v.outcome.reached_goal;
+  }
+  void OnEpisodeEnd(long episode) override {
+    EXPECT_EQ(episode, starts - 1);
+    ++ends;
+    episode_ended_by_collision += last_collided ? 1 : 0;
+    episode_lengths.push_back(next_step);
+    if (!last_collided && !last_reached_goal) ++timeouts;
+  }
+
+  long starts = 0, ends = 0, steps = 0, decisions = 0, collisions = 0, timeouts = 0;
+  long episode_ended_by_collision = 0;
+  int next_step = 0;
+  bool last_collided = false, last_reached_goal = false;
+  std::vector<Eigen::VectorXf> start_observations;
+  std::vector<int> episode_lengths;
+
+ private:
+  const di::ReachAvoidEnv& env_;
+};
+
+TEST(EpisodeRunnerTest, TheObserverSeesEveryEpisodeAndStep) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
+  policy::PolicyEvaluator evaluator(pd);
+  EpisodeRunner runner(env);
+  Recorder plain(env);
+  const SeedResult a = runner.Run(evaluator, nullptr, 6, 11, &plain);
+  EXPECT_EQ(plain.starts, 6);
+  EXPECT_EQ(plain.ends, 6);
+  EXPECT_EQ(plain.steps, a.steps);
+  EXPECT_EQ(plain.decisions, 0);
+  EXPECT_EQ(plain.collisions, a.collision_events);
+  // The observer does not change the run.
+  const SeedResult unobserved = runner.Run(evaluator, nullptr, 6, 11);
+  EXPECT_EQ(unobserved.steps, a.steps);
+  EXPECT_EQ(unobserved.collision_events, a.collision_events);
+
+  di::GroundTruthBarrier barrier(task.truth);
+  shield::Shield shield(shield::ShieldOptions{}, barrier, env.ShieldModel());
+  Recorder shielded(env);
+  const SeedResult b = runner.Run(evaluator, &shield, 4, 11, &shielded);
+  EXPECT_EQ(shielded.ends, 4);
+  EXPECT_EQ(shielded.steps, b.steps);
+  EXPECT_EQ(shielded.decisions, b.decisions);
+  EXPECT_EQ(shielded.decisions, b.steps);
+  // Common random numbers: the same seed starts the same episodes, shielded or not.
+  for (int i = 0; i < 4; ++i)
+    EXPECT_EQ(shielded.start_observations[i], plain.start_observations[i]) << i;
+}
+
+TEST(EpisodeRunnerTest, StopOnCollisionEndsTheEpisodeAtTheFirstCollision) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
+  policy::PolicyEvaluator evaluator(pd);
+  EpisodeRunner going_on(env);
+  const SeedResult a = going_on.Run(evaluator, nullptr, 10, 5);
+  ASSERT_GT(a.collision_events, a.dangerous);  // default: the episodes continue
+  EXPECT_FALSE(going_on.options().stop_on_collision);
+
+  EpisodeRunnerOptions options;
+  options.stop_on_collision = true;
+  EpisodeRunner stopping(env, options);
+  Recorder recorder(env);
+  const SeedResult b = stopping.Run(evaluator, nullptr, 10, 5, &recorder);
+  EXPECT_EQ(b.dangerous, a.dangerous);         // the same episodes collide (same streams)...
+  EXPECT_EQ(b.collision_events, b.dangerous);  // ...and end there
+  EXPECT_EQ(recorder.episode_ended_by_collision, b.dangerous);
+  EXPECT_EQ(b.successes + b.dangerous + recorder.timeouts, b.episodes);
+  EXPECT_LT(b.steps, a.steps);
+}
+
+// The PD controller of PdPolicy written by hand, with the default Sample().
+class HandPd final : public EpisodePolicy {
+ public:
+  explicit HandPd(policy::PolicyEvaluator& evaluator) : evaluator_(evaluator) {}
+  int observation_dim() const override { return 4; }
+  int action_dim() const override { return 2; }
+  void Mean(const Eigen::Ref<const Eigen::VectorXf>& o, Eigen::Ref<Eigen::VectorXf> mu) override {
+    ++calls;
+    evaluator_.Mean(o, mu);
+  }
+  const Eigen::VectorXf& sigma() const override { return evaluator_.sigma(); }
+  long calls = 0;
+
+ private:
+  policy::PolicyEvaluator& evaluator_;
+};
+
+TEST(EpisodeRunnerTest, AnEpisodePolicyRunsLikeTheGaussianPolicyItWraps) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
+  policy::PolicyEvaluator evaluator(pd);
+  EpisodeRunner runner(env);
+  HandPd hand(evaluator);
+  // Unshielded: the default Sample() draws one Normal per action dimension, in order, as
+  // PolicyEvaluator::Sample does, so the episodes are the same.
+  const SeedResult a = runner.Run(evaluator, nullptr, 8, 21);
+  const SeedResult b = runner.Run(hand, nullptr, 8, 21);
+  EXPECT_EQ(a.steps, b.steps);
+  EXPECT_EQ(a.collision_events, b.collision_events);
+  EXPECT_EQ(a.mean_steps_to_goal, b.mean_steps_to_goal);
+  EXPECT_EQ(hand.calls, b.steps);
+  // Shielded: (mu, sigma) go to the shield.
+  di::GroundTruthBarrier barrier(task.truth);
+  shield::Shield shield(shield::ShieldOptions{}, barrier, env.ShieldModel());
+  const SeedResult c = runner.Run(evaluator, &shield, 4, 21);
+  const SeedResult d = runner.Run(hand, &shield, 4, 21);
+  EXPECT_EQ(c.steps, d.steps);
+  EXPECT_EQ(c.interventions, d.interventions);
+  EXPECT_EQ(c.dangerous, 0);
+}
+
+TEST(EpisodeRunnerTest, TheEpisodeSeedOptionChoosesTheStreams) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
+  policy::PolicyEvaluator evaluator(pd);
+  EpisodeRunnerOptions options;
+  options.episode_seed = [](std::uint64_t seed, long) { return seed; };  // one stream for all
+  EpisodeRunner same(env, options);
+  Recorder r(env);
+  same.Run(evaluator, nullptr, 3, 9, &r);
+  EXPECT_EQ(r.start_observations[0], r.start_observations[1]);
+  EXPECT_EQ(r.start_observations[0], r.start_observations[2]);
+  EXPECT_EQ(r.episode_lengths[0], r.episode_lengths[2]);
+  // The default: EpisodeSeed, a stream per episode.
+  EpisodeRunner runner(env);
+  Recorder d(env);
+  runner.Run(evaluator, nullptr, 2, 9, &d);
+  EXPECT_NE(d.start_observations[0], d.start_observations[1]);
+  EXPECT_EQ(runner.options().episode_seed, &EpisodeSeed);
+
+  options.episode_seed = nullptr;
+  EXPECT_HAS(ErrorOf([&] { EpisodeRunner bad(env, options); }), "episode_seed = null");
+}
+
+// A policy whose sigma has the wrong size.
+class BadSigma final : public EpisodePolicy {
+ public:
+  int observation_dim() const override { return 4; }
+  int action_dim() const override { return 2; }
+  void Mean(const Eigen::Ref<const Eigen::VectorXf>&, Eigen::Ref<Eigen::VectorXf> mu) override {
+    mu.setZero();
+  }
+  const Eigen::VectorXf& sigma() const override { return sigma_; }
+
+ private:
+  Eigen::VectorXf sigma_ = Eigen::VectorXf::Ones(3);
+};
+
+TEST(EpisodeRunnerTest, APolicyWhoseSigmaDoesNotFitIsAnError) {
+  di::ReachAvoidEnv env;
+  EpisodeRunner runner(env);
+  BadSigma bad;
+  EXPECT_HAS(ErrorOf([&] { runner.Run(bad, nullptr, 1, 0); }),
+             "the policy's sigma has 3 values, expected 2");
+}
+
+}  // namespace
+}  // namespace secure::eval
