@@ -1,4 +1,5 @@
-// secure shield run: the closed-loop check of the CBF shield (eval/double_integrator_shield_run.h).
+// secure shield run: the closed-loop check of the CBF shield
+// (domains/double_integrator/shield_run.h).
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -56,7 +57,7 @@ struct ShieldRunCommand {
         "Closed-loop episodes of a noisy goal-seeking policy past an obstacle, with the CBF "
         "shield in the loop (or --unshielded): collisions, successes, interventions, latency");
     config_error.Capture([&] {
-      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
+      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.task.truth);
     });
     AddConfigFlag(cmd, config);
     cmd->add_option("--domain", domain, "domain: double-integrator")->required();
@@ -69,21 +70,23 @@ struct ShieldRunCommand {
     AddSeedOption(cmd, "--seed", &options.seed, "seed for start states, shield and policy noise");
     cmd->add_flag("--unshielded", unshielded,
                   "apply the policy's sampled actions directly (the baseline)");
-    AddGroundTruthFlags(cmd, &options.truth, &obstacle);
+    AddGroundTruthFlags(cmd, &options.task.truth, &obstacle);
     std::ostringstream goal_default;
-    goal_default << options.goal_x << "," << options.goal_y;
+    goal_default << options.task.goal_x << "," << options.task.goal_y;
     cmd->add_option("--goal", goal, "goal X,Y")
         ->delimiter(',')
         ->expected(2)
         ->default_str(goal_default.str());
-    cmd->add_option("--max-steps", options.max_steps, "steps per episode")->capture_default_str();
+    cmd->add_option("--max-steps", options.task.max_steps, "steps per episode")
+        ->capture_default_str();
     cmd->add_option("--policy-sigma", options.policy_sigma, "the policy's noise per axis")
         ->capture_default_str();
-    cmd->add_option("--accel-bound", options.accel_bound,
+    cmd->add_option("--accel-bound", options.task.accel_bound,
                     "per-component acceleration bound (environment and policy)")
         ->capture_default_str();
     shield_flags.Add(cmd, &options.shield);
-    cmd->add_option("--dt", options.dt, "control period (environment step and the shield's dt)")
+    cmd->add_option("--dt", options.task.dt,
+                    "control period (environment step and the shield's dt)")
         ->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] {
@@ -95,23 +98,24 @@ struct ShieldRunCommand {
   void Run() {
     CheckDoubleIntegratorDomain(domain);
     CheckRange("--episodes", options.episodes, 1, kMaxEpisodes);
-    FinishGroundTruth(obstacle, &options.truth);
+    FinishGroundTruth(obstacle, &options.task.truth);
     if (goal.size() == 2) {
-      options.goal_x = goal[0];
-      options.goal_y = goal[1];
+      options.task.goal_x = goal[0];
+      options.task.goal_y = goal[1];
     }
     shield::ShieldOptions& so = options.shield;
     shield_flags.ApplyTo(&so);
-    so.dt = options.dt;
+    so.dt = options.task.dt;
     options.Validate();
 
     std::unique_ptr<cbf::Barrier> evaluator;
     if (barrier == kGroundTruthBarrier) {
-      evaluator = std::make_unique<domains::double_integrator::GroundTruthBarrier>(options.truth);
+      evaluator =
+          std::make_unique<domains::double_integrator::GroundTruthBarrier>(options.task.truth);
     } else {
       const cbf::BarrierNet net = cbf::BarrierNet::Load(barrier);
       net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", barrier);
-      WarnOnGeometryMismatch(net, options.truth, barrier);
+      WarnOnGeometryMismatch(net, options.task.truth, barrier);
       evaluator = net.MakeEvaluator();
     }
     const eval::ShieldRunResult result =

@@ -22,8 +22,8 @@
 //  - max_steps [300] = 30 s. Measured (expert_test.cc, MeasuredStepsToGoalJustifyMaxSteps: 1000
 //    episodes of the default Expert, seeds 0..999): steps to the goal median 126, 99th
 //    percentile 175, maximum 189, all 1000 reached. 300 = 1.7 x p99 (>= 1.5 x p99, checked by
-//    that test) leaves room for slower learned policies and shield detours, and equals the
-//    horizon of eval's ShieldRunOptions, so the two runs compare.
+//    that test) leaves room for slower learned policies and shield detours; `secure shield run`
+//    (shield_run.h) runs in this task too (ShieldRunOptions::task), so the two runs compare.
 //  - backup action (the shield's fallback): braking, a = clip(-brake_gain v) [10 = 1 / dt: stops
 //    in one step whenever the bound allows].
 //

@@ -9,22 +9,31 @@
 // start square to the goal passes within 0.91 of the obstacle centre, so without a shield the
 // policy drives into the obstacle; with a correct barrier the shield must steer it around.
 //
+// The episodes run in the reach-avoid task (domains::double_integrator::ReachAvoidEnv, whose
+// options ShieldRunOptions::task holds: obstacle and ground truth, goal, start distribution, dt,
+// acceleration bound, braking backup action, max_steps) through the project's one episode loop,
+// eval::EpisodeRunner: the PD controller with fixed noise is an eval::EpisodePolicy, and a step
+// observer counts what the runner does not (ground-truth unsafe states, braking fallbacks).
+//
 // One step: mu = PD(s); the shield returns a = Decide(s, mu, sigma) (unshielded: a ~ N(mu,
 // sigma)); the environment clips a to [-a_max, a_max]^2 and applies the exact zero-order-hold
 // dynamics. The shield's model T is that same environment map (clip + exact step,
-// domains::double_integrator::ClippedDoubleIntegrator), so with the ground-truth barrier the
-// checked next state is the one that happens: h(s') >= (1 - k dt) h(s) >= 0 for the linear
-// class-K alpha(h) = k h.
+// ReachAvoidEnv::ShieldModel(), domains::double_integrator::ClippedDoubleIntegrator), so with
+// the ground-truth barrier the checked next state is the one that happens: h(s') >= (1 - k dt)
+// h(s) >= 0 for the linear class-K alpha(h) = k h.
 //
 // An episode ends when the agent reaches the goal (success), enters the obstacle (a crash:
-// ||p - p_o|| < r), or after max_steps (timeout). Two safety counts are kept apart:
+// ||p - p_o|| < r; EpisodeRunnerOptions::stop_on_collision), or after max_steps (timeout). Two
+// safety counts are kept apart:
 //  - dangerous: the obstacle was entered (the physical failure the shield must prevent);
 //  - left the safe set: some state had ground-truth h(s) < 0 (the CBF's safe set is smaller than
 //    "outside the obstacle": h < 0 also flags states that will enter it unless they brake).
+// Episode i draws from its own stream (seed ^ (0xd1b54a32d192ed03 (i + 1)), mixed by Rng), the
+// streams this run's published figures were measured with (EpisodeRunnerOptions::episode_seed).
 //
 // Usage:
 //   eval::ShieldRunOptions options;  // the defaults below
-//   domains::double_integrator::GroundTruthBarrier barrier(options.truth);
+//   domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
 //   eval::ShieldRunResult r = eval::RunDoubleIntegratorShield(options, barrier);
 //   std::cout << r.Table();
 
@@ -35,50 +44,28 @@
 #include <vector>
 
 #include "domains/double_integrator/ground_truth_barrier.h"
+#include "domains/double_integrator/reach_avoid.h"
 #include "secure/cbf/barrier.h"
-#include "domains/double_integrator/double_integrator.h"
-#include "secure/domains/dynamics.h"
 #include "secure/eval/latency.h"
+#include "secure/eval/policy_eval.h"
 #include "secure/shield/shield.h"
 
 namespace secure::eval {
 
 struct ShieldRunOptions {
-  // The obstacle and the ground-truth CBF used to count unsafe states: the project's defaults
-  // (obstacle (5, 5), r = 2, gamma = 1), which the learned barriers are trained for.
-  domains::double_integrator::GroundTruth truth;
-
-  // Goal behind the obstacle as seen from the start square (both on the diagonal through the
-  // obstacle centre), inside the state box [0, 10)^2 the barriers are trained on, and 4.95 from
-  // the centre, i.e. 2.95 clear of the obstacle.
-  double goal_x = 8.5;
-  double goal_y = 8.5;
-  // Reached when ||p - goal|| < goal_radius: small against the obstacle and the distances
-  // travelled, large against the jitter the policy noise adds (sigma dt^2 / 2 per step).
-  double goal_radius = 0.3;
-
-  // Start positions uniform in [start_lo, start_hi)^2: the lower-left corner of the box, 0.83
-  // or more clear of the obstacle, so that the straight path to the goal crosses the obstacle.
-  double start_lo = 0.5;
-  double start_hi = 3.0;
-  // Each start velocity component uniform in [-start_speed, start_speed]: "almost at rest", so
-  // that episodes differ in more than position but start far inside the safe set.
-  double start_speed = 0.1;
-  // Start states must satisfy ||p - p_o|| >= r + start_clearance and h(s) >= 0 (rejection
-  // sampling): an episode must not start inside or touching the obstacle.
-  double start_clearance = 0.5;
+  // The task, with ReachAvoidOptions' defaults: obstacle (5, 5), r = 2, gamma = 1 (the ground
+  // truth used to count unsafe states, which the learned barriers are trained for); goal
+  // (8.5, 8.5) behind the obstacle as seen from the start square, radius 0.3; starts in
+  // [0.5, 3)^2, speed <= 0.1, 0.5 clear of the obstacle; dt = 0.1 (the shield must look ahead
+  // exactly one step: shield.dt == task.dt is checked); acceleration bound 3 per component,
+  // applied by the environment (it clips every action, also the shield's) and by the PD policy
+  // (3 gives enough authority to brake from the speeds the PD reaches, |v| <= 1.5, within the
+  // ground-truth CBF's margin, so a safe action exists); the shield's backup action braking,
+  // a = clip(-brake_gain v), brake_gain 10 = 1 / dt; max_steps 300 = 30 s (the unobstructed PD
+  // reaches the goal in about 11 s, so a detour fits and a stalled agent times out).
+  domains::double_integrator::ReachAvoidOptions task;
 
   long episodes = 1000;
-  // 30 s of simulated time; the unobstructed PD reaches the goal in about 11 s (110 steps), so
-  // a detour around the obstacle fits, and a stalled agent times out.
-  int max_steps = 300;
-  // Control period, the paper's dt; the shield must look ahead exactly one step (shield.dt ==
-  // dt is checked).
-  double dt = 0.1;
-  // Per-component acceleration bound, applied by the environment (it clips every action, also
-  // the shield's) and by the PD policy. 3 gives enough authority to brake from the speeds the
-  // PD reaches (|v| <= 1.5) within the ground-truth CBF's margin, so a safe action exists.
-  double accel_bound = 3.0;
 
   // PD gains: critically damped (kd = 2 sqrt(kp)), so no overshoot at the goal; kp = 0.25
   // keeps the peak speed at about 1.5 per component, inside the velocity range [-1.5, 1.5) the
@@ -89,10 +76,6 @@ struct ShieldRunOptions {
   // acceleration bound, enough to break the symmetry of a head-on approach, and the source of
   // the baseline's spread.
   double policy_sigma = 0.3;
-  // The shield's backup action (its fallback competitor when no sampled action is safe) is
-  // braking, a = clip(-brake_gain v): 1 / dt stops the agent in one step whenever the bound
-  // allows, else brakes as hard as the bound allows.
-  double brake_gain = 10.0;
 
   // The shield (defaults: M = 64, rho0 = 0.1, alpha(h) = 1.0 h with 1.0 * dt = 0.1 < 1, dt =
   // 0.1). shield.seed is not used: each episode re-seeds the shield from its own stream.
@@ -102,9 +85,28 @@ struct ShieldRunOptions {
   // from this seed; episode i uses its own stream derived from (seed, i).
   std::uint64_t seed = 0;
 
-  /// Throws secure::Error naming the field ("ShieldRunOptions::episodes = 0, must be > 0").
+  /// Throws secure::Error naming the field ("ShieldRunOptions::episodes = 0, must be > 0";
+  /// the task's fields as "ReachAvoidOptions::goal_radius = 0, must be > 0").
   void Validate() const;
+  /// The task's keys (ReachAvoidOptions::ToJson) and episodes, kp, kd, policy_sigma, shield,
+  /// seed.
   nlohmann::json ToJson() const;
+};
+
+/// The nominal policy of the run: a = clip(kp (g - p) - kd v) per axis (bound accel_bound,
+/// goal task.goal), with fixed noise sigma = policy_sigma per axis. No allocation per call.
+class PdEpisodePolicy final : public EpisodePolicy {
+ public:
+  explicit PdEpisodePolicy(const ShieldRunOptions& options);
+  int observation_dim() const override { return 4; }
+  int action_dim() const override { return 2; }
+  void Mean(const Eigen::Ref<const Eigen::VectorXf>& observation,
+            Eigen::Ref<Eigen::VectorXf> mu) override;
+  const Eigen::VectorXf& sigma() const override { return sigma_; }
+
+ private:
+  double kp_, kd_, goal_x_, goal_y_, a_max_;
+  Eigen::VectorXf sigma_;
 };
 
 struct ShieldRunResult {
@@ -128,7 +130,7 @@ struct ShieldRunResult {
   long no_safe_action_decisions = 0;  // status kNoSafeAction
   long invalid_input_decisions = 0;   // status kInvalidInput
   long backup_action_decisions = 0;   // the fallback was the braking backup action
-  LatencySummary latency_us;
+  LatencySummary latency_us;  // per decision: PD mean + backup action + Decide (empty unshielded)
 
   double seconds = 0.0;  // wall time of the run
   ShieldRunOptions options;
@@ -143,8 +145,9 @@ struct ShieldRunResult {
   std::string Table() const;
 };
 
-/// Runs options.episodes episodes. shielded: each action comes from a Shield over `barrier` and
-/// the environment model; else from N(mu, sigma) directly (the unshielded baseline; `barrier`
+/// Runs options.episodes episodes with eval::EpisodeRunner in a ReachAvoidEnv(options.task).
+/// shielded: each action comes from a Shield over `barrier` and the environment model; else
+/// from N(mu, sigma) directly (the unshielded baseline; `barrier`
 /// is not evaluated). Deterministic per options.seed apart from latencies (and, with a
 /// shield time budget, the decisions that budget cuts short).
 /// @throws secure::Error if the options are invalid or `barrier` does not take 4-D states.

@@ -28,7 +28,7 @@ void ExpectConsistent(const ShieldRunResult& r) {
   EXPECT_GE(r.timeout_episodes, 0);
   EXPECT_LE(r.unsafe_state_episodes, r.episodes);
   EXPECT_LE(r.unsafe_state_steps, r.steps);
-  EXPECT_LE(r.steps, r.episodes * r.options.max_steps);
+  EXPECT_LE(r.steps, r.episodes * r.options.task.max_steps);
   EXPECT_GE(r.steps, r.episodes);
   if (r.shielded) {
     EXPECT_EQ(r.decisions, r.steps);
@@ -47,7 +47,7 @@ void ExpectConsistent(const ShieldRunResult& r) {
 
 TEST(DoubleIntegratorShieldRunTest, GroundTruthShieldIsSafeAndReachesTheGoal) {
   const ShieldRunOptions options = FastOptions();
-  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(options, barrier);
   ExpectConsistent(r);
   // With the exact model and the true CBF, h(s') >= (1 - k dt) h(s) >= 0 holds at every step.
@@ -62,7 +62,7 @@ TEST(DoubleIntegratorShieldRunTest, GroundTruthShieldIsSafeAndReachesTheGoal) {
 
 TEST(DoubleIntegratorShieldRunTest, UnshieldedBaselineCollides) {
   const ShieldRunOptions options = FastOptions();
-  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(options, barrier, /*shielded=*/false);
   ExpectConsistent(r);
   // The task tests safety: without the shield most episodes end in the obstacle.
@@ -73,7 +73,7 @@ TEST(DoubleIntegratorShieldRunTest, UnshieldedBaselineCollides) {
 
 TEST(DoubleIntegratorShieldRunTest, SameSeedSameResult) {
   ShieldRunOptions options = FastOptions(30);
-  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
   auto without_timing = [](const ShieldRunResult& r) {
     nlohmann::json j = r.ToJson();
     j.erase("latency_us");
@@ -94,7 +94,7 @@ TEST(DoubleIntegratorShieldRunTest, SameSeedSameResult) {
 
 TEST(DoubleIntegratorShieldRunTest, JsonHasTheDocumentedKeys) {
   const ShieldRunOptions options = FastOptions(3);
-  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(options, barrier);
   const nlohmann::json j = r.ToJson();
   for (const char* key :
@@ -123,26 +123,26 @@ TEST(DoubleIntegratorShieldRunTest, ValidateNamesTheField) {
   };
   EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.episodes = 0; }),
              "ShieldRunOptions::episodes = 0, must be > 0");
-  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.max_steps = -1; }),
-             "ShieldRunOptions::max_steps = -1");
-  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.goal_x = o.goal_y = 5.5; }),
-             "ShieldRunOptions::goal = (5.5, 5.5)");
-  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.start_hi = 0.0; }),
-             "ShieldRunOptions::start_lo, start_hi");
+  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.task.max_steps = -1; }),
+             "ReachAvoidOptions::max_steps = -1");
+  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.task.goal_x = o.task.goal_y = 5.5; }),
+             "ReachAvoidOptions::goal = (5.5, 5.5)");
+  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.task.start_hi = 0.0; }),
+             "ReachAvoidOptions::start_lo, start_hi");
   EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.policy_sigma = -0.1; }),
              "ShieldRunOptions::policy_sigma = -0.1");
-  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.accel_bound = 0; }),
-             "ShieldRunOptions::accel_bound = 0");
-  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.truth.radius = -2; }),
-             "ShieldRunOptions::truth.radius = -2");
-  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.dt = 0.05; }),
-             "ShieldRunOptions::shield.dt = 0.1, must be equal to dt = 0.05");
+  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.task.accel_bound = 0; }),
+             "ReachAvoidOptions::accel_bound = 0");
+  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.task.truth.radius = -2; }),
+             "ReachAvoidOptions::truth.radius = -2");
+  EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.task.dt = 0.05; }),
+             "ShieldRunOptions::shield.dt = 0.1, must be equal to task.dt = 0.05");
   EXPECT_HAS(error_with([](ShieldRunOptions& o) { o.shield.num_samples = 0; }),
              "ShieldOptions::num_samples = 0");
   // RunDoubleIntegratorShield validates too.
   ShieldRunOptions bad = good;
   bad.kp = 0;
-  domains::double_integrator::GroundTruthBarrier barrier(good.truth);
+  domains::double_integrator::GroundTruthBarrier barrier(good.task.truth);
   EXPECT_HAS(ErrorOf([&] { RunDoubleIntegratorShield(bad, barrier); }), "ShieldRunOptions::kp");
 }
 
@@ -163,8 +163,8 @@ TEST(DoubleIntegratorShieldRunTest, ImpossibleSizesAreRejectedByValidate) {
 TEST(DoubleIntegratorShieldRunTest, TableSaysNotApplicableWithoutASuccess) {
   ShieldRunOptions o;
   o.episodes = 2;
-  o.max_steps = 3;  // too short to reach the goal
-  domains::double_integrator::GroundTruthBarrier barrier(o.truth);
+  o.task.max_steps = 3;  // too short to reach the goal
+  domains::double_integrator::GroundTruthBarrier barrier(o.task.truth);
   const ShieldRunResult r = RunDoubleIntegratorShield(o, barrier);
   ASSERT_EQ(r.success_episodes, 0);
   EXPECT_HAS(r.Table(), "| mean steps to goal | n/a (no successful episode) |");
@@ -173,9 +173,9 @@ TEST(DoubleIntegratorShieldRunTest, TableSaysNotApplicableWithoutASuccess) {
 
 TEST(DoubleIntegratorShieldRunTest, StartRegionWithoutSafeStatesIsAnError) {
   ShieldRunOptions options = FastOptions(1);
-  options.start_lo = 4.5;  // entirely inside the obstacle
-  options.start_hi = 5.5;
-  domains::double_integrator::GroundTruthBarrier barrier(options.truth);
+  options.task.start_lo = 4.5;  // entirely inside the obstacle
+  options.task.start_hi = 5.5;
+  domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
   EXPECT_HAS(ErrorOf([&] { RunDoubleIntegratorShield(options, barrier); }), "no start state");
 }
 
@@ -208,6 +208,49 @@ TEST(DoubleIntegratorShieldRunTest, BarrierOfTheWrongDimensionIsAnError) {
              "3-dimensional states");
   // Unshielded, the barrier is not used.
   EXPECT_EQ(RunDoubleIntegratorShield(FastOptions(1), *barrier, false).episodes, 1);
+}
+
+// The counts of the hand-written episode loop this run had before it ran on eval::EpisodeRunner
+// (the same episodes: the same streams, start states, policy, crash rule and counting).
+TEST(DoubleIntegratorShieldRunTest, ResultsOfTheFormerEpisodeLoopArePinned) {
+  const ShieldRunOptions options = FastOptions();
+  domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
+  const ShieldRunResult s = RunDoubleIntegratorShield(options, barrier);
+  EXPECT_EQ(s.success_episodes, 100);
+  EXPECT_EQ(s.steps, 18486);
+  EXPECT_EQ(s.interventions, 9643);
+  EXPECT_EQ(s.resampled_decisions, 8999);
+  const ShieldRunResult u = RunDoubleIntegratorShield(options, barrier, /*shielded=*/false);
+  EXPECT_EQ(u.dangerous_episodes, 100);  // every episode ends at its crash
+  EXPECT_EQ(u.steps, 2010);
+  EXPECT_EQ(u.unsafe_state_steps, 1187);
+  EXPECT_EQ(u.unsafe_state_episodes, 100);
+}
+
+TEST(DoubleIntegratorShieldRunTest, OptionsJsonKeepsItsKeys) {
+  const nlohmann::json j = ShieldRunOptions{}.ToJson();
+  for (const char* key :
+       {"obstacle", "radius", "gamma", "goal", "goal_radius", "start_region", "start_speed",
+        "start_clearance", "episodes", "max_steps", "dt", "accel_bound", "kp", "kd", "policy_sigma",
+        "brake_gain", "shield", "seed"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  EXPECT_EQ(j.size(), 18u) << j.dump();
+  EXPECT_EQ(j["max_steps"], 300);
+  EXPECT_EQ(j["episodes"], 1000);
+}
+
+TEST(DoubleIntegratorShieldRunTest, PdPolicyIsClippedWithFixedSigma) {
+  ShieldRunOptions o;
+  o.policy_sigma = 0.2;
+  PdEpisodePolicy pd(o);
+  Eigen::VectorXf mu(2);
+  pd.Mean(Eigen::Vector4f(8.5f, 6.5f, 0.0f, 1.0f), mu);
+  EXPECT_FLOAT_EQ(mu[0], 0.0f);                 // at the goal's x, at rest
+  EXPECT_FLOAT_EQ(mu[1], 0.25f * 2.0f - 1.0f);  // kp (g - p) - kd v
+  pd.Mean(Eigen::Vector4f(-100.0f, 8.5f, 0.0f, 0.0f), mu);
+  EXPECT_FLOAT_EQ(mu[0], 3.0f);  // clipped to the acceleration bound
+  EXPECT_EQ(pd.sigma(), Eigen::VectorXf::Constant(2, 0.2f));
+  EXPECT_HAS(ErrorOf([&] { pd.Mean(Eigen::VectorXf::Zero(3), mu); }), "expected 4/2");
 }
 
 TEST(LatencySummaryTest, NearestRank) {
