@@ -128,6 +128,8 @@ class ReachAvoidEnv final : public Environment {
                    Eigen::Ref<Eigen::VectorXf> observation) override;
 
   const DynamicsModel& ShieldModel() const override { return model_; }
+  /// The shield model is the environment's own clipped step on the state (= observation).
+  bool ShieldModelIsExact() const override { return true; }
   /// Braking: clip(-brake_gain v) per component. Always available.
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;

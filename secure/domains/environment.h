@@ -57,6 +57,13 @@ class Environment {
   /// privileged information (for the double integrator: the exact clipped dynamics).
   virtual const DynamicsModel& ShieldModel() const = 0;
 
+  /// Whether ShieldModel() is the environment's own transition on observations: from any
+  /// observation o the environment can be in, ShieldModel() applied to (o, a) gives exactly the
+  /// observation Step(a) writes (the shield then sees the next state that will happen). A claim
+  /// the domain contract tests check (tests/domains/domain_contract_test.cc); false (the default)
+  /// claims nothing (e.g. Derby: a constant-velocity guess of the other cars).
+  virtual bool ShieldModelIsExact() const { return false; }
+
   /// A safe action to fall back on at `observation` (e.g. braking), the shield's backup
   /// competitor when no sampled action is safe. Returns false if the domain has none.
   virtual bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
