@@ -74,8 +74,9 @@ void PdEpisodePolicy::Mean(const Eigen::Ref<const Eigen::VectorXf>& s,
 // ---------------------------------------------------------------------------------------------
 void ShieldRunOptions::Validate() const {
   task.Validate();
-  SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, "ShieldRunOptions", "episodes",
-                     episodes, "in [1, " << kMaxEpisodes << "]");
+  SECURE_CHECK_FIELD(episodes > 0, "ShieldRunOptions", "episodes", episodes, "> 0");
+  SECURE_CHECK_FIELD(episodes <= kMaxEpisodes, "ShieldRunOptions", "episodes", episodes,
+                     "in [1, " << kMaxEpisodes << "]");
   SECURE_CHECK_FIELD(std::isfinite(kp) && kp > 0, "ShieldRunOptions", "kp", kp, "> 0");
   SECURE_CHECK_FIELD(std::isfinite(kd) && kd >= 0, "ShieldRunOptions", "kd", kd, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(policy_sigma) && policy_sigma >= 0, "ShieldRunOptions",
