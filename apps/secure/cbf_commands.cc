@@ -19,6 +19,7 @@
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
+#include "secure/experiments/domain.h"
 
 namespace secure::cli {
 namespace {
@@ -250,24 +251,39 @@ struct TrainCommand {
 };
 
 // ------------------------------------------------------------------------------------------
-struct EvalCommand {
+struct ValidateCommand {
   di::GroundTruth truth;
   std::vector<double> obstacle;
   std::string model, domain;
   cbf::GridValidationOptions validation;
   bool json = false;
+  bool truth_from_config = false;
+  std::vector<CLI::Option*> truth_flags;
   DeferredError config_error;
+  std::string name;
 
-  void Register(CLI::App& app, const Config& config) {
+  void Register(CLI::App& app, const Config& config, const std::string& command) {
+    name = command;
     CLI::App* cmd = app.add_subcommand(
-        "eval", "Confusion matrix of a barrier against a domain's ground truth on its grid");
-    config_error.Capture(
-        [&] { ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth); });
+        command, command == "validate"
+                     ? "Confusion matrix of a barrier against a domain's ground truth on the "
+                       "domain's validation grid"
+                     : "Alias of `cbf validate`");
+    config_error.Capture([&] {
+      const YAML::Node section = config.Section("double_integrator");
+      truth_from_config = section.IsMap();
+      ApplyGroundTruthYaml(section, config.path, &truth);
+    });
     AddConfigFlag(cmd, config);
     cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--domain", domain, "domain with a ground truth: double-integrator")
+    cmd->add_option("--domain", domain,
+                    "a domain with a ground truth: " +
+                        experiments::DomainRegistry::Global().NameList())
         ->required();
+    const std::size_t before = cmd->get_options().size();
     AddGroundTruthFlags(cmd, &truth, &obstacle);
+    for (std::size_t k = before; k < cmd->get_options().size(); ++k)
+      truth_flags.push_back(cmd->get_options()[k]);
     cmd->add_option("--threads", validation.threads, "worker threads")->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] {
@@ -277,18 +293,41 @@ struct EvalCommand {
   }
 
   void Run() {
-    CheckDoubleIntegratorDomain(domain);
-    FinishGroundTruth(obstacle, &truth);
+    const std::unique_ptr<experiments::Domain> d =
+        experiments::DomainRegistry::Global().Make(domain);
+    // The obstacle flags and the `double_integrator:` section are the domain's task options
+    // (obstacle, radius, gamma); a domain without them rejects them by name.
+    bool given = truth_from_config;
+    for (const CLI::Option* o : truth_flags) given = given || o->count() > 0;
+    if (given) {
+      FinishGroundTruth(obstacle, &truth);
+      YAML::Node task;
+      task["obstacle"].push_back(truth.obstacle_x);
+      task["obstacle"].push_back(truth.obstacle_y);
+      task["radius"] = truth.radius;
+      task["gamma"] = truth.gamma;
+      YAML::Node node;
+      node["task"] = task;
+      d->ApplyYaml(node, "--obstacle/--radius/--gamma");
+    }
+    d->Validate();
+    std::unique_ptr<cbf::Barrier> reference = d->MakeGroundTruth();
+    const std::optional<cbf::StateSource> grid = d->ValidationGrid();
+    SECURE_CHECK(reference != nullptr && grid.has_value(),
+                 "cbf " << name << ": the " << domain
+                        << " domain has no ground truth to validate against");
     const cbf::BarrierNet net = cbf::BarrierNet::Load(model);
-    net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", model);
-    const di::Grid grid;
+    net.CheckFeatures(d->MakeEnvironment()->ObservationFeatures(), "the " + domain + " domain",
+                      model);
     const Stopwatch clock;
-    const cbf::Confusion c =
-        domains::double_integrator::ValidateAgainstGroundTruth([&] { return net.MakeEvaluator(); }, truth, grid, validation);
+    const cbf::Confusion c = cbf::ValidateOnGrid([&] { return net.MakeEvaluator(); },
+                                                 [&] { return d->MakeGroundTruth(); }, *grid,
+                                                 validation);
     const double seconds = clock.Seconds();
     if (json) {
       nlohmann::json r = c.ToJson();
-      r["command"] = "cbf eval";
+      r["command"] = "cbf " + name;
+      r["domain"] = domain;
       r["model"] = model;
       r["seconds"] = seconds;
       PrintJson(r);
@@ -418,11 +457,12 @@ void RegisterCbfCommands(CLI::App& app, const Config& config) {
   CLI::App* cbf = app.add_subcommand("cbf", "Learn, check and use control barrier functions");
   cbf->require_subcommand(1);
   static TrainCommand train;
-  static EvalCommand eval;
+  static ValidateCommand validate, eval;
   static PredictCommand predict;
   static Table1Command table1;
   train.Register(*cbf, config);
-  eval.Register(*cbf, config);
+  validate.Register(*cbf, config, "validate");
+  eval.Register(*cbf, config, "eval");
   predict.Register(*cbf, config);
   table1.Register(*cbf, config, "table1",
                   "The paper's Table 1: learn the double-integrator CBF over seeds, validate on "

@@ -40,102 +40,113 @@ constexpr long kMaxSlowedCopies = 100;
 // ------------------------------------------------------------------------------------------
 struct DemosGenerateCommand {
   std::string domain, out;
-  di::ReachAvoidOptions task;
-  di::ExpertOptions expert;
+  // The data flags, defaults of the double integrator's full profile; each given flag becomes
+  // one of the domain's own options (a domain without it rejects it by name).
   di::DemonstrationOptions demos;
   di::NearDangerousOptions near_dangerous;
   long safe_states = 20000;
   int slowed_copies = 1;
   std::uint64_t seed = 1000;
   bool json = false;
+  CLI::Option *episodes_flag = nullptr, *safe_flag = nullptr, *slowed_flag = nullptr,
+              *nd_flag = nullptr, *rho_min_flag = nullptr, *rho_max_flag = nullptr,
+              *stop_flag = nullptr;
 
   void Register(CLI::App& parent) {
     CLI::App* cmd = parent.add_subcommand(
         "generate",
-        "Expert task demonstrations (collisions discarded) and safety demonstrations: "
-        "demos.csv, safe.csv, near_dangerous.csv in --out");
-    cmd->add_option("--domain", domain, "domain: double-integrator")->required();
+        "Expert task demonstrations (collisions discarded) and safety demonstrations of any "
+        "domain: demos.csv, safe.csv, near_dangerous.csv in --out");
+    cmd->add_option("--domain", domain,
+                    "the domain: " + experiments::DomainRegistry::Global().NameList())
+        ->required();
     cmd->add_option("--out", out, "output directory")->required();
-    cmd->add_option("--episodes", demos.episodes,
-                    "expert episodes to attempt, at most " + std::to_string(kMaxEpisodes))
-        ->capture_default_str();
-    cmd->add_option("--safe-states", safe_states,
-                    "demonstration states (up to the goal) kept as safe states, at random")
-        ->capture_default_str();
-    cmd->add_option("--slowed-copies", slowed_copies,
-                    "safe-state augmentation: copies of each safe state with its velocity scaled "
-                    "by U[0, 1)")
-        ->capture_default_str();
-    cmd->add_option("--near-dangerous", near_dangerous.count, "near-dangerous states")
-        ->capture_default_str();
-    cmd->add_option("--rho-min", near_dangerous.rho_min,
-                    "near-dangerous band: from this distance to the obstacle's edge (negative: "
-                    "inside)")
-        ->capture_default_str();
-    cmd->add_option("--rho-max", near_dangerous.rho_max, "near-dangerous band: to this distance")
-        ->capture_default_str();
-    cmd->add_flag("--stop-at-goal", demos.stop_at_goal,
-                  "end each demonstration at the goal (default: run the full horizon)");
+    episodes_flag = cmd->add_option("--episodes", demos.episodes,
+                                    "expert episodes to keep, at most " +
+                                        std::to_string(kMaxEpisodes) + " (default: the domain's)");
+    safe_flag = cmd->add_option("--safe-states", safe_states,
+                                "demonstration states kept as safe states, at random (default: "
+                                "the domain's)");
+    slowed_flag = cmd->add_option(
+        "--slowed-copies", slowed_copies,
+        "double-integrator: safe-state augmentation, copies of each safe state with its velocity "
+        "scaled by U[0, 1)");
+    nd_flag = cmd->add_option("--near-dangerous", near_dangerous.count,
+                              "near-dangerous states (default: the domain's)");
+    rho_min_flag = cmd->add_option("--rho-min", near_dangerous.rho_min,
+                                   "double-integrator: near-dangerous band from this distance to "
+                                   "the obstacle's edge (negative: inside)");
+    rho_max_flag = cmd->add_option("--rho-max", near_dangerous.rho_max,
+                                   "double-integrator: near-dangerous band to this distance");
+    stop_flag = cmd->add_flag("--stop-at-goal", demos.stop_at_goal,
+                              "double-integrator: end each demonstration at the goal (default: "
+                              "run the full horizon)");
     AddSeedOption(cmd, "--seed", &seed, "seed of all the data");
     cmd->add_flag("--json", json, "print counts as JSON");
     cmd->callback([this] { Run(); });
   }
 
   void Run() {
-    CheckDoubleIntegratorDomain(domain);
-    CheckRange("--episodes", demos.episodes, 1, kMaxEpisodes);
-    CheckRange("--safe-states", safe_states, 1, kMaxStates);
-    CheckRange("--slowed-copies", slowed_copies, 0, kMaxSlowedCopies);
-    CheckRange("--safe-states x (1 + --slowed-copies)", safe_states * (1L + slowed_copies), 1,
-               kMaxStates);
-    CheckRange("--near-dangerous", near_dangerous.count, 1, kMaxStates);
-    demos.seed = seed;
-    task.Validate();
-    expert.Validate();
-    demos.Validate();
-    near_dangerous.Validate();
+    const std::unique_ptr<experiments::Domain> d =
+        experiments::DomainRegistry::Global().Make(domain);
+    YAML::Node options;
+    if (episodes_flag->count() > 0) {
+      CheckRange("--episodes", demos.episodes, 1, kMaxEpisodes);
+      options["demonstrations"]["episodes"] = demos.episodes;
+    }
+    if (stop_flag->count() > 0) options["demonstrations"]["stop_at_goal"] = demos.stop_at_goal;
+    if (safe_flag->count() > 0) {
+      CheckRange("--safe-states", safe_states, 1, kMaxStates);
+      options["safe_states"] = safe_states;
+    }
+    if (slowed_flag->count() > 0) {
+      CheckRange("--slowed-copies", slowed_copies, 0, kMaxSlowedCopies);
+      options["slowed_copies"] = slowed_copies;
+    }
+    if (nd_flag->count() > 0) {
+      CheckRange("--near-dangerous", near_dangerous.count, 1, kMaxStates);
+      options["near_dangerous"]["count"] = near_dangerous.count;
+    }
+    if (rho_min_flag->count() > 0) options["near_dangerous"]["rho_min"] = near_dangerous.rho_min;
+    if (rho_max_flag->count() > 0) options["near_dangerous"]["rho_max"] = near_dangerous.rho_max;
+    if (options.size() > 0) d->ApplyYaml(options, "demos generate flags");
+    d->Validate();
     // Before the work: an unusable --out (a file, a read-only place) fails at once.
     CreateDirectories(out);
-    const di::Demonstrations d = di::GenerateDemonstrations(task, expert, demos);
-    Rng rng(seed + 1);
-    const data::StateSet safe = di::WithSlowedCopies(
-        di::SafeStatesFromDemonstrations(di::UntilGoal(d), safe_states, rng), slowed_copies, rng);
-    const data::StateSet nd = di::GenerateNearDangerous(task, near_dangerous, rng);
-    data::WriteTrajectories(out + "/demos.csv", d.trajectories);
-    data::WriteStateSet(out + "/safe.csv", safe);
-    data::WriteStateSet(out + "/near_dangerous.csv", nd);
+    const experiments::DomainData data = d->GenerateData(seed);
+    data::WriteTrajectories(out + "/demos.csv", data.demonstrations);
+    data::WriteStateSet(out + "/safe.csv", data.safe);
+    data::WriteStateSet(out + "/near_dangerous.csv", data.near_dangerous);
     const nlohmann::json r = {
         {"command", "demos generate"},
-        {"demonstrations", d.trajectories.num_episodes()},
-        {"steps", d.trajectories.num_steps()},
-        {"attempted", d.attempted},
-        {"discarded_collisions", d.discarded_collisions},
-        {"discarded_no_goal", d.discarded_no_goal},
-        {"safe_states", safe.size()},
-        {"near_dangerous_states", nd.size()},
+        {"domain", domain},
+        {"demonstrations", data.demonstrations.num_episodes()},
+        {"steps", data.demonstrations.num_steps()},
+        {"discarded", data.discarded_demonstrations},
+        {"safe_states", data.safe.size()},
+        {"near_dangerous_states", data.near_dangerous.size()},
         {"files", {out + "/demos.csv", out + "/safe.csv", out + "/near_dangerous.csv"}},
-        {"task", task.ToJson()},
-        {"expert", expert.ToJson()}};
+        {"domain_options", d->OptionsJson()}};
     if (json) {
       PrintJson(r);
     } else {
-      std::cout << d.trajectories.num_episodes() << " demonstrations (" << d.attempted
-                << " attempted, " << d.discarded_collisions << " discarded for a collision, "
-                << d.discarded_no_goal << " for not reaching the goal), "
-                << d.trajectories.num_steps() << " steps -> " << out << "/demos.csv\n"
-                << safe.size() << " safe states -> " << out << "/safe.csv\n"
-                << nd.size() << " near-dangerous states -> " << out << "/near_dangerous.csv\n";
+      std::cout << data.demonstrations.num_episodes() << " demonstrations ("
+                << data.discarded_demonstrations << " expert episodes discarded for a collision "
+                << "or for not reaching the goal), " << data.demonstrations.num_steps()
+                << " steps -> " << out << "/demos.csv\n"
+                << data.safe.size() << " safe states -> " << out << "/safe.csv\n"
+                << data.near_dangerous.size() << " near-dangerous states -> " << out
+                << "/near_dangerous.csv\n";
     }
   }
 };
 
 // ------------------------------------------------------------------------------------------
 struct PolicyTrainCommand {
-  std::string algo, demos_path, out, domain = kDoubleIntegratorDomain, warm_start, reward;
+  std::string algo, demos_path, out, domain = "double-integrator", warm_start, reward;
   std::string state_features, action_features;
   policy::BcOptions bc;
   policy::AirlOptions airl;
-  di::ReachAvoidOptions task;
   bool json = false;
   // --seed and --curve serve both algorithms: copied onto the chosen one's options if given.
   std::uint64_t seed = 0;
@@ -162,8 +173,8 @@ struct PolicyTrainCommand {
         ->required();
     cmd->add_option("--out", out, "output policy model file")->required();
     cmd->add_option("--domain", domain,
-                    "domain the demonstrations come from (AIRL rolls out in it): "
-                    "double-integrator")
+                    "domain the demonstrations come from (AIRL rolls out in it): " +
+                        experiments::DomainRegistry::Global().NameList())
         ->capture_default_str();
     bc_only.push_back(
         cmd->add_option("--state-features", state_features,
@@ -208,7 +219,8 @@ struct PolicyTrainCommand {
   }
 
   void Run() {
-    CheckDoubleIntegratorDomain(domain);
+    const std::unique_ptr<experiments::Domain> d =
+        experiments::DomainRegistry::Global().Make(domain);
     SECURE_CHECK(algo == "bc" || algo == "airl", "--algo = '" << algo << "', must be bc or airl");
     for (const CLI::Option* option : algo == "bc" ? airl_only : bc_only) {
       SECURE_CHECK(option->count() == 0,
@@ -222,7 +234,8 @@ struct PolicyTrainCommand {
                    "--resume needs --checkpoint FILE (the checkpoint to continue from)");
     }
     nn::SetTorchThreads(1);
-    const di::ReachAvoidEnv env(task);
+    const std::unique_ptr<domains::Environment> environment = d->MakeEnvironment();
+    const domains::Environment& env = *environment;
     std::vector<std::string> states = env.ObservationFeatures(), actions = env.ActionFeatures();
     if (!state_features.empty()) states = data::SplitList(state_features);
     if (!action_features.empty()) actions = data::SplitList(action_features);

@@ -4,7 +4,7 @@
 //
 //   SECURE_CHECK_FIELD(lr > 0, "BarrierTrainerOptions", "lr", lr, "> 0");
 //   // throws secure::Error("BarrierTrainerOptions::lr = -1, must be > 0")
-//   SECURE_CHECK_FIELD(n <= kMax, "PipelineOptions", "seeds", n, "in [1, " << kMax << "]");
+//   SECURE_CHECK_FIELD(n <= kMax, "ExperimentOptions", "seeds", n, "in [1, " << kMax << "]");
 //
 // `owner` is anything streamable (a type name, or "source: section" for a nested block); `rule`
 // may stream several pieces.

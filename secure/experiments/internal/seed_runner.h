@@ -1,5 +1,5 @@
 #pragma once
-// Pieces shared by the experiment drivers (double_integrator_pipeline.cc, derby_experiments.cc):
+// Pieces of the experiment driver (experiment.cc):
 // serialised progress lines and a pool that runs one job per seed on a few threads. INTERNAL:
 // include only from secure/experiments/*.cc.
 #include <algorithm>
