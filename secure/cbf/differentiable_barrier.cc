@@ -1,0 +1,91 @@
+#include "secure/cbf/differentiable_barrier.h"
+
+#include <sstream>
+
+#include "secure/cbf/internal/car_barrier_torch.h"
+#include "secure/common/error.h"
+#include "secure/nn/torch_mlp.h"
+
+namespace secure::cbf {
+namespace {
+
+torch::Tensor VectorTensor(const Eigen::VectorXf& v) {
+  return torch::from_blob(const_cast<float*>(v.data()), {v.size()}, torch::kFloat32).clone();
+}
+
+// BarrierNet: h(s) = mlp((s - mean) / scale), as BarrierNetEvaluator.
+class FlatDifferentiableBarrier final : public DifferentiableBarrier {
+ public:
+  explicit FlatDifferentiableBarrier(const BarrierNet& net)
+      : state_dim_(net.state_dim()), mlp_(nullptr) {
+    net.Validate();
+    mlp_ = nn::TorchMlp(net.mlp.spec);
+    mlp_->LoadParams(net.mlp);
+    for (auto& p : mlp_->parameters()) p.requires_grad_(false);
+    mean_ = VectorTensor(net.normalizer.mean);
+    scale_ = VectorTensor(net.normalizer.scale);
+    std::ostringstream t;
+    t << "barrier_mlp";
+    const auto widths = net.mlp.spec.Widths();
+    for (std::size_t i = 0; i < widths.size(); ++i) t << (i ? "-" : " ") << widths[i];
+    t << " " << ToString(nn::kActivationNames, net.mlp.spec.activation) << " (differentiable)";
+    description_ = t.str();
+  }
+  int state_dim() const override { return state_dim_; }
+  std::string Describe() const override { return description_; }
+
+ protected:
+  torch::Tensor DoForward(const torch::Tensor& states) const override {
+    return mlp_->forward((states - mean_) / scale_).reshape({-1});
+  }
+
+ private:
+  int state_dim_;
+  mutable nn::TorchMlp mlp_;  // mutable: a forward pass changes no state
+  torch::Tensor mean_, scale_;
+  std::string description_;
+};
+
+// CarBarrierNet: the per-car LibTorch forward of internal/car_barrier_torch.h.
+class CarDifferentiableBarrier final : public DifferentiableBarrier {
+ public:
+  explicit CarDifferentiableBarrier(const CarBarrierNet& net)
+      : state_dim_(net.state_dim()),
+        description_(net.Describe() + " (differentiable)"),
+        module_(net) {
+    module_->Freeze();
+  }
+  int state_dim() const override { return state_dim_; }
+  std::string Describe() const override { return description_; }
+
+ protected:
+  torch::Tensor DoForward(const torch::Tensor& states) const override {
+    return module_->forward(states);
+  }
+
+ private:
+  int state_dim_;
+  std::string description_;
+  mutable internal::CarBarrierTorch module_;  // mutable: a forward pass changes no state
+};
+
+}  // namespace
+
+torch::Tensor DifferentiableBarrier::Forward(const torch::Tensor& states) const {
+  SECURE_CHECK(states.dim() == 2 && states.size(1) == state_dim(),
+               Describe() << ": states of shape " << states.sizes() << ", expected [N, "
+                          << state_dim() << "]");
+  SECURE_CHECK(states.scalar_type() == torch::kFloat32,
+               Describe() << ": states must be float32, not " << states.scalar_type());
+  return DoForward(states);
+}
+
+std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrier(const BarrierNet& net) {
+  return std::make_unique<FlatDifferentiableBarrier>(net);
+}
+
+std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrier(const CarBarrierNet& net) {
+  return std::make_unique<CarDifferentiableBarrier>(net);
+}
+
+}  // namespace secure::cbf

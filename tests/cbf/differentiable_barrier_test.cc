@@ -1,0 +1,95 @@
+#include "secure/cbf/differentiable_barrier.h"
+
+#include <gtest/gtest.h>
+
+#include "secure/common/rng.h"
+#include "secure/nn/torch_mlp.h"
+#include "tests/test_util.h"
+
+namespace secure::cbf {
+namespace {
+
+using secure::test::ErrorOf;
+
+Eigen::MatrixXf UniformStates(int dim, int n, double lo, double hi, std::uint64_t seed) {
+  Rng rng(seed);
+  Eigen::MatrixXf s(dim, n);
+  for (int c = 0; c < n; ++c)
+    for (int r = 0; r < dim; ++r) s(r, c) = static_cast<float>(rng.Uniform(lo, hi));
+  return s;
+}
+
+BarrierNet FlatNet() {
+  BarrierNet net;
+  net.mlp = nn::RandomMlpParams({3, {8, 8}, 1, nn::Activation::kTanh}, 11);
+  net.normalizer.mean = (Eigen::VectorXf(3) << 0.5f, -1.0f, 0.25f).finished();
+  net.normalizer.scale = (Eigen::VectorXf(3) << 2.0f, 0.5f, 1.5f).finished();
+  net.features = {"a", "b", "c"};
+  return net;
+}
+
+TEST(DifferentiableBarrierTest, FlatMatchesItsEvaluatorAndFiniteDifferences) {
+  const BarrierNet net = FlatNet();
+  const std::unique_ptr<DifferentiableBarrier> h = MakeDifferentiableBarrier(net);
+  EXPECT_EQ(h->state_dim(), 3);
+  EXPECT_NE(h->Describe().find("barrier_mlp 3-8-8-1 tanh"), std::string::npos) << h->Describe();
+
+  const Eigen::MatrixXf states = UniformStates(3, 40, -2, 2, 12);
+  Eigen::VectorXf h_eigen(40);
+  net.MakeEvaluator()->Evaluate(states, h_eigen);
+  torch::Tensor x = nn::ToTensor(states).requires_grad_(true);
+  const torch::Tensor values = h->Forward(x);
+  ASSERT_EQ(values.sizes(), (std::vector<std::int64_t>{40}));
+  for (int i = 0; i < 40; ++i) EXPECT_NEAR(values[i].item<double>(), h_eigen(i), 1e-5);
+
+  // d h / d s by autograd against central differences (each row's h depends on its row only).
+  values.sum().backward();
+  const Eigen::MatrixXf grad = nn::ToEigen(x.grad());
+  const float eps = 1e-2f;
+  for (int r = 0; r < 3; ++r) {
+    Eigen::MatrixXf plus = states, minus = states;
+    plus.row(r).array() += eps;
+    minus.row(r).array() -= eps;
+    Eigen::VectorXf hp(40), hm(40);
+    net.MakeEvaluator()->Evaluate(plus, hp);
+    net.MakeEvaluator()->Evaluate(minus, hm);
+    for (int i = 0; i < 40; ++i)
+      EXPECT_NEAR(grad(r, i), (hp(i) - hm(i)) / (2 * eps), 2e-3 + 1e-2 * std::abs(grad(r, i)))
+          << "row " << r << ", state " << i;
+  }
+  EXPECT_GT(grad.cwiseAbs().sum(), 0.0f);
+}
+
+TEST(DifferentiableBarrierTest, CarMatchesItsEvaluatorAndPassesGradientsToTheStates) {
+  CarBarrierNet net;
+  net.input.use_velocity = true;
+  net.cap = 0.04;
+  net.mlp = nn::RandomMlpParams({5, {16, 16}, 1, nn::Activation::kRelu}, 5);
+  net.normalizer = nn::Normalizer::Fit(Eigen::MatrixXf::Random(5, 30));
+  const std::unique_ptr<DifferentiableBarrier> h = MakeDifferentiableBarrier(net);
+  EXPECT_EQ(h->state_dim(), net.state_dim());
+  EXPECT_EQ(h->Describe(), net.Describe() + " (differentiable)");
+
+  const Eigen::MatrixXf states = UniformStates(net.state_dim(), 30, -0.6, 0.6, 13);
+  Eigen::VectorXf h_eigen(30);
+  net.MakeEvaluator()->Evaluate(states, h_eigen);
+  torch::Tensor x = nn::ToTensor(states).requires_grad_(true);
+  const torch::Tensor values = h->Forward(x);
+  ASSERT_EQ(values.sizes(), (std::vector<std::int64_t>{30}));
+  for (int i = 0; i < 30; ++i) EXPECT_NEAR(values[i].item<double>(), h_eigen(i), 1e-5);
+  values.sum().backward();
+  ASSERT_TRUE(x.grad().defined());
+  EXPECT_GT(x.grad().abs().sum().item<double>(), 0.0);
+}
+
+TEST(DifferentiableBarrierTest, WrongShapesAndInvalidNetsAreRejected) {
+  const std::unique_ptr<DifferentiableBarrier> h = MakeDifferentiableBarrier(FlatNet());
+  EXPECT_HAS(ErrorOf([&] { h->Forward(torch::zeros({4, 2})); }), "expected [N, 3]");
+  EXPECT_HAS(ErrorOf([&] { h->Forward(torch::zeros({4, 3}, torch::kFloat64)); }), "float32");
+  BarrierNet bad = FlatNet();
+  bad.normalizer = nn::Normalizer::Identity(2);
+  EXPECT_HAS(ErrorOf([&] { MakeDifferentiableBarrier(bad); }), "normalizer");
+}
+
+}  // namespace
+}  // namespace secure::cbf
