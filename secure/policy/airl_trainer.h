@@ -77,6 +77,7 @@
 #include <vector>
 
 #include "secure/common/enum_strings.h"
+#include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
 #include "secure/data/data.h"
 #include "secure/domains/dynamics.h"
@@ -85,6 +86,10 @@
 
 namespace YAML {
 class Node;
+}
+
+namespace secure::cbf {
+class DifferentiableBarrier;  // secure/cbf/differentiable_barrier.h (LibTorch; secure::cbf_train)
 }
 
 namespace secure::policy {
@@ -250,13 +255,30 @@ struct JointCbfOptions {
 };
 
 /// TrainAirl with the JointCbfOptions term in every PPO minibatch (the returned summary's
-/// `cbf_loss` is the last iteration's mean L_cbf). `model` must map the environment's
-/// observations (its state_dim and action_dim equal the environment's), and `barrier` must read
-/// them (its layout fits the observation).
+/// `cbf_loss` is the last iteration's mean L_cbf). `barrier` is any differentiable barrier
+/// (cbf::MakeDifferentiableBarrier of a BarrierNet or CarBarrierNet, or another implementation;
+/// it must outlive the call) and must read the environment's observations (its state_dim equals
+/// the observation dimension); `model` must map them (its state_dim and action_dim equal the
+/// environment's).
 /// @throws secure::Error as TrainAirl, or on a model or barrier that does not fit the environment.
+GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint,
+                              const cbf::DifferentiableBarrier& barrier,
+                              const domains::DynamicsModel& model,
+                              const data::TrajectorySet& demos, const domains::Environment& env,
+                              const GaussianPolicy* warm_start, AirlSummary* summary,
+                              const AirlCallback& callback = nullptr);
+
+/// The same with a learned barrier model (made differentiable inside, so that the caller needs
+/// no LibTorch header): the per-car CarBarrierNet (Demolition Derby) or the flat BarrierNet (an
+/// MLP on the whole observation). Throws also on an invalid `barrier`.
 GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint,
                               const cbf::CarBarrierNet& barrier,
                               const domains::DynamicsModel& model,
+                              const data::TrajectorySet& demos, const domains::Environment& env,
+                              const GaussianPolicy* warm_start, AirlSummary* summary,
+                              const AirlCallback& callback = nullptr);
+GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint,
+                              const cbf::BarrierNet& barrier, const domains::DynamicsModel& model,
                               const data::TrajectorySet& demos, const domains::Environment& env,
                               const GaussianPolicy* warm_start, AirlSummary* summary,
                               const AirlCallback& callback = nullptr);

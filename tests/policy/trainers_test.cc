@@ -13,13 +13,17 @@
 #include <thread>
 #include <vector>
 
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/differentiable_barrier.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/common/strings.h"
 #include "secure/nn/mlp.h"
+#include "secure/nn/torch_mlp.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/bc_trainer.h"
+#include "secure/policy/internal/joint_cbf_term.h"
 #include "secure/policy/internal/torch_policy.h"
 #include "tests/policy/single_thread.h"
 #include "tests/policy/toy_env.h"
@@ -758,6 +762,159 @@ TEST(AirlTest, OptionsYamlAndNames) {
   back.ApplyYaml(YAML::Load(o.ToJson().dump()), "json");
   EXPECT_EQ(back.ToJson(), o.ToJson());
   EXPECT_EQ(ToString(kAirlRewardNames, AirlReward::kLogitD), "logit-d");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Joint optimisation (TrainAirlJoint) with a flat BarrierNet
+
+// A flat barrier on the toy task's (x, y): a random tanh MLP with a non-trivial normaliser.
+cbf::BarrierNet RandomFlatBarrier() {
+  cbf::BarrierNet net;
+  net.mlp = nn::RandomMlpParams({2, {8}, 1, nn::Activation::kTanh}, 21);
+  net.mlp.layers.back().bias[0] = 0.1f;
+  net.normalizer.mean = (Eigen::VectorXf(2) << 0.2f, -0.1f).finished();
+  net.normalizer.scale = (Eigen::VectorXf(2) << 1.5f, 0.8f).finished();
+  net.features = {"x", "y"};
+  return net;
+}
+
+// L_cbf of JointCbfOptions from its definition, in double precision through the Eigen
+// evaluator of `net` and the toy model T(s, a) = s + 0.1 a (|a| <= 1).
+double ReferenceJointLoss(const cbf::BarrierNet& net, const JointCbfOptions& o,
+                          const Eigen::MatrixXf& states, const Eigen::MatrixXf& actions) {
+  const long n = states.cols();
+  const Eigen::MatrixXf next = states + 0.1f * actions;
+  Eigen::VectorXf h(n), h_next(n);
+  net.MakeEvaluator()->Evaluate(states, h);
+  net.MakeEvaluator()->Evaluate(next, h_next);
+  double sum = 0.0;
+  for (long i = 0; i < n; ++i) {
+    const double deriv = double(h_next(i)) - h(i) + o.dt * o.class_k_gain * h(i);
+    sum += h(i) >= 0 ? std::max(-deriv, 0.0)
+                     : o.unsafe_weight * std::max(-deriv + o.unsafe_margin, 0.0);
+  }
+  return sum / static_cast<double>(n);
+}
+
+TEST(AirlJointTest, TheTermOfAFlatBarrierMatchesItsDefinitionAndFiniteDifferences) {
+  const cbf::BarrierNet net = RandomFlatBarrier();
+  const std::unique_ptr<cbf::DifferentiableBarrier> barrier = cbf::MakeDifferentiableBarrier(net);
+  const test::PointMassModel model;
+  JointCbfOptions o;
+  o.class_k_gain = 2.0;
+  o.unsafe_weight = 3.0;
+  o.unsafe_margin = 0.05;
+  const int n = 24;
+  Rng rng(5);
+  Eigen::MatrixXf states(2, n), actions(2, n);
+  for (int c = 0; c < n; ++c)
+    for (int r = 0; r < 2; ++r) {
+      states(r, c) = static_cast<float>(rng.Uniform(-2.5, 2.5));
+      actions(r, c) = static_cast<float>(rng.Uniform(-0.9, 0.9));  // inside the action bound
+    }
+  Eigen::VectorXf h(n);
+  net.MakeEvaluator()->Evaluate(states, h);
+  ASSERT_GT((h.array() >= 0).count(), 0);  // both branches of the loss are exercised
+  ASSERT_GT((h.array() < 0).count(), 0);
+
+  internal::JointCbfTerm term(o, *barrier, model);
+  term.Prepare(states, 2);
+  // Rows in a permuted order: Loss indexes the prepared rows.
+  std::vector<std::int64_t> order(n);
+  for (int i = 0; i < n; ++i) order[i] = (7 * i) % n;
+  Eigen::MatrixXf permuted_states(2, n), permuted_actions(2, n);
+  for (int i = 0; i < n; ++i) {
+    permuted_states.col(i) = states.col(order[i]);
+    permuted_actions.col(i) = actions.col(order[i]);
+  }
+  const torch::Tensor idx = internal::IndexTensor(order);
+  torch::Tensor a = nn::ToTensor(permuted_actions).requires_grad_(true);
+  const torch::Tensor loss = term.Loss(idx, a);
+  const double reference = ReferenceJointLoss(net, o, permuted_states, permuted_actions);
+  EXPECT_GT(reference, 0.0);
+  EXPECT_NEAR(loss.item<double>(), reference, 1e-5);
+  EXPECT_NEAR(term.MeanLoss(), loss.item<double>(), 1e-12);
+
+  // d L / d a by autograd against central differences of the definition.
+  loss.backward();
+  const Eigen::MatrixXf grad = nn::ToEigen(a.grad());
+  const float eps = 1e-2f;
+  double grad_norm = 0.0;
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < 2; ++k) {
+      Eigen::MatrixXf plus = permuted_actions, minus = permuted_actions;
+      plus(k, i) += eps;
+      minus(k, i) -= eps;
+      const double fd = (ReferenceJointLoss(net, o, permuted_states, plus) -
+                         ReferenceJointLoss(net, o, permuted_states, minus)) /
+                        (2 * eps);
+      EXPECT_NEAR(grad(k, i), fd, 1e-4 + 1e-2 * std::abs(fd)) << "row " << i << ", action " << k;
+      grad_norm += std::abs(grad(k, i));
+    }
+  EXPECT_GT(grad_norm, 0.0);
+}
+
+// h(s) = 100 tanh(0.01 x) - 5 ~ x - 5: negative everywhere in the arena, so L_cbf (unsafe
+// branch) = unsafe_weight * relu(-0.1 a_x - 0.1 (x - 5) + margin) pushes a_x up.
+cbf::BarrierNet RightwardFlatBarrier() {
+  cbf::BarrierNet net;
+  net.mlp.spec = {2, {1}, 1, nn::Activation::kTanh};
+  net.mlp.layers = {{(Eigen::MatrixXf(1, 2) << 0.01f, 0.0f).finished(), Eigen::VectorXf::Zero(1)},
+                    {Eigen::MatrixXf::Constant(1, 1, 100.0f), Eigen::VectorXf::Constant(1, -5.0f)}};
+  net.normalizer = nn::Normalizer::Identity(2);
+  net.features = {"x", "y"};
+  return net;
+}
+
+TEST(AirlJointTest, TrainsWithAFlatBarrierAndTheTermMovesThePolicy) {
+  const data::TrajectorySet demos = ExpertDemos(10, 2);
+  const PointMassEnv env;
+  AirlOptions o = SmallAirl();
+  o.iterations = 10;
+  o.policy_lr = 3e-3;  // Adam moves the mean ~ lr per step: make the effect visible
+  JointCbfOptions joint;
+  joint.weight = 10.0;
+  AirlSummary airl_summary, joint_summary;
+  const GaussianPolicy airl = TrainAirl(o, demos, env, nullptr, &airl_summary);
+  const GaussianPolicy with_term = TrainAirlJoint(
+      o, joint, RightwardFlatBarrier(), env.ShieldModel(), demos, env, nullptr, &joint_summary);
+  EXPECT_EQ(airl_summary.cbf_loss, 0.0);
+  EXPECT_TRUE(std::isfinite(joint_summary.cbf_loss));
+  EXPECT_GT(joint_summary.cbf_loss, 0.0);
+  EXPECT_EQ(with_term.provenance["joint"], joint.ToJson());
+  EXPECT_NE(with_term.provenance["trainer"].get<std::string>().find("TrainAirlJoint"),
+            std::string::npos);
+  // Mean x-action over the demonstration states: the term pushes it up.
+  auto mean_ax = [&](const GaussianPolicy& pi) {
+    PolicyEvaluator ev(pi, static_cast<int>(demos.num_steps()));
+    Eigen::MatrixXf mus(2, demos.num_steps());
+    ev.Means(demos.states, mus);
+    return mus.row(0).mean();
+  };
+  EXPECT_GT(mean_ax(with_term), mean_ax(airl) + 1.0)
+      << "AIRL " << mean_ax(airl) << ", joint " << mean_ax(with_term);
+}
+
+TEST(AirlJointTest, ABarrierOrModelThatDoesNotFitTheEnvironmentIsRejected) {
+  const data::TrajectorySet demos = ExpertDemos(4, 2);
+  const PointMassEnv env;
+  cbf::BarrierNet wide;
+  wide.mlp = nn::RandomMlpParams({3, {4}, 1, nn::Activation::kTanh}, 1);
+  wide.normalizer = nn::Normalizer::Identity(3);
+  wide.features = {"x", "y", "z"};
+  const std::string m = ErrorOf([&] {
+    TrainAirlJoint(SmallAirl(), JointCbfOptions{}, wide, env.ShieldModel(), demos, env, nullptr,
+                   nullptr);
+  });
+  EXPECT_HAS(m, "joint optimisation: the barrier (barrier_mlp 3-4-1 tanh");
+  EXPECT_HAS(m, "reads 3-D states");
+  JointCbfOptions bad;
+  bad.weight = -1;
+  EXPECT_HAS(ErrorOf([&] {
+               TrainAirlJoint(SmallAirl(), bad, RightwardFlatBarrier(), env.ShieldModel(), demos,
+                              env, nullptr, nullptr);
+             }),
+             "JointCbfOptions::weight = -1");
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
 #pragma once
 // LibTorch pieces shared by the BC and AIRL trainers (and their test): a Gaussian policy module,
 // Gaussian log-densities, the AIRL discriminator and reward. INTERNAL: includes <torch/torch.h>;
-// include it only from bc_trainer.cc, airl_trainer.cc and tests/policy/trainers_test.cc.
+// include it only from secure/policy/*.cc (the trainers and their internal/ parts) and
+// tests/policy/trainers_test.cc.
 //
 // Tensors are (N x dim), one sample per row; networks take *normalised* observations (the
 // normaliser is applied once on the Eigen side, nn::Normalizer::Apply, before ToTensor).

@@ -1,0 +1,46 @@
+#include "secure/policy/internal/airl_rollout.h"
+
+#include <algorithm>
+
+namespace secure::policy::internal {
+
+void CollectRollout(const GaussianPolicy& policy,
+                    std::vector<std::unique_ptr<domains::Environment>>& envs, int horizon, Rng& rng,
+                    RolloutBuffer& buffer, AirlIterationStats& stats) {
+  const int episodes = static_cast<int>(envs.size());
+  const int obs_dim = static_cast<int>(buffer.obs.rows());
+  const int act_dim = static_cast<int>(buffer.actions.rows());
+  PolicyEvaluator evaluator(policy, std::max(1, episodes));
+  const Eigen::VectorXf sigma = evaluator.sigma();
+  std::vector<Rng> episode_rngs;
+  for (int e = 0; e < episodes; ++e) episode_rngs.push_back(rng.Split());
+  Eigen::MatrixXf current_obs(obs_dim, episodes), mus(act_dim, episodes);
+  Eigen::VectorXf action(act_dim), next(obs_dim);
+  std::vector<char> reached(episodes, 0), collided(episodes, 0);
+  long collision_events = 0;
+  for (int e = 0; e < episodes; ++e) envs[e]->Reset(episode_rngs[e], current_obs.col(e));
+  for (int t = 0; t < horizon; ++t) {
+    evaluator.Means(current_obs, mus);
+    for (int e = 0; e < episodes; ++e) {
+      const long column = static_cast<long>(e) * horizon + t;
+      for (int i = 0; i < act_dim; ++i)
+        action[i] = mus(i, e) + sigma[i] * static_cast<float>(episode_rngs[e].Normal());
+      const domains::StepOutcome outcome = envs[e]->Step(action, next);
+      buffer.obs.col(column) = current_obs.col(e);
+      buffer.actions.col(column) = action;
+      buffer.next_obs.col(column) = next;
+      current_obs.col(e) = next;
+      reached[e] |= outcome.reached_goal;
+      collided[e] |= outcome.collided;
+      collision_events += outcome.collisions;
+    }
+  }
+  stats.episodes = episodes;
+  stats.success_rate =
+      std::count(reached.begin(), reached.end(), 1) / static_cast<double>(episodes);
+  stats.collision_rate =
+      std::count(collided.begin(), collided.end(), 1) / static_cast<double>(episodes);
+  stats.mean_collisions = static_cast<double>(collision_events) / episodes;
+}
+
+}  // namespace secure::policy::internal
