@@ -32,8 +32,6 @@ using internal::Progress;
 
 constexpr const char* kOptions = "ExperimentOptions";
 
-// The evaluation stream of a training seed (distinct from its training streams).
-std::uint64_t EvaluationSeedOf(std::uint64_t seed) { return seed ^ 0x5ec07e5eed5ULL; }
 
 std::string Percent(double fraction) {
   char buffer[32];
@@ -263,16 +261,19 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     // The joint policy needs the (baseline) barrier.
     std::optional<policy::GaussianPolicy> joint;
     if (needs_joint) {
-      SECURE_CHECK(barrier && barrier->per_obstacle.has_value(),
-                   "the joint policy needs the per-obstacle barrier (barrier_kind = per-obstacle)");
+      SECURE_INTERNAL_CHECK(barrier.has_value(), "the joint method trains a barrier");
       clock.Restart();
       policy::AirlOptions options = o.airl;
       options.seed = seed;
       options.verbose = false;
       if (!dir.empty()) options.curve_path = dir + "/joint_curve.csv";
       policy::AirlSummary summary;
-      joint = policy::TrainAirlJoint(options, o.joint, *barrier->per_obstacle, env.ShieldModel(),
-                                     demos, env, o.airl_warm_start ? &*bc : nullptr, &summary);
+      const policy::GaussianPolicy* start = o.airl_warm_start ? &*bc : nullptr;
+      joint = barrier->per_obstacle
+                  ? policy::TrainAirlJoint(options, o.joint, *barrier->per_obstacle,
+                                           env.ShieldModel(), demos, env, start, &summary)
+                  : policy::TrainAirlJoint(options, o.joint, *barrier->flat, env.ShieldModel(),
+                                           demos, env, start, &summary);
       outcome.summary["joint"] = summary.ToJson();
       timings["joint"] = clock.Seconds();
       if (!dir.empty()) joint->Save(dir + "/joint.model");
@@ -289,7 +290,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     models.joint = joint ? &*joint : nullptr;
     if (barrier) models.make_barrier = barrier->Factory();
     outcome.results.push_back(eval::EvaluateMethods(env, methods, models, o.shield, o.episodes,
-                                                    EvaluationSeedOf(seed)));
+                                                    eval::EvaluationSeed(seed)));
     evaluation_seconds += clock.Seconds();
     progress.Line([&](std::ostream& out) {
       out << tag << " evaluated";
