@@ -346,7 +346,28 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_HAS(r.err, "'foo'");
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "--domain = 'panda'");
+  EXPECT_HAS(r.err, "unknown domain 'panda' (registered: derby | double-integrator)");
+  // A flag the domain does not have is rejected by name (Derby has no slowed copies).
+  r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "slowed_copies");
+}
+
+// Every command that takes --domain lists the registered domains in its help and its error.
+TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
+  for (const std::string command :
+       {"experiment method-comparison", "experiment ablation", "eval", "cbf validate",
+        "demos generate", "policy train"}) {
+    const Result help = RunCli(command + " --help");
+    EXPECT_EQ(help.exit_code, 0) << command;
+    EXPECT_HAS(help.out, "derby | double-integrator");
+  }
+  const Result r = RunCli("experiment method-comparison --domain unicycle --quick");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "unknown domain 'unicycle' (registered: derby | double-integrator)");
+  const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
+  EXPECT_EQ(v.exit_code, 1);
+  EXPECT_HAS(v.err, "the derby domain has no ground truth");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -358,7 +379,8 @@ TEST(CliTest, DerbyExperimentQuickPrintsTheResultDocument) {
   EXPECT_HAS(r.err, "[seed 0]");
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["command"], "experiment derby-table3");
-  EXPECT_EQ(j["experiment"]["name"], "derby-table3");
+  EXPECT_EQ(j["experiment"]["kind"], "method-comparison");
+  EXPECT_EQ(j["experiment"]["domain"], "derby");
   for (const char* method : {"bc", "airl", "secure"}) {
     ASSERT_TRUE(j["methods"].contains(method)) << method;
     EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
