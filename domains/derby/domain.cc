@@ -9,7 +9,7 @@
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/rng.h"
-#include "secure/common/yaml_value.h"
+#include "secure/common/yaml_fields.h"
 
 namespace secure::domains::derby {
 namespace {
@@ -44,40 +44,19 @@ void DerbyDomainOptions::Validate() const {
 }
 
 void DerbyDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": the derby domain options must be a mapping");
-  for (const auto& entry : node) {
-    const std::string key = YamlKey(entry.first, source);
-    const std::string where = source + " [" + key + "]";
-    if (key == "task") {
-      task.ApplyYaml(entry.second, where);
-    } else if (key == "safe_states") {
-      safe_states = YamlValue<long>(entry.second, key, source);
-    } else if (key == "demonstrations" || key == "near_dangerous") {
-      SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping");
-      for (const auto& item : entry.second) {
-        const std::string name = YamlKey(item.first, where);
-        if (key == "demonstrations" && name == "episodes") {
-          demonstrations.episodes = YamlValue<long>(item.second, name, where);
-        } else if (key == "demonstrations" && name == "max_attempts") {
-          demonstrations.max_attempts = YamlValue<long>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "count") {
-          near_dangerous.count = YamlValue<long>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "nearest") {
-          near_dangerous.nearest = YamlValue<int>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "max_redraws") {
-          near_dangerous.max_redraws = YamlValue<int>(item.second, name, where);
-        } else {
-          SECURE_THROW(where << ": unknown key '" << name << "' (valid: "
-                             << (key == "demonstrations" ? "episodes, max_attempts"
-                                                         : "count, nearest, max_redraws")
-                             << ")");
-        }
-      }
-    } else {
-      SECURE_THROW(source << ": unknown key '" << key
-                          << "' (valid: task, safe_states, demonstrations, near_dangerous)");
-    }
-  }
+  YamlFields()
+      .Section("task", [this](const YAML::Node& n, const std::string& where) {
+        task.ApplyYaml(n, where);
+      })
+      .Field("safe_states", &safe_states)
+      .Section("demonstrations", YamlFields()
+                                     .Field("episodes", &demonstrations.episodes)
+                                     .Field("max_attempts", &demonstrations.max_attempts))
+      .Section("near_dangerous", YamlFields()
+                                     .Field("count", &near_dangerous.count)
+                                     .Field("nearest", &near_dangerous.nearest)
+                                     .Field("max_redraws", &near_dangerous.max_redraws))
+      .Apply(node, source);
 }
 
 nlohmann::json DerbyDomainOptions::ToJson() const {

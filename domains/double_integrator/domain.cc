@@ -10,7 +10,7 @@
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/rng.h"
-#include "secure/common/yaml_value.h"
+#include "secure/common/yaml_fields.h"
 
 namespace secure::domains::double_integrator {
 
@@ -40,50 +40,23 @@ void DomainOptions::Validate() const {
 }
 
 void DomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": the double-integrator domain options must be a mapping");
-  for (const auto& entry : node) {
-    const std::string key = YamlKey(entry.first, source);
-    const std::string where = source + " [" + key + "]";
-    if (key == "task") {
-      task.ApplyYaml(entry.second, where);
-    } else if (key == "safe_states") {
-      safe_states = YamlValue<long>(entry.second, key, source);
-    } else if (key == "slowed_copies") {
-      slowed_copies = YamlValue<int>(entry.second, key, source);
-    } else if (key == "demonstrations" || key == "near_dangerous") {
-      SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping");
-      for (const auto& item : entry.second) {
-        const std::string name = YamlKey(item.first, where);
-        if (key == "demonstrations" && name == "episodes") {
-          demonstrations.episodes = YamlValue<long>(item.second, name, where);
-        } else if (key == "demonstrations" && name == "stop_at_goal") {
-          demonstrations.stop_at_goal = YamlValue<bool>(item.second, name, where);
-        } else if (key == "demonstrations" && name == "max_attempts") {
-          demonstrations.max_attempts = YamlValue<long>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "count") {
-          near_dangerous.count = YamlValue<long>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "rho_min") {
-          near_dangerous.rho_min = YamlValue<double>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "rho_max") {
-          near_dangerous.rho_max = YamlValue<double>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "velocity_lo") {
-          near_dangerous.velocity_lo = YamlValue<double>(item.second, name, where);
-        } else if (key == "near_dangerous" && name == "velocity_hi") {
-          near_dangerous.velocity_hi = YamlValue<double>(item.second, name, where);
-        } else {
-          SECURE_THROW(where << ": unknown key '" << name << "' (valid: "
-                             << (key == "demonstrations"
-                                     ? "episodes, stop_at_goal, max_attempts"
-                                     : "count, rho_min, rho_max, velocity_lo, velocity_hi")
-                             << ")");
-        }
-      }
-    } else {
-      SECURE_THROW(source << ": unknown key '" << key
-                          << "' (valid: task, safe_states, slowed_copies, demonstrations, "
-                             "near_dangerous)");
-    }
-  }
+  YamlFields()
+      .Section("task", [this](const YAML::Node& n, const std::string& where) {
+        task.ApplyYaml(n, where);
+      })
+      .Field("safe_states", &safe_states)
+      .Field("slowed_copies", &slowed_copies)
+      .Section("demonstrations", YamlFields()
+                                     .Field("episodes", &demonstrations.episodes)
+                                     .Field("stop_at_goal", &demonstrations.stop_at_goal)
+                                     .Field("max_attempts", &demonstrations.max_attempts))
+      .Section("near_dangerous", YamlFields()
+                                     .Field("count", &near_dangerous.count)
+                                     .Field("rho_min", &near_dangerous.rho_min)
+                                     .Field("rho_max", &near_dangerous.rho_max)
+                                     .Field("velocity_lo", &near_dangerous.velocity_lo)
+                                     .Field("velocity_hi", &near_dangerous.velocity_hi))
+      .Apply(node, source);
 }
 
 nlohmann::json DomainOptions::ToJson() const {
