@@ -354,45 +354,6 @@ TEST_F(TrainerGeneratorTest, TrainingLeavesTheGlobalGeneratorAlone) {
   EXPECT_TRUE(torch::equal(torch::rand({32}), expected));
 }
 
-// Manual: a small sweep of the optimisation defaults on a harder variant of the synthetic data
-// (safe cars only farther than 0.12, near-dangerous nearest car within 0.14: overlapping
-// classes). Run with --gtest_also_run_disabled_tests --gtest_filter=*Sweep*.
-TEST(CarBarrierTrainerTest, DISABLED_Sweep) {
-  const auto safe = Synthetic(false, 1024, 21, 0.12), nd = Synthetic(true, 1024, 22, 0.12);
-  const auto test_safe = Synthetic(false, 2000, 23, 0.12), test_nd = Synthetic(true, 2000, 24, 0.12);
-  auto run = [&](const char* name, CarBarrierTrainerOptions o) {
-    CarBarrierTrainingSummary s;
-    const CarBarrierNet net = TrainCarBarrier(o, safe, nd, &s);
-    const CarBarrierAccuracy t = EvaluateCarBarrier(net, test_safe, test_nd);
-    std::printf("%-28s %6.2f s  epochs %3d best %3d  held-out states safe %.4f nd %.4f  entries "
-                "safe %.4f danger %.4f\n",
-                name, s.wall_seconds, s.epochs, s.best_epoch, t.states.safe,
-                t.states.near_dangerous, t.entries.safe, t.entries.near_dangerous);
-  };
-  run("released", CarBarrierTrainerOptions::Released());
-  CarBarrierTrainerOptions o;
-  run("defaults", o);
-  o.max_epochs = 10;
-  run("defaults, 10 epochs", o);
-  o = {};
-  o.learning_rate = 1e-3;
-  o.final_learning_rate = 1e-5;
-  run("lr 1e-3", o);
-  o = {};
-  o.batch_size = 64;
-  run("batch 64", o);
-  o = {};
-  o.normalize_inputs = false;
-  run("no normalisation", o);
-  o = {};
-  o.safe_margin = 0.01;
-  o.danger_margin = 0.01;
-  run("margins 0.01", o);
-  o = {};
-  o.input.use_velocity = true;
-  run("use_velocity", o);
-}
-
 class CarBarrierTrainerFileTest : public secure::test::TempDirTest {};
 
 TEST_F(CarBarrierTrainerFileTest, SameSeedGivesByteIdenticalModelFiles) {
