@@ -157,7 +157,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     timings["bc"] = clock.Seconds();
     if (!dir.empty()) bc->Save(dir + "/bc.model");
     progress.Line([&](std::ostream& out) {
-      out << tag << " BC: " << summary.BriefReport() << " (" << clock.Seconds() << " s)";
+      out << tag << " " << summary.BriefReport();
     });
   }
 
@@ -187,7 +187,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     timings["airl"] = clock.Seconds();
     if (!dir.empty()) airl->Save(dir + "/airl.model");
     progress.Line([&](std::ostream& out) {
-      out << tag << " AIRL: " << summary.BriefReport() << " (" << clock.Seconds() << " s)";
+      out << tag << " " << summary.BriefReport();
     });
   }
 
