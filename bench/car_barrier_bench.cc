@@ -20,6 +20,7 @@
 #include <cmath>
 #include <vector>
 
+#include "domains/derby/domain.h"
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/rng.h"
 #include "secure/nn/mlp.h"
@@ -51,6 +52,7 @@ Eigen::MatrixXf Observations(int n, double half_width, std::uint64_t seed) {
 void BM_CarBarrier(benchmark::State& state, bool all_in_range) {
   const int m = static_cast<int>(state.range(0));
   cbf::CarBarrierNet net;
+  net.input.layout = secure::domains::derby::ObstacleLayoutOfObservation();
   net.mlp = nn::RandomMlpParams({3, {64, 128, 64}, 1, nn::Activation::kRelu}, 42);
   net.normalizer = nn::Normalizer::Identity(3);
   // all in range: |dx|, |dy| <= 0.7 gives d <= 0.99 < R.

@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/derby/domain.h"
 #include "secure/cbf/car_barrier_trainer.h"
 #include "secure/common/rng.h"
 
@@ -138,7 +139,9 @@ CarBarrierTrainerOptions UseVelocity() {
 
 void BM_CarBarrierTrain(benchmark::State& state, CarBarrierTrainerOptions (*make)()) {
   const Data& d = SweepData();
-  const CarBarrierTrainerOptions options = make();
+  // The synthetic data has the Demolition Derby observation layout (the plug-in gives it).
+  CarBarrierTrainerOptions options = make();
+  options.input.layout = domains::derby::ObstacleLayoutOfObservation();
   cbf::CarBarrierTrainingSummary summary;
   cbf::CarBarrierNet net;
   for (auto _ : state) {

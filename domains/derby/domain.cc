@@ -121,6 +121,7 @@ experiments::ExperimentOptions DerbyDomain::Preset() const {
   experiments::ExperimentOptions o;
   o.data_seed = 2000;
   o.barrier_kind = experiments::BarrierKind::kPerObstacle;
+  o.per_obstacle_barrier.input.layout = ObstacleLayoutOfObservation();
   // AIRL on 100-step episodes: 40 episodes per iteration.
   o.airl.iterations = 60;
   // AIRL + BC regulariser (AirlOptions::bc_weight). Pure AIRL's PPO leaves the policy's MEAN
@@ -150,6 +151,17 @@ experiments::ExperimentOptions DerbyDomain::Preset() const {
     o.label_noise = {0.0, 0.3};
   }
   return o;
+}
+
+cbf::ObstacleLayout ObstacleLayoutOfObservation() {
+  cbf::ObstacleLayout l;
+  l.obs_dim = kObservationDim;
+  l.first_obstacle_offset = kFirstCarOffset;
+  l.obstacle_stride = kCarStride;
+  l.num_obstacles = kObservedCars;
+  l.position_offset = 0;  // car_dx, car_dy
+  l.velocity_offset = 2;  // car_dvx, car_dvy
+  return l;
 }
 
 cbf::BarrierCheckOptions DerbyCheckDefaults() {

@@ -8,6 +8,7 @@
 
 #include "domains/derby/derby.h"
 #include "domains/derby/expert.h"
+#include "secure/cbf/car_barrier.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
@@ -82,5 +83,11 @@ cbf::BarrierCheckProblem MakeDerbyCheckProblem(const DerbyOptions& task,
 /// The check's Derby defaults: cbf::BarrierCheckOptions with 2000 region and 2000 near-dangerous
 /// samples (about 1 s per per-car barrier).
 cbf::BarrierCheckOptions DerbyCheckDefaults();
+
+/// Where the observed cars sit in the observation (kObservationDim = 52 values): goal - p_ego
+/// (2), v_ego (2), then the kObservedCars = 12 nearest cars as blocks of kCarStride = 4 from
+/// kFirstCarOffset = 4, each (p_car - p_ego (2), v_car - v_ego (2)). The per-car barrier's input
+/// (DerbyDomain::Preset().per_obstacle_barrier.input.layout).
+cbf::ObstacleLayout ObstacleLayoutOfObservation();
 
 }  // namespace secure::domains::derby

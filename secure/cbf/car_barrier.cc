@@ -59,6 +59,9 @@ std::string Widths(const nn::MlpSpec& spec) {
 // ObstacleLayout
 
 void ObstacleLayout::Validate(const std::string& what) const {
+  SECURE_CHECK(IsSet(), what << ": layout.obs_dim = 0: the obstacle layout is unset and must be "
+                                "given (there is no default: the domain's plug-in provides the "
+                                "layout of its observation)");
   SECURE_CHECK_FIELD(obs_dim > 0, what << ": layout", "obs_dim", obs_dim, "> 0");
   SECURE_CHECK_FIELD(num_obstacles > 0, what << ": layout", "num_obstacles", num_obstacles, "> 0");
   SECURE_CHECK_FIELD(first_obstacle_offset >= 0, what << ": layout", "first_obstacle_offset",
@@ -127,15 +130,16 @@ std::vector<std::string> CarFeatureSpec::FeatureNames() const {
   return names;
 }
 
-void CarFeatureSpec::Validate(const std::string& what) const {
-  layout.Validate(what);
+void CarFeatureSpec::Validate(const std::string& what, bool allow_unset_layout) const {
+  const bool check_layout = !allow_unset_layout || layout.IsSet();
+  if (check_layout) layout.Validate(what);
   SECURE_CHECK(std::isfinite(collision_radius) && collision_radius >= 0,
                what << ": collision_radius = " << collision_radius << ", must be >= 0");
   SECURE_CHECK(std::isfinite(sensing_radius) && sensing_radius > 0,
                what << ": sensing_radius = " << sensing_radius << ", must be > 0");
   SECURE_CHECK(std::isfinite(distance_epsilon) && distance_epsilon >= 0,
                what << ": distance_epsilon = " << distance_epsilon << ", must be >= 0");
-  SECURE_CHECK(!use_velocity || layout.velocity_offset >= 0,
+  SECURE_CHECK(!check_layout || !use_velocity || layout.velocity_offset >= 0,
                what << ": use_velocity = true, but layout.velocity_offset = -1 (the observation "
                        "has no relative velocities)");
 }

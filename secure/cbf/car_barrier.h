@@ -49,17 +49,21 @@ inline constexpr const char* kCarBarrierModelKind = "car_barrier";
 /// block starting at first_obstacle_offset + i * obstacle_stride; within a block, the relative
 /// position (p_obstacle - p_ego, 2 values) starts at position_offset and the relative velocity
 /// (v_obstacle - v_ego, 2 values) at velocity_offset (-1: the observation has none).
+///
+/// There is no default layout: a default-constructed ObstacleLayout (all fields 0) is "unset",
+/// and Validate() rejects it. The layout belongs to the domain's observation and is given by its
+/// plug-in (Demolition Derby: domains::derby::ObstacleLayoutOfObservation(), the domain's
+/// Preset().per_obstacle_barrier.input.layout); a saved model stores its own.
 struct ObstacleLayout {
-  int obs_dim = 52;
-  int first_obstacle_offset = 4;
-  int obstacle_stride = 4;
-  int num_obstacles = 12;
+  int obs_dim = 0;
+  int first_obstacle_offset = 0;
+  int obstacle_stride = 0;
+  int num_obstacles = 0;
   int position_offset = 0;
-  int velocity_offset = 2;
+  int velocity_offset = 0;
 
-  /// The Demolition Derby observation (52 values): goal - p_ego (2), v_ego (2), then the 12
-  /// nearest cars as (p_car - p_ego (2), v_car - v_ego (2)). Equal to the defaults.
-  static ObstacleLayout Derby() { return {}; }
+  /// False for the default-constructed (all-zero) layout, which Validate() rejects.
+  bool IsSet() const { return *this != ObstacleLayout{}; }
 
   /// Index of obstacle i's relative x position / x velocity in the observation.
   int PositionIndex(int i) const {
@@ -70,8 +74,9 @@ struct ObstacleLayout {
   }
 
   /// Throws secure::Error naming `what`, the field, its value and the rule (e.g.
-  /// "model.bin: layout.num_obstacles = 0, must be > 0"); every block must fit into obs_dim and
-  /// the position and velocity pairs must lie inside their block without overlapping.
+  /// "model.bin: layout.num_obstacles = 0, must be > 0"); the layout must be set (IsSet()),
+  /// every block must fit into obs_dim and the position and velocity pairs must lie inside their
+  /// block without overlapping.
   void Validate(const std::string& what = "ObstacleLayout") const;
   nlohmann::json ToJson() const;
   /// Reads the fields written by ToJson (all required); `source` names the file in messages.
@@ -93,8 +98,9 @@ struct CarFeatureSpec {
   /// "dx", "dy", "d_minus_r" [, "dvx", "dvy"].
   std::vector<std::string> FeatureNames() const;
   /// Layout valid, radii and epsilon finite with r >= 0, R > 0, eps >= 0, and a velocity offset
-  /// when use_velocity.
-  void Validate(const std::string& what = "CarFeatureSpec") const;
+  /// when use_velocity. With `allow_unset_layout`, an unset layout passes (and the layout checks
+  /// are skipped): options not yet bound to a domain's observation.
+  void Validate(const std::string& what = "CarFeatureSpec", bool allow_unset_layout = false) const;
   nlohmann::json ToJson() const;
   static CarFeatureSpec FromJson(const nlohmann::json& json, const std::string& source);
   bool operator==(const CarFeatureSpec& other) const;

@@ -186,7 +186,9 @@ CarBarrierTrainerOptions CarBarrierTrainerOptions::Released() {
 }
 
 void CarBarrierTrainerOptions::Validate() const {
-  input.Validate("CarBarrierTrainerOptions::input");
+  // An unset layout passes here (a domain whose barrier is flat carries these options unused);
+  // TrainCarBarrier requires it.
+  input.Validate("CarBarrierTrainerOptions::input", /*allow_unset_layout=*/true);
   SECURE_CHECK_FIELD(!hidden.empty(), "CarBarrierTrainerOptions", "hidden", "[]",
                      "a non-empty list of layer widths");
   for (std::size_t i = 0; i < hidden.size(); ++i)
@@ -443,6 +445,7 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
                               CarBarrierTrainingSummary* summary,
                               const CarBarrierEpochCallback& callback) {
   options.Validate();
+  options.input.Validate("CarBarrierTrainerOptions::input");  // the layout must be given
   CheckObservations(options.input, safe, "safe states", false);
   CheckObservations(options.input, near_dangerous, "near-dangerous states", true);
   SECURE_CHECK(safe.features == near_dangerous.features,

@@ -17,7 +17,8 @@
 // to 100 % held-out per-state accuracy when the classes are separable, 96.6 % (safe) / 100 %
 // (near-dangerous) when they overlap (released constants: 89.6 % / 100 %); see the README.
 //
-//   CarBarrierTrainerOptions options;            // Derby layout, documented defaults
+//   CarBarrierTrainerOptions options;            // documented defaults
+//   options.input.layout = layout;               // required: the domain's (no default)
 //   CarBarrierTrainingSummary summary;
 //   CarBarrierNet net = TrainCarBarrier(options, safe, near_dangerous, &summary);
 //   std::cout << summary.BriefReport() << "\n";
@@ -42,7 +43,7 @@ namespace secure::cbf {
 
 struct CarBarrierTrainerOptions {
   // Model.
-  CarFeatureSpec input;                   // layout (Derby by default), r, R, eps, use_velocity
+  CarFeatureSpec input;  // layout (required, no default: the domain's), r, R, eps, use_velocity
   std::vector<int> hidden = {64, 128, 64};  // per-car MLP hidden widths (released)
   nn::Activation activation = nn::Activation::kRelu;
   bool normalize_inputs = true;  // fit a per-feature normaliser on the training entries
@@ -78,7 +79,8 @@ struct CarBarrierTrainerOptions {
   double EffectiveCap() const { return cap.value_or(safe_margin); }
 
   /// Throws secure::Error naming the field, value and constraint
-  /// ("CarBarrierTrainerOptions::batch_size = 0, must be > 0").
+  /// ("CarBarrierTrainerOptions::batch_size = 0, must be > 0"). An unset input.layout passes
+  /// (the options of a domain whose barrier is flat); TrainCarBarrier rejects it.
   void Validate() const;
   /// Reads fields from a YAML mapping; unknown keys are an error naming the key and `source`.
   /// Keys: the fields above, with `layout` a mapping of ObstacleLayout fields and
@@ -126,10 +128,10 @@ using CarBarrierEpochCallback =
 CarBarrierAccuracy EvaluateCarBarrier(const CarBarrierNet& net, const data::StateSet& safe,
                                       const data::StateSet& near_dangerous);
 
-/// Trains a CarBarrierNet. Both sets must be non-empty, have options.input.layout.obs_dim
-/// features (the same names), finite values, and every near-dangerous observation's block 0
-/// must be its nearest car and within the sensing radius. The net records the options and the
-/// summary in its provenance.
+/// Trains a CarBarrierNet. options.input.layout must be set (ObstacleLayout::IsSet). Both sets
+/// must be non-empty, have options.input.layout.obs_dim features (the same names), finite
+/// values, and every near-dangerous observation's block 0 must be its nearest car and within the
+/// sensing radius. The net records the options and the summary in its provenance.
 /// @throws secure::Error on invalid options or data, naming the set, the state (0-based column =
 ///   data row) and the value.
 CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const data::StateSet& safe,

@@ -11,6 +11,7 @@
 #include <limits>
 #include <numeric>
 
+#include "domains/derby/domain.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/nn/model_file.h"
@@ -22,6 +23,9 @@ using secure::test::ErrorOf;
 
 constexpr int kObs = 52;
 constexpr int kCars = 12;
+
+// The Demolition Derby observation layout (the derby plug-in's): 52 values, 12 blocks of 4 from 4.
+ObstacleLayout DerbyLayout() { return domains::derby::ObstacleLayoutOfObservation(); }
 
 // Random Derby-layout observations: cars at distances drawn from [min_dist, max_dist], sorted
 // nearest first; random relative velocities, goal and ego velocity.
@@ -47,6 +51,7 @@ Eigen::MatrixXf RandomObservations(int n, double min_dist, double max_dist, std:
 
 CarBarrierNet RandomNet(bool use_velocity, std::uint64_t seed, double cap = 0.05) {
   CarBarrierNet net;
+  net.input.layout = DerbyLayout();
   net.input.use_velocity = use_velocity;
   net.cap = cap;
   const int f = net.input.feature_dim();
@@ -60,6 +65,7 @@ CarBarrierNet RandomNet(bool use_velocity, std::uint64_t seed, double cap = 0.05
 // normaliser).
 CarBarrierNet HandNet() {
   CarBarrierNet net;
+  net.input.layout = DerbyLayout();
   net.cap = 0.02;
   net.mlp.spec = {3, {2}, 1, nn::Activation::kRelu};
   nn::DenseLayer l0, l1;
@@ -218,19 +224,44 @@ TEST(CarBarrierTest, NonDefaultLayout) {
   }
   for (int j = 3; j < kCars; ++j) derby.block(4 + 4 * j, 0, 2, 4).setConstant(9.0f);  // far
   CarBarrierNet derby_net = net;
-  derby_net.input.layout = ObstacleLayout::Derby();
+  derby_net.input.layout = DerbyLayout();
   EXPECT_LT((Eval(net, obs) - Eval(derby_net, derby)).cwiseAbs().maxCoeff(), 1e-6f);
 }
 
+TEST(CarBarrierTest, TheLayoutHasNoDefault) {
+  // Generic code carries no domain's layout: the default is unset, and rejected by name.
+  const ObstacleLayout unset;
+  EXPECT_FALSE(unset.IsSet());
+  EXPECT_TRUE(DerbyLayout().IsSet());
+  const std::string e = ErrorOf([&] { unset.Validate("x"); });
+  EXPECT_NE(e.find("x: layout.obs_dim = 0: the obstacle layout is unset and must be given"),
+            std::string::npos)
+      << e;
+  CarBarrierNet net = RandomNet(false, 12);
+  net.input.layout = {};
+  EXPECT_NE(ErrorOf([&] { net.Validate("m"); }).find("m: layout.obs_dim = 0"), std::string::npos);
+  EXPECT_THROW(net.MakeEvaluator(), Error);
+  EXPECT_THROW(net.Save(TempPath("unset.model")), Error);
+  // Options not bound to an observation accept it; a net's feature spec does not.
+  EXPECT_NO_THROW(CarFeatureSpec{}.Validate("spec", /*allow_unset_layout=*/true));
+  EXPECT_THROW(CarFeatureSpec{}.Validate("spec"), Error);
+  // A layout with some fields set is set, and its other fields are checked.
+  ObstacleLayout partial;
+  partial.num_obstacles = 12;
+  EXPECT_TRUE(partial.IsSet());
+  EXPECT_NE(ErrorOf([&] { partial.Validate("x"); }).find("obs_dim = 0, must be > 0"),
+            std::string::npos);
+}
+
 TEST(CarBarrierTest, LayoutValidationNamesTheField) {
-  ObstacleLayout l;
+  ObstacleLayout l = DerbyLayout();
   l.num_obstacles = 13;
   EXPECT_NE(ErrorOf([&] { l.Validate("x"); }).find("beyond layout.obs_dim = 52"),
             std::string::npos);
-  l = {};
+  l = DerbyLayout();
   l.velocity_offset = 1;
   EXPECT_NE(ErrorOf([&] { l.Validate("x"); }).find("velocity_offset = 1"), std::string::npos);
-  l = {};
+  l = DerbyLayout();
   l.position_offset = 3;
   EXPECT_NE(ErrorOf([&] { l.Validate("x"); }).find("position_offset = 3"), std::string::npos);
   CarBarrierNet net = RandomNet(true, 8);

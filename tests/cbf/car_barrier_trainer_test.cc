@@ -13,6 +13,7 @@
 #include <thread>
 #include <utility>
 
+#include "domains/derby/domain.h"
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/atomic_file.h"
@@ -70,8 +71,14 @@ data::StateSet Synthetic(bool near_dangerous, int n, std::uint64_t seed, double 
   return set;
 }
 
+// `o` with the Demolition Derby observation layout (the derby plug-in's; there is no default).
+CarBarrierTrainerOptions WithDerbyLayout(CarBarrierTrainerOptions o) {
+  o.input.layout = domains::derby::ObstacleLayoutOfObservation();
+  return o;
+}
+
 CarBarrierTrainerOptions Fast() {
-  CarBarrierTrainerOptions o;
+  CarBarrierTrainerOptions o = WithDerbyLayout({});
   o.max_epochs = 15;
   return o;
 }
@@ -79,12 +86,11 @@ CarBarrierTrainerOptions Fast() {
 TEST(CarBarrierTrainerTest, LearnsSyntheticDerbyData) {
   CarBarrierTrainingSummary s;
   const CarBarrierNet net =
-      TrainCarBarrier(CarBarrierTrainerOptions{}, Synthetic(false, 1024, 1), Synthetic(true, 1024, 2), &s);
+      TrainCarBarrier(WithDerbyLayout({}), Synthetic(false, 1024, 1), Synthetic(true, 1024, 2), &s);
   std::printf("%s\n%s", s.BriefReport().c_str(), s.FullReport().c_str());
   EXPECT_GE(s.train_accuracy.states.Balanced(), 0.97);
   EXPECT_GE(s.validation_accuracy.states.safe, 0.95);
   EXPECT_GE(s.validation_accuracy.states.near_dangerous, 0.95);
-  EXPECT_LT(s.wall_seconds, 20.0);
   // Held-out data through the Eigen evaluator.
   const CarBarrierAccuracy test =
       EvaluateCarBarrier(net, Synthetic(false, 1000, 11), Synthetic(true, 1000, 12));
@@ -125,6 +131,7 @@ TEST(CarBarrierTrainerTest, DeterministicForASeedAlsoConcurrently) {
 
 TEST(CarBarrierTrainerTest, TorchForwardMatchesEigenEvaluatorAndIsDifferentiable) {
   CarBarrierNet net;
+  net.input.layout = domains::derby::ObstacleLayoutOfObservation();
   net.input.use_velocity = true;
   net.cap = 0.04;
   net.mlp = nn::RandomMlpParams({5, {64, 128, 64}, 1, nn::Activation::kRelu}, 5);
@@ -183,8 +190,9 @@ TEST(CarBarrierTrainerTest, TorchForwardMatchesEigenEvaluatorAndIsDifferentiable
 
 TEST(CarBarrierTrainerTest, ReleasedConstantsRunOneEpochOf512Updates) {
   CarBarrierTrainingSummary s;
-  const CarBarrierNet net = TrainCarBarrier(CarBarrierTrainerOptions::Released(),
-                                            Synthetic(false, 1024, 8), Synthetic(true, 1024, 9), &s);
+  const CarBarrierNet net =
+      TrainCarBarrier(WithDerbyLayout(CarBarrierTrainerOptions::Released()),
+                      Synthetic(false, 1024, 8), Synthetic(true, 1024, 9), &s);
   EXPECT_EQ(s.epochs, 1);
   EXPECT_EQ(s.iterations, 512);
   EXPECT_EQ(s.validation_safe, 0);
@@ -241,6 +249,26 @@ TEST(CarBarrierTrainerTest, BadInputsNameTheProblem) {
   bad = o;
   bad.cap = -1.0;
   EXPECT_NE(ErrorOf([&] { bad.Validate(); }).find("cap = -1"), std::string::npos);
+}
+
+TEST(CarBarrierTrainerTest, TrainingNeedsTheLayout) {
+  // No default layout: options without one validate (a domain with a flat barrier carries them
+  // unused), but training with them fails, naming the field.
+  const auto safe = Synthetic(false, 20, 1), nd = Synthetic(true, 20, 2);
+  const CarBarrierTrainerOptions unset;
+  EXPECT_FALSE(unset.input.layout.IsSet());
+  EXPECT_NO_THROW(unset.Validate());
+  CarBarrierTrainingSummary s;
+  const std::string e = ErrorOf([&] { TrainCarBarrier(unset, safe, nd, &s); });
+  EXPECT_NE(e.find("CarBarrierTrainerOptions::input: layout.obs_dim = 0: the obstacle layout is "
+                   "unset and must be given"),
+            std::string::npos)
+      << e;
+  // A partly given layout is checked field by field already by Validate.
+  CarBarrierTrainerOptions partial;
+  partial.ApplyYaml(YAML::Load("{layout: {num_obstacles: 12}}"), "run.yaml");
+  EXPECT_NE(ErrorOf([&] { partial.Validate(); }).find("obs_dim = 0, must be > 0"),
+            std::string::npos);
 }
 
 TEST(CarBarrierTrainerTest, YamlOptions) {

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "domains/derby/domain.h"
 #include "secure/common/rng.h"
 #include "secure/nn/torch_mlp.h"
 #include "tests/test_util.h"
@@ -62,6 +63,7 @@ TEST(DifferentiableBarrierTest, FlatMatchesItsEvaluatorAndFiniteDifferences) {
 
 TEST(DifferentiableBarrierTest, CarMatchesItsEvaluatorAndPassesGradientsToTheStates) {
   CarBarrierNet net;
+  net.input.layout = domains::derby::ObstacleLayoutOfObservation();
   net.input.use_velocity = true;
   net.cap = 0.04;
   net.mlp = nn::RandomMlpParams({5, {16, 16}, 1, nn::Activation::kRelu}, 5);

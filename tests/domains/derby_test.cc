@@ -2,6 +2,7 @@
 // Euler semantics, collisions, success, determinism, the shield model, bad inputs, allocations.
 
 #include "domains/derby/derby.h"
+#include "domains/derby/domain.h"
 
 #include <gtest/gtest.h>
 
@@ -125,6 +126,25 @@ TEST(DerbyOptionsTest, FeatureNames) {
   EXPECT_EQ(env.action_dim(), 2);
   EXPECT_EQ(kFirstCarOffset + kCarStride * kObservedCars, kObservationDim);
   EXPECT_HAS(env.Describe(), "16 cars");
+}
+
+TEST(DerbyOptionsTest, ObstacleLayoutOfObservationPointsAtTheCarBlocks) {
+  // The per-car barrier's layout comes from the plug-in (cbf has no default).
+  const cbf::ObstacleLayout l = ObstacleLayoutOfObservation();
+  EXPECT_NO_THROW(l.Validate());
+  EXPECT_EQ(l.obs_dim, kObservationDim);
+  EXPECT_EQ(l.num_obstacles, kObservedCars);
+  const auto& f = ObservationFeatures();
+  for (int i = 0; i < kObservedCars; ++i) {
+    const std::string car = "car" + std::to_string(i);
+    EXPECT_EQ(f[l.PositionIndex(i)], car + "_dx");
+    EXPECT_EQ(f[l.PositionIndex(i) + 1], car + "_dy");
+    EXPECT_EQ(f[l.VelocityIndex(i)], car + "_dvx");
+    EXPECT_EQ(f[l.VelocityIndex(i) + 1], car + "_dvy");
+  }
+  // Both profiles' presets train the per-car barrier on it.
+  for (const auto profile : {experiments::Profile::kFull, experiments::Profile::kQuick})
+    EXPECT_TRUE(DerbyDomain(profile).Preset().per_obstacle_barrier.input.layout == l);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
 #include "domains/derby/derby.h"
+#include "domains/derby/domain.h"
 #include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
 
@@ -400,6 +401,7 @@ TEST(ShieldAllocTest, PandaSizedLearnedBarrierDecisionsDoNotAllocate) {
 // in range) with the shield's constant-velocity model, M = 64, resampling.
 TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
   cbf::CarBarrierNet net;
+  net.input.layout = domains::derby::ObstacleLayoutOfObservation();
   net.mlp = nn::RandomMlpParams(nn::MlpSpec{3, {64, 128, 64}, 1, nn::Activation::kRelu}, 5);
   net.normalizer = nn::Normalizer::Identity(3);
   net.cap = 0.05;

@@ -23,6 +23,7 @@
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
 #include "domains/derby/derby.h"
+#include "domains/derby/domain.h"
 #include "secure/common/rng.h"
 #include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
@@ -91,6 +92,7 @@ System MakeSystem(SystemKind kind, unsigned long long net_seed) {
       break;
     case SystemKind::kDerbyCarNet: {
       b.car_net = std::make_unique<cbf::CarBarrierNet>();
+      b.car_net->input.layout = derby::ObstacleLayoutOfObservation();
       b.car_net->input.use_velocity = (net_seed & 1) != 0;
       const int f = b.car_net->input.feature_dim();
       b.car_net->mlp = nn::RandomMlpParams({f, {16, 8}, 1, nn::Activation::kRelu}, net_seed);
