@@ -1,4 +1,5 @@
 #include "secure/cbf/car_barrier_trainer.h"
+#include "tests/cbf/synthetic_derby_observations.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -26,50 +27,10 @@ namespace {
 
 using secure::test::ErrorOf;
 
-constexpr int kObs = 52;
-constexpr int kCars = 12;
-
-std::vector<std::string> ObsNames() {
-  std::vector<std::string> names = {"gx", "gy", "vx", "vy"};
-  for (int j = 0; j < kCars; ++j)
-    for (const char* f : {"dx", "dy", "dvx", "dvy"}) names.push_back("c" + std::to_string(j) + f);
-  return names;
-}
-
-// Synthetic Derby observations. Safe: every car farther than 0.2 (uniform in [-1.5, 1.5]^2, so
-// some are out of the sensing radius). Near-dangerous: the nearest car within 0.14, the others
-// farther than 0.2. Cars sorted nearest first.
-data::StateSet Synthetic(bool near_dangerous, int n, std::uint64_t seed, double safe_min = 0.2) {
-  Rng rng(seed);
-  data::StateSet set{near_dangerous ? "synthetic near-dangerous" : "synthetic safe", ObsNames(),
-                     Eigen::MatrixXf(kObs, n)};
-  for (int i = 0; i < n; ++i) {
-    for (int f = 0; f < 4; ++f) set.states(f, i) = static_cast<float>(rng.Uniform(-1, 1));
-    std::vector<std::array<float, 4>> cars(kCars);
-    for (int j = 0; j < kCars; ++j) {
-      double x, y;
-      if (near_dangerous && j == 0) {
-        const double rho = rng.Uniform(0, 0.14), a = rng.Uniform(0, 2 * M_PI);
-        x = rho * std::cos(a);
-        y = rho * std::sin(a);
-      } else {
-        do {
-          x = rng.Uniform(-1.5, 1.5);
-          y = rng.Uniform(-1.5, 1.5);
-        } while (std::hypot(x, y) <= safe_min);
-      }
-      cars[j] = {static_cast<float>(x), static_cast<float>(y),
-                 static_cast<float>(rng.Uniform(-0.5, 0.5)),
-                 static_cast<float>(rng.Uniform(-0.5, 0.5))};
-    }
-    std::sort(cars.begin(), cars.end(), [](const auto& a, const auto& b) {
-      return a[0] * a[0] + a[1] * a[1] < b[0] * b[0] + b[1] * b[1];
-    });
-    for (int j = 0; j < kCars; ++j)
-      for (int q = 0; q < 4; ++q) set.states(4 + 4 * j + q, i) = cars[j][q];
-  }
-  return set;
-}
+using test::kCars;
+using test::kObs;
+using test::ObsNames;
+using test::Synthetic;
 
 // `o` with the Demolition Derby observation layout (the derby plug-in's; there is no default).
 CarBarrierTrainerOptions WithDerbyLayout(CarBarrierTrainerOptions o) {
