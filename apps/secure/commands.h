@@ -12,6 +12,8 @@ void RegisterCbfCheckCommand(CLI::App& cbf, const Config& config);
 void RegisterShieldCommands(CLI::App& app, const Config& config);
 /// secure demos generate, secure policy train, secure eval.
 void RegisterPipelineCommands(CLI::App& app, const Config& config);
+/// secure demos check-labels (label_check_command.cc), registered by RegisterPipelineCommands.
+void RegisterLabelCheckCommand(CLI::App& demos, const Config& config);
 /// secure demo; secure experiment KIND --domain NAME (and the derby-* aliases).
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
 }  // namespace secure::cli

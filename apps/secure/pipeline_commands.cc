@@ -434,6 +434,7 @@ void RegisterPipelineCommands(CLI::App& app, const Config& config) {
   CLI::App* demos = app.add_subcommand("demos", "Generate demonstrations");
   demos->require_subcommand(1);
   generate.Register(*demos);
+  RegisterLabelCheckCommand(*demos, config);
   CLI::App* policy = app.add_subcommand("policy", "Learn policies from demonstrations");
   policy->require_subcommand(1);
   train.Register(*policy, config);

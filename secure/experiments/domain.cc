@@ -7,6 +7,11 @@
 
 namespace secure::experiments {
 
+std::vector<LabelCheckRow> Domain::CheckLabels(std::uint64_t, long) const {
+  SECURE_THROW("the " << name() << " domain has no label check (it cannot simulate forward from "
+                         "a labelled state)");
+}
+
 void Domain::CheckHeldOut(std::uint64_t, long, data::StateSet*, data::StateSet*) const {
   SECURE_THROW("the " << name() << " domain has no barrier check");
 }

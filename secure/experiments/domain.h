@@ -56,6 +56,19 @@ struct DomainData {
   long discarded_demonstrations = 0;    // expert episodes dropped (collided, or missed the goal)
 };
 
+/// One row of a label check (Domain::CheckLabels): a labelled set of states and how many of them
+/// lead to a dangerous event when the motion they show continues in the domain's physics.
+struct LabelCheckRow {
+  std::string set;          // "near-dangerous (upper part)"
+  std::string label;        // "safe" | "near-dangerous": what the data claims
+  long states = 0;          // checked
+  long dangerous = 0;       // ended in a dangerous event
+  long skipped = 0;         // could not be simulated (e.g. out of the robot's reach)
+  double DangerousFraction() const {
+    return states > skipped ? double(dangerous) / double(states - skipped) : 0.0;
+  }
+};
+
 class Domain {
  public:
   virtual ~Domain() = default;
@@ -102,6 +115,15 @@ class Domain {
       const shield::ShieldOptions& shield, const data::StateSet& safe,
       const data::StateSet& near_dangerous,
       std::unique_ptr<domains::DynamicsModel>* dynamics) const;
+
+  /// Whether CheckLabels works (the domain can simulate forward from a labelled state).
+  virtual bool HasLabelCheck() const { return false; }
+  /// Checks the labels of the data from `data_seed` against the domain's physics, at most
+  /// `max_states` states per row; what "the motion continues" means is the domain's (documented
+  /// there). Only if HasLabelCheck(). Deterministic.
+  virtual std::vector<LabelCheckRow> CheckLabels(std::uint64_t data_seed, long max_states) const;
+  /// What CheckLabels simulates, in one sentence (for reports).
+  virtual std::string LabelCheckDescription() const { return ""; }
 
   /// An analytic ground-truth barrier, or null if the domain has none.
   virtual std::unique_ptr<cbf::Barrier> MakeGroundTruth() const { return nullptr; }

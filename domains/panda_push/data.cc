@@ -1,0 +1,435 @@
+#include "domains/panda_push/data.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <numeric>
+
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::panda_push {
+namespace {
+
+bool Finite(double x) { return std::isfinite(x); }
+
+double Draw(Rng& rng, const Range& r) { return r.lo + (r.hi - r.lo) * rng.Uniform(); }
+
+void CheckRange(const Range& r, const char* owner, const char* field, double min, double max) {
+  SECURE_CHECK_FIELD(Finite(r.lo) && Finite(r.hi) && r.lo >= min && r.hi <= max && r.lo <= r.hi,
+                     owner, field, "[" << r.lo << ", " << r.hi << "]",
+                     "an interval lo <= hi within [" << min << ", " << max << "]");
+}
+
+YamlFields::Handler RangeField(Range* r) {
+  return [r](const YAML::Node& n, const std::string& where) {
+    YamlFields().Field("lo", &r->lo).Field("hi", &r->hi).Apply(n, where);
+  };
+}
+
+nlohmann::json RangeJson(const Range& r) { return {{"lo", r.lo}, {"hi", r.hi}}; }
+
+// Columns `cols` of `states`, in order.
+data::StateSet Subset(const std::string& source, const Eigen::MatrixXf& states,
+                      std::vector<long> cols) {
+  data::StateSet s;
+  s.source = source;
+  s.features = ObservationFeatures();
+  s.states.resize(kObservationDim, static_cast<long>(cols.size()));
+  for (long i = 0; i < static_cast<long>(cols.size()); ++i) s.states.col(i) = states.col(cols[i]);
+  return s;
+}
+
+// `count` of `n` indices drawn without replacement (all of them, shuffled, if count >= n).
+std::vector<long> DrawIndices(long n, long count, Rng& rng) {
+  std::vector<long> idx(static_cast<size_t>(n));
+  std::iota(idx.begin(), idx.end(), 0L);
+  for (long i = n - 1; i > 0; --i)
+    std::swap(idx[i], idx[rng.UniformIndex(static_cast<std::uint64_t>(i + 1))]);
+  if (count < n) idx.resize(static_cast<size_t>(count));
+  return idx;
+}
+
+// The demonstration states with `copies` noisy copies each (the released noise).
+Eigen::MatrixXf WithNoisyCopies(const Eigen::MatrixXf& states, int copies, Rng& rng) {
+  Eigen::MatrixXf out(states.rows(), states.cols() * (1 + copies));
+  out.leftCols(states.cols()) = states;
+  for (int c = 0; c < copies; ++c) {
+    for (long i = 0; i < states.cols(); ++i) {
+      auto s = out.col(states.cols() * (1 + c) + i);
+      s = states.col(i);
+      s[kEePos] += static_cast<float>(rng.Uniform(-0.01, 0.0));
+      s[kEePos + 1] += static_cast<float>(rng.Uniform(-0.005, 0.005));
+      s[kEePos + 2] += static_cast<float>(rng.Uniform(-0.001, 0.001));
+      for (int k : {kEeVel, kEeVel + 1, kEeVel + 2, kBlockVel, kBlockVel + 1, kBlockVel + 2})
+        s[k] += static_cast<float>(rng.Uniform(-0.001, 0.001));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+void PandaDemonstrationOptions::Validate() const {
+  const char* o = "PandaDemonstrationOptions";
+  SECURE_CHECK_FIELD(episodes >= 1 && episodes <= 10000, o, "episodes", episodes,
+                     "in [1, 10000]");
+  SECURE_CHECK_FIELD(max_attempts >= episodes, o, "max_attempts", max_attempts,
+                     ">= episodes (" << episodes << ")");
+  CheckRange(push_height, o, "push_height", 0.0, 0.4);
+  CheckRange(descend_speed, o, "descend_speed", 0.0, 1.0);
+  CheckRange(approach_speed, o, "approach_speed", 0.0, 1.0);
+  CheckRange(push_speed, o, "push_speed", 0.0, 1.0);
+  SECURE_CHECK_FIELD(push_speed.lo > 0, o, "push_speed.lo", push_speed.lo, "> 0");
+  SECURE_CHECK_FIELD(descend_speed.lo > 0, o, "descend_speed.lo", descend_speed.lo, "> 0");
+  SECURE_CHECK_FIELD(approach_speed.lo > 0, o, "approach_speed.lo", approach_speed.lo, "> 0");
+  SECURE_CHECK_FIELD(Finite(approach_gap) && approach_gap >= 0 && approach_gap <= 0.3, o,
+                     "approach_gap", approach_gap, "in [0, 0.3] m");
+  SECURE_CHECK_FIELD(Finite(action_noise) && action_noise >= 0 && action_noise <= 0.5, o,
+                     "action_noise", action_noise, "in [0, 0.5]");
+}
+
+nlohmann::json PandaDemonstrationOptions::ToJson() const {
+  return {{"episodes", episodes},
+          {"max_attempts", max_attempts},
+          {"push_height", RangeJson(push_height)},
+          {"descend_speed", RangeJson(descend_speed)},
+          {"approach_speed", RangeJson(approach_speed)},
+          {"push_speed", RangeJson(push_speed)},
+          {"approach_gap", approach_gap},
+          {"action_noise", action_noise}};
+}
+
+void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("episodes", &episodes)
+      .Field("max_attempts", &max_attempts)
+      .Section("push_height", RangeField(&push_height))
+      .Section("descend_speed", RangeField(&descend_speed))
+      .Section("approach_speed", RangeField(&approach_speed))
+      .Section("push_speed", RangeField(&push_speed))
+      .Field("approach_gap", &approach_gap)
+      .Field("action_noise", &action_noise)
+      .Apply(node, source);
+}
+
+void PandaSafeOptions::Validate() const {
+  SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "PandaSafeOptions", "count", count,
+                     "in [1, 1e8]");
+  SECURE_CHECK_FIELD(noisy_copies >= 0 && noisy_copies <= 1000, "PandaSafeOptions",
+                     "noisy_copies", noisy_copies, "in [0, 1000]");
+}
+
+nlohmann::json PandaSafeOptions::ToJson() const {
+  return {{"count", count}, {"noisy_copies", noisy_copies}};
+}
+
+void PandaSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields().Field("count", &count).Field("noisy_copies", &noisy_copies).Apply(node, source);
+}
+
+void PandaNearDangerousOptions::Validate() const {
+  const char* o = "PandaNearDangerousOptions";
+  SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, o, "count", count, "in [1, 1e8]");
+  SECURE_CHECK_FIELD(copies >= 1 && copies <= 1000, o, "copies", copies, "in [1, 1000]");
+  SECURE_CHECK_FIELD(Finite(p_upper) && p_upper >= 0 && p_upper <= 1, o, "p_upper", p_upper,
+                     "in [0, 1]");
+  SECURE_CHECK_FIELD(Finite(p_fast) && p_fast >= 0 && p_upper + p_fast <= 1, o, "p_fast", p_fast,
+                     ">= 0 with p_upper + p_fast <= 1");
+  SECURE_CHECK_FIELD(Finite(fast_x_share) && fast_x_share >= 0 && fast_x_share <= 1, o,
+                     "fast_x_share", fast_x_share, "in [0, 1]");
+  CheckRange(upper_z, o, "upper_z", 0.0, 0.4);
+  SECURE_CHECK_FIELD(Finite(low_z_max) && low_z_max >= 0 && low_z_max <= 0.4, o, "low_z_max",
+                     low_z_max, "in [0, 0.4] m");
+  CheckRange(fast_vx, o, "fast_vx", 0.0, 10.0);
+  CheckRange(fast_vz, o, "fast_vz", 0.0, 10.0);
+  SECURE_CHECK_FIELD(Finite(back_off) && back_off >= 0 && back_off <= 0.1, o, "back_off",
+                     back_off, "in [0, 0.1] m");
+}
+
+nlohmann::json PandaNearDangerousOptions::ToJson() const {
+  return {{"count", count},
+          {"copies", copies},
+          {"p_upper", p_upper},
+          {"p_fast", p_fast},
+          {"fast_x_share", fast_x_share},
+          {"upper_z", RangeJson(upper_z)},
+          {"low_z_max", low_z_max},
+          {"fast_vx", RangeJson(fast_vx)},
+          {"fast_vz", RangeJson(fast_vz)},
+          {"back_off", back_off}};
+}
+
+void PandaNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("count", &count)
+      .Field("copies", &copies)
+      .Field("p_upper", &p_upper)
+      .Field("p_fast", &p_fast)
+      .Field("fast_x_share", &fast_x_share)
+      .Section("upper_z", RangeField(&upper_z))
+      .Field("low_z_max", &low_z_max)
+      .Section("fast_vx", RangeField(&fast_vx))
+      .Section("fast_vz", RangeField(&fast_vz))
+      .Field("back_off", &back_off)
+      .Apply(node, source);
+}
+
+const char* ScenarioName(NearDangerousScenario s) {
+  switch (s) {
+    case NearDangerousScenario::kUpper:
+      return "upper";
+    case NearDangerousScenario::kFastX:
+      return "fast-x";
+    case NearDangerousScenario::kFastZ:
+      return "fast-z";
+    case NearDangerousScenario::kBoth:
+      return "both";
+  }
+  return "?";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Demonstrations
+
+PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
+                                                const PandaDemonstrationOptions& options) {
+  task.Validate();
+  options.Validate();
+  PandaPushEnv env(task, PandaPushShieldModelOptions{});
+  Rng rng(options.seed);
+  PandaDemonstrations out;
+  std::vector<Eigen::VectorXf> obs_rows, act_rows;
+  out.trajectories.source = "scripted panda-push demonstrations (seed " +
+                            std::to_string(options.seed) + ")";
+  out.trajectories.state_features = ObservationFeatures();
+  out.trajectories.action_features = ActionFeatures();
+  out.trajectories.episode_begin.push_back(0);
+  Eigen::VectorXf o(kObservationDim), next(kObservationDim);
+  Eigen::VectorXf a(kActionDim);
+  int kept = 0;
+  for (int attempt = 0; attempt < options.max_attempts && kept < options.episodes; ++attempt) {
+    Rng episode_rng(rng.NextU64());
+    const double h = Draw(episode_rng, options.push_height);
+    const double descend = Draw(episode_rng, options.descend_speed);
+    const double approach = Draw(episode_rng, options.approach_speed);
+    const double push = Draw(episode_rng, options.push_speed);
+    env.Reset(episode_rng, o);
+    std::vector<Eigen::VectorXf> eo, ea;
+    long push_begin = -1;
+    bool descended = false, success = false, toppled = false;
+    for (int t = 0; t < task.max_steps; ++t) {
+      a.setZero();
+      // The pusher's front is 0.04 ahead of the end-effector, the block's back 0.04 behind its
+      // centre.
+      const double gap = o[kBlockPos] - 0.04 - (o[kEePos] + 0.04);
+      if (!descended && o[kEePos + 2] > h + 0.01) {
+        a[2] = static_cast<float>(-descend);
+      } else {
+        descended = true;
+        a[2] = static_cast<float>(std::clamp(0.5 * (h - o[kEePos + 2]) / 0.05, -1.0, 1.0));
+        a[1] = static_cast<float>(std::clamp(-5.0 * (o[kEePos + 1] - o[kBlockPos + 1]), -0.2,
+                                             0.2));
+        if (gap > options.approach_gap) {
+          a[0] = static_cast<float>(approach);
+        } else {
+          if (push_begin < 0) push_begin = static_cast<long>(eo.size());
+          a[0] = static_cast<float>(push);
+        }
+      }
+      for (int k = 0; k < kActionDim; ++k)
+        a[k] = std::clamp(a[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
+                          -1.0f, 1.0f);
+      eo.push_back(o);
+      ea.push_back(a);
+      const StepOutcome r = env.Step(a, next);
+      o = next;
+      if (r.collided) {
+        toppled = true;
+        break;
+      }
+      if (r.reached_goal) {
+        success = true;
+        break;
+      }
+    }
+    if (toppled) {
+      ++out.discarded_toppled;
+      continue;
+    }
+    if (!success || push_begin < 0) {
+      ++out.discarded_failed;
+      continue;
+    }
+    out.push_begin.push_back(static_cast<long>(obs_rows.size()) + push_begin);
+    obs_rows.insert(obs_rows.end(), eo.begin(), eo.end());
+    act_rows.insert(act_rows.end(), ea.begin(), ea.end());
+    out.trajectories.episode_begin.push_back(static_cast<long>(obs_rows.size()));
+    ++kept;
+  }
+  SECURE_CHECK(kept == options.episodes,
+               "panda-push demonstrations: only " << kept << " of " << options.episodes
+                                                  << " succeeded in " << options.max_attempts
+                                                  << " attempts (" << out.discarded_toppled
+                                                  << " toppled the block, "
+                                                  << out.discarded_failed << " missed the target)");
+  const long n = static_cast<long>(obs_rows.size());
+  out.trajectories.states.resize(kObservationDim, n);
+  out.trajectories.actions.resize(kActionDim, n);
+  for (long i = 0; i < n; ++i) {
+    out.trajectories.states.col(i) = obs_rows[i];
+    out.trajectories.actions.col(i) = act_rows[i];
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Safe and near-dangerous states
+
+data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafeOptions& options,
+                               Rng& rng) {
+  options.Validate();
+  const Eigen::MatrixXf all = WithNoisyCopies(demos.trajectories.states, options.noisy_copies, rng);
+  return Subset("panda-push safe states (demonstrations, " +
+                    std::to_string(options.noisy_copies) + " noisy copies each)",
+                all, DrawIndices(all.cols(), options.count, rng));
+}
+
+data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
+                                        const PandaNearDangerousOptions& options, Rng& rng,
+                                        std::vector<NearDangerousScenario>* scenarios) {
+  options.Validate();
+  const data::TrajectorySet& t = demos.trajectories;
+  SECURE_CHECK(static_cast<long>(demos.push_begin.size()) == t.num_episodes(),
+               "panda-push near-dangerous states: " << demos.push_begin.size()
+                                                    << " push starts for " << t.num_episodes()
+                                                    << " demonstrations");
+  std::vector<Eigen::VectorXf> rows;
+  std::vector<NearDangerousScenario> kinds;
+  for (long e = 0; e < t.num_episodes(); ++e) {
+    for (int c = 0; c < options.copies; ++c) {
+      const double u = rng.Uniform();
+      const bool upper = u < options.p_upper;
+      const bool fast = !upper && u < options.p_upper + options.p_fast;
+      for (long i = demos.push_begin[e]; i < t.episode_begin[e + 1]; ++i) {
+        Eigen::VectorXf s = t.states.col(i);
+        s[kEePos] -= static_cast<float>(options.back_off);
+        NearDangerousScenario kind;
+        if (upper) {
+          kind = NearDangerousScenario::kUpper;
+          s[kEePos + 2] = static_cast<float>(Draw(rng, options.upper_z));
+        } else if (fast) {
+          s[kEePos + 2] = static_cast<float>(options.low_z_max * rng.Uniform());
+          if (rng.Uniform() < options.fast_x_share) {
+            kind = NearDangerousScenario::kFastX;
+            s[kEeVel] = static_cast<float>(Draw(rng, options.fast_vx));
+          } else {
+            kind = NearDangerousScenario::kFastZ;
+            s[kEeVel + 2] = static_cast<float>(-Draw(rng, options.fast_vz));
+          }
+        } else {
+          kind = NearDangerousScenario::kBoth;
+          s[kEePos + 2] = static_cast<float>(Draw(rng, options.upper_z));
+          s[kEeVel] = static_cast<float>(Draw(rng, options.fast_vx));
+        }
+        rows.push_back(s);
+        kinds.push_back(kind);
+      }
+    }
+  }
+  SECURE_CHECK(!rows.empty(), "panda-push near-dangerous states: the demonstrations have no push");
+  Eigen::MatrixXf all(kObservationDim, static_cast<long>(rows.size()));
+  for (long i = 0; i < all.cols(); ++i) all.col(i) = rows[i];
+  const std::vector<long> idx = DrawIndices(all.cols(), options.count, rng);
+  if (scenarios != nullptr) {
+    scenarios->clear();
+    for (long i : idx) scenarios->push_back(kinds[i]);
+  }
+  return Subset("panda-push near-dangerous states (upper part / too fast / both)", all, idx);
+}
+
+ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeOptions& safe,
+                                        long near_count, Rng& rng) {
+  safe.Validate();
+  SECURE_CHECK(near_count >= 1, "released panda-push data: near_count = " << near_count
+                                                                           << ", must be >= 1");
+  const std::filesystem::path base(dir);
+  ReleasedPandaData r;
+  r.demonstrations = data::ReadTrajectories((base / "task_demos.csv").string(),
+                                            ObservationFeatures(), ActionFeatures());
+  const data::StateSet nd =
+      data::ReadStateSet((base / "near_dangerous_states.csv").string(), ObservationFeatures());
+  const Eigen::MatrixXf safe_all =
+      WithNoisyCopies(r.demonstrations.states, safe.noisy_copies, rng);
+  r.safe = Subset("released panda-push demonstrations (" + r.demonstrations.source + ", " +
+                      std::to_string(safe.noisy_copies) + " noisy copies each)",
+                  safe_all, DrawIndices(safe_all.cols(), safe.count, rng));
+  std::vector<long> keep;
+  for (long i = 0; i < nd.states.cols(); ++i)
+    if (!nd.states.col(i).isZero(0.0f)) keep.push_back(i);
+  Eigen::MatrixXf nd_kept(kObservationDim, static_cast<long>(keep.size()));
+  for (long i = 0; i < static_cast<long>(keep.size()); ++i) nd_kept.col(i) = nd.states.col(keep[i]);
+  r.near_dangerous = Subset("released panda-push near-dangerous states (" + nd.source + ")",
+                            nd_kept, DrawIndices(nd_kept.cols(), near_count, rng));
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Labels against physics
+
+nlohmann::json LabelCheckResult::ToJson() const {
+  return {{"states", states},
+          {"toppled", toppled},
+          {"unreachable", unreachable},
+          {"toppling_fraction", TopplingFraction()}};
+}
+
+LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet& set,
+                             const LabelCheckOptions& options) {
+  SECURE_CHECK(set.dim() == kObservationDim,
+               "panda-push label check: " << set.source << " has " << set.dim()
+                                          << " features, expected 18");
+  PandaPushSim sim(task);
+  const int push_steps = static_cast<int>(std::lround(options.push_seconds / task.control_period));
+  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
+  const int stop_steps =
+      std::max(1, static_cast<int>(std::lround(options.stop_seconds / task.control_period)));
+  LabelCheckResult r;
+  const long n = std::min<long>(set.size(), options.max_states);
+  for (long i = 0; i < n; ++i) {
+    ++r.states;
+    const Eigen::VectorXf s = set.states.col(i);
+    if (sim.SetObservation(s) > 0.01) {
+      ++r.unreachable;
+      continue;
+    }
+    Eigen::Vector3f a;
+    for (int k = 0; k < 3; ++k)
+      a[k] = std::clamp(static_cast<float>(s[kEeVel + k] / options.velocity_gain), -1.0f, 1.0f);
+    Eigen::VectorXf o(kObservationDim);
+    sim.Observe(o);
+    const Eigen::Vector3f start = o.segment<3>(kEePos);
+    bool toppled = false;
+    int stop_begin = push_steps;  // the step the ramp down starts
+    for (int t = 0; t < stop_begin + stop_steps + hold_steps && !toppled; ++t) {
+      const float scale =
+          t < stop_begin ? 1.0f
+                         : std::max(0.0f, 1.0f - static_cast<float>(t - stop_begin + 1) / stop_steps);
+      sim.Step(scale * a);
+      sim.Observe(o);
+      if (t < stop_begin && (o.segment<3>(kEePos) - start).norm() >= options.push_distance)
+        stop_begin = t + 1;
+      toppled = sim.Toppled();
+    }
+    if (toppled) ++r.toppled;
+  }
+  return r;
+}
+
+}  // namespace secure::domains::panda_push

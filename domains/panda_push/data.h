@@ -1,0 +1,150 @@
+#pragma once
+// The panda-push data: the scripted demonstrator, the safe and near-dangerous state generators,
+// the authors' released data, and the check of the labels against physics.
+//
+// Demonstrator (in the style of the released keyboard teleoperation, official-code-facts.md
+// §2.6): descend to a push height h ~ U(push_height) at a_z ~ -U(descend_speed); approach along
+// +x at a_x ~ U(approach_speed) until approach_gap m before the block; then push along +x at
+// a_x ~ U(push_speed) holding the height (a_z = (h - z) / 0.05 * 0.5) and the line
+// (a_y = -5 (ee_y - block_y)), each action component with N(0, action_noise^2) noise, until the
+// block reaches the target. Episodes that topple the block or miss the target are discarded.
+//
+// Near-dangerous states (the released generator, §2.7, in this simulator's units and without
+// its bug that copies unmodified states into the unsafe set): the pushing part of each
+// demonstration (from its first push step) is processed `copies` times; each copy draws one
+// scenario, every state then draws its own values:
+//   (a) upper part (p_upper):  ee_x -= back_off; ee_z ~ U(upper_z);
+//   (b) too fast   (p_fast):   ee_x -= back_off; ee_z ~ U(0, low_z_max); and with probability
+//                              fast_x_share ee_vx ~ U(fast_vx), otherwise ee_vz ~ U(fast_vz);
+//   (c) both       (the rest): ee_x -= back_off; ee_z ~ U(upper_z); ee_vx ~ U(fast_vx).
+// `count` states are drawn from the result without replacement.
+//
+// Safe states: the demonstration states, each also copied `noisy_copies` times with the released
+// noise (ee_x += U(-0.01, 0), ee_y += U(-0.005, 0.005), ee_z += U(-0.001, 0.001), every ee and
+// block velocity component += U(-0.001, 0.001)); `count` drawn without replacement.
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "domains/panda_push/panda_push.h"
+#include "secure/common/rng.h"
+#include "secure/data/data.h"
+
+namespace YAML {
+class Node;
+}
+
+namespace secure::domains::panda_push {
+
+/// A closed interval [lo, hi] to draw from uniformly.
+struct Range {
+  double lo = 0, hi = 0;
+};
+
+struct PandaDemonstrationOptions {
+  int episodes = 6;        // kept demonstrations
+  int max_attempts = 60;   // episodes tried before giving up
+  Range push_height = {0.02, 0.035};  // m, the end-effector height while pushing
+  Range descend_speed = {0.5, 0.9};   // -a_z while descending
+  Range approach_speed = {0.4, 0.7};  // a_x while approaching
+  Range push_speed = {0.08, 0.15};    // a_x while pushing
+  double approach_gap = 0.03;         // m between the pusher's front and the block to slow down
+  double action_noise = 0.02;         // sd of the per-component action noise
+  std::uint64_t seed = 0;
+
+  void Validate() const;
+  nlohmann::json ToJson() const;
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+struct PandaDemonstrations {
+  data::TrajectorySet trajectories;  // observations and actions, one episode per demonstration
+  std::vector<long> push_begin;      // per episode: the column of its first push step
+  long discarded_toppled = 0, discarded_failed = 0;
+};
+
+/// @throws secure::Error if fewer than options.episodes succeed within max_attempts.
+PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
+                                                const PandaDemonstrationOptions& options);
+
+struct PandaSafeOptions {
+  long count = 1476;      // Table 2
+  int noisy_copies = 10;  // the released noisy copies per demonstration state (0: none)
+  void Validate() const;
+  nlohmann::json ToJson() const;
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+struct PandaNearDangerousOptions {
+  long count = 1476;  // Table 2
+  int copies = 10;
+  double p_upper = 0.3, p_fast = 0.4;  // the rest: both
+  double fast_x_share = 1.0;           // of the fast scenario: fast along x (else along z)
+  Range upper_z = {0.07, 0.399};       // m
+  double low_z_max = 0.069;            // m
+  Range fast_vx = {0.6, 1.25};         // m/s (the demonstrations push at 0.1-0.2 m/s)
+  Range fast_vz = {0.3, 1.25};         // m/s (downwards)
+  double back_off = 0.002;             // m
+  void Validate() const;
+  nlohmann::json ToJson() const;
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+/// The scenario of each generated near-dangerous state.
+enum class NearDangerousScenario { kUpper, kFastX, kFastZ, kBoth };
+const char* ScenarioName(NearDangerousScenario s);
+
+/// Safe states from the demonstrations (observations).
+data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafeOptions& options,
+                               Rng& rng);
+/// Near-dangerous states from the pushing part of the demonstrations; `scenarios` (if not null)
+/// receives each state's scenario.
+data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
+                                        const PandaNearDangerousOptions& options, Rng& rng,
+                                        std::vector<NearDangerousScenario>* scenarios = nullptr);
+
+/// The authors' released data (official-code-facts.md §2.6-2.7): task_demos.csv (2
+/// demonstrations, 246 states) and near_dangerous_states.csv (4381 states) in `dir`, read by
+/// feature name. Safe states: the released demonstration states with `safe.noisy_copies` noisy
+/// copies, `safe.count` drawn; near-dangerous: `near_count` drawn from the released file (its
+/// all-zero row dropped; its unmodified rows kept, as released).
+/// @throws secure::Error naming the file on a missing file or column.
+struct ReleasedPandaData {
+  data::TrajectorySet demonstrations;
+  data::StateSet safe, near_dangerous;
+};
+ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeOptions& safe,
+                                        long near_count, Rng& rng);
+
+/// The labels against physics: from each state, the simulation is put in that state
+/// (PandaPushSim::SetObservation), the push continues at the state's own end-effector velocity
+/// (a = v / velocity_gain, clipped) until the end-effector has moved push_distance or
+/// push_seconds have passed, then the push ends as a careful demonstrator ends one: the action
+/// ramps down to zero over stop_seconds and the arm holds still for hold_seconds. (Every push
+/// ends somewhere; a fast push that ends lets the block slide on alone, and a tall block sliding
+/// on a table with friction above w / 2h = 0.2 tips forward.) The state "topples" if the block's tilt exceeds
+/// the topple angle at any step. States the arm cannot reach (IK error > 0.01 m) are counted
+/// apart.
+struct LabelCheckOptions {
+  double push_distance = 0.1;  // m
+  double stop_seconds = 0.2;
+  double push_seconds = 1.0;
+  double hold_seconds = 1.0;
+  double velocity_gain = 1.25;  // m/s per unit action (PandaPushShieldModelOptions)
+  long max_states = 300;        // per set, the first ones (sets are already shuffled)
+};
+
+struct LabelCheckResult {
+  long states = 0, toppled = 0, unreachable = 0;
+  double TopplingFraction() const {
+    return states > unreachable ? double(toppled) / double(states - unreachable) : 0.0;
+  }
+  nlohmann::json ToJson() const;
+};
+
+/// Checks `set` (observations). Deterministic.
+LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet& set,
+                             const LabelCheckOptions& options);
+
+}  // namespace secure::domains::panda_push

@@ -1,0 +1,241 @@
+#include "domains/panda_push/domain.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/rng.h"
+#include "secure/common/yaml_fields.h"
+#include "secure/common/yaml_value.h"
+
+namespace secure::domains::panda_push {
+
+const std::vector<std::string>& BarrierFeatures() {
+  static const std::vector<std::string> names(ObservationFeatures().begin(),
+                                              ObservationFeatures().begin() + 9);
+  return names;
+}
+
+PandaPushDomainOptions PandaPushDomainOptions::For(experiments::Profile profile) {
+  PandaPushDomainOptions o;
+  if (profile == experiments::Profile::kQuick) {
+    o.demonstrations.episodes = 3;
+    o.safe.count = 400;
+    o.near_dangerous.count = 400;
+  }
+  return o;
+}
+
+void PandaPushDomainOptions::Validate() const {
+  task.Validate();
+  shield_model.Validate();
+  demonstrations.Validate();
+  safe.Validate();
+  near_dangerous.Validate();
+  SECURE_CHECK_FIELD(barrier_data != BarrierData::kReleased || !released_data_dir.empty(),
+                     "PandaPushDomainOptions", "released_data_dir", "''",
+                     "set (the folder of task_demos.csv and near_dangerous_states.csv) with "
+                     "barrier_data: released");
+}
+
+void PandaPushDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Section("task", [this](const YAML::Node& n, const std::string& w) { task.ApplyYaml(n, w); })
+      .Section("shield_model",
+               [this](const YAML::Node& n, const std::string& w) { shield_model.ApplyYaml(n, w); })
+      .Section("demonstrations", [this](const YAML::Node& n,
+                                        const std::string& w) { demonstrations.ApplyYaml(n, w); })
+      .Section("safe", [this](const YAML::Node& n, const std::string& w) { safe.ApplyYaml(n, w); })
+      .Section("near_dangerous", [this](const YAML::Node& n,
+                                        const std::string& w) { near_dangerous.ApplyYaml(n, w); })
+      .Section("barrier_data",
+               [this](const YAML::Node& n, const std::string& w) {
+                 const std::string v = YamlValue<std::string>(n, "barrier_data", w);
+                 SECURE_CHECK(v == "generated" || v == "released",
+                              w << ": barrier_data = '" << v
+                                << "', must be generated or released");
+                 barrier_data = v == "released" ? BarrierData::kReleased : BarrierData::kGenerated;
+               })
+      .Field("released_data_dir", &released_data_dir)
+      .Apply(node, source);
+}
+
+nlohmann::json PandaPushDomainOptions::ToJson() const {
+  return {{"task", task.ToJson()},
+          {"shield_model", shield_model.ToJson()},
+          {"demonstrations", demonstrations.ToJson()},
+          {"safe", safe.ToJson()},
+          {"near_dangerous", near_dangerous.ToJson()},
+          {"barrier_data", barrier_data == BarrierData::kReleased ? "released" : "generated"},
+          {"released_data_dir", released_data_dir}};
+}
+
+// ---------------------------------------------------------------------------------------------
+PandaPushDomain::PandaPushDomain(experiments::Profile profile)
+    : profile_(profile), options_(PandaPushDomainOptions::For(profile)) {}
+
+std::string PandaPushDomain::Describe() const {
+  return PandaPushEnv(options_.task, options_.shield_model).Describe();
+}
+
+void PandaPushDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  options_.ApplyYaml(node, source);
+}
+
+std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {
+  return std::make_unique<PandaPushEnv>(options_.task, options_.shield_model);
+}
+
+experiments::DomainData PandaPushDomain::GenerateData(std::uint64_t data_seed) const {
+  options_.Validate();
+  PandaDemonstrationOptions demo_options = options_.demonstrations;
+  demo_options.seed = data_seed;
+  const PandaDemonstrations demos = GeneratePandaDemonstrations(options_.task, demo_options);
+  Rng rng(data_seed + 1);
+  experiments::DomainData d;
+  d.demonstrations = demos.trajectories;
+  d.discarded_demonstrations = demos.discarded_toppled + demos.discarded_failed;
+  if (options_.barrier_data == BarrierData::kReleased) {
+    ReleasedPandaData released = ReadReleasedPandaData(options_.released_data_dir, options_.safe,
+                                                       options_.near_dangerous.count, rng);
+    d.safe = std::move(released.safe);
+    d.near_dangerous = std::move(released.near_dangerous);
+  } else {
+    d.safe = PandaSafeStates(demos, options_.safe, rng);
+    d.near_dangerous = PandaNearDangerousStates(demos, options_.near_dangerous, rng);
+  }
+  return d;
+}
+
+std::string PandaPushDomain::LabelCheckDescription() const {
+  const LabelCheckOptions c;
+  std::ostringstream s;
+  s << "from each state the push continues at the state's own end-effector velocity for "
+    << c.push_distance << " m (at most " << c.push_seconds << " s), ramps down over "
+    << c.stop_seconds << " s and holds " << c.hold_seconds
+    << " s; dangerous = the block tilts past " << options_.task.topple_angle << " rad";
+  return s.str();
+}
+
+std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64_t data_seed,
+                                                                    long max_states) const {
+  options_.Validate();
+  SECURE_CHECK(max_states >= 1, "label check: max_states = " << max_states << ", must be >= 1");
+  PandaDemonstrationOptions demo_options = options_.demonstrations;
+  demo_options.seed = data_seed;
+  const PandaDemonstrations demos = GeneratePandaDemonstrations(options_.task, demo_options);
+  Rng rng(data_seed + 1);
+  // The same draws as GenerateData (safe, then near-dangerous).
+  const data::StateSet safe = PandaSafeStates(demos, options_.safe, rng);
+  std::vector<NearDangerousScenario> kinds;
+  const data::StateSet near =
+      PandaNearDangerousStates(demos, options_.near_dangerous, rng, &kinds);
+  LabelCheckOptions check;
+  check.max_states = max_states;
+  check.velocity_gain = options_.shield_model.velocity_gain;
+  std::vector<experiments::LabelCheckRow> rows;
+  auto add = [&](const std::string& name, const std::string& label, const data::StateSet& set) {
+    const LabelCheckResult r = panda_push::CheckLabels(options_.task, set, check);
+    experiments::LabelCheckRow row;
+    row.set = name;
+    row.label = label;
+    row.states = r.states;
+    row.dangerous = r.toppled;
+    row.skipped = r.unreachable;
+    rows.push_back(row);
+  };
+  auto columns = [](const data::StateSet& from, const std::vector<long>& cols) {
+    data::StateSet s;
+    s.features = from.features;
+    s.source = from.source;
+    s.states.resize(from.dim(), static_cast<long>(cols.size()));
+    for (long i = 0; i < static_cast<long>(cols.size()); ++i) s.states.col(i) = from.states.col(cols[i]);
+    return s;
+  };
+  add("safe states", "safe", safe);
+  std::vector<long> pushing;
+  for (long e = 0; e < demos.trajectories.num_episodes(); ++e)
+    for (long i = demos.push_begin[e] + 1; i < demos.trajectories.episode_begin[e + 1]; ++i)
+      pushing.push_back(i);
+  data::StateSet demo_states;
+  demo_states.features = ObservationFeatures();
+  demo_states.states = demos.trajectories.states;
+  add("demonstration states while pushing", "safe", columns(demo_states, pushing));
+  for (NearDangerousScenario k : {NearDangerousScenario::kUpper, NearDangerousScenario::kFastX,
+                                  NearDangerousScenario::kFastZ, NearDangerousScenario::kBoth}) {
+    std::vector<long> cols;
+    for (long i = 0; i < static_cast<long>(kinds.size()); ++i)
+      if (kinds[i] == k) cols.push_back(i);
+    if (!cols.empty())
+      add(std::string("near-dangerous (") + ScenarioName(k) + ")", "near-dangerous",
+          columns(near, cols));
+  }
+  if (!options_.released_data_dir.empty()) {
+    Rng released_rng(data_seed + 2);
+    const ReleasedPandaData released = ReadReleasedPandaData(
+        options_.released_data_dir, PandaSafeOptions{max_states, 0}, max_states, released_rng);
+    add("released demonstration states", "safe", released.safe);
+    add("released near-dangerous states", "near-dangerous", released.near_dangerous);
+  }
+  return rows;
+}
+
+void PandaPushDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
+  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
+                     "ExperimentOptions", "shield.dt", options.shield.dt,
+                     "the control period (" << options_.task.control_period
+                                            << " s): the shield's model looks one step ahead");
+}
+
+experiments::ExperimentOptions PandaPushDomain::Preset() const {
+  experiments::ExperimentOptions o;
+  o.data_seed = 3000;
+  o.barrier_kind = experiments::BarrierKind::kFlat;
+  // The paper's Table 2 barrier: 32-128-128-256-256-256-256-128-128-32, tanh, on the first 9
+  // observation features.
+  o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
+  o.flat_barrier.activation = nn::Activation::kTanh;
+  // MERGE-A o.flat_barrier.input_features = BarrierFeatures();
+  o.flat_barrier.max_epochs = 150;
+  // AIRL on 150-step episodes (fixed horizon), with the BC regulariser as in Derby.
+  o.airl.iterations = 40;
+  o.airl.steps_per_iteration = 3000;
+  o.airl.bc_weight = 1.0;
+  // The shield: M = 128 (Section 6.3's Panda setting in the paper's Figure 9 runs), rho0 = 0.1,
+  // one control period ahead; alpha dt = 0.2 < 1 (requirement R3).
+  o.shield.num_samples = 128;
+  o.shield.safe_ratio = 0.1;
+  o.shield.dt = options_.task.control_period;
+  o.shield.class_k_gain = 5.0;
+  o.shield.probe_extent = 1.0;
+  o.check_enabled = false;  // no barrier check problem for this domain yet
+  if (profile_ == experiments::Profile::kQuick) {
+    o.seeds = 2;
+    o.episodes = 5;
+    o.bc.epochs = 10;
+    o.airl.iterations = 2;
+    o.airl.steps_per_iteration = 600;
+    o.flat_barrier.max_epochs = 5;
+    o.data_fractions = {1.0, 0.1};
+    o.imbalance_ratios = {1, 4};
+    o.label_noise = {0.0, 0.3};
+  }
+  return o;
+}
+
+}  // namespace secure::domains::panda_push
+
+namespace secure::plugins {
+void Register_panda_push(experiments::DomainRegistry& registry) {
+  registry.Add("panda-push",
+               "Panda Arm Push: a Franka arm pushes a tall block to a target without toppling it "
+               "(MuJoCo; paper Section 6)",
+               [](experiments::Profile p) {
+                 return std::make_unique<domains::panda_push::PandaPushDomain>(p);
+               });
+}
+}  // namespace secure::plugins

@@ -1,0 +1,539 @@
+// GCC 12 reports false -Wmaybe-uninitialized inside Eigen's AVX-512 packet code for the small
+// double products below (Eigen 3.4); the whole translation unit is quiet about it.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include "domains/panda_push/panda_push.h"
+
+#include <mujoco/mujoco.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <sstream>
+
+#include "domains/panda_push/mujoco_model.h"
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::panda_push {
+namespace {
+
+bool Finite(double x) { return std::isfinite(x); }
+
+// The tool frame's target orientation: z down, x along world x (rotation by pi about x; the
+// released IK target quaternion (x, y, z, w) = (1, 0, 0, 0)).
+const Eigen::Matrix3d& TargetRotation() {
+  static const Eigen::Matrix3d r = Eigen::Vector3d(1, -1, -1).asDiagonal();
+  return r;
+}
+
+// Damped least squares: dq = J^T (J J^T + lambda^2 I)^-1 e, plus a null-space pull towards the
+// neutral posture (so the redundant elbow does not drift over an episode).
+Eigen::Matrix<double, kArmJoints, 1> IkStep(const Eigen::Matrix<double, 6, kArmJoints>& j,
+                                            const Eigen::Matrix<double, 6, 1>& error,
+                                            const Eigen::Matrix<double, kArmJoints, 1>& posture,
+                                            double lambda) {
+  const Eigen::Matrix<double, 6, 6> jjt =
+      j * j.transpose() + lambda * lambda * Eigen::Matrix<double, 6, 6>::Identity();
+  const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> solver(jjt);
+  // J^T A^-1 = (A^-1 J)^T, A symmetric.
+  const Eigen::Matrix<double, kArmJoints, 6> pinv = solver.solve(j).transpose();
+  const Eigen::Matrix<double, kArmJoints, kArmJoints> null =
+      Eigen::Matrix<double, kArmJoints, kArmJoints>::Identity() - pinv * j;
+  return pinv * error + null * posture;
+}
+
+}  // namespace
+
+const std::vector<std::string>& ObservationFeatures() {
+  static const std::vector<std::string> names{
+      "ee_x",       "ee_y",        "ee_z",      "ee_vx",    "ee_vy",    "ee_vz",
+      "block_x",    "block_y",     "block_z",   "block_roll", "block_pitch", "block_yaw",
+      "block_vx",   "block_vy",    "block_vz",  "block_wx", "block_wy", "block_wz"};
+  return names;
+}
+
+const std::vector<std::string>& ActionFeatures() {
+  static const std::vector<std::string> names{"act_x", "act_y", "act_z"};
+  return names;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+void PandaPushOptions::Validate() const {
+  const char* o = "PandaPushOptions";
+  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
+                     "in [1, 100000]");
+  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
+                     "control_period", control_period, "in (0, 1] s");
+  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
+  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
+                     "large enough for a physics step <= 5 ms (control_period / substeps; "
+                     "the contacts are unstable beyond)");
+  SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
+                     "action_scale", action_scale, "in (0, 0.2] m");
+  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
+                         tracking_omega * control_period / substeps < 0.5,
+                     o, "tracking_omega", tracking_omega,
+                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
+  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
+                     ik_damping, "in (0, 1)");
+  SECURE_CHECK_FIELD(Finite(initial_joint_noise) && initial_joint_noise >= 0 &&
+                         initial_joint_noise <= 0.2,
+                     o, "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
+  for (int i = 0; i < 3; ++i) {
+    SECURE_CHECK_FIELD(Finite(block_start[i]), o, "block_start", block_start[i], "finite");
+    SECURE_CHECK_FIELD(Finite(target[i]), o, "target", target[i], "finite");
+  }
+  SECURE_CHECK_FIELD(block_start[2] == 0.2, o, "block_start[2]", block_start[2],
+                     "0.2 (the block stands on the table: half its height)");
+  SECURE_CHECK_FIELD(Finite(success_radius) && success_radius > 0, o, "success_radius",
+                     success_radius, "> 0");
+  SECURE_CHECK_FIELD(Finite(topple_angle) && topple_angle > 0 && topple_angle < 1.5707963, o,
+                     "topple_angle", topple_angle, "in (0, pi/2) rad");
+  SECURE_CHECK_FIELD(Finite(table_friction) && table_friction > 0 && table_friction <= 5, o,
+                     "table_friction", table_friction, "in (0, 5]");
+  SECURE_CHECK_FIELD(Finite(pusher_friction) && pusher_friction > 0 && pusher_friction <= 5, o,
+                     "pusher_friction", pusher_friction, "in (0, 5]");
+}
+
+nlohmann::json PandaPushOptions::ToJson() const {
+  return {{"max_steps", max_steps},
+          {"control_period", control_period},
+          {"substeps", substeps},
+          {"action_scale", action_scale},
+          {"tracking_omega", tracking_omega},
+          {"ik_damping", ik_damping},
+          {"initial_joint_noise", initial_joint_noise},
+          {"block_start", block_start},
+          {"target", target},
+          {"success_radius", success_radius},
+          {"topple_angle", topple_angle},
+          {"table_friction", table_friction},
+          {"pusher_friction", pusher_friction}};
+}
+
+void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("max_steps", &max_steps)
+      .Field("control_period", &control_period)
+      .Field("substeps", &substeps)
+      .Field("action_scale", &action_scale)
+      .Field("tracking_omega", &tracking_omega)
+      .Field("ik_damping", &ik_damping)
+      .Field("initial_joint_noise", &initial_joint_noise)
+      .Field("block_start", &block_start)
+      .Field("target", &target)
+      .Field("success_radius", &success_radius)
+      .Field("topple_angle", &topple_angle)
+      .Field("table_friction", &table_friction)
+      .Field("pusher_friction", &pusher_friction)
+      .Apply(node, source);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The simulation
+
+struct PandaPushSim::Impl {
+  MujocoModel model;  // this simulation's copy (options applied)
+  MujocoData data;
+  int tcp = -1, block_body = -1, block_qpos = -1, block_dof = -1;
+  int block_geom = -1, pusher_geom = -1;
+  int arm_qpos[kArmJoints], arm_dof[kArmJoints];
+  double lower[kArmJoints], upper[kArmJoints];
+  // Scratch (allocated once).
+  std::vector<mjtNum> jacp, jacr, force_in, force_out;
+
+  explicit Impl(MujocoModel m) : model(std::move(m)), data(model) {}
+};
+
+PandaPushSim::PandaPushSim(const PandaPushOptions& options)
+    : options_((options.Validate(), options)) {
+  MujocoModel m = MujocoModel::Copy(PandaPushModel());
+  mjModel* raw = m.get();
+  raw->opt.timestep = options_.control_period / options_.substeps;
+  for (int p = 0; p < raw->npair; ++p) {
+    const std::string name = mj_id2name(raw, mjOBJ_PAIR, p) ? mj_id2name(raw, mjOBJ_PAIR, p) : "";
+    if (name == "block_table") {
+      raw->pair_friction[5 * p] = raw->pair_friction[5 * p + 1] = options_.table_friction;
+    } else if (name.rfind("block_", 0) == 0) {
+      raw->pair_friction[5 * p] = raw->pair_friction[5 * p + 1] = options_.pusher_friction;
+    }
+  }
+  impl_ = std::make_unique<Impl>(std::move(m));
+  Impl& s = *impl_;
+  const mjModel* mm = s.model.get();
+  auto id = [&](mjtObj type, const char* name) {
+    const int i = mj_name2id(mm, type, name);
+    SECURE_CHECK(i >= 0, "the Panda model has no " << name);
+    return i;
+  };
+  s.tcp = id(mjOBJ_SITE, "tcp");
+  s.block_body = id(mjOBJ_BODY, "block");
+  const int block_joint = id(mjOBJ_JOINT, "block");
+  s.block_qpos = mm->jnt_qposadr[block_joint];
+  s.block_dof = mm->jnt_dofadr[block_joint];
+  s.block_geom = id(mjOBJ_GEOM, "block");
+  s.pusher_geom = id(mjOBJ_GEOM, "pusher");
+  for (int i = 0; i < kArmJoints; ++i) {
+    const std::string name = "joint" + std::to_string(i + 1);
+    const int j = id(mjOBJ_JOINT, name.c_str());
+    s.arm_qpos[i] = mm->jnt_qposadr[j];
+    s.arm_dof[i] = mm->jnt_dofadr[j];
+    s.lower[i] = mm->jnt_range[2 * j];
+    s.upper[i] = mm->jnt_range[2 * j + 1];
+    SECURE_CHECK(s.arm_dof[i] == i, "the Panda model's arm joints must come first");
+  }
+  s.jacp.assign(3 * mm->nv, 0.0);
+  s.jacr.assign(3 * mm->nv, 0.0);
+  s.force_in.assign(mm->nv, 0.0);
+  s.force_out.assign(mm->nv, 0.0);
+  ResetTo(kNeutralJoints);
+}
+
+PandaPushSim::~PandaPushSim() = default;
+
+const void* PandaPushSim::model() const { return impl_->model.get(); }
+void* PandaPushSim::data() const { return impl_->data.get(); }
+double PandaPushSim::time() const { return impl_->data.get()->time; }
+
+namespace {
+// Positions and velocities of every body and site from qpos, qvel (no collision, no forces).
+void UpdateKinematics(const mjModel* m, mjData* d) {
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  mj_comVel(m, d);
+}
+}  // namespace
+
+void PandaPushSim::ResetTo(const std::array<double, kArmJoints>& joints) {
+  Impl& s = *impl_;
+  const mjModel* m = s.model.get();
+  mjData* d = s.data.get();
+  mj_resetData(m, d);
+  for (int i = 0; i < kArmJoints; ++i) d->qpos[s.arm_qpos[i]] = joints[i];
+  for (int k = 0; k < 3; ++k) d->qpos[s.block_qpos + k] = options_.block_start[k];
+  d->qpos[s.block_qpos + 3] = 1.0;
+  for (int k = 4; k < 7; ++k) d->qpos[s.block_qpos + k] = 0.0;
+  UpdateKinematics(m, d);
+}
+
+void PandaPushSim::Reset(Rng& rng) {
+  std::array<double, kArmJoints> q = kNeutralJoints;
+  for (double& v : q) v += options_.initial_joint_noise * (2.0 * rng.Uniform() - 1.0);
+  ResetTo(q);
+}
+
+namespace {
+// The tool site's Jacobian (6 x 7, arm columns) at the current kinematics.
+void ToolJacobian(const mjModel* m, mjData* d, int site, std::vector<mjtNum>& jacp,
+                  std::vector<mjtNum>& jacr, Eigen::Matrix<double, 6, kArmJoints>* j) {
+  mj_jacSite(m, d, jacp.data(), jacr.data(), site);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < kArmJoints; ++c) {
+      (*j)(r, c) = jacp[r * m->nv + c];
+      (*j)(r + 3, c) = jacr[r * m->nv + c];
+    }
+  }
+}
+
+// Position and orientation error of the tool site towards `target` (orientation: TargetRotation).
+Eigen::Matrix<double, 6, 1> ToolError(const mjData* d, int site, const Eigen::Vector3d& target) {
+  Eigen::Matrix<double, 6, 1> e;
+  const Eigen::Map<const Eigen::Vector3d> p(d->site_xpos + 3 * site);
+  const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->site_xmat + 9 * site);
+  e.head<3>() = target - p;
+  // Small-angle rotation vector from r to the target: 0.5 sum_i r_i x t_i over the columns.
+  const Eigen::Matrix3d& t = TargetRotation();
+  e.tail<3>() =
+      0.5 * (r.col(0).cross(t.col(0)) + r.col(1).cross(t.col(1)) + r.col(2).cross(t.col(2)));
+  return e;
+}
+
+void CheckWarnings(const mjData* d, const char* where) {
+  for (int i = 0; i < mjNWARNING; ++i) {
+    SECURE_CHECK(d->warning[i].number == 0,
+                 "panda-push: MuJoCo warning during " << where << ": " << mju_warningText(i, d->warning[i].lastinfo));
+  }
+}
+}  // namespace
+
+void PandaPushSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
+  Impl& s = *impl_;
+  const mjModel* m = s.model.get();
+  mjData* d = s.data.get();
+  Eigen::Vector3d a;
+  for (int k = 0; k < 3; ++k) {
+    SECURE_CHECK(std::isfinite(action[k]),
+                 "panda-push: action[" << k << "] = " << action[k] << " is not finite");
+    a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
+  }
+  // The end-effector target, and one IK step towards it (kinematics are current: every public
+  // call leaves them so).
+  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * s.tcp);
+  Eigen::Vector3d target = ee + options_.action_scale * a;
+  target.z() = std::max(target.z(), 0.0);
+  Eigen::Matrix<double, 6, kArmJoints> j;
+  ToolJacobian(m, d, s.tcp, s.jacp, s.jacr, &j);
+  Eigen::Matrix<double, kArmJoints, 1> q0, posture;
+  for (int i = 0; i < kArmJoints; ++i) {
+    q0[i] = d->qpos[s.arm_qpos[i]];
+    posture[i] = 0.1 * (kNeutralJoints[i] - q0[i]);
+  }
+  Eigen::Matrix<double, kArmJoints, 1> dq =
+      IkStep(j, ToolError(d, s.tcp, target), posture, options_.ik_damping);
+  for (int i = 0; i < kArmJoints; ++i) {
+    // Stay 0.01 rad inside the joint limits.
+    dq[i] = std::clamp(q0[i] + dq[i], s.lower[i] + 0.01, s.upper[i] - 0.01) - q0[i];
+  }
+  // Computed-torque tracking of the ramp q0 -> q0 + dq over the period.
+  const double kp = options_.tracking_omega * options_.tracking_omega;
+  const double kd = 2.0 * options_.tracking_omega;
+  const Eigen::Matrix<double, kArmJoints, 1> qd_ref = dq / options_.control_period;
+  for (int k = 1; k <= options_.substeps; ++k) {
+    mj_step1(m, d);
+    const double f = static_cast<double>(k) / options_.substeps;
+    std::fill(s.force_in.begin(), s.force_in.end(), 0.0);
+    for (int i = 0; i < kArmJoints; ++i) {
+      const double e = q0[i] + f * dq[i] - d->qpos[s.arm_qpos[i]];
+      const double ed = qd_ref[i] - d->qvel[s.arm_dof[i]];
+      s.force_in[s.arm_dof[i]] = kp * e + kd * ed;
+    }
+    mj_mulM(m, d, s.force_out.data(), s.force_in.data());
+    for (int i = 0; i < kArmJoints; ++i) {
+      const int dof = s.arm_dof[i];
+      d->ctrl[i] = s.force_out[dof] + d->qfrc_bias[dof] - d->qfrc_passive[dof];
+    }
+    mj_step2(m, d);
+  }
+  UpdateKinematics(m, d);
+  CheckWarnings(d, "a step");
+}
+
+void PandaPushSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
+  SECURE_CHECK(o.size() == kObservationDim,
+               "panda-push: observation has " << o.size() << " entries, expected 18");
+  const Impl& s = *impl_;
+  const mjModel* m = s.model.get();
+  mjData* d = s.data.get();
+  mjtNum v[6];
+  for (int k = 0; k < 3; ++k) o[kEePos + k] = static_cast<float>(d->site_xpos[3 * s.tcp + k]);
+  mj_objectVelocity(m, d, mjOBJ_SITE, s.tcp, v, 0);
+  for (int k = 0; k < 3; ++k) o[kEeVel + k] = static_cast<float>(v[3 + k]);
+  for (int k = 0; k < 3; ++k) o[kBlockPos + k] = static_cast<float>(d->xpos[3 * s.block_body + k]);
+  const mjtNum* r = d->xmat + 9 * s.block_body;  // row-major
+  o[kBlockEuler + 0] = static_cast<float>(std::atan2(r[7], r[8]));
+  o[kBlockEuler + 1] = static_cast<float>(std::asin(std::clamp(-r[6], -1.0, 1.0)));
+  o[kBlockEuler + 2] = static_cast<float>(std::atan2(r[3], r[0]));
+  mj_objectVelocity(m, d, mjOBJ_BODY, s.block_body, v, 0);
+  for (int k = 0; k < 3; ++k) o[kBlockVel + k] = static_cast<float>(v[3 + k]);
+  for (int k = 0; k < 3; ++k) o[kBlockAngVel + k] = static_cast<float>(v[k]);
+}
+
+double PandaPushSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) {
+  SECURE_CHECK(o.size() == kObservationDim,
+               "panda-push: observation has " << o.size() << " entries, expected 18");
+  for (int k = 0; k < kObservationDim; ++k) {
+    SECURE_CHECK(std::isfinite(o[k]), "panda-push: observation " << ObservationFeatures()[k]
+                                                                 << " = " << o[k]
+                                                                 << " is not finite");
+  }
+  Impl& s = *impl_;
+  const mjModel* m = s.model.get();
+  mjData* d = s.data.get();
+  ResetTo(kNeutralJoints);
+  // The arm: IK from the neutral posture to the end-effector position, hand down.
+  const Eigen::Vector3d target(o[kEePos], o[kEePos + 1], o[kEePos + 2]);
+  Eigen::Matrix<double, 6, kArmJoints> j;
+  Eigen::Matrix<double, 6, 1> e;
+  for (int it = 0; it < 200; ++it) {
+    e = ToolError(d, s.tcp, target);
+    if (e.norm() < 1e-7) break;
+    ToolJacobian(m, d, s.tcp, s.jacp, s.jacr, &j);
+    Eigen::Matrix<double, kArmJoints, 1> posture;
+    for (int i = 0; i < kArmJoints; ++i)
+      posture[i] = 0.1 * (kNeutralJoints[i] - d->qpos[s.arm_qpos[i]]);
+    const Eigen::Matrix<double, kArmJoints, 1> dq = IkStep(j, e, posture, 1e-3);
+    for (int i = 0; i < kArmJoints; ++i) {
+      double& q = d->qpos[s.arm_qpos[i]];
+      q = std::clamp(q + dq[i], s.lower[i] + 0.01, s.upper[i] - 0.01);
+    }
+    UpdateKinematics(m, d);
+  }
+  e = ToolError(d, s.tcp, target);
+  // Joint velocities that give the end-effector velocity (no rotation).
+  ToolJacobian(m, d, s.tcp, s.jacp, s.jacr, &j);
+  Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();
+  twist.head<3>() << o[kEeVel], o[kEeVel + 1], o[kEeVel + 2];
+  const Eigen::Matrix<double, kArmJoints, 1> qd =
+      IkStep(j, twist, Eigen::Matrix<double, kArmJoints, 1>::Zero(), 1e-3);
+  for (int i = 0; i < kArmJoints; ++i) d->qvel[s.arm_dof[i]] = qd[i];
+  // The block: R = Rz(yaw) Ry(pitch) Rx(roll).
+  for (int k = 0; k < 3; ++k) d->qpos[s.block_qpos + k] = o[kBlockPos + k];
+  const Eigen::Quaterniond q =
+      Eigen::AngleAxisd(o[kBlockEuler + 2], Eigen::Vector3d::UnitZ()) *
+      Eigen::AngleAxisd(o[kBlockEuler + 1], Eigen::Vector3d::UnitY()) *
+      Eigen::AngleAxisd(o[kBlockEuler + 0], Eigen::Vector3d::UnitX());
+  d->qpos[s.block_qpos + 3] = q.w();
+  d->qpos[s.block_qpos + 4] = q.x();
+  d->qpos[s.block_qpos + 5] = q.y();
+  d->qpos[s.block_qpos + 6] = q.z();
+  // Free joint: linear velocity in the world frame, angular velocity in the body frame.
+  const Eigen::Vector3d w_world(o[kBlockAngVel], o[kBlockAngVel + 1], o[kBlockAngVel + 2]);
+  const Eigen::Vector3d w_body = q.toRotationMatrix().transpose() * w_world;
+  for (int k = 0; k < 3; ++k) {
+    d->qvel[s.block_dof + k] = o[kBlockVel + k];
+    d->qvel[s.block_dof + 3 + k] = w_body[k];
+  }
+  UpdateKinematics(m, d);
+  return e.head<3>().norm();
+}
+
+double PandaPushSim::BlockTilt() const {
+  const mjData* d = impl_->data.get();
+  return std::acos(std::clamp(d->xmat[9 * impl_->block_body + 8], -1.0, 1.0));
+}
+
+double PandaPushSim::TargetDistance() const {
+  const mjData* d = impl_->data.get();
+  const mjtNum* p = d->xpos + 3 * impl_->block_body;
+  double sum = 0;
+  for (int k = 0; k < 3; ++k) sum += (p[k] - options_.target[k]) * (p[k] - options_.target[k]);
+  return std::sqrt(sum);
+}
+
+bool PandaPushSim::PusherTouchesBlock() const {
+  const Impl& s = *impl_;
+  const mjData* d = s.data.get();
+  for (int c = 0; c < d->ncon; ++c) {
+    const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
+    const int other = g1 == s.block_geom ? g2 : g2 == s.block_geom ? g1 : -1;
+    if (other == s.pusher_geom && d->contact[c].dist <= 0)
+      return true;
+  }
+  return false;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The shield's model
+
+void PandaPushShieldModelOptions::Validate() const {
+  const char* o = "PandaPushShieldModelOptions";
+  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain",
+                     position_gain, ">= 0");
+  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain",
+                     velocity_gain, ">= 0");
+  SECURE_CHECK_FIELD(Finite(contact_range) && contact_range >= 0, o, "contact_range",
+                     contact_range, ">= 0");
+}
+
+nlohmann::json PandaPushShieldModelOptions::ToJson() const {
+  return {{"position_gain", position_gain},
+          {"velocity_gain", velocity_gain},
+          {"contact_range", contact_range}};
+}
+
+void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("position_gain", &position_gain)
+      .Field("velocity_gain", &velocity_gain)
+      .Field("contact_range", &contact_range)
+      .Apply(node, source);
+}
+
+PandaPushShieldModel::PandaPushShieldModel(const PandaPushShieldModelOptions& options)
+    : options_((options.Validate(), options)) {}
+
+std::string PandaPushShieldModel::Describe() const {
+  std::ostringstream s;
+  s << "panda-push approximate model (ee += " << options_.position_gain
+    << " a, ee_vel = " << options_.velocity_gain << " a, block follows within "
+    << options_.contact_range << " m)";
+  return s.str();
+}
+
+void PandaPushShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                  const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                                  Eigen::Ref<Eigen::MatrixXf> next) const {
+  const float pg = static_cast<float>(options_.position_gain);
+  const float vg = static_cast<float>(options_.velocity_gain);
+  const bool pushing =
+      std::abs(state[kEePos] - state[kBlockPos]) < static_cast<float>(options_.contact_range);
+  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
+    next.col(c) = state;
+    for (int k = 0; k < 3; ++k) {
+      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
+      next(kEePos + k, c) += pg * a;
+      next(kEeVel + k, c) = vg * a;
+      if (pushing) next(kBlockPos + k, c) += pg * a;
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The environment
+
+PandaPushEnv::PandaPushEnv(const PandaPushOptions& options,
+                           const PandaPushShieldModelOptions& shield_model)
+    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {}
+
+PandaPushEnv::~PandaPushEnv() = default;
+
+std::vector<std::string> PandaPushEnv::ObservationFeatures() const {
+  return panda_push::ObservationFeatures();
+}
+std::vector<std::string> PandaPushEnv::ActionFeatures() const {
+  return panda_push::ActionFeatures();
+}
+
+std::string PandaPushEnv::Describe() const {
+  const PandaPushOptions& o = sim_.options();
+  std::ostringstream s;
+  s << "Panda Arm Push (MuJoCo " << mj_versionString() << "): push a 0.08 x 0.08 x 0.40 m, 1 kg "
+    << "block from (" << o.block_start[0] << ", " << o.block_start[1] << ") to within "
+    << o.success_radius << " m of (" << o.target[0] << ", " << o.target[1]
+    << ") without tilting it past " << o.topple_angle << " rad; " << o.max_steps << " steps of "
+    << o.control_period << " s, friction table " << o.table_friction << ", pusher "
+    << o.pusher_friction;
+  return s.str();
+}
+
+void PandaPushEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
+  SECURE_CHECK(observation.size() == kObservationDim,
+               "panda-push: observation has " << observation.size() << " entries, expected 18");
+  sim_.Reset(rng);
+  toppled_ = false;
+  sim_.Observe(observation);
+}
+
+StepOutcome PandaPushEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
+                               Eigen::Ref<Eigen::VectorXf> observation) {
+  SECURE_CHECK(action.size() == kActionDim,
+               "panda-push: action has " << action.size() << " entries, expected 3");
+  SECURE_CHECK(observation.size() == kObservationDim,
+               "panda-push: observation has " << observation.size() << " entries, expected 18");
+  sim_.Step(Eigen::Vector3f(action[0], action[1], action[2]));
+  sim_.Observe(observation);
+  StepOutcome outcome;
+  outcome.reached_goal = sim_.Succeeded();
+  outcome.collided = sim_.Toppled();
+  outcome.collisions = outcome.collided && !toppled_ ? 1 : 0;
+  toppled_ = outcome.collided;
+  return outcome;
+}
+
+bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
+                                Eigen::Ref<Eigen::VectorXf> action) const {
+  action.setZero();
+  return true;
+}
+
+std::unique_ptr<Environment> PandaPushEnv::Clone() const {
+  return std::make_unique<PandaPushEnv>(sim_.options(), shield_model_options_);
+}
+
+}  // namespace secure::domains::panda_push

@@ -1,0 +1,289 @@
+// The panda-push plug-in: the MuJoCo model, the arm controller, the task's outcomes, the
+// demonstrator, the data generators, the label check against physics and the shield's model.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <string>
+
+#include "domains/panda_push/data.h"
+#include "domains/panda_push/domain.h"
+#include "domains/panda_push/panda_push.h"
+#include "secure/common/error.h"
+
+namespace secure::domains::panda_push {
+namespace {
+
+// Scripted push: descend to `height`, approach, push along +x at `push` (action units) until the
+// block reaches the target or topples. Returns the outcome of the last step.
+struct PushResult {
+  bool success = false, toppled = false;
+  int steps = 0;
+  double max_tilt = 0;
+};
+PushResult Push(PandaPushSim& sim, double height, double push) {
+  Eigen::VectorXf o(kObservationDim);
+  sim.Observe(o);
+  PushResult r;
+  for (int t = 0; t < sim.options().max_steps; ++t) {
+    Eigen::Vector3f a = Eigen::Vector3f::Zero();
+    if (o[kEePos + 2] > height + 0.005 && o[kEePos] < 0.2) {
+      a[2] = -0.6f;
+    } else {
+      a[2] = static_cast<float>(std::clamp(0.5 * (height - o[kEePos + 2]) / 0.05, -1.0, 1.0));
+      a[0] = o[kBlockPos] - o[kEePos] > 0.11 ? 0.5f : static_cast<float>(push);
+    }
+    sim.Step(a);
+    sim.Observe(o);
+    ++r.steps;
+    r.max_tilt = std::max(r.max_tilt, sim.BlockTilt());
+    if (sim.Toppled()) {
+      r.toppled = true;
+      break;
+    }
+    if (sim.Succeeded()) {
+      r.success = true;
+      break;
+    }
+  }
+  return r;
+}
+
+TEST(PandaPushModel, StartsInTheReleasedPoseWithTheBlockUpright) {
+  PandaPushSim sim(PandaPushOptions{});
+  Eigen::VectorXf o(kObservationDim);
+  sim.Observe(o);
+  // The released initial end-effector position is about (0.0928, 0, 0.1190) (official-code-facts
+  // §2.2); our kinematics from the published DH parameters give the same within 2 mm.
+  EXPECT_NEAR(o[kEePos], 0.0928, 0.002);
+  EXPECT_NEAR(o[kEePos + 1], 0.0, 0.002);
+  EXPECT_NEAR(o[kEePos + 2], 0.119, 0.002);
+  EXPECT_NEAR(o[kBlockPos], 0.40, 1e-6);
+  EXPECT_NEAR(o[kBlockPos + 2], 0.20, 1e-6);
+  EXPECT_NEAR(sim.BlockTilt(), 0.0, 1e-9);
+  EXPECT_NEAR(sim.TargetDistance(), 0.15, 1e-6);
+  EXPECT_FALSE(sim.Succeeded());
+  EXPECT_FALSE(sim.Toppled());
+}
+
+TEST(PandaPushModel, HoldingStillKeepsEverythingInPlaceWithoutWarnings) {
+  // Step() throws on any MuJoCo warning; the arm holds its pose under gravity.
+  PandaPushSim sim(PandaPushOptions{});
+  Eigen::VectorXf before(kObservationDim), after(kObservationDim);
+  sim.Observe(before);
+  for (int t = 0; t < 50; ++t) sim.Step(Eigen::Vector3f::Zero());
+  sim.Observe(after);
+  EXPECT_LT((after.head<3>() - before.head<3>()).norm(), 0.005);
+  EXPECT_LT((after.segment<3>(kBlockPos) - before.segment<3>(kBlockPos)).norm(), 1e-3);
+  EXPECT_NEAR(sim.time(), 50 * 0.04, 1e-9);
+}
+
+TEST(PandaPushModel, TheEndEffectorTracksTheActionAndPointsDown) {
+  PandaPushSim sim(PandaPushOptions{});
+  Eigen::VectorXf o(kObservationDim), next(kObservationDim);
+  sim.Observe(o);
+  // Steps of a = (0.4, 0, -0.4): the target moves 0.02 m each way per step; from rest the
+  // controller lags the first step (about 2/3 of it), then keeps up.
+  for (int t = 0; t < 4; ++t) sim.Step(Eigen::Vector3f(0.4f, 0.0f, -0.4f));
+  sim.Observe(next);
+  EXPECT_NEAR(next[kEePos] - o[kEePos], 0.08, 0.012);
+  EXPECT_NEAR(next[kEePos + 2] - o[kEePos + 2], -0.08, 0.012);
+  EXPECT_NEAR(next[kEePos + 1] - o[kEePos + 1], 0.0, 0.002);
+  EXPECT_NEAR(next[kEeVel], 0.5, 0.1);  // 0.02 m per 0.04 s
+  // Actions are clipped to [-1, 1]: 5 and 1 give the same step.
+  PandaPushSim a(PandaPushOptions{}), b(PandaPushOptions{});
+  a.Step(Eigen::Vector3f(5.0f, 0.0f, 0.0f));
+  b.Step(Eigen::Vector3f(1.0f, 0.0f, 0.0f));
+  Eigen::VectorXf oa(kObservationDim), ob(kObservationDim);
+  a.Observe(oa);
+  b.Observe(ob);
+  EXPECT_EQ(oa, ob);
+  EXPECT_THROW(a.Step(Eigen::Vector3f(NAN, 0.0f, 0.0f)), Error);
+}
+
+TEST(PandaPushPhysics, ALowCarefulPushReachesTheTargetUpright) {
+  PandaPushSim sim(PandaPushOptions{});
+  const PushResult r = Push(sim, 0.03, 0.12);
+  EXPECT_TRUE(r.success) << "steps " << r.steps << " max tilt " << r.max_tilt;
+  EXPECT_LT(r.max_tilt, 0.1);
+}
+
+TEST(PandaPushPhysics, PushingTheUpperPartTopplesTheBlock) {
+  for (double height : {0.12, 0.2}) {
+    PandaPushSim sim(PandaPushOptions{});
+    const PushResult r = Push(sim, height, 0.12);
+    EXPECT_TRUE(r.toppled) << "height " << height << " max tilt " << r.max_tilt;
+    EXPECT_FALSE(r.success);
+  }
+}
+
+TEST(PandaPushPhysics, LowerTableFrictionLetsTheUpperPushSlideInstead) {
+  // The friction is what makes the labels true: on a slippery table the block slides.
+  PandaPushOptions o;
+  o.table_friction = 0.15;
+  PandaPushSim sim(o);
+  const PushResult r = Push(sim, 0.12, 0.12);
+  EXPECT_FALSE(r.toppled) << "max tilt " << r.max_tilt;
+}
+
+TEST(PandaPushSim, SetObservationReproducesTheObservation) {
+  PandaPushSim sim(PandaPushOptions{});
+  Eigen::VectorXf o(kObservationDim);
+  sim.Observe(o);
+  Eigen::VectorXf s = o;
+  s[kEePos] = 0.3f;
+  s[kEePos + 2] = 0.05f;
+  s[kEeVel] = 0.1f;
+  s[kBlockPos] = 0.42f;
+  s[kBlockEuler + 2] = 0.1f;  // yaw
+  s[kBlockVel] = 0.05f;
+  const double err = sim.SetObservation(s);
+  EXPECT_LT(err, 1e-5);
+  Eigen::VectorXf back(kObservationDim);
+  sim.Observe(back);
+  for (int k = 0; k < kObservationDim; ++k)
+    EXPECT_NEAR(back[k], s[k], 2e-3) << ObservationFeatures()[k];
+  Eigen::VectorXf bad = s;
+  bad[3] = INFINITY;
+  EXPECT_THROW(sim.SetObservation(bad), Error);
+}
+
+TEST(PandaPushEnv, EpisodesAreDeterministicPerRngAndReportOutcomes) {
+  PandaPushEnv env(PandaPushOptions{}, PandaPushShieldModelOptions{});
+  EXPECT_EQ(env.ObservationFeatures()[kBlockEuler + 1], "block_pitch");
+  EXPECT_EQ(env.max_steps(), 150);
+  Eigen::VectorXf o1(kObservationDim), o2(kObservationDim);
+  Rng r1(5), r2(5), r3(6);
+  env.Reset(r1, o1);
+  auto clone = env.Clone();
+  clone->Reset(r2, o2);
+  EXPECT_EQ(o1, o2);
+  clone->Reset(r3, o2);
+  EXPECT_NE(o1, o2);  // initial joint noise
+  EXPECT_THROW(env.Step(Eigen::VectorXf::Zero(2), o1), Error);
+}
+
+TEST(PandaPushShieldModel, IsTheReleasedApproximateModel) {
+  PandaPushShieldModel model(PandaPushShieldModelOptions{});
+  Eigen::VectorXf s = Eigen::VectorXf::Zero(kObservationDim);
+  s[kEePos] = 0.33f;
+  s[kBlockPos] = 0.41f;  // within contact_range: the block follows
+  Eigen::MatrixXf a(3, 2);
+  a << 0.5f, 3.0f, 0.0f, 0.0f, -0.2f, 0.0f;
+  Eigen::MatrixXf next(kObservationDim, 2);
+  model.Step(s, a, next);
+  EXPECT_NEAR(next(kEePos, 0), 0.33f + 0.05f * 0.5f, 1e-6);
+  EXPECT_NEAR(next(kEeVel, 0), 1.25f * 0.5f, 1e-6);
+  EXPECT_NEAR(next(kEePos + 2, 0), -0.05f * 0.2f, 1e-6);
+  EXPECT_NEAR(next(kBlockPos, 0), 0.41f + 0.05f * 0.5f, 1e-6);
+  EXPECT_NEAR(next(kEePos, 1), 0.33f + 0.05f, 1e-6);  // clipped to 1
+  s[kBlockPos] = 0.9f;  // out of range: the block stays
+  model.Step(s, a, next);
+  EXPECT_EQ(next(kBlockPos, 0), 0.9f);
+}
+
+TEST(PandaPushData, DemonstrationsSucceedAndNearDangerousStatesFollowTheirScenarios) {
+  PandaDemonstrationOptions d;
+  d.episodes = 3;
+  d.seed = 11;
+  const PandaDemonstrations demos = GeneratePandaDemonstrations(PandaPushOptions{}, d);
+  ASSERT_EQ(demos.trajectories.num_episodes(), 3);
+  ASSERT_EQ(demos.push_begin.size(), 3u);
+  for (long e = 0; e < 3; ++e) {
+    EXPECT_GT(demos.push_begin[e], demos.trajectories.episode_begin[e]);
+    EXPECT_LT(demos.push_begin[e], demos.trajectories.episode_begin[e + 1]);
+  }
+  Rng rng(3);
+  PandaNearDangerousOptions nd;
+  nd.count = 300;
+  std::vector<NearDangerousScenario> kinds;
+  const data::StateSet set = PandaNearDangerousStates(demos, nd, rng, &kinds);
+  ASSERT_EQ(set.size(), 300);
+  ASSERT_EQ(kinds.size(), 300u);
+  for (long i = 0; i < set.size(); ++i) {
+    const double z = set.states(kEePos + 2, i), vx = set.states(kEeVel, i);
+    switch (kinds[i]) {
+      case NearDangerousScenario::kUpper:
+        EXPECT_GE(z, nd.upper_z.lo - 1e-6);
+        break;
+      case NearDangerousScenario::kFastX:
+        EXPECT_LE(z, nd.low_z_max + 1e-6);
+        EXPECT_GE(vx, nd.fast_vx.lo - 1e-6);
+        break;
+      case NearDangerousScenario::kFastZ:
+        EXPECT_LE(set.states(kEeVel + 2, i), -nd.fast_vz.lo + 1e-6);
+        break;
+      case NearDangerousScenario::kBoth:
+        EXPECT_GE(z, nd.upper_z.lo - 1e-6);
+        EXPECT_GE(vx, nd.fast_vx.lo - 1e-6);
+        break;
+    }
+  }
+  PandaSafeOptions so;
+  so.count = 200;
+  const data::StateSet safe = PandaSafeStates(demos, so, rng);
+  EXPECT_EQ(safe.size(), 200);
+  EXPECT_EQ(safe.features, ObservationFeatures());
+}
+
+TEST(PandaPushData, LabelsHoldAgainstPhysics) {
+  // The label check on a small sample: near-dangerous states mostly topple when the push
+  // continues, the pushing part of the demonstrations does not.
+  PandaDemonstrationOptions d;
+  d.episodes = 2;
+  d.seed = 4;
+  const PandaDemonstrations demos = GeneratePandaDemonstrations(PandaPushOptions{}, d);
+  Rng rng(9);
+  PandaNearDangerousOptions nd;
+  nd.count = 40;
+  const data::StateSet near = PandaNearDangerousStates(demos, nd, rng);
+  data::StateSet pushing;
+  pushing.features = ObservationFeatures();
+  pushing.states = demos.trajectories.states.middleCols(
+      demos.push_begin[0] + 1, demos.trajectories.episode_begin[1] - demos.push_begin[0] - 1);
+  LabelCheckOptions lc;
+  const LabelCheckResult rn = CheckLabels(PandaPushOptions{}, near, lc);
+  const LabelCheckResult rs = CheckLabels(PandaPushOptions{}, pushing, lc);
+  EXPECT_GT(rn.TopplingFraction(), 0.6) << rn.ToJson().dump();
+  EXPECT_LT(rs.TopplingFraction(), 0.1) << rs.ToJson().dump();
+}
+
+TEST(PandaPushDomain, OptionsRejectBadValuesAndUnknownKeys) {
+  PandaPushDomain domain(experiments::Profile::kQuick);
+  EXPECT_NO_THROW(domain.Validate());
+  EXPECT_THROW(domain.ApplyYaml(YAML::Load("{task: {no_such_key: 1}}"), "cfg.yaml"), Error);
+  domain.ApplyYaml(YAML::Load("{task: {table_friction: -1}}"), "cfg.yaml");
+  try {
+    domain.Validate();
+    FAIL() << "negative friction accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("table_friction"), std::string::npos) << e.what();
+  }
+  PandaPushDomain released(experiments::Profile::kQuick);
+  released.ApplyYaml(YAML::Load("{barrier_data: released}"), "cfg.yaml");
+  EXPECT_THROW(released.Validate(), Error);  // no released_data_dir
+  EXPECT_THROW(released.ApplyYaml(YAML::Load("{barrier_data: other}"), "cfg.yaml"), Error);
+}
+
+TEST(PandaPushDomain, ReadsTheReleasedData) {
+  const std::string dir = std::string(SECURE_SHARED_DIR) + "/data/panda_push";
+  Rng rng(1);
+  PandaSafeOptions safe;
+  safe.count = 500;
+  ReleasedPandaData r;
+  try {
+    r = ReadReleasedPandaData(dir, safe, 1476, rng);
+  } catch (const Error& e) {
+    GTEST_SKIP() << "the released data is not available: " << e.what();
+  }
+  EXPECT_EQ(r.demonstrations.num_episodes(), 2);
+  EXPECT_EQ(r.demonstrations.num_steps(), 246);
+  EXPECT_EQ(r.safe.size(), 500);
+  EXPECT_EQ(r.near_dangerous.size(), 1476);
+  for (long i = 0; i < r.near_dangerous.size(); ++i)
+    EXPECT_FALSE(r.near_dangerous.states.col(i).isZero(0.0f));
+  EXPECT_THROW(ReadReleasedPandaData("/nonexistent", safe, 10, rng), Error);
+}
+
+}  // namespace
+}  // namespace secure::domains::panda_push
