@@ -426,6 +426,33 @@ void WriteFileAtomicallyForTest(const std::string& path, std::string_view bytes,
 }
 }  // namespace internal
 
+ScratchFile::ScratchFile(const std::string& path) {
+  SECURE_CHECK(!path.empty() && path.back() != '/',
+               "cannot write '" << path << "': not a file name");
+  InstallTemporaryFileCleanupHandlers();
+  RemoveStaleTemporaries(path);
+  path_ = TempPathFor(path);
+  slot_ = RegisterTemporary(path_);
+  const int flags = O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC;
+  int fd = ::open(path_.c_str(), flags, 0666);
+  if (fd < 0 && errno == EEXIST) {  // left by an earlier process that had our pid
+    ::unlink(path_.c_str());
+    fd = ::open(path_.c_str(), flags, 0666);
+  }
+  if (fd < 0) {
+    const int error = errno;
+    UnregisterTemporary(slot_);
+    SECURE_THROW("cannot write '" << path << "': cannot create temporary file '" << path_
+                                  << "': " << std::strerror(error));
+  }
+  ::close(fd);
+}
+
+ScratchFile::~ScratchFile() {
+  ::unlink(path_.c_str());
+  UnregisterTemporary(slot_);
+}
+
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   SECURE_CHECK(in.good(), "cannot open '" << path << "': " << std::strerror(errno));

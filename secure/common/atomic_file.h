@@ -44,6 +44,26 @@ namespace secure {
 /// Writes `bytes` to `path` as described above. Throws secure::Error naming the path on failure.
 void WriteFileAtomically(const std::string& path, std::string_view bytes);
 
+/// A scratch file next to `path` for content that is written by other means (e.g. by a child
+/// process such as an encoder) before WriteFileAtomically installs it at `path`: named
+/// "<path>.tmp-<pid>-<n>" like the temporaries above (so a later write of `path` sweeps it if
+/// this process was killed), created empty and exclusively, registered for the SIGINT/SIGTERM
+/// cleanup, and removed by the destructor.
+class ScratchFile {
+ public:
+  /// @throws secure::Error naming `path` if the file cannot be created (e.g. its directory does
+  /// not exist or is not writable).
+  explicit ScratchFile(const std::string& path);
+  ~ScratchFile();
+  ScratchFile(const ScratchFile&) = delete;
+  ScratchFile& operator=(const ScratchFile&) = delete;
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  int slot_ = -1;
+};
+
 /// Reads a whole file. Throws secure::Error naming the path if it cannot be opened or read.
 std::string ReadFile(const std::string& path);
 

@@ -112,6 +112,27 @@ TEST_F(AtomicFileTest, WriteIntoAMissingDirectoryThrowsNamingThePath) {
   EXPECT_TRUE(Entries().empty());
 }
 
+TEST_F(AtomicFileTest, AScratchFileLivesNextToThePathUntilDestroyed) {
+  const std::string path = (dir_ / "video.mp4").string();
+  std::string scratch_path;
+  {
+    ScratchFile scratch(path);
+    scratch_path = scratch.path();
+    EXPECT_EQ(scratch_path.rfind(path + ".tmp-" + std::to_string(::getpid()) + "-", 0), 0u)
+        << scratch_path;
+    EXPECT_TRUE(fs::is_regular_file(scratch_path));
+    EXPECT_EQ(fs::file_size(scratch_path), 0u);
+    ScratchFile other(path);  // a second one has another name
+    EXPECT_NE(other.path(), scratch_path);
+    // Installing content read from it at the path leaves the scratch file to the destructor.
+    WriteFileAtomically(path, "content");
+  }
+  EXPECT_FALSE(fs::exists(scratch_path));
+  EXPECT_EQ(Entries(), std::vector<std::string>{"video.mp4"});
+  const std::string missing = (dir_ / "no_such_dir" / "v.mp4").string();
+  EXPECT_HAS(ErrorOf([&] { ScratchFile s(missing); }), "cannot write '" + missing + "'");
+}
+
 TEST_F(AtomicFileTest, FailedWriteLeavesThePreviousFileAndNoTemporaries) {
   // A directory is refused before anything is written: no temporary, the directory intact.
   const fs::path target = dir_ / "occupied";
