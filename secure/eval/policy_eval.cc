@@ -92,6 +92,8 @@ EpisodeRunner::EpisodeRunner(domains::Environment& env, EpisodeRunnerOptions opt
       backup_(env.action_dim()) {
   SECURE_CHECK(options_.episode_seed != nullptr,
                "EpisodeRunnerOptions::episode_seed = null, must be a function");
+  SECURE_CHECK(options_.first_episode >= 0, "EpisodeRunnerOptions::first_episode = "
+                                                << options_.first_episode << ", must be >= 0");
 }
 
 std::uint64_t EpisodeSeed(std::uint64_t seed, long episode) {
@@ -134,7 +136,8 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
   long steps_to_goal_sum = 0;
   long iterations_sum = 0;
   const Eigen::VectorXf& sigma = policy.sigma();
-  for (long episode = 0; episode < episodes; ++episode) {
+  for (long episode = options_.first_episode; episode < options_.first_episode + episodes;
+       ++episode) {
     Rng rng(options_.episode_seed(seed, episode));
     env_.Reset(rng, observation_);
     if (shield != nullptr) shield->Seed(rng.NextU64());
@@ -195,6 +198,28 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
   return result;
 }
 
+SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& models,
+                     const shield::ShieldOptions& shield_options, long episodes,
+                     std::uint64_t seed, StepObserver* observer) {
+  const std::string name = ToString(kMethodNames, method);
+  const policy::GaussianPolicy* policy = UsesBcPolicy(method)      ? models.bc
+                                         : UsesJointPolicy(method) ? models.joint
+                                                                   : models.airl;
+  SECURE_CHECK(policy != nullptr, "method '" << name << "' needs a "
+                                             << (UsesBcPolicy(method)      ? "BC"
+                                                 : UsesJointPolicy(method) ? "joint"
+                                                                           : "AIRL")
+                                             << " policy, and none was given");
+  policy::PolicyEvaluator evaluator(*policy);
+  if (!IsShielded(method)) return runner.Run(evaluator, nullptr, episodes, seed, observer);
+  SECURE_CHECK(models.make_barrier != nullptr,
+               "method '" << name << "' needs a barrier, and none was given");
+  std::unique_ptr<cbf::Barrier> barrier = models.make_barrier();
+  shield::Shield shield(ShieldOptionsFor(method, shield_options), *barrier,
+                        runner.environment().ShieldModel());
+  return runner.Run(evaluator, &shield, episodes, seed, observer);
+}
+
 std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
                                              const std::vector<Method>& methods,
                                              const SeedModels& models,
@@ -204,26 +229,7 @@ std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
   EpisodeRunner runner(*local_env);
   std::map<Method, SeedResult> results;
   for (Method method : methods) {
-    const std::string name = ToString(kMethodNames, method);
-    const policy::GaussianPolicy* policy = UsesBcPolicy(method)      ? models.bc
-                                           : UsesJointPolicy(method) ? models.joint
-                                                                     : models.airl;
-    SECURE_CHECK(policy != nullptr, "method '" << name << "' needs a "
-                                               << (UsesBcPolicy(method)      ? "BC"
-                                                   : UsesJointPolicy(method) ? "joint"
-                                                                             : "AIRL")
-                                               << " policy, and none was given");
-    policy::PolicyEvaluator evaluator(*policy);
-    if (!IsShielded(method)) {
-      results[method] = runner.Run(evaluator, nullptr, episodes, seed);
-      continue;
-    }
-    SECURE_CHECK(models.make_barrier != nullptr,
-                 "method '" << name << "' needs a barrier, and none was given");
-    std::unique_ptr<cbf::Barrier> barrier = models.make_barrier();
-    shield::Shield shield(ShieldOptionsFor(method, shield_options), *barrier,
-                          local_env->ShieldModel());
-    results[method] = runner.Run(evaluator, &shield, episodes, seed);
+    results[method] = RunMethod(runner, method, models, shield_options, episodes, seed);
   }
   return results;
 }

@@ -198,6 +198,11 @@ struct EpisodeRunnerOptions {
   // The stream of episode i of a run with seed s is episode_seed(s, i). EpisodeSeed by default;
   // a harness with published figures may keep the streams it was measured with.
   std::uint64_t (*episode_seed)(std::uint64_t seed, long episode) = &EpisodeSeed;
+  // The index of the first episode Run() plays: a run of N episodes plays episodes
+  // first_episode, ..., first_episode + N - 1 (each from its own stream episode_seed(seed, i),
+  // and so reported to the observer), so one episode of an evaluation can be replayed alone
+  // (`secure render`). 0 by default: the evaluation's episodes.
+  long first_episode = 0;
 };
 
 /// Runs episodes in one environment (not thread-safe; one runner per thread).
@@ -223,6 +228,8 @@ class EpisodeRunner {
                  std::uint64_t seed, StepObserver* observer = nullptr);
 
   const EpisodeRunnerOptions& options() const { return options_; }
+  /// The environment the runner steps.
+  domains::Environment& environment() const { return env_; }
 
  private:
   domains::Environment& env_;
@@ -239,8 +246,17 @@ struct SeedModels {
   std::function<std::unique_ptr<cbf::Barrier>()> make_barrier;
 };
 
+/// Runs `method` in `runner` for `episodes` episodes with evaluation seed `seed`, exactly as
+/// EvaluateMethods() runs each of its methods: a PolicyEvaluator of the method's policy, and for a
+/// shielded method a shield with ShieldOptionsFor(method, shield_options) over a barrier from
+/// models.make_barrier() and the runner's environment's ShieldModel(). `observer` as in
+/// EpisodeRunner::Run(). @throws secure::Error if the method's model is missing.
+SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& models,
+                     const shield::ShieldOptions& shield_options, long episodes,
+                     std::uint64_t seed, StepObserver* observer = nullptr);
+
 /// Runs every method of `methods` for `episodes` episodes with evaluation seed `seed` in a clone
-/// of `env`. Shielded methods use ShieldOptionsFor(method, shield_options) and the environment's
+/// of `env` (RunMethod for each). Shielded methods use ShieldOptionsFor(method, shield_options) and the environment's
 /// ShieldModel(). @throws secure::Error if a method's model is missing.
 std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
                                              const std::vector<Method>& methods,

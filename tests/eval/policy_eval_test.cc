@@ -9,6 +9,7 @@
 
 #include "secure/cbf/barrier.h"
 #include "domains/double_integrator/reach_avoid.h"
+#include "tests/eval/pd_policy.h"
 #include "tests/test_util.h"
 
 namespace secure::eval {
@@ -17,30 +18,7 @@ namespace {
 namespace di = domains::double_integrator;
 using test::ErrorOf;
 
-// A linear policy: the PD controller a = kp (goal - p) - kd v straight at the goal (through the
-// obstacle), with the given noise.
-policy::GaussianPolicy PdPolicy(const di::ReachAvoidOptions& task, double sigma) {
-  policy::GaussianPolicy p;
-  p.mean.spec.input_dim = 4;
-  p.mean.spec.output_dim = 2;
-  nn::DenseLayer layer;
-  const float kp = 0.25f, kd = 1.0f;
-  layer.weight = Eigen::MatrixXf::Zero(2, 4);
-  layer.weight(0, 0) = -kp;
-  layer.weight(1, 1) = -kp;
-  layer.weight(0, 2) = -kd;
-  layer.weight(1, 3) = -kd;
-  layer.bias = Eigen::Vector2f(kp * static_cast<float>(task.goal_x),
-                               kp * static_cast<float>(task.goal_y));
-  p.mean.layers.push_back(layer);
-  p.input = nn::Normalizer::Identity(4);
-  p.log_std = Eigen::VectorXf::Constant(2, static_cast<float>(std::log(sigma)));
-  p.observation_features = di::StateFeatures();
-  const di::ReachAvoidEnv env(task);
-  p.action_features = env.ActionFeatures();
-  p.Validate();
-  return p;
-}
+using test::PdPolicy;
 
 TEST(PolicyEvalTest, ShieldWithGroundTruthPreventsTheCollisionsOfTheUnshieldedPolicy) {
   const di::ReachAvoidOptions task;

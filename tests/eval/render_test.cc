@@ -1,0 +1,155 @@
+// Rendering one evaluation episode (secure render): the episode is the one the evaluation plays
+// for that seed and index, with a frame after Reset() and after every step.
+#include "secure/eval/render.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <memory>
+#include <vector>
+
+#include "domains/double_integrator/ground_truth_barrier.h"
+#include "domains/double_integrator/reach_avoid.h"
+#include "tests/eval/pd_policy.h"
+#include "tests/test_util.h"
+
+namespace secure::eval {
+namespace {
+
+namespace di = domains::double_integrator;
+using test::ErrorOf;
+
+// The reach-avoid task with a "renderer": the frame's first bytes are the current observation's
+// floats, the rest a constant; so a frame says which state it shows.
+class RenderableEnv final : public domains::Environment {
+ public:
+  explicit RenderableEnv(std::unique_ptr<domains::Environment> inner)
+      : inner_(std::move(inner)), observation_(inner_->observation_dim()) {}
+  int observation_dim() const override { return inner_->observation_dim(); }
+  int action_dim() const override { return inner_->action_dim(); }
+  std::vector<std::string> ObservationFeatures() const override {
+    return inner_->ObservationFeatures();
+  }
+  std::vector<std::string> ActionFeatures() const override { return inner_->ActionFeatures(); }
+  int max_steps() const override { return inner_->max_steps(); }
+  std::string Describe() const override { return "renderable " + inner_->Describe(); }
+  void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override {
+    inner_->Reset(rng, observation);
+    observation_ = observation;
+  }
+  domains::StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
+                            Eigen::Ref<Eigen::VectorXf> observation) override {
+    const domains::StepOutcome outcome = inner_->Step(action, observation);
+    observation_ = observation;
+    return outcome;
+  }
+  const domains::DynamicsModel& ShieldModel() const override { return inner_->ShieldModel(); }
+  bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
+                    Eigen::Ref<Eigen::VectorXf> action) const override {
+    return inner_->BackupAction(observation, action);
+  }
+  std::unique_ptr<Environment> Clone() const override {
+    return std::make_unique<RenderableEnv>(inner_->Clone());
+  }
+  bool CanRender() const override { return true; }
+  void Render(int width, int height, domains::Frame* frame) override {
+    frame->width = width;
+    frame->height = height;
+    frame->rgb.assign(3 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height), 7);
+    std::memcpy(frame->rgb.data(), observation_.data(), sizeof(float) * observation_.size());
+  }
+
+ private:
+  std::unique_ptr<domains::Environment> inner_;
+  Eigen::VectorXf observation_;
+};
+
+Eigen::VectorXf Decode(const domains::Frame& frame, int dim) {
+  Eigen::VectorXf v(dim);
+  std::memcpy(v.data(), frame.rgb.data(), sizeof(float) * dim);
+  return v;
+}
+
+// What the evaluation saw in one of its episodes.
+class EpisodeRecorder final : public StepObserver {
+ public:
+  explicit EpisodeRecorder(long episode) : episode_(episode) {}
+  void OnEpisodeStart(long episode, const Eigen::VectorXf& observation) override {
+    if (episode == episode_) observations.push_back(observation);
+  }
+  void OnStep(const StepView& step) override {
+    if (step.episode != episode_) return;
+    observations.push_back(step.observation);
+    success = success || step.outcome.reached_goal;
+    dangerous = dangerous || step.outcome.collided;
+  }
+  std::vector<Eigen::VectorXf> observations;
+  bool success = false, dangerous = false;
+
+ private:
+  long episode_;
+};
+
+TEST(RenderEpisodeTest, DrawsTheEpisodeTheEvaluationPlays) {
+  const di::ReachAvoidOptions task;
+  const policy::GaussianPolicy pd = test::PdPolicy(task, 0.4);
+  SeedModels models;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
+  const std::uint64_t seed = EvaluationSeed(5);
+  const long episode = 3;
+  bool saw_dangerous = false;
+  for (Method method : {Method::kAirl, Method::kSecure}) {
+    SCOPED_TRACE(ToString(kMethodNames, method));
+    // The evaluation: episodes 0..5, recording episode 3.
+    RenderableEnv evaluated(std::make_unique<di::ReachAvoidEnv>(task));
+    EpisodeRunner runner(evaluated);
+    EpisodeRecorder recorder(episode);
+    RunMethod(runner, method, models, shield::ShieldOptions{}, 6, seed, &recorder);
+    ASSERT_GT(recorder.observations.size(), 1u);
+
+    RenderableEnv env(std::make_unique<di::ReachAvoidEnv>(task));
+    std::vector<domains::Frame> frames;
+    const RenderedEpisode r =
+        RenderEpisode(env, method, models, shield::ShieldOptions{}, seed, episode, 6, 4,
+                      [&](const domains::Frame& f) { frames.push_back(f); });
+    ASSERT_EQ(frames.size(), recorder.observations.size());
+    EXPECT_EQ(r.frames, static_cast<long>(frames.size()));
+    EXPECT_EQ(r.steps, r.frames - 1);
+    EXPECT_EQ(r.success, recorder.success);
+    EXPECT_EQ(r.dangerous, recorder.dangerous);
+    saw_dangerous = saw_dangerous || r.dangerous;
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      EXPECT_EQ(frames[i].width, 6);
+      EXPECT_EQ(frames[i].height, 4);
+      EXPECT_EQ(Decode(frames[i], 4), recorder.observations[i]) << "frame " << i;
+    }
+  }
+  EXPECT_TRUE(saw_dangerous);  // the unshielded straight path crosses the obstacle
+}
+
+TEST(RenderEpisodeTest, AnEnvironmentThatCannotRenderIsAnError) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  EXPECT_FALSE(env.CanRender());
+  domains::Frame frame;
+  EXPECT_HAS(ErrorOf([&] { env.Render(4, 4, &frame); }), "cannot render");
+  const policy::GaussianPolicy pd = test::PdPolicy(task, 0.4);
+  SeedModels models;
+  models.airl = &pd;
+  EXPECT_HAS(ErrorOf([&] {
+               RenderEpisode(env, Method::kAirl, models, shield::ShieldOptions{}, 1, 0, 4, 4,
+                             [](const domains::Frame&) {});
+             }),
+             "cannot render (no offscreen renderer)");
+}
+
+TEST(EpisodeRunnerTest, ANegativeFirstEpisodeIsAnError) {
+  di::ReachAvoidEnv env(di::ReachAvoidOptions{});
+  EpisodeRunnerOptions options;
+  options.first_episode = -1;
+  EXPECT_HAS(ErrorOf([&] { EpisodeRunner runner(env, options); }), "first_episode = -1");
+}
+
+}  // namespace
+}  // namespace secure::eval
