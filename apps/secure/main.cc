@@ -1,5 +1,6 @@
 // secure: learn safe behaviour from demonstrations (SECURE, CBF shielding). main() only parses
-// and dispatches; see cbf_commands.cc, shield_commands.cc and pipeline_commands.cc.
+// and dispatches; see cbf_commands.cc, shield_commands.cc, pipeline_commands.cc, render_command.cc
+// and experiment_commands.cc.
 #include <CLI/CLI.hpp>
 #include <iostream>
 #include <new>
@@ -23,6 +24,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterCbfCommands(app, config);
     secure::cli::RegisterShieldCommands(app, config);
     secure::cli::RegisterPipelineCommands(app, config);
+    secure::cli::RegisterRenderCommand(app, config);
     secure::cli::RegisterExperimentCommands(app, config);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

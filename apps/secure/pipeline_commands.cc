@@ -11,6 +11,7 @@
 
 #include "cli_common.h"
 #include "commands.h"
+#include "eval_models.h"
 #include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
@@ -323,19 +324,11 @@ struct EvalCommand {
     cmd->callback([this] { Run(); });
   }
 
-  std::string ModelPath(const std::string& explicit_path, const std::string& name,
-                        std::uint64_t seed) const {
-    if (!explicit_path.empty() || run_dir.empty()) return explicit_path;
-    return run_dir + "/seed-" + std::to_string(seed) + "/" + name + ".model";
-  }
-
   void Run() {
     const std::unique_ptr<experiments::Domain> d =
         experiments::DomainRegistry::Global().Make(domain);
     // The shield: the domain's experiment preset, with the flags given on top.
-    shield_flags.ApplyTo(&shield);
-    shield::ShieldOptions shield_options = d->Preset().shield;
-    shield_flags.OverlayGiven(shield, &shield_options);
+    const shield::ShieldOptions shield_options = DomainShieldOptions(*d, shield_flags, &shield);
     CheckRange("--seeds", seeds, 1, kMaxSeeds);
     CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     SECURE_CHECK(std::isfinite(tost_bound) && tost_bound > 0,
@@ -359,47 +352,11 @@ struct EvalCommand {
     eval::Evaluation evaluation(eval::EvaluationOptions{tost_bound, 0.05});
     for (int k = 0; k < seeds; ++k) {
       const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(k);
-      std::optional<policy::GaussianPolicy> bc, airl, joint;
-      std::optional<cbf::BarrierNet> net;
-      std::optional<cbf::CarBarrierNet> per_obstacle;
-      bool need_bc = false, need_airl = false, need_joint = false, need_barrier = false;
-      for (eval::Method m : list) {
-        if (eval::UsesBcPolicy(m)) {
-          need_bc = true;
-        } else if (eval::UsesJointPolicy(m)) {
-          need_joint = true;
-        } else {
-          need_airl = true;
-        }
-        need_barrier = need_barrier || eval::IsShielded(m);
-      }
-      if (need_bc) bc = LoadPolicy(ModelPath(bc_path, "bc", seed), *env, domain);
-      if (need_airl) airl = LoadPolicy(ModelPath(airl_path, "airl", seed), *env, domain);
-      if (need_joint) joint = LoadPolicy(ModelPath(joint_path, "joint", seed), *env, domain);
-      eval::SeedModels models;
-      models.bc = bc ? &*bc : nullptr;
-      models.airl = airl ? &*airl : nullptr;
-      models.joint = joint ? &*joint : nullptr;
-      if (need_barrier) {
-        const std::string path = ModelPath(barrier_path, "barrier", seed);
-        SECURE_CHECK(!path.empty(), "the shielded methods need --barrier or --run");
-        const std::string where = "the " + domain + " domain";
-        if (path == "ground-truth") {
-          SECURE_CHECK(d->MakeGroundTruth() != nullptr,
-                       "--barrier ground-truth: the " << domain << " domain has no ground truth");
-          models.make_barrier = [&d] { return d->MakeGroundTruth(); };
-        } else if (nn::ReadModelFile(path).kind == cbf::kCarBarrierModelKind) {
-          per_obstacle = cbf::CarBarrierNet::Load(path);
-          per_obstacle->CheckFeatures(env->ObservationFeatures(), where, path);
-          models.make_barrier = [&per_obstacle] { return per_obstacle->MakeEvaluator(256); };
-        } else {
-          net = cbf::BarrierNet::Load(path);
-          net->CheckFeatures(env->ObservationFeatures(), where, path);
-          models.make_barrier = [&net] { return net->MakeEvaluator(256); };
-        }
-      }
-      const auto results = eval::EvaluateMethods(*env, list, models, shield_options, episodes,
-                                                 eval::EvaluationSeed(seed));
+      const SeedModelSet models(
+          ModelSources{run_dir, bc_path, airl_path, joint_path, barrier_path}, *d, domain, *env,
+          list, seed);
+      const auto results = eval::EvaluateMethods(*env, list, models.models(), shield_options,
+                                                 episodes, eval::EvaluationSeed(seed));
       for (const auto& [method, r] : results) evaluation.Add(method, r);
       if (!json) std::cerr << "seed " << seed << " evaluated\n";
     }
@@ -412,16 +369,6 @@ struct EvalCommand {
     } else {
       std::cout << evaluation.Table();
     }
-  }
-
-  static policy::GaussianPolicy LoadPolicy(const std::string& path,
-                                           const domains::Environment& env,
-                                           const std::string& domain) {
-    policy::GaussianPolicy p = policy::GaussianPolicy::Load(path);
-    SECURE_CHECK(p.observation_features == env.ObservationFeatures() &&
-                     p.action_features == env.ActionFeatures(),
-                 path << ": the policy's features do not match the " << domain << " domain's");
-    return p;
   }
 };
 

@@ -913,4 +913,25 @@ TEST(CliHardeningTest, AConfigKeyThatIsNotAPlainNameIsAnError) {
   EXPECT_HAS(r.err, config + ":2: a key must be a plain name, not a sequence");
 }
 
+// secure render: a domain without an offscreen renderer is refused before anything is loaded or
+// written (the models named do not exist; no output file appears).
+TEST(CliTest, RenderOfADomainThatCannotRenderIsAnError) {
+  const std::string out = (TempDir() / "never.mp4").string();
+  const std::string frames = (TempDir() / "never_frames").string();
+  for (const char* domain : {"double-integrator", "derby"}) {
+    const Result r = RunCli(std::string("render --domain ") + domain +
+                            " --method secure --policy /nonexistent/airl.model --barrier "
+                            "/nonexistent/barrier.model --out " + out + " --frames-dir " + frames);
+    ExpectOneErrorLine(r, std::string("the ") + domain +
+                              " domain cannot render (no offscreen renderer)");
+  }
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(frames));
+  const Result help = RunCli("render --help");
+  EXPECT_EQ(help.exit_code, 0);
+  for (const char* flag : {"--domain", "--method", "--run", "--seed", "--policy", "--barrier",
+                           "--episode", "--out", "--frames-dir", "--width", "--height", "--fps"})
+    EXPECT_HAS(help.out, flag);
+}
+
 }  // namespace

@@ -1,0 +1,72 @@
+#include "eval_models.h"
+
+#include "secure/common/error.h"
+#include "secure/nn/model_file.h"
+
+namespace secure::cli {
+
+std::string ModelSources::Path(const std::string& explicit_path, const std::string& name,
+                               std::uint64_t seed) const {
+  if (!explicit_path.empty() || run_dir.empty()) return explicit_path;
+  return run_dir + "/seed-" + std::to_string(seed) + "/" + name + ".model";
+}
+
+policy::GaussianPolicy LoadDomainPolicy(const std::string& path, const domains::Environment& env,
+                                        const std::string& domain) {
+  policy::GaussianPolicy p = policy::GaussianPolicy::Load(path);
+  SECURE_CHECK(p.observation_features == env.ObservationFeatures() &&
+                   p.action_features == env.ActionFeatures(),
+               path << ": the policy's features do not match the " << domain << " domain's");
+  return p;
+}
+
+SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domain& domain,
+                           const std::string& domain_name, const domains::Environment& env,
+                           const std::vector<eval::Method>& methods, std::uint64_t seed) {
+  bool need_bc = false, need_airl = false, need_joint = false, need_barrier = false;
+  for (eval::Method m : methods) {
+    if (eval::UsesBcPolicy(m)) {
+      need_bc = true;
+    } else if (eval::UsesJointPolicy(m)) {
+      need_joint = true;
+    } else {
+      need_airl = true;
+    }
+    need_barrier = need_barrier || eval::IsShielded(m);
+  }
+  if (need_bc) bc_ = LoadDomainPolicy(sources.Path(sources.bc, "bc", seed), env, domain_name);
+  if (need_airl)
+    airl_ = LoadDomainPolicy(sources.Path(sources.airl, "airl", seed), env, domain_name);
+  if (need_joint)
+    joint_ = LoadDomainPolicy(sources.Path(sources.joint, "joint", seed), env, domain_name);
+  models_.bc = bc_ ? &*bc_ : nullptr;
+  models_.airl = airl_ ? &*airl_ : nullptr;
+  models_.joint = joint_ ? &*joint_ : nullptr;
+  if (!need_barrier) return;
+  const std::string path = sources.Path(sources.barrier, "barrier", seed);
+  SECURE_CHECK(!path.empty(), "the shielded methods need --barrier or --run");
+  const std::string where = "the " + domain_name + " domain";
+  if (path == "ground-truth") {
+    SECURE_CHECK(domain.MakeGroundTruth() != nullptr,
+                 "--barrier ground-truth: the " << domain_name << " domain has no ground truth");
+    models_.make_barrier = [&domain] { return domain.MakeGroundTruth(); };
+  } else if (nn::ReadModelFile(path).kind == cbf::kCarBarrierModelKind) {
+    per_obstacle_ = cbf::CarBarrierNet::Load(path);
+    per_obstacle_->CheckFeatures(env.ObservationFeatures(), where, path);
+    models_.make_barrier = [this] { return per_obstacle_->MakeEvaluator(256); };
+  } else {
+    net_ = cbf::BarrierNet::Load(path);
+    net_->CheckFeatures(env.ObservationFeatures(), where, path);
+    models_.make_barrier = [this] { return net_->MakeEvaluator(256); };
+  }
+}
+
+shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain,
+                                          const ShieldFlags& flags, shield::ShieldOptions* parsed) {
+  flags.ApplyTo(parsed);
+  shield::ShieldOptions options = domain.Preset().shield;
+  flags.OverlayGiven(*parsed, &options);
+  return options;
+}
+
+}  // namespace secure::cli

@@ -1,0 +1,63 @@
+#pragma once
+// What `secure eval` and `secure render` share: where a seed's models come from (--run DIR or
+// explicit files), loading and checking them against the domain, and the shield options (the
+// domain's preset with the shield flags given on top).
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cli_common.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
+#include "secure/domains/environment.h"
+#include "secure/eval/policy_eval.h"
+#include "secure/experiments/experiment.h"
+#include "secure/policy/gaussian_policy.h"
+
+namespace secure::cli {
+
+/// Where the models come from: a run directory (seed-<k>/{bc,airl,joint,barrier}.model per
+/// training seed, as `secure demo --out` and `secure experiment --out` write them) and/or explicit
+/// files, which override the run's. The barrier may be "ground-truth" (a domain that has one).
+struct ModelSources {
+  std::string run_dir, bc, airl, joint, barrier;
+  /// `explicit_path` if given, else run_dir/seed-<seed>/<name>.model, else "".
+  std::string Path(const std::string& explicit_path, const std::string& name,
+                   std::uint64_t seed) const;
+};
+
+/// Loads a policy model and checks that its features are the domain's ("<path>: the policy's
+/// features do not match the <domain> domain's").
+policy::GaussianPolicy LoadDomainPolicy(const std::string& path, const domains::Environment& env,
+                                        const std::string& domain);
+
+/// The models `methods` need for one training seed, loaded and checked against the domain (its
+/// observation and action features); models() points into this object, which is neither copied
+/// nor moved. `domain` must outlive it (a ground-truth barrier is made by it).
+class SeedModelSet {
+ public:
+  /// @throws secure::Error naming the file or flag (a missing model: "the shielded methods need
+  /// --barrier or --run").
+  SeedModelSet(const ModelSources& sources, const experiments::Domain& domain,
+               const std::string& domain_name, const domains::Environment& env,
+               const std::vector<eval::Method>& methods, std::uint64_t seed);
+  SeedModelSet(const SeedModelSet&) = delete;
+  SeedModelSet& operator=(const SeedModelSet&) = delete;
+
+  const eval::SeedModels& models() const { return models_; }
+
+ private:
+  std::optional<policy::GaussianPolicy> bc_, airl_, joint_;
+  std::optional<cbf::BarrierNet> net_;
+  std::optional<cbf::CarBarrierNet> per_obstacle_;
+  eval::SeedModels models_;
+};
+
+/// The shield of an evaluation: the domain's experiment preset with the fields whose flags were
+/// given overlaid from `parsed` (the options `flags` are bound to); flags.ApplyTo(parsed) is
+/// called first. Not validated (the caller calls Validate()).
+shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain,
+                                          const ShieldFlags& flags, shield::ShieldOptions* parsed);
+
+}  // namespace secure::cli
