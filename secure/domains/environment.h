@@ -16,10 +16,12 @@
 // Implementations must not allocate in Step() and are used from one thread at a time; make one
 // environment per thread (Clone()).
 #include <Eigen/Core>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 
@@ -30,6 +32,12 @@ struct StepOutcome {
   bool reached_goal = false;  // the new state is within the goal region
   bool collided = false;      // the new state is inside an obstacle (a dangerous event)
   int collisions = 0;         // dangerous events in this step (e.g. cars touched; >= collided)
+};
+
+/// An RGB frame, rows top to bottom, 3 bytes per pixel (rgb.size() == 3 * width * height).
+struct Frame {
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> rgb;
 };
 
 class Environment {
@@ -69,6 +77,19 @@ class Environment {
   virtual bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                             Eigen::Ref<Eigen::VectorXf> action) const {
     return false;
+  }
+
+  /// Whether Render() works (an offscreen renderer exists for this domain). False by default.
+  virtual bool CanRender() const { return false; }
+  /// Draws the current state (after Reset() or the last Step()) into `frame`, resized to
+  /// width x height. Rendering must not change the episode (no random draws, no state change).
+  /// Used by `secure render`; not called in Step()'s allocation-free loop.
+  /// @throws secure::Error if the domain cannot render (the default) or the size is not positive.
+  virtual void Render(int width, int height, Frame* frame) {
+    (void)width;
+    (void)height;
+    (void)frame;
+    SECURE_THROW("this environment cannot render (no offscreen renderer): " << Describe());
   }
 
   /// A fresh environment with the same options (for another thread).

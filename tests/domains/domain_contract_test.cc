@@ -246,6 +246,47 @@ TEST_P(DomainContract, ShieldModelMatchesTheEnvironmentWhereExact) {
 // ---------------------------------------------------------------------------------------------
 // Data
 
+// Rendering (secure render): a domain that claims an offscreen renderer draws frames of the size
+// asked for without changing the episode; one that does not refuses with "cannot render".
+TEST_P(DomainContract, RenderingWhereClaimed) {
+  domains::Frame frame;
+  if (!env_->CanRender()) {
+    Eigen::VectorXf o(env_->observation_dim());
+    Rng rng(1);
+    env_->Reset(rng, o);
+    try {
+      env_->Render(64, 48, &frame);
+      ADD_FAILURE() << "Render() of a domain that cannot render did not throw";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cannot render"), std::string::npos) << e.what();
+    }
+    return;
+  }
+  const int steps = std::min(steps_, 10);
+  const Episode plain = RunEpisode(*env_, 31, 32, steps);
+  // The same episode with a frame after the reset and after every step.
+  Rng rng(31), action_rng(32);
+  Eigen::VectorXf o(env_->observation_dim()), a(env_->action_dim());
+  Episode rendered;
+  env_->Reset(rng, o);
+  rendered.observations.push_back(o);
+  for (int t = 0; t <= steps; ++t) {
+    const int width = t % 2 == 0 ? 64 : 32, height = t % 2 == 0 ? 48 : 24;
+    env_->Render(width, height, &frame);
+    ASSERT_EQ(frame.width, width) << "step " << t;
+    ASSERT_EQ(frame.height, height) << "step " << t;
+    ASSERT_EQ(frame.rgb.size(), 3u * width * height) << "step " << t;
+    if (t == steps) break;
+    DrawAction(action_rng, a);
+    const domains::StepOutcome out = env_->Step(a, o);
+    rendered.observations.push_back(o);
+    rendered.goal.push_back(out.reached_goal);
+    rendered.collided.push_back(out.collided);
+    rendered.collisions.push_back(out.collisions);
+  }
+  ExpectSameEpisode(plain, rendered);
+}
+
 TEST_P(DomainContract, GenerateDataIsDeterministicFiniteAndOfTheEnvironmentsDimension) {
   const experiments::DomainData a = domain_->GenerateData(7);
   const experiments::DomainData b = domain_->GenerateData(7);
