@@ -22,6 +22,7 @@ set -euo pipefail
 #   libyaml-cpp-dev             experiment config files
 #   libboost-dev                Boost.CRC (model file checksums); Boost.Math (statistics)
 #   libmujoco-dev libqhull-dev  MuJoCo for the Panda domain (its CMake config needs qhull)
+#   libosmesa6-dev              software OpenGL (OSMesa): the Panda domain's offscreen renderer
 #   ffmpeg                      `secure render`: encodes rendered episodes as MP4 (libx264); its tests
 #   libgtest-dev libgmock-dev   unit tests
 #   librapidcheck-dev           property-based tests
@@ -30,7 +31,7 @@ PACKAGES=(
   build-essential cmake git
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
   libeigen3-dev libxsmm-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
-  libmujoco-dev libqhull-dev
+  libmujoco-dev libqhull-dev libosmesa6-dev
   ffmpeg
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
 )

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "domains/panda_push/mujoco_model.h"
+#include "domains/panda_push/render.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
@@ -530,6 +531,11 @@ bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observa
                                 Eigen::Ref<Eigen::VectorXf> action) const {
   action.setZero();
   return true;
+}
+
+void PandaPushEnv::Render(int width, int height, Frame* frame) {
+  if (renderer_ == nullptr) renderer_ = std::make_unique<PandaPushRenderer>(sim_);
+  renderer_->Render(width, height, frame);
 }
 
 std::unique_ptr<Environment> PandaPushEnv::Clone() const {

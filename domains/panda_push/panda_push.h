@@ -175,6 +175,8 @@ class PandaPushShieldModel final : public DynamicsModel {
 };
 
 /// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
+class PandaPushRenderer;
+
 class PandaPushEnv final : public Environment {
  public:
   PandaPushEnv(const PandaPushOptions& options, const PandaPushShieldModelOptions& shield_model);
@@ -195,6 +197,10 @@ class PandaPushEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
+  /// MuJoCo's renderer in an OSMesa context (software OpenGL), created on the first call; frames
+  /// up to 1280 x 720.
+  bool CanRender() const override { return true; }
+  void Render(int width, int height, Frame* frame) override;
 
   PandaPushSim& sim() { return sim_; }
   const PandaPushSim& sim() const { return sim_; }
@@ -204,6 +210,7 @@ class PandaPushEnv final : public Environment {
   PandaPushShieldModelOptions shield_model_options_;
   PandaPushShieldModel shield_model_;
   bool toppled_ = false;
+  std::unique_ptr<PandaPushRenderer> renderer_;
 };
 
 }  // namespace secure::domains::panda_push

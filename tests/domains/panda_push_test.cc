@@ -287,3 +287,54 @@ TEST(PandaPushDomain, ReadsTheReleasedData) {
 
 }  // namespace
 }  // namespace secure::domains::panda_push
+
+namespace secure::domains::panda_push {
+namespace {
+
+// Pixels that look like the block (red) in a frame.
+long RedPixels(const Frame& f) {
+  long n = 0;
+  for (size_t i = 0; i + 2 < f.rgb.size(); i += 3)
+    if (f.rgb[i] > 120 && f.rgb[i + 1] < 90 && f.rgb[i + 2] < 90) ++n;
+  return n;
+}
+
+TEST(PandaPushRender, FramesShowTheSceneWithTheBlock) {
+  PandaPushEnv env(PandaPushOptions{}, PandaPushShieldModelOptions{});
+  ASSERT_TRUE(env.CanRender());
+  Rng rng(1);
+  Eigen::VectorXf o(kObservationDim);
+  env.Reset(rng, o);
+  Frame first, again;
+  env.Render(160, 120, &first);
+  ASSERT_EQ(first.width, 160);
+  ASSERT_EQ(first.height, 120);
+  ASSERT_EQ(first.rgb.size(), 160u * 120u * 3u);
+  // Not blank: many distinct colours, and the red block covers a visible patch.
+  long differing = 0;
+  for (size_t i = 3; i < first.rgb.size(); i += 3)
+    if (first.rgb[i] != first.rgb[0] || first.rgb[i + 1] != first.rgb[1]) ++differing;
+  EXPECT_GT(differing, 160 * 120 / 4);
+  EXPECT_GT(RedPixels(first), 100);
+  // Rendering does not change the state; the same state gives the same frame.
+  Eigen::VectorXf before(kObservationDim), after(kObservationDim);
+  env.sim().Observe(before);
+  env.Render(160, 120, &again);
+  env.sim().Observe(after);
+  EXPECT_EQ(before, after);
+  EXPECT_EQ(first.rgb, again.rgb);
+  // The frame follows the state: a toppled block looks different.
+  Eigen::VectorXf tipped = before;
+  tipped[kBlockEuler + 1] = 1.3f;
+  tipped[kBlockPos + 2] = 0.06f;
+  env.sim().SetObservation(tipped);
+  Frame toppled;
+  env.Render(160, 120, &toppled);
+  EXPECT_NE(toppled.rgb, first.rgb);
+  EXPECT_GT(RedPixels(toppled), 50);
+  EXPECT_THROW(env.Render(4000, 120, &toppled), Error);
+  EXPECT_THROW(env.Render(0, 120, &toppled), Error);
+}
+
+}  // namespace
+}  // namespace secure::domains::panda_push

@@ -1,0 +1,100 @@
+#include "domains/panda_push/render.h"
+
+#include <GL/osmesa.h>
+#include <mujoco/mujoco.h>
+
+#include <cstring>
+#include <vector>
+
+#include "domains/panda_push/mujoco_model.h"
+#include "domains/panda_push/panda_push.h"
+#include "secure/common/error.h"
+
+namespace secure::domains::panda_push {
+
+struct PandaPushRenderer::Impl {
+  const PandaPushSim* sim = nullptr;
+  OSMesaContext gl = nullptr;
+  std::vector<unsigned char> buffer;  // the OSMesa colour buffer (RGBA)
+  mjvScene scene;
+  mjvCamera camera;
+  mjvOption option;
+  mjrContext context;
+  std::vector<unsigned char> rows;  // bottom-up RGB from mjr_readPixels
+
+  void MakeCurrent() {
+    SECURE_CHECK(OSMesaMakeCurrent(gl, buffer.data(), GL_UNSIGNED_BYTE, kMaxRenderWidth,
+                                   kMaxRenderHeight),
+                 "panda-push renderer: OSMesaMakeCurrent failed");
+  }
+};
+
+PandaPushRenderer::PandaPushRenderer(const PandaPushSim& sim) : impl_(std::make_unique<Impl>()) {
+  InstallMujocoHandlers();
+  Impl& r = *impl_;
+  r.sim = &sim;
+  const mjModel* m = static_cast<const mjModel*>(sim.model());
+  SECURE_CHECK(m->vis.global.offwidth >= kMaxRenderWidth &&
+                   m->vis.global.offheight >= kMaxRenderHeight,
+               "panda-push renderer: the model's offscreen buffer is "
+                   << m->vis.global.offwidth << " x " << m->vis.global.offheight
+                   << ", smaller than " << kMaxRenderWidth << " x " << kMaxRenderHeight);
+  r.gl = OSMesaCreateContextExt(OSMESA_RGBA, 24, 8, 0, nullptr);
+  SECURE_CHECK(r.gl != nullptr, "panda-push renderer: cannot create an OSMesa context");
+  r.buffer.assign(static_cast<size_t>(kMaxRenderWidth) * kMaxRenderHeight * 4, 0);
+  r.MakeCurrent();
+  mjv_defaultScene(&r.scene);
+  mjv_defaultCamera(&r.camera);
+  mjv_defaultOption(&r.option);
+  mjr_defaultContext(&r.context);
+  mjv_makeScene(m, &r.scene, 2000);
+  mjr_makeContext(m, &r.context, mjFONTSCALE_100);
+  mjr_setBuffer(mjFB_OFFSCREEN, &r.context);
+  SECURE_CHECK(r.context.currentBuffer == mjFB_OFFSCREEN,
+               "panda-push renderer: no offscreen framebuffer in this OpenGL context");
+  // From the side (-y), slightly above the table: the arm at the left, the block and the target
+  // at the right.
+  r.camera.type = mjCAMERA_FREE;
+  r.camera.lookat[0] = 0.12;
+  r.camera.lookat[1] = 0.0;
+  r.camera.lookat[2] = 0.3;
+  r.camera.distance = 2.0;
+  r.camera.azimuth = 75;
+  r.camera.elevation = -15;
+}
+
+PandaPushRenderer::~PandaPushRenderer() {
+  Impl& r = *impl_;
+  if (r.gl != nullptr) {
+    OSMesaMakeCurrent(r.gl, r.buffer.data(), GL_UNSIGNED_BYTE, kMaxRenderWidth, kMaxRenderHeight);
+    mjr_freeContext(&r.context);
+    mjv_freeScene(&r.scene);
+    OSMesaDestroyContext(r.gl);
+  }
+}
+
+void PandaPushRenderer::Render(int width, int height, Frame* frame) {
+  SECURE_CHECK(width >= 2 && width <= kMaxRenderWidth && height >= 2 &&
+                   height <= kMaxRenderHeight,
+               "panda-push: frame size " << width << " x " << height << " is outside [2, "
+                                         << kMaxRenderWidth << "] x [2, " << kMaxRenderHeight
+                                         << "]");
+  Impl& r = *impl_;
+  r.MakeCurrent();
+  const mjModel* m = static_cast<const mjModel*>(r.sim->model());
+  mjData* d = static_cast<mjData*>(r.sim->data());
+  mjv_updateScene(m, d, &r.option, nullptr, &r.camera, mjCAT_ALL, &r.scene);
+  const mjrRect viewport = {0, 0, width, height};
+  mjr_render(viewport, &r.scene, &r.context);
+  r.rows.resize(static_cast<size_t>(3) * width * height);
+  mjr_readPixels(r.rows.data(), nullptr, viewport, &r.context);
+  // OpenGL rows are bottom-up.
+  frame->width = width;
+  frame->height = height;
+  frame->rgb.resize(r.rows.size());
+  const size_t stride = static_cast<size_t>(3) * width;
+  for (int y = 0; y < height; ++y)
+    std::memcpy(frame->rgb.data() + stride * y, r.rows.data() + stride * (height - 1 - y), stride);
+}
+
+}  // namespace secure::domains::panda_push
