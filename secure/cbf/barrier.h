@@ -12,7 +12,6 @@
 #include <string>
 #include <vector>
 
-
 namespace secure::cbf {
 
 class Barrier {
@@ -33,6 +32,41 @@ class Barrier {
   /// Called with checked dimensions.
   virtual void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h) = 0;
+};
+
+/// The row of each of `wanted` (names, in order) among `available` (the first row of that name).
+/// @throws secure::Error naming the first missing name, `source` with its features and `reader`
+///   with what it reads ("the panda domain has 18 features (…), without 'x', which m.model reads
+///   (9: …)").
+std::vector<int> FeatureRows(const std::vector<std::string>& wanted,
+                             const std::vector<std::string>& available, const std::string& source,
+                             const std::string& reader);
+
+/// A barrier on wider states: h(s) = inner(s[rows]), i.e. the inner barrier reads rows[k] of a
+/// `state_dim`-row state as its k-th row. The rows are gathered into a buffer preallocated for
+/// `chunk` states (larger batches go in chunks), so Evaluate allocates nothing. E.g. a barrier
+/// trained on 9 of the 18 features of an observation, evaluated on whole observations
+/// (BarrierNet::MakeEvaluatorFor).
+class SelectRows final : public Barrier {
+ public:
+  /// @throws secure::Error if rows.size() != inner->state_dim(), a row is outside
+  ///   [0, state_dim) or chunk < 1.
+  SelectRows(std::unique_ptr<Barrier> inner, int state_dim, std::vector<int> rows,
+             int chunk = 4096);
+
+  int state_dim() const override { return state_dim_; }
+  /// The inner description with the selection ("barrier_mlp 9-64-1 tanh on 9 of 18 state rows").
+  std::string Describe() const override;
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override;
+
+ private:
+  std::unique_ptr<Barrier> inner_;
+  int state_dim_;
+  std::vector<int> rows_;
+  Eigen::MatrixXf buffer_;  // (rows_.size() x chunk)
 };
 
 }  // namespace secure::cbf

@@ -75,6 +75,16 @@ std::unique_ptr<Barrier> BarrierNet::MakeEvaluator(int chunk) const {
   return std::make_unique<BarrierNetEvaluator>(*this, chunk);
 }
 
+std::unique_ptr<Barrier> BarrierNet::MakeEvaluatorFor(
+    const std::vector<std::string>& state_features, const std::string& source,
+    const std::string& model_name, int chunk) const {
+  if (state_features == features) return MakeEvaluator(chunk);
+  std::vector<int> rows = FeatureRows(features, state_features, source, model_name);
+  return std::make_unique<SelectRows>(MakeEvaluator(chunk),
+                                      static_cast<int>(state_features.size()), std::move(rows),
+                                      chunk);
+}
+
 BarrierNetEvaluator::BarrierNetEvaluator(const BarrierNet& net, int chunk)
     : mlp_(net.mlp, net.normalizer),
       workspace_(mlp_.MakeWorkspace(chunk)),

@@ -20,7 +20,7 @@ inline constexpr const char* kBarrierModelKind = "barrier_mlp";
 struct BarrierNet {
   nn::MlpParams mlp;                                     // output_dim == 1
   nn::Normalizer normalizer;                             // applied to raw states before the MLP
-  std::vector<std::string> features;                     // names of the state rows, in order
+  std::vector<std::string> features;                     // names of the rows it reads, in order
   nlohmann::json provenance = nlohmann::json::object();  // training options, summary, data
 
   int state_dim() const { return mlp.spec.input_dim; }
@@ -41,6 +41,18 @@ struct BarrierNet {
   /// An evaluator with preallocated buffers for batches of up to `chunk` states; larger batches
   /// are evaluated in chunks.
   std::unique_ptr<Barrier> MakeEvaluator(int chunk = 4096) const;
+
+  /// An evaluator on states whose rows are `state_features` (e.g. a domain's whole observation),
+  /// of which the model reads its `features` by name. If state_features == features: the plain
+  /// MakeEvaluator(chunk). Otherwise a SelectRows (barrier.h) around it, of state_dim()
+  /// state_features.size(), that gathers the model's rows into a buffer preallocated for `chunk`
+  /// states (no allocation per Evaluate; larger batches in chunks).
+  /// @throws secure::Error if a model feature is not in state_features; the message names
+  ///   `source` with its features, `model_name` and the first missing feature.
+  std::unique_ptr<Barrier> MakeEvaluatorFor(const std::vector<std::string>& state_features,
+                                            const std::string& source,
+                                            const std::string& model_name = "the model",
+                                            int chunk = 4096) const;
 };
 
 /// The evaluator behind BarrierNet::MakeEvaluator, exposed for the shield's hot path.

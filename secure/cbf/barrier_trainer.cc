@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
@@ -83,17 +84,41 @@ bool Better(const Score& a, const Score& b) {
   return a.loss < b.loss;
 }
 
+// `set` with only the rows `rows`, in that order, named `features`.
+data::StateSet ProjectRows(const data::StateSet& set, const std::vector<int>& rows,
+                           const std::vector<std::string>& features) {
+  data::StateSet projected;
+  projected.source = set.source;
+  projected.features = features;
+  projected.states.resize(static_cast<Eigen::Index>(rows.size()), set.states.cols());
+  for (std::size_t k = 0; k < rows.size(); ++k)
+    projected.states.row(static_cast<Eigen::Index>(k)) = set.states.row(rows[k]);
+  return projected;
+}
+
 }  // namespace
 
-BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& safe,
-                        const data::StateSet& near_dangerous, BarrierTrainingSummary* summary,
+BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& all_safe,
+                        const data::StateSet& all_near_dangerous, BarrierTrainingSummary* summary,
                         const BarrierEpochCallback& callback) {
   options.Validate();
+  SECURE_CHECK(all_safe.features == all_near_dangerous.features,
+               "safe states (" << all_safe.source << ") and near-dangerous states ("
+                               << all_near_dangerous.source << ") have different features");
+  // The columns the barrier reads (BarrierTrainerOptions::input_features), checked by name.
+  std::optional<data::StateSet> projected_safe, projected_nd;
+  if (!options.input_features.empty() && options.input_features != all_safe.features) {
+    const std::vector<int> rows =
+        FeatureRows(options.input_features, all_safe.features,
+                    "the safe and near-dangerous states (" + all_safe.source + ")",
+                    "BarrierTrainerOptions::input_features");
+    projected_safe = ProjectRows(all_safe, rows, options.input_features);
+    projected_nd = ProjectRows(all_near_dangerous, rows, options.input_features);
+  }
+  const data::StateSet& safe = projected_safe ? *projected_safe : all_safe;
+  const data::StateSet& near_dangerous = projected_nd ? *projected_nd : all_near_dangerous;
   data::CheckNonEmptyFinite(safe, "safe states");
   data::CheckNonEmptyFinite(near_dangerous, "near-dangerous states");
-  SECURE_CHECK(safe.features == near_dangerous.features,
-               "safe states (" << safe.source << ") and near-dangerous states ("
-                               << near_dangerous.source << ") have different features");
   const Stopwatch clock;
   TorchThreadsGuard threads(options.threads);
   Rng rng(options.seed);

@@ -33,6 +33,12 @@ class Node;
 namespace secure::cbf {
 
 struct BarrierTrainerOptions {
+  // Input: the features (by name, in this order) of the training states that the barrier reads;
+  // empty: all of them. The model's `features` are these names, so the model file records what it
+  // reads; evaluate it on the whole states with BarrierNet::MakeEvaluatorFor. E.g. Panda's
+  // barrier reads 9 of the 18 observation features.
+  std::vector<std::string> input_features;
+
   // Architecture.
   std::vector<int> hidden = {64, 64, 64};  // hidden layer widths
   nn::Activation activation = nn::Activation::kTanh;
@@ -86,8 +92,10 @@ struct BarrierTrainingSummary {
 /// false to stop training (the best checkpoint so far is kept).
 using BarrierEpochCallback = std::function<bool(int epoch, double train_loss, double val_accuracy)>;
 
-/// Trains a BarrierNet on `safe` and `near_dangerous` (same features, each non-empty and finite).
-/// The returned net records the options and summary in its provenance.
+/// Trains a BarrierNet on `safe` and `near_dangerous` (same features, each non-empty and finite),
+/// projected to options.input_features when given (a name missing from the data is an error that
+/// names it and lists the data's features). The returned net records the options and summary in
+/// its provenance.
 /// @throws secure::Error on invalid options or data (names the set and the problem).
 BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& safe,
                         const data::StateSet& near_dangerous, BarrierTrainingSummary* summary,

@@ -1,6 +1,8 @@
 #include "secure/cbf/differentiable_barrier.h"
 
+#include <cstdint>
 #include <sstream>
+#include <vector>
 
 #include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/error.h"
@@ -16,8 +18,9 @@ torch::Tensor VectorTensor(const Eigen::VectorXf& v) {
 // BarrierNet: h(s) = mlp((s - mean) / scale), as BarrierNetEvaluator.
 class FlatDifferentiableBarrier final : public DifferentiableBarrier {
  public:
-  explicit FlatDifferentiableBarrier(const BarrierNet& net)
-      : state_dim_(net.state_dim()), mlp_(nullptr) {
+  // rows: the rows of a `state_dim`-row state the net reads (empty: all, state_dim ignored).
+  FlatDifferentiableBarrier(const BarrierNet& net, const std::vector<int>& rows, int state_dim)
+      : state_dim_(rows.empty() ? net.state_dim() : state_dim), mlp_(nullptr) {
     net.Validate();
     mlp_ = nn::TorchMlp(net.mlp.spec);
     mlp_->LoadParams(net.mlp);
@@ -29,6 +32,16 @@ class FlatDifferentiableBarrier final : public DifferentiableBarrier {
     const auto widths = net.mlp.spec.Widths();
     for (std::size_t i = 0; i < widths.size(); ++i) t << (i ? "-" : " ") << widths[i];
     t << " " << ToString(nn::kActivationNames, net.mlp.spec.activation) << " (differentiable)";
+    if (!rows.empty()) {
+      SECURE_CHECK(static_cast<int>(rows.size()) == net.state_dim(),
+                   "MakeDifferentiableBarrier: " << rows.size() << " rows for a barrier of "
+                                                 << net.state_dim() << " inputs");
+      for (int r : rows)
+        SECURE_CHECK(r >= 0 && r < state_dim, "MakeDifferentiableBarrier: row "
+                                                  << r << " outside [0, " << state_dim << ")");
+      rows_ = torch::tensor(std::vector<std::int64_t>(rows.begin(), rows.end()), torch::kInt64);
+      t << " on " << rows.size() << " of " << state_dim << " state rows";
+    }
     description_ = t.str();
   }
   int state_dim() const override { return state_dim_; }
@@ -36,11 +49,13 @@ class FlatDifferentiableBarrier final : public DifferentiableBarrier {
 
  protected:
   torch::Tensor DoForward(const torch::Tensor& states) const override {
-    return mlp_->forward((states - mean_) / scale_).reshape({-1});
+    const torch::Tensor read = rows_.defined() ? states.index_select(1, rows_) : states;
+    return mlp_->forward((read - mean_) / scale_).reshape({-1});
   }
 
  private:
   int state_dim_;
+  torch::Tensor rows_;  // undefined: all rows
   mutable nn::TorchMlp mlp_;  // mutable: a forward pass changes no state
   torch::Tensor mean_, scale_;
   std::string description_;
@@ -81,7 +96,16 @@ torch::Tensor DifferentiableBarrier::Forward(const torch::Tensor& states) const 
 }
 
 std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrier(const BarrierNet& net) {
-  return std::make_unique<FlatDifferentiableBarrier>(net);
+  return std::make_unique<FlatDifferentiableBarrier>(net, std::vector<int>{}, 0);
+}
+
+std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrierFor(
+    const BarrierNet& net, const std::vector<std::string>& state_features,
+    const std::string& source, const std::string& model_name) {
+  if (state_features == net.features) return MakeDifferentiableBarrier(net);
+  return std::make_unique<FlatDifferentiableBarrier>(
+      net, FeatureRows(net.features, state_features, source, model_name),
+      static_cast<int>(state_features.size()));
 }
 
 std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrier(const CarBarrierNet& net) {

@@ -24,6 +24,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
@@ -53,5 +54,11 @@ class DifferentiableBarrier {
 std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrier(const BarrierNet& net);
 /// A copy of `net` (validated) as a frozen differentiable barrier.
 std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrier(const CarBarrierNet& net);
+/// As BarrierNet::MakeEvaluatorFor: `net` on states whose rows are `state_features`, reading its
+/// own features by name (the plain MakeDifferentiableBarrier(net) if they are equal).
+/// @throws secure::Error as BarrierNet::MakeEvaluatorFor.
+std::unique_ptr<DifferentiableBarrier> MakeDifferentiableBarrierFor(
+    const BarrierNet& net, const std::vector<std::string>& state_features,
+    const std::string& source, const std::string& model_name = "the model");
 
 }  // namespace secure::cbf

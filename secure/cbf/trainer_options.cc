@@ -20,6 +20,14 @@ namespace {
 }  // namespace
 
 void BarrierTrainerOptions::Validate() const {
+  for (std::size_t k = 0; k < input_features.size(); ++k) {
+    SECURE_CHECK_FIELD(!input_features[k].empty(), "BarrierTrainerOptions",
+                       "input_features[" << k << "]", "''", "a non-empty feature name");
+    for (std::size_t i = 0; i < k; ++i)
+      SECURE_CHECK_FIELD(input_features[i] != input_features[k], "BarrierTrainerOptions",
+                         "input_features[" << k << "]", "'" << input_features[k] << "'",
+                         "a name not given before (it is also input_features[" << i << "])");
+  }
   SECURE_CHECK_FIELD(!hidden.empty(), "BarrierTrainerOptions", "hidden", "[]",
                      "a non-empty list of layer widths");
   for (std::size_t i = 0; i < hidden.size(); ++i) {
@@ -59,13 +67,19 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
       "hidden",      "activation",    "safe_margin",   "unsafe_margin",       "balance_classes",
       "safe_weight", "unsafe_weight", "learning_rate", "final_learning_rate", "weight_decay",
       "batch_size",  "max_epochs",    "patience",      "validation_fraction", "seed",
-      "threads",     "verbose"};
+      "threads",     "verbose",       "input_features"};
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
                  source << ": unknown field '" << key << "' in the barrier trainer options");
     const YAML::Node& v = item.second;
-    if (key == "hidden") {
+    if (key == "input_features") {
+      SECURE_CHECK(v.IsSequence(),
+                   source << ": field 'input_features' must be a list of feature names");
+      input_features.clear();
+      for (const auto& f : v)
+        input_features.push_back(YamlValue<std::string>(f, "input_features", source));
+    } else if (key == "hidden") {
       SECURE_CHECK(v.IsSequence(), source << ": field 'hidden' must be a list of layer widths");
       hidden.clear();
       for (const auto& w : v) hidden.push_back(YamlValue<int>(w, "hidden", source));
@@ -107,7 +121,8 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
 }
 
 nlohmann::json BarrierTrainerOptions::ToJson() const {
-  return {{"hidden", hidden},
+  return {{"input_features", input_features},
+          {"hidden", hidden},
           {"activation", ToString(nn::kActivationNames, activation)},
           {"safe_margin", safe_margin},
           {"unsafe_margin", unsafe_margin},

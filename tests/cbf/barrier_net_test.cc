@@ -112,6 +112,66 @@ TEST(BarrierNetTest, CheckFeaturesNamesBothSides) {
   EXPECT_NE(msg.find("m.bin expects 2 (f0, f1)"), std::string::npos) << msg;
 }
 
+TEST(BarrierNetTest, MakeEvaluatorForEqualFeaturesIsThePlainEvaluator) {
+  const BarrierNet net = MakeNet(3, {8}, nn::Activation::kTanh, 12);
+  const std::unique_ptr<Barrier> plain = net.MakeEvaluator();
+  const std::unique_ptr<Barrier> same = net.MakeEvaluatorFor(net.features, "data.csv");
+  EXPECT_NE(dynamic_cast<BarrierNetEvaluator*>(same.get()), nullptr);  // no wrapper
+  EXPECT_EQ(same->Describe(), plain->Describe());
+  const Eigen::MatrixXf states = Eigen::MatrixXf::Random(3, 100) * 4.0f;
+  Eigen::VectorXf a(100), b(100);
+  plain->Evaluate(states, a);
+  same->Evaluate(states, b);
+  EXPECT_EQ(a, b);
+}
+
+// A 3-feature model on 6-row states whose rows hold its features in another order, among others.
+TEST(BarrierNetTest, MakeEvaluatorForPicksTheModelsFeaturesByName) {
+  const BarrierNet net = MakeNet(3, {8, 8}, nn::Activation::kTanh, 13);  // f0, f1, f2
+  const std::vector<std::string> wide = {"a", "f2", "b", "f0", "c", "f1"};
+  const Eigen::MatrixXf states = Eigen::MatrixXf::Random(6, 1000) * 4.0f;
+  Eigen::MatrixXf projected(3, 1000);
+  projected.row(0) = states.row(3);
+  projected.row(1) = states.row(5);
+  projected.row(2) = states.row(1);
+  for (int chunk : {4096, 7, 1}) {  // one batch; 142 full chunks and a partial one; one by one
+    Eigen::VectorXf expected(1000);
+    net.MakeEvaluator(chunk)->Evaluate(projected, expected);
+    const std::unique_ptr<Barrier> evaluator = net.MakeEvaluatorFor(wide, "wide.csv", "m", chunk);
+    EXPECT_EQ(evaluator->state_dim(), 6);
+    EXPECT_NE(evaluator->Describe().find("on 3 of 6 state rows"), std::string::npos)
+        << evaluator->Describe();
+    Eigen::VectorXf h(1000);
+    evaluator->Evaluate(states, h);
+    EXPECT_EQ(h, expected) << "chunk " << chunk;
+  }
+  // The wide evaluator checks the wide dimension.
+  Eigen::VectorXf h(10);
+  EXPECT_THROW(net.MakeEvaluatorFor(wide, "wide.csv")->Evaluate(Eigen::MatrixXf::Zero(3, 10), h),
+               Error);
+}
+
+TEST(BarrierNetTest, MakeEvaluatorForNamesTheFirstMissingFeature) {
+  const BarrierNet net = MakeNet(3, {4}, nn::Activation::kTanh, 14);  // f0, f1, f2
+  const std::string msg = ErrorOf([&] {
+    net.MakeEvaluatorFor({"f0", "x", "f2", "y"}, "the toy domain", "m.bin");
+  });
+  EXPECT_NE(msg.find("the toy domain has 4 features (f0, x, f2, y)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("without 'f1', which m.bin reads (3: f0, f1, f2)"), std::string::npos)
+      << msg;
+}
+
+TEST(SelectRowsTest, RejectsInconsistentRows) {
+  const BarrierNet net = MakeNet(2, {4}, nn::Activation::kTanh, 15);
+  EXPECT_NE(ErrorOf([&] { SelectRows(net.MakeEvaluator(), 4, {0}); }).find("1 rows for"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SelectRows(net.MakeEvaluator(), 4, {0, 4}); })
+                .find("rows[1] = 4, must be in [0, 4)"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SelectRows(net.MakeEvaluator(), 4, {0, 1}, 0); }).find("chunk = 0"),
+            std::string::npos);
+}
+
 TEST(BarrierNetTest, ValidateRejectsInconsistentParts) {
   BarrierNet net = MakeNet(3, {4}, nn::Activation::kTanh, 8);
   net.features.pop_back();

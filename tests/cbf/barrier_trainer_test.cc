@@ -185,6 +185,98 @@ TEST(BarrierTrainerOptionsTest, YamlOverridesAndRejectsUnknownKeys) {
   EXPECT_NE(msg.find("sigmoid"), std::string::npos) << msg;
 }
 
+// `set` (px, py) inside wider states: (noise, py, junk, px), the extra rows random.
+data::StateSet Widen(const data::StateSet& set, std::uint64_t seed) {
+  Rng rng(seed);
+  data::StateSet wide{set.source, {"noise", "py", "junk", "px"}, Eigen::MatrixXf(4, set.size())};
+  for (long j = 0; j < set.size(); ++j) {
+    wide.states(0, j) = static_cast<float>(rng.Uniform(-5, 5));
+    wide.states(1, j) = set.states(1, j);
+    wide.states(2, j) = static_cast<float>(rng.Uniform(100, 200));
+    wide.states(3, j) = set.states(0, j);
+  }
+  return wide;
+}
+
+TEST(BarrierTrainerTest, InputFeaturesSelectAndOrderTheColumns) {
+  const auto safe = Disk(false, 120, 1), nd = Disk(true, 80, 2);
+  const auto wide_safe = Widen(safe, 3), wide_nd = Widen(nd, 4);
+  BarrierTrainerOptions o = Fast();
+  o.max_epochs = 5;
+  const BarrierNet reference = TrainBarrier(o, safe, nd, nullptr);
+  o.input_features = {"px", "py"};
+  BarrierTrainingSummary summary;
+  const BarrierNet net = TrainBarrier(o, wide_safe, wide_nd, &summary);
+  EXPECT_EQ(net.features, (std::vector<std::string>{"px", "py"}));
+  EXPECT_EQ(net.state_dim(), 2);
+  EXPECT_EQ(net.provenance["options"]["input_features"], nlohmann::json({"px", "py"}));
+  // Training on the selected columns is training on those data: the same weights.
+  EXPECT_EQ(net.normalizer.mean, reference.normalizer.mean);
+  EXPECT_EQ(net.normalizer.scale, reference.normalizer.scale);
+  for (std::size_t l = 0; l < net.mlp.layers.size(); ++l) {
+    EXPECT_EQ(net.mlp.layers[l].weight, reference.mlp.layers[l].weight) << "layer " << l;
+    EXPECT_EQ(net.mlp.layers[l].bias, reference.mlp.layers[l].bias) << "layer " << l;
+  }
+  // On the wide states, h equals h on the projected states exactly.
+  Eigen::VectorXf h_wide(wide_safe.size()), h_projected(safe.size());
+  const std::unique_ptr<Barrier> wide = net.MakeEvaluatorFor(wide_safe.features, "wide states");
+  EXPECT_EQ(wide->state_dim(), 4);
+  wide->Evaluate(wide_safe.states, h_wide);
+  net.MakeEvaluator()->Evaluate(safe.states, h_projected);
+  EXPECT_EQ(h_wide, h_projected);
+
+  // The order given is the model's order: (py, px) reads the rows swapped.
+  o.input_features = {"py", "px"};
+  const BarrierNet swapped = TrainBarrier(o, wide_safe, wide_nd, nullptr);
+  EXPECT_EQ(swapped.features, (std::vector<std::string>{"py", "px"}));
+  EXPECT_EQ(swapped.normalizer.mean[0], reference.normalizer.mean[1]);
+  EXPECT_EQ(swapped.normalizer.mean[1], reference.normalizer.mean[0]);
+  // All features in the data's order: the same as no selection.
+  o.input_features = wide_safe.features;
+  EXPECT_EQ(TrainBarrier(o, wide_safe, wide_nd, nullptr).features, wide_safe.features);
+}
+
+TEST(BarrierTrainerTest, AnInputFeatureMissingFromTheDataIsNamed) {
+  BarrierTrainerOptions o = Fast();
+  o.input_features = {"px", "vz"};
+  const std::string msg = ErrorOf([&] {
+    TrainBarrier(o, Widen(Disk(false, 10, 1), 3), Widen(Disk(true, 10, 2), 4), nullptr);
+  });
+  EXPECT_HAS(msg, "(outside) has 4 features (noise, py, junk, px), without 'vz'");
+  EXPECT_HAS(msg, "BarrierTrainerOptions::input_features reads (2: px, vz)");
+}
+
+// Only the selected columns must be finite: a NaN in a column the barrier does not read is fine.
+TEST(BarrierTrainerTest, OnlyTheSelectedColumnsAreChecked) {
+  BarrierTrainerOptions o = Fast();
+  o.max_epochs = 2;
+  o.input_features = {"px", "py"};
+  data::StateSet safe = Widen(Disk(false, 20, 1), 3);
+  safe.states(2, 5) = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_NO_THROW(TrainBarrier(o, safe, Widen(Disk(true, 20, 2), 4), nullptr));
+  o.input_features = {"junk", "px"};
+  EXPECT_THROW(TrainBarrier(o, safe, Widen(Disk(true, 20, 2), 4), nullptr), Error);
+}
+
+TEST(BarrierTrainerOptionsTest, InputFeaturesInYamlJsonAndValidate) {
+  BarrierTrainerOptions o;
+  EXPECT_TRUE(o.input_features.empty());
+  EXPECT_EQ(o.ToJson()["input_features"], nlohmann::json::array());
+  o.ApplyYaml(YAML::Load("{input_features: [ee_x, ee_y, block_z]}"), "cfg.yaml");
+  EXPECT_EQ(o.input_features, (std::vector<std::string>{"ee_x", "ee_y", "block_z"}));
+  EXPECT_EQ(o.ToJson()["input_features"], nlohmann::json({"ee_x", "ee_y", "block_z"}));
+  EXPECT_NO_THROW(o.Validate());
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{input_features: ee_x}"), "cfg.yaml"); }),
+             "cfg.yaml: field 'input_features' must be a list of feature names");
+  o.input_features = {"ee_x", "ee_y", "ee_x"};
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }),
+            "BarrierTrainerOptions::input_features[2] = 'ee_x', must be a name not given before "
+            "(it is also input_features[0])");
+  o.input_features = {"ee_x", ""};
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }),
+            "BarrierTrainerOptions::input_features[1] = '', must be a non-empty feature name");
+}
+
 // Two runs with the same seed and data write byte-identical model files: no wall-clock time in
 // the file (it stays in the summary the caller gets, i.e. the run record).
 class BarrierTrainerFileTest : public secure::test::TempDirTest {};

@@ -29,6 +29,33 @@ BarrierNet FlatNet() {
   return net;
 }
 
+// On wider states whose rows hold the net's features among others, by name: the values of the
+// Eigen evaluator for the same states, and no gradient to the rows it does not read.
+TEST(DifferentiableBarrierTest, FlatForWiderStatesPicksItsFeaturesByName) {
+  const BarrierNet net = FlatNet();  // a, b, c
+  const std::vector<std::string> wide = {"c", "x", "a", "b", "y"};
+  const std::unique_ptr<DifferentiableBarrier> h =
+      MakeDifferentiableBarrierFor(net, wide, "the wide states");
+  EXPECT_EQ(h->state_dim(), 5);
+  EXPECT_NE(h->Describe().find("on 3 of 5 state rows"), std::string::npos) << h->Describe();
+  const Eigen::MatrixXf states = UniformStates(5, 40, -2, 2, 13);
+  Eigen::VectorXf h_eigen(40);
+  net.MakeEvaluatorFor(wide, "the wide states")->Evaluate(states, h_eigen);
+  torch::Tensor x = nn::ToTensor(states).requires_grad_(true);
+  const torch::Tensor values = h->Forward(x);
+  for (int i = 0; i < 40; ++i) EXPECT_NEAR(values[i].item<double>(), h_eigen(i), 1e-5);
+  values.sum().backward();
+  const Eigen::MatrixXf grad = nn::ToEigen(x.grad());
+  EXPECT_EQ(grad.row(1).cwiseAbs().maxCoeff(), 0.0f);  // x
+  EXPECT_EQ(grad.row(4).cwiseAbs().maxCoeff(), 0.0f);  // y
+  EXPECT_GT(grad.row(0).cwiseAbs().maxCoeff(), 0.0f);  // c
+
+  EXPECT_EQ(MakeDifferentiableBarrierFor(net, net.features, "s")->Describe(),
+            MakeDifferentiableBarrier(net)->Describe());
+  EXPECT_HAS(ErrorOf([&] { MakeDifferentiableBarrierFor(net, {"a", "c"}, "two.csv", "m"); }),
+             "two.csv has 2 features (a, c), without 'b', which m reads (3: a, b, c)");
+}
+
 TEST(DifferentiableBarrierTest, FlatMatchesItsEvaluatorAndFiniteDifferences) {
   const BarrierNet net = FlatNet();
   const std::unique_ptr<DifferentiableBarrier> h = MakeDifferentiableBarrier(net);

@@ -358,6 +358,30 @@ TEST(ShieldAllocTest, SmallLearnedBarrierDecisionsDoNotAllocate) {
     ExpectNoAllocations(s, barrier, dynamics);
 }
 
+// A barrier on some of the state's features (BarrierNet::MakeEvaluatorFor: rows picked by name
+// into a preallocated buffer) allocates nothing per evaluation, at batches up to and beyond its
+// chunk, nor in the shield's decisions.
+TEST(ShieldAllocTest, ABarrierOnSomeStateFeaturesDoesNotAllocate) {
+  const cbf::BarrierNet small = MakeNet(2, {16, 16}, 9);  // s0, s1
+  const std::unique_ptr<cbf::Barrier> picker =
+      small.MakeEvaluatorFor({"a", "s1", "b", "s0"}, "the test states", "the net", 64);
+  for (int batch : {1, 64, 200}) {
+    const Eigen::MatrixXf states = Eigen::MatrixXf::Random(4, batch);
+    Eigen::VectorXf h(batch);
+    picker->Evaluate(states, h);  // warm-up
+    EXPECT_EQ(CountDuring([&] { picker->Evaluate(states, h); }).total(), 0) << "batch " << batch;
+  }
+  // The double integrator's decisions with a barrier that reads its rows in another order.
+  const cbf::BarrierNet net = MakeNet(4, {64, 64}, 7);
+  const std::unique_ptr<cbf::Barrier> evaluator =
+      net.MakeEvaluatorFor({"s3", "s2", "s1", "s0"}, "the test states", "the net");
+  ASSERT_EQ(dynamic_cast<cbf::SelectRows*>(evaluator.get()) != nullptr, true);
+  TiltedBarrier barrier(*evaluator, 3, 100.0f, -1.5f);
+  const di::Dynamics dynamics(0.1);
+  for (const Scenario& s : DoubleIntegratorScenarios(true))
+    ExpectNoAllocations(s, barrier, dynamics);
+}
+
 // A Panda-sized barrier (9 inputs, ten hidden layers up to 256 wide) at M = 128. inference_mlp.h
 // documents a known gap (Eigen's GEMM allocates its packing buffers for wide layers); this test
 // asserts the contract (0 allocations) and reports the count when it is violated, with the count
