@@ -195,8 +195,7 @@ struct CheckCommand {
         domain == kDerbyDomain ? derby::ObservationFeatures() : di::StateFeatures();
     if (kind == cbf::kBarrierModelKind) {
       flat = cbf::BarrierNet::Load(model);
-      flat->CheckFeatures(features, "the " + domain + " domain", model);
-      barrier = flat->MakeEvaluator();
+      barrier = flat->MakeEvaluatorFor(features, "the " + domain + " domain", model);
     } else if (kind == cbf::kCarBarrierModelKind) {
       SECURE_CHECK(domain == kDerbyDomain, model << " is a per-car barrier (kind '" << kind
                                                  << "'), which needs --domain derby");

@@ -198,7 +198,10 @@ struct TrainCommand {
       return n > 0 ? nlohmann::json(accuracy) : nlohmann::json(nullptr);
     };
     if (test_fraction > 0) {
-      test = cbf::EvaluateAccuracy(*net.MakeEvaluator(), safe_test.states, nd_test.states);
+      // The test sets keep all the data's features; the model reads its own by name.
+      test = cbf::EvaluateAccuracy(
+          *net.MakeEvaluatorFor(safe_test.features, "the held-out states", out), safe_test.states,
+          nd_test.states);
       net.provenance["test"] = {
           {"fraction", test_fraction},
           {"safe", safe_test.size()},
@@ -317,10 +320,12 @@ struct ValidateCommand {
                  "cbf " << name << ": the " << domain
                         << " domain has no ground truth to validate against");
     const cbf::BarrierNet net = cbf::BarrierNet::Load(model);
-    net.CheckFeatures(d->MakeEnvironment()->ObservationFeatures(), "the " + domain + " domain",
-                      model);
+    const std::vector<std::string> features = d->MakeEnvironment()->ObservationFeatures();
+    const std::string where = "the " + domain + " domain";
+    cbf::FeatureRows(net.features, features, where, model);  // fails here on a mismatch
     const Stopwatch clock;
-    const cbf::Confusion c = cbf::ValidateOnGrid([&] { return net.MakeEvaluator(); },
+    const cbf::Confusion c = cbf::ValidateOnGrid(
+        [&] { return net.MakeEvaluatorFor(features, where, model); },
                                                  [&] { return d->MakeGroundTruth(); }, *grid,
                                                  validation);
     const double seconds = clock.Seconds();

@@ -56,8 +56,11 @@ SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domai
     models_.make_barrier = [this] { return per_obstacle_->MakeEvaluator(256); };
   } else {
     net_ = cbf::BarrierNet::Load(path);
-    net_->CheckFeatures(env.ObservationFeatures(), where, path);
-    models_.make_barrier = [this] { return net_->MakeEvaluator(256); };
+    const std::vector<std::string> features = env.ObservationFeatures();
+    cbf::FeatureRows(net_->features, features, where, path);  // fails here on a mismatch
+    models_.make_barrier = [this, features, where, path] {
+      return net_->MakeEvaluatorFor(features, where, path, 256);
+    };
   }
 }
 

@@ -62,9 +62,18 @@ struct SeedBarrier {
   std::optional<cbf::BarrierNet> flat;
   nlohmann::json summary;
 
-  std::function<std::unique_ptr<cbf::Barrier>()> Factory() const {
+  // Evaluators on the domain's observations (`env`): a flat barrier that reads a subset of them
+  // (BarrierTrainerOptions::input_features) gets its rows picked by name.
+  std::function<std::unique_ptr<cbf::Barrier>()> Factory(const Domain& domain,
+                                                         const domains::Environment& env) const {
     if (per_obstacle) return [this] { return per_obstacle->MakeEvaluator(256); };
-    return [this] { return flat->MakeEvaluator(256); };
+    // Checked once here, so that a mismatch fails before any evaluation.
+    const std::vector<std::string> features = env.ObservationFeatures();
+    const std::string source = "the " + domain.name() + " domain's observations";
+    cbf::FeatureRows(flat->features, features, source, "the flat barrier");
+    return [this, features, source] {
+      return flat->MakeEvaluatorFor(features, source, "the flat barrier", 256);
+    };
   }
   void Save(const std::string& path) const {
     if (per_obstacle) per_obstacle->Save(path);
@@ -220,7 +229,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
       // states.
       if (shared.check) {
         const Stopwatch check_clock;
-        cbf::CheckReport report = CheckSeedBarrier(domain, o, shared, barrier->Factory());
+        cbf::CheckReport report = CheckSeedBarrier(domain, o, shared, barrier->Factory(domain, env));
         record["check"] = report.ToJson();
         record["check"]["seconds"] = check_clock.Seconds();
         if (!dir.empty()) report.WriteCsv(dir + "/" + VariantFile("check", variant, ".csv"));
@@ -237,7 +246,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
             states.col(near_dangerous.size() + i) = report.worst[static_cast<std::size_t>(i)].state;
           near_dangerous.states = std::move(states);
           barrier = TrainSeedBarrier(o, seed, safe, near_dangerous, &brief);
-          cbf::CheckReport after = CheckSeedBarrier(domain, o, shared, barrier->Factory());
+          cbf::CheckReport after = CheckSeedBarrier(domain, o, shared, barrier->Factory(domain, env));
           record["augmented"] = {{"added_near_dangerous_states", added},
                                  {"training", barrier->summary},
                                  {"check", after.ToJson()},
@@ -288,7 +297,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     models.bc = bc ? &*bc : nullptr;
     models.airl = airl ? &*airl : nullptr;
     models.joint = joint ? &*joint : nullptr;
-    if (barrier) models.make_barrier = barrier->Factory();
+    if (barrier) models.make_barrier = barrier->Factory(domain, env);
     outcome.results.push_back(eval::EvaluateMethods(env, methods, models, o.shield, o.episodes,
                                                     eval::EvaluationSeed(seed)));
     evaluation_seconds += clock.Seconds();

@@ -1,6 +1,7 @@
 // The top-level AIRL loop and the public API; the parts of an iteration are in internal/.
 #include "secure/policy/airl_trainer.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -448,8 +449,17 @@ GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions&
                               const data::TrajectorySet& demos, const domains::Environment& env,
                               const GaussianPolicy* warm_start, AirlSummary* summary,
                               const AirlCallback& callback) {
-  return TrainAirlJoint(options, joint_options, *cbf::MakeDifferentiableBarrier(barrier), model,
-                        demos, env, warm_start, summary, callback);
+  // A barrier that reads some of the observation's features (BarrierTrainerOptions::
+  // input_features) picks them by name; any other barrier meets the dimension check.
+  const std::vector<std::string> features = env.ObservationFeatures();
+  bool subset = true;
+  for (const std::string& f : barrier.features)
+    subset = subset && std::find(features.begin(), features.end(), f) != features.end();
+  const std::unique_ptr<cbf::DifferentiableBarrier> differentiable =
+      subset ? cbf::MakeDifferentiableBarrierFor(barrier, features, env.Describe(), "the barrier")
+             : cbf::MakeDifferentiableBarrier(barrier);
+  return TrainAirlJoint(options, joint_options, *differentiable, model, demos, env, warm_start,
+                        summary, callback);
 }
 
 }  // namespace secure::policy

@@ -270,7 +270,9 @@ GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions&
 
 /// The same with a learned barrier model (made differentiable inside, so that the caller needs
 /// no LibTorch header): the per-car CarBarrierNet (Demolition Derby) or the flat BarrierNet (an
-/// MLP on the whole observation). Throws also on an invalid `barrier`.
+/// MLP on the observation; one whose features are all among the environment's observation
+/// features reads them by name, as BarrierNet::MakeEvaluatorFor). Throws also on an invalid
+/// `barrier`.
 GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint,
                               const cbf::CarBarrierNet& barrier,
                               const domains::DynamicsModel& model,

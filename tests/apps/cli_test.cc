@@ -121,6 +121,62 @@ TEST(CliTest, TrainFromFilesThenPredict) {
   EXPECT_EQ(rows, 60);
 }
 
+// `trainer: {input_features: [...]}`: the barrier reads some columns of wider training states;
+// the model records them, and `cbf predict` reads them by name from a CSV with more columns.
+TEST(CliTest, InputFeaturesTrainOnSomeColumnsThenPredictOnWiderStates) {
+  std::string safe = "extra,y,other,x\n", nd = "extra,y,other,x\n";
+  for (int i = 0; i < 60; ++i) {
+    const double y = -1.0 + 2.0 * i / 59.0;
+    safe += std::to_string(i % 7) + "," + std::to_string(y) + ",5," + std::to_string(0.3 + 0.01 * i) +
+            "\n";
+    nd += std::to_string(i % 5) + "," + std::to_string(y) + ",5," +
+          std::to_string(-0.3 - 0.01 * i) + "\n";
+  }
+  const std::string safe_csv = Write("wide_safe.csv", safe), nd_csv = Write("wide_nd.csv", nd);
+  const std::string cfg = Write("input_features.yaml", "trainer:\n  input_features: [x, y]\n");
+  const std::string model = (TempDir() / "input_features.model").string();
+  Result r = RunCli("cbf train --safe-states " + safe_csv + " --near-dangerous-states " + nd_csv +
+                    " --config " + cfg + " --out " + model + kFastTrain +
+                    " --test-fraction 0.2 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["features"], nlohmann::json({"x", "y"}));
+  EXPECT_EQ(j["options"]["input_features"], nlohmann::json({"x", "y"}));
+  EXPECT_GE(j["test"]["accuracy"]["balanced"].get<double>(), 0.9);  // on the wide held-out states
+
+  const std::string h = (TempDir() / "input_features_h.csv").string();
+  r = RunCli("cbf predict --model " + model + " --states " + nd_csv + " --out " + h + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto p = nlohmann::json::parse(r.out);
+  EXPECT_EQ(p["rows"], 60);
+  EXPECT_LE(p["predicted_safe"].get<int>(), 6);
+
+  const std::string missing = Write("missing_feature.yaml", "trainer: {input_features: [x, z]}\n");
+  r = RunCli("cbf train --safe-states " + safe_csv + " --near-dangerous-states " + nd_csv +
+             " --config " + missing + " --out " + model + " --epochs 1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "has 4 features (extra, y, other, x), without 'z'");
+}
+
+// A double-integrator barrier whose inputs are the state's features in another order
+// (input_features): `cbf eval` and `cbf check` evaluate it on the domain's states by name.
+TEST(CliTest, ABarrierOnReorderedFeaturesIsEvaluatedOnTheDomainsStates) {
+  const std::string cfg = Write("reordered.yaml", "trainer: {input_features: [vy, x, vx, y]}\n");
+  const std::string model = (TempDir() / "reordered.model").string();
+  Result r = RunCli("cbf train --domain double-integrator --safe 100 --unsafe 100 --out " + model +
+                    " --config " + cfg + kFastTrain + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["features"], nlohmann::json({"vy", "x", "vx", "y"}));
+  r = RunCli("cbf eval --model " + model + " --domain double-integrator --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GT(nlohmann::json::parse(r.out)["safe_correct"].get<double>(), 0.5);
+  r = RunCli("cbf check --model " + model +
+             " --domain double-integrator --region-samples 100 --near-samples 100 --held-out 50 "
+             "--json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["accuracy"]["held_out_safe"], 50);
+}
+
 TEST(CliTest, RejectsBadCsvWithFileLineColumnAndValue) {
   WriteToyData();
   const std::string bad = Write("bad.csv", "x,y\n1,2\n3,nan\n");

@@ -83,6 +83,28 @@ TEST(PipelineTest, RunsEveryMethodOverSeedsAndDoesNotDependOnTheWorkerCount) {
   EXPECT_EQ(ja["methods"]["airl"]["seeds"][0]["decisions"], 0);
 }
 
+// A flat barrier on some of the observation's features (flat_barrier.input_features, here in
+// another order): the shield and the joint policy read them by name. (The double integrator has
+// no barrier check in experiments; `cbf check` on such a barrier is in cli_test.)
+TEST(PipelineTest, AFlatBarrierOnSomeObservationFeaturesRunsEveryStage) {
+  ExperimentOptions o = Tiny();
+  o.seeds = 1;
+  o.methods = {eval::Method::kAirl, eval::Method::kSecure, eval::Method::kJoint};
+  o.ApplyYaml(YAML::Load("{flat_barrier: {input_features: [vy, x, y]}}"), "x.yaml");
+  EXPECT_EQ(o.ToJson()["flat_barrier"]["input_features"], nlohmann::json({"vy", "x", "y"}));
+  const nlohmann::json j = RunTiny(o).ToJson();
+  for (const char* name : {"secure", "joint"}) {
+    const double danger = j.at("methods").at(name).at("dangerous_rate").at("mean");
+    EXPECT_GE(danger, 0.0) << name;
+    EXPECT_LE(danger, 1.0) << name;
+  }
+  const nlohmann::json& seed0 = j.at("methods").at("secure").at("seeds").at(0);
+  EXPECT_EQ(seed0.at("decisions"), seed0.at("steps"));
+
+  o.ApplyYaml(YAML::Load("{flat_barrier: {input_features: [x, speed]}}"), "x.yaml");
+  EXPECT_HAS(ErrorOf([&] { RunTiny(o); }), "without 'speed'");
+}
+
 TEST(PipelineTest, OptionsAreValidated) {
   ExperimentOptions o = Tiny();
   o.seeds = 0;

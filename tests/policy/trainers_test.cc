@@ -895,6 +895,26 @@ TEST(AirlJointTest, TrainsWithAFlatBarrierAndTheTermMovesThePolicy) {
       << "AIRL " << mean_ax(airl) << ", joint " << mean_ax(with_term);
 }
 
+// A flat barrier on some of the observation's features (BarrierTrainerOptions::input_features)
+// reads them by name: RightwardFlatBarrier on x alone (its y weight is 0) trains as it does.
+TEST(AirlJointTest, AFlatBarrierOnSomeObservationFeaturesReadsThemByName) {
+  const data::TrajectorySet demos = ExpertDemos(4, 2);
+  const PointMassEnv env;
+  AirlOptions o = SmallAirl();
+  o.iterations = 2;
+  cbf::BarrierNet x_only = RightwardFlatBarrier();
+  x_only.mlp.spec.input_dim = 1;
+  x_only.mlp.layers[0].weight = Eigen::MatrixXf::Constant(1, 1, 0.01f);
+  x_only.normalizer = nn::Normalizer::Identity(1);
+  x_only.features = {"x"};
+  AirlSummary full_summary, x_summary;
+  TrainAirlJoint(o, JointCbfOptions{}, RightwardFlatBarrier(), env.ShieldModel(), demos, env,
+                 nullptr, &full_summary);
+  TrainAirlJoint(o, JointCbfOptions{}, x_only, env.ShieldModel(), demos, env, nullptr, &x_summary);
+  EXPECT_GT(x_summary.cbf_loss, 0.0);
+  EXPECT_NEAR(x_summary.cbf_loss, full_summary.cbf_loss, 1e-6 * full_summary.cbf_loss);
+}
+
 TEST(AirlJointTest, ABarrierOrModelThatDoesNotFitTheEnvironmentIsRejected) {
   const data::TrajectorySet demos = ExpertDemos(4, 2);
   const PointMassEnv env;
