@@ -32,6 +32,7 @@ struct CheckLabelsCommand {
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
     cmd->add_flag("--quick", quick, "the domain's small profile");
+    AddConfigFlag(cmd, cfg);  // the domain's options: section <domain's>, key `domain`
     seed_option = AddSeedOption(cmd, "--seed", &seed,
                                 "data seed (default: the domain's experiment data seed)");
     cmd->add_option("--max-states", max_states, "states checked per row (default 300)");

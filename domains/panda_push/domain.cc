@@ -199,7 +199,7 @@ experiments::ExperimentOptions PandaPushDomain::Preset() const {
   // observation features.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
   o.flat_barrier.activation = nn::Activation::kTanh;
-  // MERGE-A o.flat_barrier.input_features = BarrierFeatures();
+  o.flat_barrier.input_features = BarrierFeatures();
   o.flat_barrier.max_epochs = 150;
   // AIRL on 150-step episodes (fixed horizon), with the BC regulariser as in Derby.
   o.airl.iterations = 40;

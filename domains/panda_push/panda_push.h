@@ -77,7 +77,7 @@ struct PandaPushOptions {
   std::array<double, 3> target = {0.55, 0.0, 0.20};
   double success_radius = 0.03;
   double topple_angle = 0.4;        // rad of tilt from upright
-  double table_friction = 0.8;      // block-table sliding friction
+  double table_friction = 0.6;      // block-table sliding friction
   double pusher_friction = 0.1;     // block-hand and block-finger sliding friction
 
   /// @throws secure::Error naming the field, value and rule.
