@@ -236,12 +236,11 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
         a[2] = static_cast<float>(std::clamp(0.5 * (h - o[kEePos + 2]) / 0.05, -1.0, 1.0));
         a[1] = static_cast<float>(std::clamp(-5.0 * (o[kEePos + 1] - o[kBlockPos + 1]), -0.2,
                                              0.2));
-        if (gap > options.approach_gap) {
-          a[0] = static_cast<float>(approach);
-        } else {
-          if (push_begin < 0) push_begin = static_cast<long>(eo.size());
-          a[0] = static_cast<float>(push);
-        }
+        // Fast while far, slowing down in proportion to the gap over the last approach_gap
+        // metres (a keyboard user easing off), the push speed once in contact.
+        const double ease = std::clamp(gap / std::max(options.approach_gap, 1e-9), 0.0, 1.0);
+        a[0] = static_cast<float>(push + (approach - push) * ease);
+        if (gap <= 0.005 && push_begin < 0) push_begin = static_cast<long>(eo.size());
       }
       for (int k = 0; k < kActionDim; ++k)
         a[k] = std::clamp(a[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),

@@ -4,10 +4,12 @@
 //
 // Demonstrator (in the style of the released keyboard teleoperation, official-code-facts.md
 // §2.6): descend to a push height h ~ U(push_height) at a_z ~ -U(descend_speed); approach along
-// +x at a_x ~ U(approach_speed) until approach_gap m before the block; then push along +x at
-// a_x ~ U(push_speed) holding the height (a_z = (h - z) / 0.05 * 0.5) and the line
-// (a_y = -5 (ee_y - block_y)), each action component with N(0, action_noise^2) noise, until the
-// block reaches the target. Episodes that topple the block or miss the target are discarded.
+// +x at a_x ~ U(approach_speed), easing off linearly to the push speed a_x ~ U(push_speed) over
+// the last approach_gap metres before the pusher touches the block; then push along +x at that
+// speed holding the height (a_z = (h - z) / 0.05 * 0.5) and the line (a_y = -5 (ee_y - block_y)),
+// each action component with N(0, action_noise^2) noise, until the block reaches the target.
+// The push starts (push_begin) at the first state within 5 mm of contact. Episodes that topple
+// the block or miss the target are discarded.
 //
 // Near-dangerous states (the released generator, §2.7, in this simulator's units and without
 // its bug that copies unmodified states into the unsafe set): the pushing part of each
@@ -43,13 +45,16 @@ struct Range {
 };
 
 struct PandaDemonstrationOptions {
-  int episodes = 6;        // kept demonstrations
-  int max_attempts = 60;   // episodes tried before giving up
+  // Kept demonstrations. The paper learns from 2 teleoperated ones (246 states); our scripted ones
+  // are shorter (about 45 steps) and BC/AIRL from 6 of them drifted off the block (AIRL 55 %
+  // success); 20 (about 900 states) gave AIRL 90-95 % (docs/RESULTS.md).
+  int episodes = 20;
+  int max_attempts = 100;  // episodes tried before giving up
   Range push_height = {0.02, 0.035};  // m, the end-effector height while pushing
   Range descend_speed = {0.5, 0.9};   // -a_z while descending
   Range approach_speed = {0.4, 0.7};  // a_x while approaching
   Range push_speed = {0.08, 0.15};    // a_x while pushing
-  double approach_gap = 0.03;         // m between the pusher's front and the block to slow down
+  double approach_gap = 0.1;  // m: the approach speed eases to the push speed over this gap
   double action_noise = 0.02;         // sd of the per-component action noise
   std::uint64_t seed = 0;
 
@@ -83,7 +88,10 @@ struct PandaNearDangerousOptions {
   double fast_x_share = 1.0;           // of the fast scenario: fast along x (else along z)
   Range upper_z = {0.07, 0.399};       // m
   double low_z_max = 0.069;            // m
-  Range fast_vx = {0.6, 1.25};         // m/s (the demonstrations push at 0.1-0.2 m/s)
+  // m/s. The demonstrations push at 0.1-0.19 m/s; continuing a push topples the block from
+  // 0.3 m/s on (label check: 7 % at 0.2-0.3, 37 % at 0.3-0.4, 89 % at 0.4-0.6, 99 % above), and
+  // a pusher arriving at 0.36 m/s knocks it over (seen in SECURE episodes with 0.6 here).
+  Range fast_vx = {0.35, 1.25};
   Range fast_vz = {0.3, 1.25};         // m/s (downwards)
   double back_off = 0.002;             // m
   void Validate() const;

@@ -402,7 +402,7 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_HAS(r.err, "'foo'");
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "unknown domain 'panda' (registered: derby | double-integrator)");
+  EXPECT_HAS(r.err, "unknown domain 'panda' (registered: derby | double-integrator | panda-push)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
   EXPECT_EQ(r.exit_code, 1);
@@ -420,10 +420,31 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   }
   const Result r = RunCli("experiment method-comparison --domain unicycle --quick");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "unknown domain 'unicycle' (registered: derby | double-integrator)");
+  EXPECT_HAS(r.err, "unknown domain 'unicycle' (registered: derby | double-integrator | panda-push)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
   EXPECT_HAS(v.err, "the derby domain has no ground truth");
+}
+
+TEST(CliTest, CheckLabelsSimulatesFromTheLabelledStates) {
+  // panda-push simulates forward from each labelled state; rows name the set, its label and the
+  // dangerous count. A domain without physics to simulate refuses in one line.
+  const Result r = RunCli("demos check-labels --domain panda-push --quick --max-states 4 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["domain"], "panda-push");
+  ASSERT_GE(j["rows"].size(), 4u);
+  EXPECT_EQ(j["rows"][0]["label"], "safe");
+  for (const auto& row : j["rows"]) {
+    EXPECT_EQ(row["states"], 4);
+    EXPECT_LE(row["dangerous"].get<long>() + row["skipped"].get<long>(), 4);
+  }
+  const Result di = RunCli("demos check-labels --domain double-integrator");
+  EXPECT_EQ(di.exit_code, 1);
+  EXPECT_HAS(di.err, "the double-integrator domain has no label check");
+  const Result bad = RunCli("demos check-labels --domain panda-push --max-states 0");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_HAS(bad.err, "--max-states");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -669,7 +690,7 @@ TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
   Result r = RunCli(base + Write("typo.yaml", "trainr:\n  max_epochs: 3\n"));
   ExpectOneErrorLine(r,
                      "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, derby, "
-                     "double_integrator, pipeline, trainer)");
+                     "double_integrator, panda_push, pipeline, trainer)");
   r = RunCli(base + Write("dup.yaml", "trainer:\n  max_epochs: 3\n  max_epochs: 4\n"));
   ExpectOneErrorLine(r, "dup.yaml:3: duplicate key 'max_epochs' (first at line 2)");
   r = RunCli(base + Write("dup_top.yaml", "trainer: {}\ndouble_integrator: {}\ntrainer: {}\n"));
