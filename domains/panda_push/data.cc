@@ -43,8 +43,11 @@ data::StateSet Subset(const std::string& source, const Eigen::MatrixXf& states,
   return s;
 }
 
-// `count` of `n` indices drawn without replacement (all of them, shuffled, if count >= n).
-std::vector<long> DrawIndices(long n, long count, Rng& rng) {
+// `count` of `n` indices drawn without replacement. @throws secure::Error naming `what` if there
+// are fewer than `count`.
+std::vector<long> DrawIndices(long n, long count, Rng& rng, const std::string& what) {
+  SECURE_CHECK(count <= n, what << ": " << count << " states asked for, only " << n
+                                << " available (fewer states, or more demonstrations / copies)");
   std::vector<long> idx(static_cast<size_t>(n));
   std::iota(idx.begin(), idx.end(), 0L);
   for (long i = n - 1; i > 0; --i)
@@ -297,7 +300,7 @@ data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafe
   const Eigen::MatrixXf all = WithNoisyCopies(demos.trajectories.states, options.noisy_copies, rng);
   return Subset("panda-push safe states (demonstrations, " +
                     std::to_string(options.noisy_copies) + " noisy copies each)",
-                all, DrawIndices(all.cols(), options.count, rng));
+                all, DrawIndices(all.cols(), options.count, rng, "panda-push safe states (count)"));
 }
 
 data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
@@ -345,7 +348,8 @@ data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
   SECURE_CHECK(!rows.empty(), "panda-push near-dangerous states: the demonstrations have no push");
   Eigen::MatrixXf all(kObservationDim, static_cast<long>(rows.size()));
   for (long i = 0; i < all.cols(); ++i) all.col(i) = rows[i];
-  const std::vector<long> idx = DrawIndices(all.cols(), options.count, rng);
+  const std::vector<long> idx =
+      DrawIndices(all.cols(), options.count, rng, "panda-push near-dangerous states (count)");
   if (scenarios != nullptr) {
     scenarios->clear();
     for (long i : idx) scenarios->push_back(kinds[i]);
@@ -353,29 +357,39 @@ data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
   return Subset("panda-push near-dangerous states (upper part / too fast / both)", all, idx);
 }
 
+ReleasedPandaFiles ReadReleasedPandaFiles(const std::string& dir) {
+  const std::filesystem::path base(dir);
+  ReleasedPandaFiles f;
+  f.demonstrations = data::ReadTrajectories((base / "task_demos.csv").string(),
+                                            ObservationFeatures(), ActionFeatures());
+  const data::StateSet nd =
+      data::ReadStateSet((base / "near_dangerous_states.csv").string(), ObservationFeatures());
+  std::vector<long> keep;
+  for (long i = 0; i < nd.states.cols(); ++i)
+    if (!nd.states.col(i).isZero(0.0f)) keep.push_back(i);
+  f.near_dangerous = Subset("released panda-push near-dangerous states (" + nd.source + ")",
+                            nd.states, keep);
+  return f;
+}
+
 ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeOptions& safe,
                                         long near_count, Rng& rng) {
   safe.Validate();
   SECURE_CHECK(near_count >= 1, "released panda-push data: near_count = " << near_count
                                                                            << ", must be >= 1");
-  const std::filesystem::path base(dir);
+  ReleasedPandaFiles files = ReadReleasedPandaFiles(dir);
   ReleasedPandaData r;
-  r.demonstrations = data::ReadTrajectories((base / "task_demos.csv").string(),
-                                            ObservationFeatures(), ActionFeatures());
-  const data::StateSet nd =
-      data::ReadStateSet((base / "near_dangerous_states.csv").string(), ObservationFeatures());
   const Eigen::MatrixXf safe_all =
-      WithNoisyCopies(r.demonstrations.states, safe.noisy_copies, rng);
-  r.safe = Subset("released panda-push demonstrations (" + r.demonstrations.source + ", " +
+      WithNoisyCopies(files.demonstrations.states, safe.noisy_copies, rng);
+  r.safe = Subset("released panda-push demonstrations (" + files.demonstrations.source + ", " +
                       std::to_string(safe.noisy_copies) + " noisy copies each)",
-                  safe_all, DrawIndices(safe_all.cols(), safe.count, rng));
-  std::vector<long> keep;
-  for (long i = 0; i < nd.states.cols(); ++i)
-    if (!nd.states.col(i).isZero(0.0f)) keep.push_back(i);
-  Eigen::MatrixXf nd_kept(kObservationDim, static_cast<long>(keep.size()));
-  for (long i = 0; i < static_cast<long>(keep.size()); ++i) nd_kept.col(i) = nd.states.col(keep[i]);
-  r.near_dangerous = Subset("released panda-push near-dangerous states (" + nd.source + ")",
-                            nd_kept, DrawIndices(nd_kept.cols(), near_count, rng));
+                  safe_all,
+                  DrawIndices(safe_all.cols(), safe.count, rng, "released safe states (count)"));
+  r.near_dangerous =
+      Subset(files.near_dangerous.source, files.near_dangerous.states,
+             DrawIndices(files.near_dangerous.size(), near_count, rng,
+                         "released near-dangerous states (count)"));
+  r.demonstrations = std::move(files.demonstrations);
   return r;
 }
 

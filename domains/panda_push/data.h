@@ -117,11 +117,19 @@ data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
 /// feature name. Safe states: the released demonstration states with `safe.noisy_copies` noisy
 /// copies, `safe.count` drawn; near-dangerous: `near_count` drawn from the released file (its
 /// all-zero row dropped; its unmodified rows kept, as released).
-/// @throws secure::Error naming the file on a missing file or column.
+/// @throws secure::Error naming the file on a missing file or column, or if a count exceeds the
+///   states there are.
 struct ReleasedPandaData {
   data::TrajectorySet demonstrations;
   data::StateSet safe, near_dangerous;
 };
+/// The released files as they are: the demonstrations and every near-dangerous state but the
+/// all-zero row (no sampling, no copies).
+struct ReleasedPandaFiles {
+  data::TrajectorySet demonstrations;
+  data::StateSet near_dangerous;
+};
+ReleasedPandaFiles ReadReleasedPandaFiles(const std::string& dir);
 ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeOptions& safe,
                                         long near_count, Rng& rng);
 

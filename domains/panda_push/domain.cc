@@ -175,10 +175,11 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
           columns(near, cols));
   }
   if (!options_.released_data_dir.empty()) {
-    Rng released_rng(data_seed + 2);
-    const ReleasedPandaData released = ReadReleasedPandaData(
-        options_.released_data_dir, PandaSafeOptions{max_states, 0}, max_states, released_rng);
-    add("released demonstration states", "safe", released.safe);
+    const ReleasedPandaFiles released = ReadReleasedPandaFiles(options_.released_data_dir);
+    data::StateSet released_demos;
+    released_demos.features = ObservationFeatures();
+    released_demos.states = released.demonstrations.states;
+    add("released demonstration states", "safe", released_demos);
     add("released near-dangerous states", "near-dangerous", released.near_dangerous);
   }
   return rows;

@@ -224,6 +224,8 @@ TEST(PandaPushData, DemonstrationsSucceedAndNearDangerousStatesFollowTheirScenar
   const data::StateSet safe = PandaSafeStates(demos, so, rng);
   EXPECT_EQ(safe.size(), 200);
   EXPECT_EQ(safe.features, ObservationFeatures());
+  so.count = 100000;  // more than 3 demonstrations x 11 copies hold
+  EXPECT_THROW(PandaSafeStates(demos, so, rng), Error);
 }
 
 TEST(PandaPushData, LabelsHoldAgainstPhysics) {
@@ -283,6 +285,10 @@ TEST(PandaPushDomain, ReadsTheReleasedData) {
   for (long i = 0; i < r.near_dangerous.size(); ++i)
     EXPECT_FALSE(r.near_dangerous.states.col(i).isZero(0.0f));
   EXPECT_THROW(ReadReleasedPandaData("/nonexistent", safe, 10, rng), Error);
+  // Asking for more states than the files hold is an error, not fewer states.
+  EXPECT_THROW(ReadReleasedPandaData(dir, safe, 5000, rng), Error);
+  const ReleasedPandaFiles files = ReadReleasedPandaFiles(dir);
+  EXPECT_EQ(files.near_dangerous.size(), 4380);  // 4381 rows, the all-zero one dropped
 }
 
 }  // namespace
