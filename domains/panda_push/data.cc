@@ -34,12 +34,11 @@ nlohmann::json RangeJson(const Range& r) { return {{"lo", r.lo}, {"hi", r.hi}}; 
 
 // Columns `cols` of `states`, in order.
 data::StateSet Subset(const std::string& source, const Eigen::MatrixXf& states,
-                      std::vector<long> cols) {
+                      const std::vector<long>& cols) {
   data::StateSet s;
   s.source = source;
   s.features = ObservationFeatures();
-  s.states.resize(kObservationDim, static_cast<long>(cols.size()));
-  for (long i = 0; i < static_cast<long>(cols.size()); ++i) s.states.col(i) = states.col(cols[i]);
+  s.states = data::SelectColumns(states, cols);
   return s;
 }
 

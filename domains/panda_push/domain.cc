@@ -152,8 +152,7 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
     data::StateSet s;
     s.features = from.features;
     s.source = from.source;
-    s.states.resize(from.dim(), static_cast<long>(cols.size()));
-    for (long i = 0; i < static_cast<long>(cols.size()); ++i) s.states.col(i) = from.states.col(cols[i]);
+    s.states = data::SelectColumns(from.states, cols);
     return s;
   };
   add("safe states", "safe", safe);

@@ -143,7 +143,6 @@ struct PandaPushSim::Impl {
   MujocoModel model;  // this simulation's copy (options applied)
   MujocoData data;
   int tcp = -1, block_body = -1, block_qpos = -1, block_dof = -1;
-  int block_geom = -1, pusher_geom = -1;
   int arm_qpos[kArmJoints], arm_dof[kArmJoints];
   double lower[kArmJoints], upper[kArmJoints];
   // Scratch (allocated once).
@@ -178,8 +177,6 @@ PandaPushSim::PandaPushSim(const PandaPushOptions& options)
   const int block_joint = id(mjOBJ_JOINT, "block");
   s.block_qpos = mm->jnt_qposadr[block_joint];
   s.block_dof = mm->jnt_dofadr[block_joint];
-  s.block_geom = id(mjOBJ_GEOM, "block");
-  s.pusher_geom = id(mjOBJ_GEOM, "pusher");
   for (int i = 0; i < kArmJoints; ++i) {
     const std::string name = "joint" + std::to_string(i + 1);
     const int j = id(mjOBJ_JOINT, name.c_str());
@@ -405,18 +402,6 @@ double PandaPushSim::TargetDistance() const {
   double sum = 0;
   for (int k = 0; k < 3; ++k) sum += (p[k] - options_.target[k]) * (p[k] - options_.target[k]);
   return std::sqrt(sum);
-}
-
-bool PandaPushSim::PusherTouchesBlock() const {
-  const Impl& s = *impl_;
-  const mjData* d = s.data.get();
-  for (int c = 0; c < d->ncon; ++c) {
-    const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
-    const int other = g1 == s.block_geom ? g2 : g2 == s.block_geom ? g1 : -1;
-    if (other == s.pusher_geom && d->contact[c].dist <= 0)
-      return true;
-  }
-  return false;
 }
 
 // ---------------------------------------------------------------------------------------------

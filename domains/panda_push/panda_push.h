@@ -123,8 +123,6 @@ class PandaPushSim {
   /// the target region; the released test does not exclude it).
   bool Succeeded() const { return TargetDistance() < options_.success_radius && !Toppled(); }
   bool Toppled() const { return BlockTilt() > options_.topple_angle; }
-  /// Whether the hand or fingers touch the block.
-  bool PusherTouchesBlock() const;
   /// Simulated time since the last reset (s).
   double time() const;
 
