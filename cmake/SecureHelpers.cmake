@@ -12,7 +12,9 @@ function(secure_add_library module)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(secure_${module} STATIC ${ARG_SOURCES})
   add_library(secure::${module} ALIAS secure_${module})
-  target_include_directories(secure_${module} PUBLIC ${PROJECT_SOURCE_DIR})
+  # The source tree in the build; <prefix>/include once installed (cmake/SecureInstall.cmake).
+  target_include_directories(secure_${module} PUBLIC $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
+                                                     $<INSTALL_INTERFACE:include>)
   target_compile_options(secure_${module} PRIVATE ${SECURE_WARNINGS} PUBLIC ${SECURE_ARCH_FLAGS})
   target_link_libraries(secure_${module} PUBLIC ${ARG_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
   secure_check_includes(secure_${module})
