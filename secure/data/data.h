@@ -1,9 +1,11 @@
 #pragma once
-// Datasets read from and written to CSV files with a header row.
+// Datasets read from and written to CSV files with a header row, or to HDF5 files in robomimic's
+// layout (by extension: .h5 / .hdf5; see docs/FILE_FORMATS.md).
 //
 // Conventions: a set of states is an Eigen matrix (dim x N), one state per column, with the
 // feature names of its rows. Readers validate everything and throw secure::Error with a message
-// that names the file, the line (1-based, the header is line 1), the column name and the value.
+// that names the file, the line (1-based, the header is line 1), the column name and the value;
+// for HDF5, the file, the dataset path, the row and the column.
 
 #include <Eigen/Core>
 #include <string>
@@ -48,9 +50,26 @@ struct StateSet {
   long size() const { return static_cast<long>(states.cols()); }
 };
 
+/// The labels of the safety demonstrations in an HDF5 file (groups safety/<label>).
+inline constexpr const char* kSafeLabel = "safe";
+inline constexpr const char* kNearDangerousLabel = "near_dangerous";
+
+/// True if `path` names an HDF5 file: its extension is .h5 or .hdf5 (any case). Every reader and
+/// writer below dispatches on it; anything else is CSV.
+bool IsHdf5Path(const std::string& path);
+
 /// Reads a state set; `features` selects columns by name (empty: all columns).
-/// @throws secure::Error as ReadCsv, and if the file holds zero states.
-StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features = {});
+/// HDF5: `features` name columns ("<key>" of a one-column obs key, "<key>[j]" of a wider one) or
+/// whole obs keys (all their columns, in order). The states are those of group
+/// safety/<hdf5_label> if present, else of the file's only state set whatever its label; a file
+/// without a safety/ group gives every step of its demonstrations (as a demonstrations CSV
+/// read as states does).
+/// @throws secure::Error as ReadCsv, and if the file holds zero states; for HDF5 also on a file
+///   that is not HDF5, a missing group, key or dataset, a wrong rank or shape, non-float data, a
+///   NaN or infinity (naming the dataset, row and column), keys of different lengths, and a
+///   label that matches none of several sets.
+StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features = {},
+                      const std::string& hdf5_label = "");
 
 /// Task demonstrations: state/action pairs grouped into episodes, as rows of one CSV file.
 struct TrajectorySet {
@@ -67,8 +86,13 @@ struct TrajectorySet {
 
 /// Reads trajectories: rows with the same value in `episode_column` that are adjacent form one
 /// episode (a value that reappears after another episode is an error naming the line).
+/// HDF5: the episodes are data/demo_<i> in order of i; `state_features` select obs columns or
+/// keys as in ReadStateSet (empty: all, in file order); `action_features` select columns of
+/// `actions` by the names our writer stores (attribute data/action_features), else "actions[j]"
+/// ("actions" for all); `episode_column` is unused.
 /// @throws secure::Error as ReadCsv, if the episode column holds a non-integer, or if the file
-///   holds no rows.
+///   holds no rows; for HDF5 as ReadStateSet, and on an empty demo, obs and actions of different
+///   lengths or a num_samples attribute that disagrees with the data.
 TrajectorySet ReadTrajectories(const std::string& path,
                                const std::vector<std::string>& state_features,
                                const std::vector<std::string>& action_features,
@@ -76,9 +100,11 @@ TrajectorySet ReadTrajectories(const std::string& path,
 
 /// Writes `set` as a CSV file (columns: the feature names; one row per state), atomically (via
 /// WriteCsv). Reads back bit-exactly with ReadStateSet.
+/// HDF5: a file holding safety/<hdf5_label> (empty label: the file name's stem), see WriteHdf5.
 /// @throws secure::Error if the set holds no states, its matrix and feature names disagree, a
 ///   feature name is unusable as a CSV column (see WriteCsv) or repeated, or a value is not finite.
-void WriteStateSet(const std::string& path, const StateSet& set);
+void WriteStateSet(const std::string& path, const StateSet& set,
+                   const std::string& hdf5_label = "");
 
 /// Writes trajectories as a CSV file, atomically (via WriteCsv), with the columns
 ///   <episode_column>, step, <state features...>, <action features...>
@@ -88,8 +114,52 @@ void WriteStateSet(const std::string& path, const StateSet& set);
 /// @throws secure::Error if there are no steps, the matrices, feature names and episode_begin
 ///   disagree (episode_begin must run strictly increasing from 0 to num_steps(): an empty episode
 ///   would not read back), a column name is repeated or unusable, or a value is not finite.
+/// HDF5: as WriteHdf5(path, &set, {}) (`episode_column` unused).
 void WriteTrajectories(const std::string& path, const TrajectorySet& set,
                        const std::string& episode_column = "episode");
+
+/// A state set with the label of its HDF5 group safety/<label>.
+struct LabelledStateSet {
+  std::string label;
+  const StateSet* set = nullptr;
+};
+
+/// Writes demonstrations (if `demos` is not null) and labelled state sets to one HDF5 file in
+/// robomimic's layout, atomically:
+///   data                 attributes total (steps), env_args (JSON string), action_features
+///   data/demo_<k>        episode k; attribute num_samples
+///     obs/<key>          (T, n) float64: feature names "<key>[0]" .. "<key>[n-1]" (n >= 2) form
+///                        one key; any other name is a (T, 1) key of its own
+///     actions            (T, n_a) float64
+///     dones, rewards     (T,) int64 (1 at the last step) and float64 (zeros)
+///     states             (T, state dim) float64: the obs columns in feature order
+///   safety/<label>       a state set; attribute num_samples
+///     obs/<key>          (N, n) float64, keys as above
+/// Groups keep creation order and no time stamps: the same data give the same bytes, and keys
+/// read back in the order written. Reads back bit-exactly (float32 values in float64).
+/// @throws secure::Error on what WriteTrajectories and WriteStateSet reject, a name that is no
+///   HDF5 name (empty, ".", containing '/'), an action name with a comma, or two sets with one
+///   label.
+void WriteHdf5(const std::string& path, const TrajectorySet* demos,
+               const std::vector<LabelledStateSet>& sets);
+
+/// What an HDF5 data file holds.
+struct Hdf5Contents {
+  bool has_demonstrations = false;
+  std::vector<std::string> observation_features;  // data/demo_0/obs columns, in file order
+  std::vector<std::string> action_features;
+  std::vector<std::string> state_sets;  // labels under safety/, in file order
+};
+/// @throws secure::Error as ReadTrajectories, or if the file holds neither data/ nor safety/.
+Hdf5Contents InspectHdf5(const std::string& path);
+
+namespace internal {
+TrajectorySet ReadHdf5Trajectories(const std::string& path,
+                                   const std::vector<std::string>& state_features,
+                                   const std::vector<std::string>& action_features);
+StateSet ReadHdf5StateSet(const std::string& path, const std::vector<std::string>& features,
+                          const std::string& label);
+}  // namespace internal
 
 /// Checks that a set has at least one state and only finite values; `what` names it in the
 /// message ("near-dangerous states (file.csv): 0 states; each class needs at least one").

@@ -6,6 +6,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstddef>
+#include <filesystem>
 #include <numeric>
 #include <string>
 #include <unordered_map>
@@ -56,7 +57,9 @@ void CheckDistinct(const std::string& path, const std::vector<std::string>& colu
 
 }  // namespace
 
-StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features) {
+StateSet ReadStateSet(const std::string& path, const std::vector<std::string>& features,
+                      const std::string& hdf5_label) {
+  if (IsHdf5Path(path)) return internal::ReadHdf5StateSet(path, features, hdf5_label);
   NumericTable table = ReadCsv(path, features);
   StateSet set;
   set.source = path;
@@ -71,6 +74,8 @@ TrajectorySet ReadTrajectories(const std::string& path,
                                const std::vector<std::string>& state_features,
                                const std::vector<std::string>& action_features,
                                const std::string& episode_column) {
+  if (IsHdf5Path(path))
+    return internal::ReadHdf5Trajectories(path, state_features, action_features);
   SECURE_CHECK(!state_features.empty(), path << ": no state features selected");
   std::vector<std::string> select;
   select.reserve(1 + state_features.size() + action_features.size());
@@ -115,7 +120,13 @@ TrajectorySet ReadTrajectories(const std::string& path,
   return set;
 }
 
-void WriteStateSet(const std::string& path, const StateSet& set) {
+void WriteStateSet(const std::string& path, const StateSet& set, const std::string& hdf5_label) {
+  if (IsHdf5Path(path)) {
+    const std::string label =
+        hdf5_label.empty() ? std::filesystem::path(path).stem().string() : hdf5_label;
+    WriteHdf5(path, nullptr, {{label, &set}});
+    return;
+  }
   SECURE_CHECK(set.states.rows() == set.dim(), "cannot write '" << path << "': the states have "
                                                                 << set.states.rows() << " rows but "
                                                                 << set.dim() << " feature names");
@@ -126,6 +137,10 @@ void WriteStateSet(const std::string& path, const StateSet& set) {
 
 void WriteTrajectories(const std::string& path, const TrajectorySet& set,
                        const std::string& episode_column) {
+  if (IsHdf5Path(path)) {
+    WriteHdf5(path, &set, {});
+    return;
+  }
   const auto state_dim = static_cast<Eigen::Index>(set.state_features.size());
   const auto action_dim = static_cast<Eigen::Index>(set.action_features.size());
   const Eigen::Index steps = set.states.cols();

@@ -1,0 +1,898 @@
+// Demonstrations and state sets in robomimic's HDF5 layout (see data.h and
+// docs/FILE_FORMATS.md). The HDF5 C API stays in this file: no public header includes hdf5.h.
+//
+// Files are read from memory (the bytes from ReadFile, opened through the core driver's file
+// image) and written to memory, then to disk by WriteFileAtomically: reads and writes share the
+// CSV files' path handling (FIFOs, symlinks, atomic replacement) and HDF5 never locks a file.
+
+#include <hdf5.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <charconv>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "secure/common/atomic_file.h"
+#include "secure/common/error.h"
+#include "secure/common/excerpt.h"
+#include "secure/common/filesystem.h"
+#include "secure/common/strings.h"
+#include "secure/data/data.h"
+
+namespace secure::data {
+namespace {
+
+constexpr const char* kEnvArgs =
+    "{\"env_name\": \"secure\", \"type\": 2, \"env_kwargs\": {}}";  // robomimic EnvType.GYM_TYPE
+
+// Owns an HDF5 identifier and closes it with the function of its kind.
+class Handle {
+ public:
+  Handle() = default;
+  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
+  ~Handle() { Reset(); }
+  Handle(Handle&& other) noexcept : id_(other.id_), close_(other.close_) { other.id_ = -1; }
+  Handle& operator=(Handle&& other) noexcept {
+    if (this != &other) {
+      Reset();
+      id_ = other.id_;
+      close_ = other.close_;
+      other.id_ = -1;
+    }
+    return *this;
+  }
+  Handle(const Handle&) = delete;
+  Handle& operator=(const Handle&) = delete;
+  hid_t get() const { return id_; }
+  bool ok() const { return id_ >= 0; }
+
+ private:
+  void Reset() {
+    if (id_ >= 0 && close_ != nullptr) close_(id_);
+    id_ = -1;
+  }
+  hid_t id_ = -1;
+  herr_t (*close_)(hid_t) = nullptr;
+};
+
+// Turns off HDF5's printing of its error stack to stderr while a file is read or written: our
+// own one-line messages replace it. Restores the previous handler.
+class QuietHdf5 {
+ public:
+  QuietHdf5() {
+    H5Eget_auto2(H5E_DEFAULT, &func_, &data_);
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  }
+  ~QuietHdf5() { H5Eset_auto2(H5E_DEFAULT, func_, data_); }
+  QuietHdf5(const QuietHdf5&) = delete;
+  QuietHdf5& operator=(const QuietHdf5&) = delete;
+
+ private:
+  H5E_auto2_t func_ = nullptr;
+  void* data_ = nullptr;
+};
+
+// The innermost message of HDF5's current error stack ("" if none), for "corrupt file" errors.
+std::string Hdf5Reason() {
+  std::string reason;
+  H5Ewalk2(
+      H5E_DEFAULT, H5E_WALK_UPWARD,
+      [](unsigned n, const H5E_error2_t* e, void* out) -> herr_t {
+        if (n == 0 && e->desc != nullptr) *static_cast<std::string*>(out) = e->desc;
+        return 0;
+      },
+      &reason);
+  return reason.empty() ? std::string() : " (HDF5: " + Excerpt(reason) + ")";
+}
+
+// Formats a value read from a file (shortest round trip).
+std::string Shown(double value) {
+  if (std::isnan(value)) return "nan";
+  if (std::isinf(value)) return value > 0 ? "inf" : "-inf";
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
+  return std::string(buffer, result.ptr);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reading.
+
+// The column names of an obs key with `cols` columns: "<key>" or "<key>[0]", ..., "<key>[k-1]".
+std::string ColumnName(const std::string& key, long cols, long j) {
+  return cols == 1 ? key : key + "[" + std::to_string(j) + "]";
+}
+
+// A (rows x cols) dataset read as row-major doubles.
+struct Table {
+  long rows = 0, cols = 0;
+  std::vector<double> values;
+};
+
+// An obs key (or the actions) of a group: its dataset's name and width.
+struct Key {
+  std::string name;
+  long cols = 0;
+};
+
+// A selected column: key index and column within the key.
+struct Column {
+  std::size_t key = 0;
+  long col = 0;
+};
+
+class Reader {
+ public:
+  explicit Reader(std::string path) : path_(std::move(path)) {
+    CheckNotADirectory(path_);
+    image_ = ReadFile(path_);
+    SECURE_CHECK(HasSignature(), path_ << ": not an HDF5 file (no HDF5 signature)");
+    Handle fapl(H5Pcreate(H5P_FILE_ACCESS), H5Pclose);
+    SECURE_CHECK(fapl.ok() && H5Pset_fapl_core(fapl.get(), 1 << 16, 0) >= 0 &&
+                     H5Pset_file_image(fapl.get(), image_.data(), image_.size()) >= 0,
+                 path_ << ": cannot set up the HDF5 reader" << Hdf5Reason());
+    // The core driver refuses an image whose name is an existing file: the name must be one
+    // no file has (it names nothing on disk; messages name path_).
+    static std::atomic<unsigned long> counter{0};
+    const std::string name = "/nonexistent/secure-hdf5-image-" + std::to_string(::getpid()) +
+                             "-" + std::to_string(counter++);
+    file_ = Handle(H5Fopen(name.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose);
+    SECURE_CHECK(file_.ok(), path_ << ": cannot open as HDF5 (corrupt or truncated file?)"
+                                   << Hdf5Reason());
+  }
+
+  const std::string& path() const { return path_; }
+  hid_t file() const { return file_.get(); }
+
+  // The kind of the link `name` in `loc`: H5I_GROUP, H5I_DATASET, or H5I_BADID if it does not
+  // exist (or is something else, e.g. a dangling link).
+  H5I_type_t KindOf(hid_t loc, const std::string& name) const {
+    if (H5Lexists(loc, name.c_str(), H5P_DEFAULT) <= 0) return H5I_BADID;
+    Handle object(H5Oopen(loc, name.c_str(), H5P_DEFAULT), H5Oclose);
+    if (!object.ok()) return H5I_BADID;
+    return H5Iget_type(object.get());
+  }
+
+  // Opens group `name` in `loc`; `where` is its full path for messages.
+  Handle OpenGroup(hid_t loc, const std::string& name, const std::string& where,
+                   const std::string& what) const {
+    const H5I_type_t kind = KindOf(loc, name);
+    SECURE_CHECK(kind != H5I_BADID, path_ << ": no group '" << where << "' (" << what << ")");
+    SECURE_CHECK(kind == H5I_GROUP, path_ << ": " << where << " is not a group (" << what << ")");
+    Handle group(H5Gopen2(loc, name.c_str(), H5P_DEFAULT), H5Gclose);
+    SECURE_CHECK(group.ok(), path_ << ": " << where << ": cannot open the group" << Hdf5Reason());
+    return group;
+  }
+
+  // The names of the links in `group`, in creation order if the file tracks it (our files, so
+  // that keys read back in the order they were written), else in name order (h5py's default).
+  std::vector<std::string> Children(hid_t group, const std::string& where) const {
+    H5G_info_t info;
+    SECURE_CHECK(H5Gget_info(group, &info) >= 0,
+                 path_ << ": " << where << ": cannot list the group" << Hdf5Reason());
+    H5_index_t index = H5_INDEX_NAME;
+    Handle gcpl(H5Gget_create_plist(group), H5Pclose);
+    unsigned flags = 0;
+    if (gcpl.ok() && H5Pget_link_creation_order(gcpl.get(), &flags) >= 0 &&
+        (flags & H5P_CRT_ORDER_TRACKED) != 0) {
+      index = H5_INDEX_CRT_ORDER;
+    }
+    std::vector<std::string> names;
+    for (hsize_t i = 0; i < info.nlinks; ++i) {
+      const ssize_t size =
+          H5Lget_name_by_idx(group, ".", index, H5_ITER_INC, i, nullptr, 0, H5P_DEFAULT);
+      SECURE_CHECK(size >= 0, path_ << ": " << where << ": cannot read link " << i
+                                    << Hdf5Reason());
+      std::string name(static_cast<std::size_t>(size) + 1, '\0');
+      H5Lget_name_by_idx(group, ".", index, H5_ITER_INC, i, name.data(), name.size(),
+                         H5P_DEFAULT);
+      name.resize(static_cast<std::size_t>(size));
+      names.push_back(std::move(name));
+    }
+    return names;
+  }
+
+  // Opens dataset `name` in `loc` and checks it is (T,) or (T, k) floating point; returns its
+  // width k (1 for (T,)) and sets *rows.
+  Handle OpenFloatDataset(hid_t loc, const std::string& name, const std::string& where,
+                          long* rows, long* cols) const {
+    const H5I_type_t kind = KindOf(loc, name);
+    SECURE_CHECK(kind != H5I_BADID, path_ << ": no dataset '" << where << "'");
+    SECURE_CHECK(kind == H5I_DATASET,
+                 path_ << ": " << where << " is a group, expected a dataset of shape (T,) or (T, k)");
+    Handle dataset(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), H5Dclose);
+    SECURE_CHECK(dataset.ok(), path_ << ": " << where << ": cannot open" << Hdf5Reason());
+    Handle type(H5Dget_type(dataset.get()), H5Tclose);
+    const H5T_class_t type_class = type.ok() ? H5Tget_class(type.get()) : H5T_NO_CLASS;
+    SECURE_CHECK(type_class == H5T_FLOAT,
+                 path_ << ": " << where << ": data type is " << ClassName(type_class)
+                       << ", expected float32 or float64");
+    Handle space(H5Dget_space(dataset.get()), H5Sclose);
+    const int rank = space.ok() ? H5Sget_simple_extent_ndims(space.get()) : -1;
+    SECURE_CHECK(rank >= 0, path_ << ": " << where << ": cannot read the shape" << Hdf5Reason());
+    hsize_t dims[H5S_MAX_RANK] = {};
+    H5Sget_simple_extent_dims(space.get(), dims, nullptr);
+    std::string shape = "(";
+    for (int i = 0; i < rank; ++i) shape += (i > 0 ? ", " : "") + std::to_string(dims[i]);
+    shape += rank == 1 ? ",)" : ")";
+    SECURE_CHECK(rank == 1 || rank == 2, path_ << ": " << where << ": shape " << shape
+                                               << " has rank " << rank
+                                               << ", expected (T,) or (T, k)");
+    const hsize_t width = rank == 2 ? dims[1] : 1;
+    SECURE_CHECK(width >= 1, path_ << ": " << where << ": shape " << shape
+                                   << " has no columns, expected (T,) or (T, k) with k >= 1");
+    constexpr hsize_t kMaxValues = hsize_t{1} << 40;
+    SECURE_CHECK(dims[0] <= kMaxValues / width,
+                 path_ << ": " << where << ": shape " << shape << " is too large");
+    *rows = static_cast<long>(dims[0]);
+    *cols = static_cast<long>(width);
+    return dataset;
+  }
+
+  // Reads a float dataset (see OpenFloatDataset) as doubles and checks every value is finite.
+  Table ReadFloatDataset(hid_t loc, const std::string& name, const std::string& where) const {
+    Table t;
+    const Handle dataset = OpenFloatDataset(loc, name, where, &t.rows, &t.cols);
+    t.values.resize(static_cast<std::size_t>(t.rows * t.cols));
+    if (!t.values.empty()) {
+      SECURE_CHECK(H5Dread(dataset.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT,
+                           t.values.data()) >= 0,
+                   path_ << ": " << where << ": cannot read the data (corrupt file?)"
+                         << Hdf5Reason());
+    }
+    for (long r = 0; r < t.rows; ++r) {
+      for (long c = 0; c < t.cols; ++c) {
+        const double v = t.values[static_cast<std::size_t>(r * t.cols + c)];
+        SECURE_CHECK(std::isfinite(v), path_ << ": " << where << ": row " << r << ", column "
+                                             << c << ": value " << Shown(v) << " is not finite");
+        SECURE_CHECK(std::abs(v) <= std::numeric_limits<float>::max(),
+                     path_ << ": " << where << ": row " << r << ", column " << c << ": value "
+                           << Shown(v) << " is out of the float range");
+      }
+    }
+    return t;
+  }
+
+  // The keys of `obs` (a group): each dataset's name and width, in file order.
+  std::vector<Key> Keys(hid_t obs, const std::string& where) const {
+    std::vector<Key> keys;
+    for (const std::string& name : Children(obs, where)) {
+      long rows = 0, cols = 0;
+      OpenFloatDataset(obs, name, where + "/" + name, &rows, &cols);
+      keys.push_back({name, cols});
+    }
+    SECURE_CHECK(!keys.empty(), path_ << ": " << where << ": no observation keys");
+    return keys;
+  }
+
+  // Resolves `select` (column names, or obs keys standing for all their columns; empty: every
+  // column) against `keys` of group `where`. Sets *names to the selected column names.
+  std::vector<Column> Resolve(const std::vector<Key>& keys, const std::vector<std::string>& select,
+                              const std::string& where, std::vector<std::string>* names) const {
+    std::map<std::string, Column> column_of;
+    std::vector<std::string> all;
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+      for (long j = 0; j < keys[k].cols; ++j) {
+        all.push_back(ColumnName(keys[k].name, keys[k].cols, j));
+        column_of.emplace(all.back(), Column{k, j});
+      }
+    }
+    std::vector<Column> columns;
+    names->clear();
+    const auto add = [&](const std::string& name, Column c) {
+      SECURE_CHECK(std::find(names->begin(), names->end(), name) == names->end(),
+                   path_ << ": " << where << ": column '" << Excerpt(name)
+                         << "' is selected twice (selection: " << Excerpt(Join(select)) << ")");
+      names->push_back(name);
+      columns.push_back(c);
+    };
+    if (select.empty()) {
+      for (const std::string& name : all) add(name, column_of.at(name));
+      return columns;
+    }
+    for (const std::string& name : select) {
+      const auto it = column_of.find(name);
+      if (it != column_of.end()) {
+        add(name, it->second);
+        continue;
+      }
+      const auto key = std::find_if(keys.begin(), keys.end(),
+                                    [&](const Key& k) { return k.name == name; });
+      SECURE_CHECK(key != keys.end(), path_ << ": " << where << ": no key or column '"
+                                            << Excerpt(name) << "'; the keys are: "
+                                            << Excerpt(DescribeKeys(keys), 400));
+      const auto k = static_cast<std::size_t>(key - keys.begin());
+      for (long j = 0; j < key->cols; ++j) add(ColumnName(key->name, key->cols, j), {k, j});
+    }
+    return columns;
+  }
+
+  // "x, vel (2 columns: vel[0], vel[1])".
+  static std::string DescribeKeys(const std::vector<Key>& keys) {
+    std::string out;
+    for (const Key& k : keys) {
+      if (!out.empty()) out += ", ";
+      out += k.name;
+      if (k.cols > 1) {
+        out += " (" + std::to_string(k.cols) + " columns: " + ColumnName(k.name, k.cols, 0) +
+               " .. " + ColumnName(k.name, k.cols, k.cols - 1) + ")";
+      }
+    }
+    return out;
+  }
+
+  // Reads the columns `columns` of the datasets `keys` (all in group `loc`, path `where`) into
+  // `out`, columns [first, first + T): all keys must have T rows (*rows; < 0: not known yet)
+  // and the width recorded in `keys`.
+  void ReadColumns(hid_t loc, const std::string& where, const std::vector<Key>& keys,
+                   const std::vector<Column>& columns, std::string* rows_from, long* rows,
+                   std::vector<std::vector<float>>* out) const {
+    std::vector<bool> used(keys.size(), false);
+    for (const Column& c : columns) used[c.key] = true;
+    std::vector<Table> tables(keys.size());
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+      if (!used[k]) continue;
+      const std::string dataset = where + "/" + keys[k].name;
+      SECURE_CHECK(KindOf(loc, keys[k].name) != H5I_BADID,
+                   path_ << ": " << where << ": no key '" << keys[k].name << "' (dataset "
+                         << dataset << ")");
+      tables[k] = ReadFloatDataset(loc, keys[k].name, dataset);
+      SECURE_CHECK(tables[k].cols == keys[k].cols,
+                   path_ << ": " << dataset << ": " << tables[k].cols << " columns, but "
+                         << keys[k].cols << " in the first group read");
+      if (*rows < 0) {
+        *rows = tables[k].rows;
+        *rows_from = dataset;
+      }
+      SECURE_CHECK(tables[k].rows == *rows,
+                   path_ << ": " << dataset << ": " << tables[k].rows << " rows, but " << *rows_from
+                         << " has " << *rows << " (one row per step)");
+    }
+    out->resize(columns.size());
+    for (std::size_t i = 0; i < columns.size(); ++i) {
+      const Table& t = tables[columns[i].key];
+      std::vector<float>& v = (*out)[i];
+      v.resize(static_cast<std::size_t>(t.rows));
+      for (long r = 0; r < t.rows; ++r)
+        v[static_cast<std::size_t>(r)] =
+            static_cast<float>(t.values[static_cast<std::size_t>(r * t.cols + columns[i].col)]);
+    }
+  }
+
+  // An integer scalar attribute, if present.
+  bool ReadIntAttribute(hid_t loc, const char* name, const std::string& where,
+                        long long* value) const {
+    if (H5Aexists(loc, name) <= 0) return false;
+    Handle attr(H5Aopen(loc, name, H5P_DEFAULT), H5Aclose);
+    Handle type(attr.ok() ? H5Aget_type(attr.get()) : -1, H5Tclose);
+    const H5T_class_t c = type.ok() ? H5Tget_class(type.get()) : H5T_NO_CLASS;
+    Handle space(attr.ok() ? H5Aget_space(attr.get()) : -1, H5Sclose);
+    SECURE_CHECK((c == H5T_INTEGER || c == H5T_FLOAT) && space.ok() &&
+                     H5Sget_simple_extent_npoints(space.get()) == 1 &&
+                     H5Aread(attr.get(), H5T_NATIVE_LLONG, value) >= 0,
+                 path_ << ": " << where << ": attribute '" << name
+                       << "' is not a single integer");
+    return true;
+  }
+
+  // A string attribute (variable- or fixed-length), if present.
+  bool ReadStringAttribute(hid_t loc, const char* name, const std::string& where,
+                           std::string* value) const {
+    if (H5Aexists(loc, name) <= 0) return false;
+    Handle attr(H5Aopen(loc, name, H5P_DEFAULT), H5Aclose);
+    Handle type(attr.ok() ? H5Aget_type(attr.get()) : -1, H5Tclose);
+    SECURE_CHECK(type.ok() && H5Tget_class(type.get()) == H5T_STRING,
+                 path_ << ": " << where << ": attribute '" << name << "' is not a string");
+    Handle memtype(H5Tcopy(H5T_C_S1), H5Tclose);
+    H5Tset_cset(memtype.get(), H5Tget_cset(type.get()));  // HDF5 converts no character sets
+    if (H5Tis_variable_str(type.get()) > 0) {
+      H5Tset_size(memtype.get(), H5T_VARIABLE);
+      char* text = nullptr;
+      SECURE_CHECK(H5Aread(attr.get(), memtype.get(), &text) >= 0,
+                   path_ << ": " << where << ": cannot read attribute '" << name << "'");
+      *value = text != nullptr ? text : "";
+      H5free_memory(text);
+    } else {
+      const std::size_t size = H5Tget_size(type.get());
+      H5Tset_size(memtype.get(), size);
+      std::string text(size, '\0');
+      SECURE_CHECK(H5Aread(attr.get(), memtype.get(), text.data()) >= 0,
+                   path_ << ": " << where << ": cannot read attribute '" << name << "'");
+      text.resize(std::min(text.find('\0'), text.size()));
+      *value = text;
+    }
+    return true;
+  }
+
+ private:
+  bool HasSignature() const {
+    static constexpr std::string_view kSignature("\x89HDF\r\n\x1a\n", 8);
+    // The superblock is at 0 or, after a user block, at 512, 1024, 2048, ...
+    for (std::size_t at = 0; at + kSignature.size() <= image_.size(); at = at == 0 ? 512 : 2 * at)
+      if (std::string_view(image_).substr(at, kSignature.size()) == kSignature) return true;
+    return false;
+  }
+
+  static const char* ClassName(H5T_class_t c) {
+    switch (c) {
+      case H5T_INTEGER: return "integer";
+      case H5T_FLOAT: return "float";
+      case H5T_STRING: return "string";
+      case H5T_BITFIELD: return "bitfield";
+      case H5T_OPAQUE: return "opaque";
+      case H5T_COMPOUND: return "compound";
+      case H5T_REFERENCE: return "reference";
+      case H5T_ENUM: return "enum";
+      case H5T_VLEN: return "variable-length";
+      case H5T_ARRAY: return "array";
+      default: return "unknown";
+    }
+  }
+
+  QuietHdf5 quiet_;
+  std::string path_;
+  std::string image_;
+  Handle file_;
+};
+
+// The demo groups of data/: "demo_<i>" sorted by i (as robomimic does).
+std::vector<std::string> DemoNames(const Reader& r, hid_t data) {
+  std::vector<std::pair<long long, std::string>> demos;
+  for (const std::string& name : r.Children(data, "data")) {
+    long long index = -1;
+    const std::string_view digits = std::string_view(name).substr(std::min<std::size_t>(5, name.size()));
+    const auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), index);
+    SECURE_CHECK(name.rfind("demo_", 0) == 0 && !digits.empty() && ec == std::errc() &&
+                     ptr == digits.data() + digits.size() && index >= 0,
+                 r.path() << ": data/" << Excerpt(name)
+                          << ": not a demo (expected groups demo_0, demo_1, ...)");
+    demos.emplace_back(index, name);
+  }
+  SECURE_CHECK(!demos.empty(), r.path() << ": data: no demos (expected groups demo_0, demo_1, ...)");
+  std::sort(demos.begin(), demos.end());
+  std::vector<std::string> names;
+  for (auto& d : demos) names.push_back(std::move(d.second));
+  return names;
+}
+
+// The action column names of data/: the "action_features" attribute that our writer adds if it
+// names `cols` columns, else "actions" / "actions[j]".
+std::vector<Key> ActionKeys(const Reader& r, hid_t data, long cols,
+                            std::vector<std::string>* names) {
+  std::string text;
+  names->clear();
+  if (r.ReadStringAttribute(data, "action_features", "data", &text)) *names = SplitList(text);
+  if (static_cast<long>(names->size()) != cols) {
+    names->clear();
+    for (long j = 0; j < cols; ++j) names->push_back(ColumnName("actions", cols, j));
+  }
+  return {{"actions", cols}};
+}
+
+void CheckNumSamples(const Reader& r, hid_t group, const std::string& where, long rows) {
+  long long num_samples = 0;
+  if (r.ReadIntAttribute(group, "num_samples", where, &num_samples)) {
+    SECURE_CHECK(num_samples == rows, r.path() << ": " << where << ": attribute num_samples = "
+                                               << num_samples << ", but the data hold " << rows
+                                               << " rows");
+  }
+}
+
+// Appends the rows of `columns` (one vector per matrix row) to `m` from column `at`.
+void Place(const std::vector<std::vector<float>>& columns, Eigen::Index at, Eigen::MatrixXf* m) {
+  for (std::size_t i = 0; i < columns.size(); ++i)
+    for (std::size_t t = 0; t < columns[i].size(); ++t)
+      (*m)(static_cast<Eigen::Index>(i), at + static_cast<Eigen::Index>(t)) = columns[i][t];
+}
+
+struct Chunk {
+  std::vector<std::vector<float>> states, actions;
+};
+
+// Reads data/demo_*: the selected obs columns and action columns of every demo.
+TrajectorySet ReadDemos(const Reader& r, const std::vector<std::string>& state_features,
+                        const std::vector<std::string>& action_features, bool need_actions) {
+  const Handle data = r.OpenGroup(r.file(), "data", "data",
+                                  "robomimic demonstrations: data/demo_<i>/obs/<key>");
+  const std::vector<std::string> demos = DemoNames(r, data.get());
+  TrajectorySet set;
+  set.source = r.path();
+  std::vector<Key> obs_keys, action_keys;
+  std::vector<Column> obs_columns, action_columns;
+  std::vector<Chunk> chunks;
+  long total = 0;
+  for (std::size_t d = 0; d < demos.size(); ++d) {
+    const std::string where = "data/" + demos[d];
+    const Handle demo = r.OpenGroup(data.get(), demos[d], where, "a demo");
+    const Handle obs = r.OpenGroup(demo.get(), "obs", where + "/obs", "the demo's observations");
+    if (d == 0) {
+      obs_keys = r.Keys(obs.get(), where + "/obs");
+      obs_columns = r.Resolve(obs_keys, state_features, where + "/obs", &set.state_features);
+    }
+    long rows = -1;
+    std::string rows_from;
+    Chunk chunk;
+    r.ReadColumns(obs.get(), where + "/obs", obs_keys, obs_columns, &rows_from, &rows,
+                  &chunk.states);
+    if (need_actions) {
+      if (d == 0) {
+        long action_rows = 0, cols = 0;
+        r.OpenFloatDataset(demo.get(), "actions", where + "/actions", &action_rows, &cols);
+        std::vector<std::string> names;
+        action_keys = ActionKeys(r, data.get(), cols, &names);
+        // Action columns by name: the attribute's names (or actions[j]), or "actions" for all.
+        std::map<std::string, long> col_of;
+        for (std::size_t j = 0; j < names.size(); ++j) col_of.emplace(names[j], long(j));
+        const std::vector<std::string> wanted =
+            action_features.empty() ? names : action_features;
+        for (const std::string& name : wanted) {
+          const auto it = col_of.find(name);
+          if (it == col_of.end() && name == "actions") {
+            for (std::size_t j = 0; j < names.size(); ++j) {
+              set.action_features.push_back(names[j]);
+              action_columns.push_back({0, long(j)});
+            }
+            continue;
+          }
+          SECURE_CHECK(it != col_of.end(), r.path() << ": " << where << "/actions: no action column '"
+                                                    << Excerpt(name) << "'; the columns are: "
+                                                    << Excerpt(Join(names), 400));
+          SECURE_CHECK(std::find(set.action_features.begin(), set.action_features.end(), name) ==
+                           set.action_features.end(),
+                       r.path() << ": " << where << "/actions: column '" << Excerpt(name)
+                                << "' is selected twice");
+          set.action_features.push_back(name);
+          action_columns.push_back({0, it->second});
+        }
+      }
+      r.ReadColumns(demo.get(), where, action_keys, action_columns, &rows_from, &rows,
+                    &chunk.actions);
+    }
+    SECURE_CHECK(rows > 0, r.path() << ": " << where << ": empty demo (0 steps)");
+    CheckNumSamples(r, demo.get(), where, rows);
+    set.episode_begin.push_back(total);
+    total += rows;
+    chunks.push_back(std::move(chunk));
+  }
+  set.episode_begin.push_back(total);
+  set.states.resize(static_cast<Eigen::Index>(set.state_features.size()), total);
+  set.actions.resize(static_cast<Eigen::Index>(set.action_features.size()), total);
+  for (std::size_t d = 0; d < chunks.size(); ++d) {
+    Place(chunks[d].states, set.episode_begin[d], &set.states);
+    Place(chunks[d].actions, set.episode_begin[d], &set.actions);
+  }
+  return set;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writing.
+
+class Writer {
+ public:
+  explicit Writer(std::string path) : path_(std::move(path)) {
+    Handle fapl(H5Pcreate(H5P_FILE_ACCESS), H5Pclose);
+    SECURE_CHECK(fapl.ok() && H5Pset_fapl_core(fapl.get(), 1 << 20, 0) >= 0,
+                 "cannot write '" << path_ << "': HDF5 setup failed" << Hdf5Reason());
+    // The name is only the in-memory file's: nothing is written to disk until Finish().
+    file_ = Handle(H5Fcreate(path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.get()), H5Fclose);
+    SECURE_CHECK(file_.ok(), "cannot write '" << path_ << "': HDF5 could not create the file"
+                                              << Hdf5Reason());
+  }
+
+  hid_t file() const { return file_.get(); }
+
+  // A group that keeps its links' creation order (so keys read back in the order written) and
+  // no time stamps (so that the same data give the same bytes).
+  Handle Group(hid_t loc, const std::string& name) {
+    Handle gcpl(H5Pcreate(H5P_GROUP_CREATE), H5Pclose);
+    H5Pset_link_creation_order(gcpl.get(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED);
+    H5Pset_obj_track_times(gcpl.get(), 0);
+    Handle group(H5Gcreate2(loc, name.c_str(), H5P_DEFAULT, gcpl.get(), H5P_DEFAULT), H5Gclose);
+    Check(group.ok(), name);
+    return group;
+  }
+
+  // A (rows,) or (rows, cols) dataset of `file_type` from row-major `values` of `mem_type`.
+  void Dataset(hid_t loc, const std::string& name, hid_t file_type, hid_t mem_type,
+               const void* values, hsize_t rows, hsize_t cols, int rank) {
+    const hsize_t dims[2] = {rows, cols};
+    Handle space(H5Screate_simple(rank, dims, nullptr), H5Sclose);
+    Handle dcpl(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
+    H5Pset_obj_track_times(dcpl.get(), 0);
+    Handle dataset(H5Dcreate2(loc, name.c_str(), file_type, space.get(), H5P_DEFAULT, dcpl.get(),
+                              H5P_DEFAULT),
+                   H5Dclose);
+    Check(dataset.ok() &&
+              H5Dwrite(dataset.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, values) >= 0,
+          name);
+  }
+
+  // Rows [first, first + count) of `m` (features x steps), columns [begin, end), as a
+  // (steps, count) float64 dataset.
+  void Matrix(hid_t loc, const std::string& name, const Eigen::MatrixXf& m, Eigen::Index first,
+              Eigen::Index count, Eigen::Index begin, Eigen::Index end) {
+    std::vector<double> values;
+    values.reserve(static_cast<std::size_t>(count * (end - begin)));
+    for (Eigen::Index t = begin; t < end; ++t)
+      for (Eigen::Index j = first; j < first + count; ++j) values.push_back(m(j, t));
+    Dataset(loc, name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, values.data(), hsize_t(end - begin),
+            hsize_t(count), 2);
+  }
+
+  void IntAttribute(hid_t loc, const char* name, long long value) {
+    Handle space(H5Screate(H5S_SCALAR), H5Sclose);
+    Handle attr(H5Acreate2(loc, name, H5T_STD_I64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT),
+                H5Aclose);
+    Check(attr.ok() && H5Awrite(attr.get(), H5T_NATIVE_LLONG, &value) >= 0, name);
+  }
+
+  // A variable-length UTF-8 string, as h5py writes a Python str.
+  void StringAttribute(hid_t loc, const char* name, const std::string& value) {
+    Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
+    H5Tset_size(type.get(), H5T_VARIABLE);
+    H5Tset_cset(type.get(), H5T_CSET_UTF8);
+    Handle space(H5Screate(H5S_SCALAR), H5Sclose);
+    Handle attr(H5Acreate2(loc, name, type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT),
+                H5Aclose);
+    const char* text = value.c_str();
+    Check(attr.ok() && H5Awrite(attr.get(), type.get(), &text) >= 0, name);
+  }
+
+  // Writes the in-memory file to path (atomically).
+  void Finish() {
+    Check(H5Fflush(file_.get(), H5F_SCOPE_GLOBAL) >= 0, "flush");
+    const ssize_t size = H5Fget_file_image(file_.get(), nullptr, 0);
+    Check(size > 0, "file image");
+    std::string image(static_cast<std::size_t>(size), '\0');
+    Check(H5Fget_file_image(file_.get(), image.data(), image.size()) == size, "file image");
+    file_ = Handle();
+    WriteFileAtomically(path_, image);
+  }
+
+ private:
+  void Check(bool ok, const std::string& what) const {
+    SECURE_CHECK(ok, "cannot write '" << path_ << "': HDF5 failed on " << what << Hdf5Reason());
+  }
+
+  QuietHdf5 quiet_;
+  std::string path_;
+  Handle file_;
+};
+
+// Groups feature names into obs keys: a run "k[0]", "k[1]", ..., "k[n-1]" (n >= 2) becomes key
+// k with n columns; any other name is a key of its own with one column. Each key is a
+// (first row, count) range of the features.
+struct KeyRange {
+  std::string name;
+  Eigen::Index first = 0, count = 0;
+};
+
+std::vector<KeyRange> GroupKeys(const std::string& path, const std::vector<std::string>& features) {
+  std::vector<KeyRange> keys;
+  const auto base_of = [](const std::string& name, long index) -> std::string {
+    const std::string suffix = "[" + std::to_string(index) + "]";
+    if (name.size() <= suffix.size() || name.compare(name.size() - suffix.size(), suffix.size(),
+                                                     suffix) != 0)
+      return {};
+    return name.substr(0, name.size() - suffix.size());
+  };
+  for (std::size_t i = 0; i < features.size();) {
+    const std::string base = base_of(features[i], 0);
+    std::size_t n = 1;
+    if (!base.empty()) {
+      while (i + n < features.size() && base_of(features[i + n], long(n)) == base) ++n;
+    }
+    if (n >= 2) {
+      keys.push_back({base, Eigen::Index(i), Eigen::Index(n)});
+    } else {
+      keys.push_back({features[i], Eigen::Index(i), 1});
+    }
+    i += n;
+  }
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const std::string& name = keys[k].name;
+    SECURE_CHECK(!name.empty() && name.find('/') == std::string::npos && name != ".",
+                 "cannot write '" << path << "': feature '" << name
+                                  << "' cannot be an HDF5 name (empty, '.' or contains '/')");
+    for (std::size_t i = 0; i < k; ++i) {
+      SECURE_CHECK(keys[i].name != name, "cannot write '" << path << "': obs key '" << name
+                                                          << "' would be written twice (features "
+                                                          << Excerpt(Join(features), 400) << ")");
+    }
+  }
+  return keys;
+}
+
+void CheckFinite(const std::string& path, const Eigen::MatrixXf& m,
+                 const std::vector<std::string>& names) {
+  for (Eigen::Index t = 0; t < m.cols(); ++t)
+    for (Eigen::Index j = 0; j < m.rows(); ++j)
+      SECURE_CHECK(std::isfinite(m(j, t)),
+                   "cannot write '" << path << "': value " << m(j, t) << " of feature '"
+                                    << names[static_cast<std::size_t>(j)] << "', row " << t
+                                    << " (0-based) is not finite");
+}
+
+void WriteObs(Writer& w, hid_t group, const std::vector<KeyRange>& keys, const Eigen::MatrixXf& m,
+              Eigen::Index begin, Eigen::Index end) {
+  const Handle obs = w.Group(group, "obs");
+  for (const KeyRange& k : keys) w.Matrix(obs.get(), k.name, m, k.first, k.count, begin, end);
+}
+
+void WriteDemos(Writer& w, const std::string& path, const TrajectorySet& set) {
+  const auto state_dim = static_cast<Eigen::Index>(set.state_features.size());
+  const auto action_dim = static_cast<Eigen::Index>(set.action_features.size());
+  const Eigen::Index steps = set.states.cols();
+  SECURE_CHECK(state_dim > 0, "cannot write '" << path << "': no state features");
+  SECURE_CHECK(action_dim > 0,
+               "cannot write '" << path << "': no action features (robomimic demos hold actions)");
+  SECURE_CHECK(set.states.rows() == state_dim && set.actions.rows() == action_dim &&
+                   set.actions.cols() == steps,
+               "cannot write '" << path << "': the states (" << set.states.rows() << " x " << steps
+                                << ") and actions (" << set.actions.rows() << " x "
+                                << set.actions.cols() << ") disagree with the " << state_dim
+                                << " state and " << action_dim << " action feature names");
+  SECURE_CHECK(steps > 0, "cannot write '" << path << "': 0 steps (would not read back)");
+  const std::vector<long>& begin = set.episode_begin;
+  SECURE_CHECK(begin.size() >= 2 && begin.front() == 0 && begin.back() == steps,
+               "cannot write '" << path << "': episode_begin must start at 0 and end at " << steps);
+  for (std::size_t k = 0; k + 1 < begin.size(); ++k)
+    SECURE_CHECK(begin[k] < begin[k + 1], "cannot write '" << path << "': episode " << k
+                                                           << " is empty or reversed");
+  for (const std::string& name : set.action_features)
+    SECURE_CHECK(!name.empty() && name.find(',') == std::string::npos,
+                 "cannot write '" << path << "': action feature '" << name
+                                  << "' is empty or contains a comma");
+  CheckFinite(path, set.states, set.state_features);
+  CheckFinite(path, set.actions, set.action_features);
+  const std::vector<KeyRange> keys = GroupKeys(path, set.state_features);
+
+  const Handle data = w.Group(w.file(), "data");
+  w.IntAttribute(data.get(), "total", steps);
+  w.StringAttribute(data.get(), "env_args", kEnvArgs);
+  w.StringAttribute(data.get(), "action_features", Join(set.action_features, ","));
+  for (std::size_t k = 0; k + 1 < begin.size(); ++k) {
+    const Handle demo = w.Group(data.get(), "demo_" + std::to_string(k));
+    const long b = begin[k], e = begin[k + 1], n = e - b;
+    w.IntAttribute(demo.get(), "num_samples", n);
+    WriteObs(w, demo.get(), keys, set.states, b, e);
+    w.Matrix(demo.get(), "actions", set.actions, 0, action_dim, b, e);
+    std::vector<long long> dones(static_cast<std::size_t>(n), 0);
+    dones.back() = 1;
+    w.Dataset(demo.get(), "dones", H5T_STD_I64LE, H5T_NATIVE_LLONG, dones.data(), hsize_t(n), 1,
+              1);
+    const std::vector<double> rewards(static_cast<std::size_t>(n), 0.0);
+    w.Dataset(demo.get(), "rewards", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, rewards.data(),
+              hsize_t(n), 1, 1);
+    w.Matrix(demo.get(), "states", set.states, 0, state_dim, b, e);
+  }
+}
+
+void WriteSets(Writer& w, const std::string& path, const std::vector<LabelledStateSet>& sets) {
+  if (sets.empty()) return;
+  const Handle safety = w.Group(w.file(), "safety");
+  for (std::size_t s = 0; s < sets.size(); ++s) {
+    const std::string& label = sets[s].label;
+    const StateSet& set = *sets[s].set;
+    SECURE_CHECK(!label.empty() && label.find('/') == std::string::npos && label != ".",
+                 "cannot write '" << path << "': state set label '" << label
+                                  << "' cannot be an HDF5 name (empty, '.' or contains '/')");
+    for (std::size_t i = 0; i < s; ++i)
+      SECURE_CHECK(sets[i].label != label,
+                   "cannot write '" << path << "': two state sets labelled '" << label << "'");
+    SECURE_CHECK(set.states.rows() == set.dim() && set.dim() > 0,
+                 "cannot write '" << path << "': the states have " << set.states.rows()
+                                  << " rows but " << set.dim() << " feature names");
+    SECURE_CHECK(set.size() > 0, "cannot write '" << path << "': 0 states (would not read back)");
+    CheckFinite(path, set.states, set.features);
+    const Handle group = w.Group(safety.get(), label);
+    w.IntAttribute(group.get(), "num_samples", set.size());
+    WriteObs(w, group.get(), GroupKeys(path, set.features), set.states, 0, set.size());
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+bool IsHdf5Path(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".h5" || ext == ".hdf5";
+}
+
+Hdf5Contents InspectHdf5(const std::string& path) {
+  const Reader r(path);
+  Hdf5Contents c;
+  if (r.KindOf(r.file(), "data") != H5I_BADID) {
+    const TrajectorySet demos = ReadDemos(r, {}, {}, true);
+    c.has_demonstrations = true;
+    c.observation_features = demos.state_features;
+    c.action_features = demos.action_features;
+  }
+  if (r.KindOf(r.file(), "safety") != H5I_BADID) {
+    const Handle safety = r.OpenGroup(r.file(), "safety", "safety", "labelled state sets");
+    c.state_sets = r.Children(safety.get(), "safety");
+  }
+  SECURE_CHECK(c.has_demonstrations || !c.state_sets.empty(),
+               path << ": neither group 'data' (demonstrations) nor 'safety' (state sets)");
+  return c;
+}
+
+namespace internal {
+
+TrajectorySet ReadHdf5Trajectories(const std::string& path,
+                                   const std::vector<std::string>& state_features,
+                                   const std::vector<std::string>& action_features) {
+  const Reader r(path);
+  return ReadDemos(r, state_features, action_features, true);
+}
+
+StateSet ReadHdf5StateSet(const std::string& path, const std::vector<std::string>& features,
+                          const std::string& label) {
+  const Reader r(path);
+  StateSet set;
+  set.source = path;
+  if (r.KindOf(r.file(), "safety") == H5I_BADID) {
+    // No labelled sets: the states of every demo step, as a demonstrations CSV read as states.
+    SECURE_CHECK(r.KindOf(r.file(), "data") != H5I_BADID,
+                 path << ": neither group 'safety' (state sets) nor 'data' (demonstrations)");
+    TrajectorySet demos = ReadDemos(r, features, {}, false);
+    set.features = std::move(demos.state_features);
+    set.states = std::move(demos.states);
+    return set;
+  }
+  const Handle safety = r.OpenGroup(r.file(), "safety", "safety", "labelled state sets");
+  const std::vector<std::string> labels = r.Children(safety.get(), "safety");
+  std::string chosen;
+  if (std::find(labels.begin(), labels.end(), label) != labels.end()) {
+    chosen = label;
+  } else {
+    SECURE_CHECK(labels.size() == 1,
+                 path << ": " << (label.empty() ? "name the state set to read"
+                                                : "no state set 'safety/" + label + "'")
+                      << "; the file has " << labels.size() << ": " << Excerpt(Join(labels), 400));
+    chosen = labels.front();
+  }
+  const std::string where = "safety/" + chosen;
+  const Handle group = r.OpenGroup(safety.get(), chosen, where, "a labelled state set");
+  const Handle obs = r.OpenGroup(group.get(), "obs", where + "/obs", "the set's states");
+  const std::vector<Key> keys = r.Keys(obs.get(), where + "/obs");
+  const std::vector<Column> columns = r.Resolve(keys, features, where + "/obs", &set.features);
+  long rows = -1;
+  std::string rows_from;
+  std::vector<std::vector<float>> values;
+  r.ReadColumns(obs.get(), where + "/obs", keys, columns, &rows_from, &rows, &values);
+  SECURE_CHECK(rows > 0, path << ": " << where << ": 0 states");
+  CheckNumSamples(r, group.get(), where, rows);
+  set.states.resize(static_cast<Eigen::Index>(set.features.size()), rows);
+  Place(values, 0, &set.states);
+  return set;
+}
+
+}  // namespace internal
+
+void WriteHdf5(const std::string& path, const TrajectorySet* demos,
+               const std::vector<LabelledStateSet>& sets) {
+  SECURE_CHECK(demos != nullptr || !sets.empty(),
+               "cannot write '" << path << "': no demonstrations and no state sets");
+  Writer w(path);
+  if (demos != nullptr) WriteDemos(w, path, *demos);
+  WriteSets(w, path, sets);
+  w.Finish();
+}
+
+}  // namespace secure::data

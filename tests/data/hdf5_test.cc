@@ -1,0 +1,333 @@
+// Tests of demonstrations and state sets in robomimic's HDF5 layout: reading files written by
+// the HDF5 C API directly (as robomimic's h5py would), round trips through our writer, and one
+// precise error per kind of bad file.
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <Eigen/Core>
+
+#include "secure/common/atomic_file.h"
+#include "secure/common/error.h"
+#include "secure/data/data.h"
+#include "tests/data/hdf5_test_file.h"
+#include "tests/test_util.h"
+
+namespace secure::data {
+namespace {
+
+using secure::test::ErrorOf;
+using secure::test::Hdf5TestFile;
+
+class Hdf5Test : public secure::test::TempDirTest {};
+
+void ExpectContainsAll(const std::string& message, const std::vector<std::string>& parts) {
+  for (const std::string& part : parts) {
+    EXPECT_NE(message.find(part), std::string::npos)
+        << "message '" << message << "' lacks '" << part << "'";
+  }
+  EXPECT_EQ(message.find('\n'), std::string::npos) << "not one line: " << message;
+}
+
+const std::vector<std::string> kActions = {"actions[0]", "actions[1]"};
+
+TEST_F(Hdf5Test, ExtensionSelectsTheFormat) {
+  EXPECT_TRUE(IsHdf5Path("a/demos.h5"));
+  EXPECT_TRUE(IsHdf5Path("demos.HDF5"));
+  EXPECT_FALSE(IsHdf5Path("demos.csv"));
+  EXPECT_FALSE(IsHdf5Path("h5"));
+  EXPECT_FALSE(IsHdf5Path("demos.h5.csv"));
+}
+
+TEST_F(Hdf5Test, ReadsRobomimicDemosInIndexOrder) {
+  const std::string path = PathOf("demos.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Demo(10, 2);  // demo_10 sorts after demo_2 (robomimic orders by the number)
+    f.Demo(2, 3);
+  }
+  const TrajectorySet set = ReadTrajectories(path, {}, {});
+  EXPECT_EQ(set.state_features, (std::vector<std::string>{"pos[0]", "pos[1]", "vel"}));
+  EXPECT_EQ(set.action_features, kActions);
+  EXPECT_EQ(set.episode_begin, (std::vector<long>{0, 3, 5}));
+  ASSERT_EQ(set.states.cols(), 5);
+  // demo_2 step 1: pos = (1, 1.1), vel = 101; demo_10 step 0: pos = (0, 0.1).
+  EXPECT_EQ(set.states.col(1), Eigen::Vector3f(1.0f, 1.1f, 101.0f));
+  EXPECT_EQ(set.states.col(3), Eigen::Vector3f(0.0f, 0.1f, 100.0f));
+  EXPECT_EQ(set.actions.col(2), Eigen::Vector2f(2.0f, -2.0f));
+}
+
+TEST_F(Hdf5Test, SelectsColumnsAndWholeKeysByName) {
+  const std::string path = PathOf("demos.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Demo(0, 2);
+  }
+  // An obs key stands for all its columns; a column by its own name; order as given.
+  TrajectorySet set = ReadTrajectories(path, {"vel", "pos"}, {"actions[1]"});
+  EXPECT_EQ(set.state_features, (std::vector<std::string>{"vel", "pos[0]", "pos[1]"}));
+  EXPECT_EQ(set.states.col(1), Eigen::Vector3f(101.0f, 1.0f, 1.1f));
+  EXPECT_EQ(set.action_features, (std::vector<std::string>{"actions[1]"}));
+  EXPECT_EQ(set.actions(0, 1), -1.0f);
+  set = ReadTrajectories(path, {"pos[1]"}, {"actions"});
+  EXPECT_EQ(set.state_features, (std::vector<std::string>{"pos[1]"}));
+  EXPECT_EQ(set.action_features, kActions);
+  // Without safety/, a state set is every demo step.
+  const StateSet states = ReadStateSet(path, {"vel"});
+  EXPECT_EQ(states.features, (std::vector<std::string>{"vel"}));
+  EXPECT_EQ(states.states, (Eigen::MatrixXf(1, 2) << 100, 101).finished());
+}
+
+TEST_F(Hdf5Test, OneDimensionalDatasetsAreOneColumn) {
+  const std::string path = PathOf("demos.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Floats("data/demo_0/obs/x", {3}, {1, 2, 3});
+    f.Doubles("data/demo_0/actions", {3}, {4, 5, 6});
+  }
+  const TrajectorySet set = ReadTrajectories(path, {"x"}, {});
+  EXPECT_EQ(set.state_features, (std::vector<std::string>{"x"}));
+  EXPECT_EQ(set.action_features, (std::vector<std::string>{"actions"}));
+  EXPECT_EQ(set.actions, (Eigen::MatrixXf(1, 3) << 4, 5, 6).finished());
+}
+
+// Random data with awkward floats (subnormals, extremes, -0) through our writer and back.
+TrajectorySet RandomDemos() {
+  TrajectorySet set;
+  set.state_features = {"x", "pos[0]", "pos[1]", "pos[2]", "q[1]", "theta"};
+  set.action_features = {"ax", "ay"};
+  set.episode_begin = {0, 4, 5, 9};
+  set.states = Eigen::MatrixXf::Random(6, 9);
+  set.actions = Eigen::MatrixXf::Random(2, 9);
+  set.states(0, 0) = std::numeric_limits<float>::denorm_min();
+  set.states(1, 1) = std::numeric_limits<float>::max();
+  set.states(2, 2) = -0.0f;
+  set.actions(1, 8) = std::numeric_limits<float>::lowest();
+  return set;
+}
+
+TEST_F(Hdf5Test, TrajectoriesRoundTripBitExactly) {
+  const TrajectorySet set = RandomDemos();
+  const std::string path = PathOf("demos.hdf5");
+  WriteTrajectories(path, set);
+  const TrajectorySet back = ReadTrajectories(path, set.state_features, set.action_features);
+  EXPECT_EQ(back.states, set.states);
+  EXPECT_EQ(back.actions, set.actions);
+  EXPECT_EQ(back.episode_begin, set.episode_begin);
+  EXPECT_TRUE(std::signbit(back.states(2, 2)));
+  // All columns in the order written, the action names from our attribute.
+  const TrajectorySet all = ReadTrajectories(path, {}, {});
+  EXPECT_EQ(all.state_features, set.state_features);
+  EXPECT_EQ(all.action_features, set.action_features);
+  EXPECT_EQ(all.states, set.states);
+  const Hdf5Contents c = InspectHdf5(path);
+  EXPECT_TRUE(c.has_demonstrations);
+  EXPECT_EQ(c.observation_features, set.state_features);
+  EXPECT_TRUE(c.state_sets.empty());
+  // Same data, same bytes (no time stamps).
+  const std::string again = PathOf("again.hdf5");
+  WriteTrajectories(again, set);
+  EXPECT_EQ(ReadFile(path), ReadFile(again));
+}
+
+TEST_F(Hdf5Test, StateSetsByLabel) {
+  const StateSet safe{"", {"x", "y"}, (Eigen::MatrixXf(2, 3) << 1, 2, 3, 4, 5, 6).finished()};
+  const StateSet nd{"", {"x", "y"}, (Eigen::MatrixXf(2, 1) << -1, -2).finished()};
+  const TrajectorySet demos = RandomDemos();
+  const std::string both = PathOf("all.h5");
+  WriteHdf5(both, &demos, {{kSafeLabel, &safe}, {kNearDangerousLabel, &nd}});
+  EXPECT_EQ(ReadStateSet(both, {}, kSafeLabel).states, safe.states);
+  EXPECT_EQ(ReadStateSet(both, {"y"}, kNearDangerousLabel).states,
+            (Eigen::MatrixXf(1, 1) << -2).finished());
+  EXPECT_EQ(InspectHdf5(both).state_sets,
+            (std::vector<std::string>{kSafeLabel, kNearDangerousLabel}));
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(both, {}, "other"); }),
+                    {both, "no state set 'safety/other'", "the file has 2: safe, near_dangerous"});
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(both); }), {both, "name the state set to read"});
+  // One set: read whatever its label (the file name's stem by default).
+  const std::string one = PathOf("check_safe.h5");
+  WriteStateSet(one, safe);
+  EXPECT_EQ(InspectHdf5(one).state_sets, (std::vector<std::string>{"check_safe"}));
+  EXPECT_EQ(ReadStateSet(one, {"x", "y"}, kSafeLabel).states, safe.states);
+  EXPECT_EQ(ReadStateSet(one).features, safe.features);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad files: one line naming the file, the dataset and the index.
+
+TEST_F(Hdf5Test, RejectsFilesThatAreNotHdf5) {
+  const std::string text = Write("demos.h5", "episode,x\n0,1\n");
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(text, {"x"}, {}); }),
+                    {text, "not an HDF5 file"});
+  const std::string missing = PathOf("missing.h5");
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(missing); }), {missing});
+  // A truncated file keeps its signature but not its content.
+  const std::string good = PathOf("good.h5");
+  WriteTrajectories(good, RandomDemos());
+  const std::string bytes = ReadFile(good);
+  const std::string cut = Write("cut.h5", bytes.substr(0, bytes.size() / 3));
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(cut, {}, {}); }), {cut});
+}
+
+TEST_F(Hdf5Test, RejectsMissingGroupsAndKeys) {
+  const std::string path = PathOf("demos.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Demo(0, 3);
+    f.Floats("data/demo_1/obs/pos", {2, 2}, {1, 2, 3, 4});  // no vel, no actions
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"pos", "vel"}, {}); }),
+                    {path, "data/demo_1/obs", "no key 'vel'"});
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"pos"}, kActions); }),
+                    {path, "data/demo_1/actions"});
+  // An unknown key lists the available ones.
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"speed"}, {}); }),
+                    {path, "data/demo_0/obs", "no key or column 'speed'",
+                     "pos (2 columns: pos[0] .. pos[1]), vel"});
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"pos"}, {"throttle"}); }),
+                    {path, "data/demo_0/actions", "no action column 'throttle'",
+                     "actions[0], actions[1]"});
+  const std::string empty = PathOf("empty.h5");
+  {
+    Hdf5TestFile f(empty);
+    f.Group("mask");
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(empty, {"x"}, {}); }),
+                    {empty, "no group 'data'"});
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(empty); }), {empty, "neither group"});
+  const std::string no_demos = PathOf("no_demos.h5");
+  {
+    Hdf5TestFile f(no_demos);
+    f.Group("data/trajectory_0");
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(no_demos, {"x"}, {}); }),
+                    {no_demos, "data/trajectory_0", "not a demo"});
+  const std::string no_obs = PathOf("no_obs.h5");
+  {
+    Hdf5TestFile f(no_obs);
+    f.Floats("data/demo_0/actions", {1, 1}, {1});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(no_obs, {"x"}, {}); }),
+                    {no_obs, "no group 'data/demo_0/obs'"});
+}
+
+TEST_F(Hdf5Test, RejectsWrongRankShapeAndType) {
+  const std::string path = PathOf("demos.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Doubles("data/demo_0/obs/image", {2, 2, 2}, std::vector<double>(8, 0.0));
+    f.Doubles("data/demo_0/obs/x", {2}, {1, 2});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"x"}, {}); }),
+                    {path, "data/demo_0/obs/image", "shape (2, 2, 2) has rank 3",
+                     "expected (T,) or (T, k)"});
+  // Every key is checked when the keys are listed; the others one file each.
+  const std::string types = PathOf("types.h5");
+  {
+    Hdf5TestFile f(types);
+    f.Ints("safety/safe/obs/count", {2}, {1, 2});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(types); }),
+                    {types, "safety/safe/obs/count", "data type is integer",
+                     "expected float32 or float64"});
+  const std::string zero = PathOf("zero.h5");
+  {
+    Hdf5TestFile f(zero);
+    f.Doubles("safety/safe/obs/none", {2, 0}, {});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(zero); }),
+                    {zero, "safety/safe/obs/none", "(2, 0) has no columns"});
+  const std::string group = PathOf("group.h5");
+  {
+    Hdf5TestFile f(group);
+    f.Group("safety/safe/obs/nested");
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(group); }),
+                    {group, "safety/safe/obs/nested is a group"});
+}
+
+TEST_F(Hdf5Test, RejectsNonFiniteValuesNamingRowAndColumn) {
+  const std::string nan = PathOf("nan.h5");
+  {
+    Hdf5TestFile f(nan);
+    f.Demo(0, 3);
+    f.Doubles("data/demo_1/obs/pos", {3, 2}, {0, 0, 0, 0, 0, std::nan("")});
+    f.Doubles("data/demo_1/obs/vel", {3}, {0, 0, 0});
+    f.Floats("data/demo_1/actions", {3, 2}, {0, 0, 0, 0, 0, 0});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(nan, {"pos"}, {}); }),
+                    {nan, "data/demo_1/obs/pos: row 2, column 1: value nan is not finite"});
+  const std::string inf = PathOf("inf.h5");
+  {
+    Hdf5TestFile f(inf);
+    f.Doubles("safety/near_dangerous/obs/x", {2}, {1, -HUGE_VAL});
+    f.Doubles("safety/near_dangerous/obs/y", {2}, {1e300, 1});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(inf, {"x"}); }),
+                    {inf, "safety/near_dangerous/obs/x: row 1, column 0: value -inf is not finite"});
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(inf, {"y"}); }),
+                    {inf, "safety/near_dangerous/obs/y: row 0, column 0: value 1e+300 is out of "
+                          "the float range"});
+}
+
+TEST_F(Hdf5Test, RejectsLengthMismatchesAndEmptyDemos) {
+  const std::string path = PathOf("demos.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Doubles("data/demo_0/obs/x", {3}, {1, 2, 3});
+    f.Doubles("data/demo_0/obs/y", {2}, {1, 2});
+    f.Doubles("data/demo_0/actions", {2, 1}, {1, 2});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"x", "y"}, {}); }),
+                    {path, "data/demo_0/obs/y: 2 rows, but data/demo_0/obs/x has 3"});
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"x"}, {"actions"}); }),
+                    {path, "data/demo_0/actions: 2 rows, but data/demo_0/obs/x has 3"});
+  const std::string empty = PathOf("empty.h5");
+  {
+    Hdf5TestFile f(empty);
+    f.Demo(0, 2);
+    f.Demo(1, 0);
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(empty, {"pos"}, kActions); }),
+                    {empty, "data/demo_1: empty demo (0 steps)"});
+  const std::string samples = PathOf("samples.h5");
+  {
+    Hdf5TestFile f(samples);
+    f.Demo(0, 2);
+    f.IntAttribute("data/demo_0", "num_samples_x", 0);
+    f.IntAttribute("data", "total", 2);
+  }
+  EXPECT_EQ(ReadTrajectories(samples, {"pos"}, kActions).num_steps(), 2);
+  const std::string widths = PathOf("widths.h5");
+  {
+    Hdf5TestFile f(widths);
+    f.Demo(0, 2);
+    f.Demo(1, 2, {"pos", "vel"}, {3, 1});
+  }
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(widths, {"pos"}, kActions); }),
+                    {widths, "data/demo_1/obs/pos: 3 columns, but 2"});
+}
+
+TEST_F(Hdf5Test, WriterRejectsWhatWouldNotReadBack) {
+  TrajectorySet set = RandomDemos();
+  set.state_features[0] = "a/b";
+  ExpectContainsAll(ErrorOf([&] { WriteTrajectories(PathOf("x.h5"), set); }),
+                    {"x.h5", "feature 'a/b'"});
+  set = RandomDemos();
+  set.state_features[0] = "pos";  // "pos" and "pos[0..2]" would be one key twice
+  ExpectContainsAll(ErrorOf([&] { WriteTrajectories(PathOf("x.h5"), set); }),
+                    {"x.h5", "obs key 'pos' would be written twice"});
+  set = RandomDemos();
+  set.states(3, 4) = std::numeric_limits<float>::quiet_NaN();
+  ExpectContainsAll(ErrorOf([&] { WriteTrajectories(PathOf("x.h5"), set); }),
+                    {"x.h5", "feature 'pos[2]', row 4", "not finite"});
+  EXPECT_FALSE(std::filesystem::exists(PathOf("x.h5")));
+}
+
+}  // namespace
+}  // namespace secure::data
