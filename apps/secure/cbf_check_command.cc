@@ -87,10 +87,10 @@ struct CheckCommand {
         ->check(CLI::ExistingFile);
     cmd->add_option("--domain", domain, "the domain: double-integrator | derby")->required();
     cmd->add_option("--safe-states", safe_path,
-                    "CSV of labelled safe states for the accuracy (default: drawn by the "
+                    "labelled safe states (CSV or HDF5) for the accuracy (default: drawn by the "
                     "domain's generators with a seed other than training's)");
     cmd->add_option("--near-dangerous-states", nd_path,
-                    "CSV of labelled near-dangerous states, for the accuracy and (b)");
+                    "labelled near-dangerous states (CSV or HDF5), for the accuracy and (b)");
     cmd->add_option("--held-out", held_out, "states per class drawn when no CSV is given")
         ->capture_default_str();
     AddSeedOption(cmd, "--data-seed", &data_seed,
@@ -219,8 +219,8 @@ struct CheckCommand {
       ApplyShieldFlags(&e.shield);
       data::StateSet safe, nd;
       if (!safe_path.empty()) {
-        safe = data::ReadStateSet(safe_path, features);
-        nd = data::ReadStateSet(nd_path, features);
+        safe = data::ReadStateSet(safe_path, features, data::kSafeLabel);
+        nd = data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
       } else {
         d.CheckHeldOut(e.data_seed, held_out, &safe, &nd);
       }
@@ -282,8 +282,9 @@ struct CheckCommand {
     p.is_unsafe_description = "ground truth h*(s) < 0";
     p.region_description = "the validation box x, y in [0, 10), vx, vy in [-1.5, 1.5)";
     if (!safe_path.empty()) {
-      p.held_out_safe = data::ReadStateSet(safe_path, features);
-      p.held_out_near_dangerous = data::ReadStateSet(nd_path, features);
+      p.held_out_safe = data::ReadStateSet(safe_path, features, data::kSafeLabel);
+      p.held_out_near_dangerous =
+          data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
     } else {
       Rng rng(data_seed != 0 ? data_seed : check_seed ^ 0x5a3b1e0d7ULL);
       di::LabelledStates l = di::SampleLabelled(t, box, held_out, held_out, rng);

@@ -120,10 +120,15 @@ struct TrainCommand {
     cmd->add_option("--domain", domain,
                     "sample labelled states from a domain: double-integrator (trainer options then "
                     "start from the double-integrator preset, see docs/RESULTS.md)");
-    cmd->add_option("--safe-states", safe_path, "CSV of safe states (header row)");
-    cmd->add_option("--near-dangerous-states", nd_path, "CSV of near-dangerous states");
+    cmd->add_option("--safe-states", safe_path,
+                    "safe states: a CSV (header row) or an HDF5 file (.h5, .hdf5; its set "
+                    "safety/safe, or its only set)");
+    cmd->add_option("--near-dangerous-states", nd_path,
+                    "near-dangerous states: a CSV or an HDF5 file (safety/near_dangerous, or its "
+                    "only set)");
     cmd->add_option("--features", features,
-                    "comma-separated column names to use as state features (default: all)");
+                    "comma-separated column names (HDF5: columns or obs keys) to use as state "
+                    "features (default: all)");
     cmd->add_option("--safe", n_safe, "safe states to sample (with --domain)")
         ->capture_default_str();
     cmd->add_option("--unsafe", n_unsafe, "unsafe states to sample (with --domain)")
@@ -171,8 +176,8 @@ struct TrainCommand {
     } else {
       SECURE_CHECK(!safe_path.empty() && !nd_path.empty(),
                    "cbf train: --safe-states and --near-dangerous-states go together");
-      safe = data::ReadStateSet(safe_path, names);
-      nd = data::ReadStateSet(nd_path, names);
+      safe = data::ReadStateSet(safe_path, names, data::kSafeLabel);
+      nd = data::ReadStateSet(nd_path, names, data::kNearDangerousLabel);
     }
     // Held-out test split per class, drawn before training from its own stream.
     data::StateSet safe_test, nd_test;
@@ -357,7 +362,10 @@ struct PredictCommand {
     CLI::App* cmd = app.add_subcommand(
         "predict", "h(s) for every row of a CSV (columns picked by the model's feature names)");
     cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--states", states, "CSV of states with a header row")->required();
+    cmd->add_option("--states", states,
+                    "states: a CSV with a header row, or an HDF5 file (its only state set, or "
+                    "its demonstrations' steps)")
+        ->required();
     cmd->add_option("--out", out, "CSV to write: columns h, safe (1 if h >= 0)")->required();
     cmd->add_flag("--json", json, "print a summary as JSON");
     cmd->callback([this] { Run(); });
@@ -370,9 +378,14 @@ struct PredictCommand {
     net.MakeEvaluator()->Evaluate(set.states, h);
     for (Eigen::Index i = 0; i < h.size(); ++i) {
       if (std::isfinite(h[i])) continue;
-      // Name the input line (the data rows' lines, from the reader, only on this error path).
-      const data::NumericTable table = data::ReadCsv(states, net.features);
-      SECURE_THROW(states << ":" << table.lines[static_cast<std::size_t>(i)] << ": the model "
+      // Name the input line (the data rows' lines, from the reader, only on this error path);
+      // an HDF5 file's state by its index.
+      std::string where = " state " + std::to_string(i) + " (0-based)";
+      if (!data::IsHdf5Path(states)) {
+        const data::NumericTable table = data::ReadCsv(states, net.features);
+        where = std::to_string(table.lines[static_cast<std::size_t>(i)]);
+      }
+      SECURE_THROW(states << ":" << where << ": the model "
                           << model << " gives h = "
                           << (std::isnan(h[i]) ? "nan"
                               : h[i] > 0       ? "inf"

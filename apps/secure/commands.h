@@ -14,6 +14,8 @@ void RegisterShieldCommands(CLI::App& app, const Config& config);
 void RegisterPipelineCommands(CLI::App& app, const Config& config);
 /// secure demos check-labels (label_check_command.cc), registered by RegisterPipelineCommands.
 void RegisterLabelCheckCommand(CLI::App& demos, const Config& config);
+/// secure demos convert (convert_command.cc): CSV <-> HDF5, registered by RegisterPipelineCommands.
+void RegisterConvertCommand(CLI::App& demos);
 /// secure render (render_command.cc): one evaluation episode as an MP4 or PPM frames.
 void RegisterRenderCommand(CLI::App& app, const Config& config);
 /// secure demo; secure experiment KIND --domain NAME (and the derby-* aliases).

@@ -170,7 +170,9 @@ struct PolicyTrainCommand {
     });
     AddConfigFlag(cmd, config);
     cmd->add_option("--algo", algo, "bc | airl")->required();
-    cmd->add_option("--demos", demos_path, "demonstrations CSV (episode, state and action columns)")
+    cmd->add_option("--demos", demos_path,
+                    "demonstrations: a CSV (episode, state and action columns) or an HDF5 file "
+                    "in robomimic's layout (.h5, .hdf5)")
         ->required();
     cmd->add_option("--out", out, "output policy model file")->required();
     cmd->add_option("--domain", domain,
@@ -179,7 +181,8 @@ struct PolicyTrainCommand {
         ->capture_default_str();
     bc_only.push_back(
         cmd->add_option("--state-features", state_features,
-                        "BC only: comma-separated state columns (default: the domain's)"));
+                        "BC only: comma-separated state columns, or HDF5 obs keys (default: the "
+                        "domain's)"));
     bc_only.push_back(
         cmd->add_option("--action-features", action_features,
                         "BC only: comma-separated action columns (default: the domain's)"));
@@ -378,10 +381,12 @@ void RegisterPipelineCommands(CLI::App& app, const Config& config) {
   static DemosGenerateCommand generate;
   static PolicyTrainCommand train;
   static EvalCommand evaluate;
-  CLI::App* demos = app.add_subcommand("demos", "Generate demonstrations");
+  CLI::App* demos =
+      app.add_subcommand("demos", "Generate, convert and check demonstrations");
   demos->require_subcommand(1);
   generate.Register(*demos);
   RegisterLabelCheckCommand(*demos, config);
+  RegisterConvertCommand(*demos);
   CLI::App* policy = app.add_subcommand("policy", "Learn policies from demonstrations");
   policy->require_subcommand(1);
   train.Register(*policy, config);

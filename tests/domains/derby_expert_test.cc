@@ -14,6 +14,7 @@
 
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
+#include "secure/data/data.h"
 #include "tests/test_util.h"
 
 namespace secure::domains::derby {
@@ -188,6 +189,36 @@ TEST(DerbyExpertTest, SafeStatesAreDemonstrationObservations) {
   EXPECT_EQ(all.size(), 25);
   EXPECT_EQ(all.states.leftCols(10), small.states);
   EXPECT_HAS(ErrorOf([&] { SafeStatesFromDemonstrations(t, 0, rng); }), "count = 0");
+}
+
+class DerbyDataFileTest : public secure::test::TempDirTest {};
+
+// Derby's demonstrations and safety demonstrations through one HDF5 file (robomimic's layout)
+// and through CSV: the same matrices, bit for bit.
+TEST_F(DerbyDataFileTest, DemonstrationsRoundTripThroughHdf5AsThroughCsv) {
+  DerbyDemonstrationOptions demo;
+  demo.episodes = 4;
+  demo.seed = 3;
+  const DerbyDemonstrations d = GenerateDerbyDemonstrations({}, {}, demo);
+  Rng rng(5);
+  const data::StateSet safe = SafeStatesFromDemonstrations(d.trajectories, 100, rng);
+  DerbyNearDangerousOptions options;
+  options.count = 100;
+  const data::StateSet nd = GenerateDerbyNearDangerous({}, d, options, rng);
+  const std::string h5 = PathOf("derby.h5"), csv = PathOf("demos.csv");
+  data::WriteHdf5(h5, &d.trajectories, {{data::kSafeLabel, &safe}, {data::kNearDangerousLabel, &nd}});
+  data::WriteTrajectories(csv, d.trajectories);
+  for (const std::string& path : {h5, csv}) {
+    SCOPED_TRACE(path);
+    const data::TrajectorySet back =
+        data::ReadTrajectories(path, ObservationFeatures(), ActionFeatures());
+    EXPECT_EQ(back.states, d.trajectories.states);
+    EXPECT_EQ(back.actions, d.trajectories.actions);
+    EXPECT_EQ(back.episode_begin, d.trajectories.episode_begin);
+  }
+  EXPECT_EQ(data::ReadStateSet(h5, ObservationFeatures(), data::kSafeLabel).states, safe.states);
+  EXPECT_EQ(data::ReadStateSet(h5, ObservationFeatures(), data::kNearDangerousLabel).states,
+            nd.states);
 }
 
 TEST(DerbyExpertTest, NearDangerousStatesFollowTheReleasedScheme) {

@@ -480,6 +480,26 @@ TEST_F(DemonstrationFileTest, TrajectoriesAndStateSetsRoundTripThroughCsv) {
   EXPECT_EQ(data::ReadStateSet(PathOf("nd.csv"), StateFeatures()).states, nd.states);
 }
 
+TEST_F(DemonstrationFileTest, TrajectoriesAndStateSetsRoundTripThroughHdf5) {
+  DemonstrationOptions demo;
+  demo.episodes = 5;
+  const Demonstrations d = GenerateDemonstrations({}, {}, demo);
+  Rng rng(1);
+  const data::StateSet nd = GenerateNearDangerous({}, {}, rng);
+  const std::string path = PathOf("demos.h5");
+  data::WriteHdf5(path, &d.trajectories, {{data::kNearDangerousLabel, &nd}});
+  const data::TrajectorySet back = data::ReadTrajectories(path, StateFeatures(), ActionFeatures());
+  EXPECT_EQ(back.states, d.trajectories.states);
+  EXPECT_EQ(back.actions, d.trajectories.actions);
+  EXPECT_EQ(back.episode_begin, d.trajectories.episode_begin);
+  // Written without a selection, the features come back in order, under their own names.
+  const data::TrajectorySet all = data::ReadTrajectories(path, {}, {});
+  EXPECT_EQ(all.state_features, StateFeatures());
+  EXPECT_EQ(all.action_features, ActionFeatures());
+  EXPECT_EQ(data::ReadStateSet(path, StateFeatures(), data::kNearDangerousLabel).states,
+            nd.states);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Safety demonstrations
 
