@@ -125,6 +125,7 @@ struct Table {
 struct Key {
   std::string name;
   long cols = 0;
+  std::string problem;  // why the dataset cannot be read as features (e.g. an image), or ""
 };
 
 // A selected column: key index and column within the key.
@@ -265,13 +266,19 @@ class Reader {
     return t;
   }
 
-  // The keys of `obs` (a group): each dataset's name and width, in file order.
+  // The keys of `obs` (a group): each dataset's name and width, in file order. A key that is
+  // no (T,) or (T, k) float dataset (e.g. robomimic's images, (T, H, W, C) uint8) is kept with
+  // its problem, an error only if it is selected.
   std::vector<Key> Keys(hid_t obs, const std::string& where) const {
     std::vector<Key> keys;
     for (const std::string& name : Children(obs, where)) {
       long rows = 0, cols = 0;
-      OpenFloatDataset(obs, name, where + "/" + name, &rows, &cols);
-      keys.push_back({name, cols});
+      try {
+        OpenFloatDataset(obs, name, where + "/" + name, &rows, &cols);
+        keys.push_back({name, cols, ""});
+      } catch (const Error& e) {
+        keys.push_back({name, 0, e.what()});
+      }
     }
     SECURE_CHECK(!keys.empty(), path_ << ": " << where << ": no observation keys");
     return keys;
@@ -291,6 +298,9 @@ class Reader {
     }
     std::vector<Column> columns;
     names->clear();
+    const auto usable = [&](const Key& k) {
+      if (!k.problem.empty()) throw Error(k.problem);
+    };
     const auto add = [&](const std::string& name, Column c) {
       SECURE_CHECK(std::find(names->begin(), names->end(), name) == names->end(),
                    path_ << ": " << where << ": column '" << Excerpt(name)
@@ -299,6 +309,7 @@ class Reader {
       columns.push_back(c);
     };
     if (select.empty()) {
+      for (const Key& k : keys) usable(k);
       for (const std::string& name : all) add(name, column_of.at(name));
       return columns;
     }
@@ -313,6 +324,7 @@ class Reader {
       SECURE_CHECK(key != keys.end(), path_ << ": " << where << ": no key or column '"
                                             << Excerpt(name) << "'; the keys are: "
                                             << Excerpt(DescribeKeys(keys), 400));
+      usable(*key);
       const auto k = static_cast<std::size_t>(key - keys.begin());
       for (long j = 0; j < key->cols; ++j) add(ColumnName(key->name, key->cols, j), {k, j});
     }
@@ -325,6 +337,7 @@ class Reader {
     for (const Key& k : keys) {
       if (!out.empty()) out += ", ";
       out += k.name;
+      if (!k.problem.empty()) out += " (not (T,) or (T, k) float)";
       if (k.cols > 1) {
         out += " (" + std::to_string(k.cols) + " columns: " + ColumnName(k.name, k.cols, 0) +
                " .. " + ColumnName(k.name, k.cols, k.cols - 1) + ")";

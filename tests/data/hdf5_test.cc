@@ -223,9 +223,16 @@ TEST_F(Hdf5Test, RejectsWrongRankShapeAndType) {
     f.Doubles("data/demo_0/obs/image", {2, 2, 2}, std::vector<double>(8, 0.0));
     f.Doubles("data/demo_0/obs/x", {2}, {1, 2});
   }
-  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"x"}, {}); }),
-                    {path, "data/demo_0/obs/image", "shape (2, 2, 2) has rank 3",
-                     "expected (T,) or (T, k)"});
+  // An unusable key (robomimic's images) is an error only when selected, or with no selection.
+  for (const std::vector<std::string>& select :
+       {std::vector<std::string>{"image"}, std::vector<std::string>{}}) {
+    ExpectContainsAll(ErrorOf([&] { ReadStateSet(path, select); }),
+                      {path, "data/demo_0/obs/image", "shape (2, 2, 2) has rank 3",
+                       "expected (T,) or (T, k)"});
+  }
+  EXPECT_EQ(ReadStateSet(path, {"x"}).size(), 2);
+  ExpectContainsAll(ErrorOf([&] { ReadStateSet(path, {"y"}); }),
+                    {"the keys are: image (not (T,) or (T, k) float), x"});
   // Every key is checked when the keys are listed; the others one file each.
   const std::string types = PathOf("types.h5");
   {
