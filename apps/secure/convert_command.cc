@@ -46,8 +46,9 @@ struct ConvertCommand {
         "convert",
         "Convert demonstrations or a state set between CSV and robomimic's HDF5 layout (by "
         "extension: .csv, .h5/.hdf5; either direction)");
-    cmd->add_option("IN", in, "input file: demonstrations (a CSV with an 'episode' column, or an "
-                              "HDF5 file with data/demo_<i>) or a state set")
+    cmd->add_option("IN", in,
+                    "input file: demonstrations (a CSV with an 'episode' column, or an "
+                    "HDF5 file with data/demo_<i>) or a state set")
         ->required();
     cmd->add_option("OUT", out, "output file (.csv, .h5 or .hdf5)")->required();
     cmd->add_option("--obs-keys", obs_keys,
@@ -100,15 +101,13 @@ struct ConvertCommand {
         wanted = c.state_sets;
       } else if (!demos) {
         SECURE_CHECK(c.state_sets.size() == 1,
-                     "demos convert: " << in << " holds " << c.state_sets.size()
-                                       << " state sets (" << Join(c.state_sets)
-                                       << "); choose one with --label");
+                     "demos convert: " << in << " holds " << c.state_sets.size() << " state sets ("
+                                       << Join(c.state_sets) << "); choose one with --label");
         wanted = c.state_sets;
       }
       for (const std::string& l : wanted) {
         SECURE_CHECK(std::find(c.state_sets.begin(), c.state_sets.end(), l) != c.state_sets.end(),
-                     "demos convert: " << in << " has no state set 'safety/" << l
-                                       << "' (its sets: "
+                     "demos convert: " << in << " has no state set 'safety/" << l << "' (its sets: "
                                        << (c.state_sets.empty() ? "none" : Join(c.state_sets))
                                        << ")");
         sets.push_back(data::ReadStateSet(in, obs, l));
@@ -117,8 +116,7 @@ struct ConvertCommand {
     } else {
       const data::NumericTable header = data::ReadCsv(in);
       const std::vector<std::string>& columns = header.columns;
-      const bool is_demos =
-          std::find(columns.begin(), columns.end(), "episode") != columns.end();
+      const bool is_demos = std::find(columns.begin(), columns.end(), "episode") != columns.end();
       obs = ExpandKeys(columns, obs);
       if (is_demos) {
         SECURE_CHECK(!actions.empty(),
@@ -151,8 +149,8 @@ struct ConvertCommand {
     }
     for (std::size_t k = 0; k < sets.size(); ++k) sets_json[labels[k]] = sets[k].size();
     if (json) {
-      nlohmann::json r = {{"command", "demos convert"}, {"in", in}, {"out", out},
-                          {"state_sets", sets_json}};
+      nlohmann::json r = {
+          {"command", "demos convert"}, {"in", in}, {"out", out}, {"state_sets", sets_json}};
       if (demos) {
         r["demonstrations"] = demos->num_episodes();
         r["steps"] = demos->num_steps();
@@ -171,8 +169,8 @@ struct ConvertCommand {
                 << demos->action_features.size() << " action columns";
     }
     for (std::size_t k = 0; k < sets.size(); ++k) {
-      std::cout << (demos || k > 0 ? ";" : "") << " state set '" << labels[k] << "': "
-                << sets[k].size() << " states, " << sets[k].dim() << " columns";
+      std::cout << (demos || k > 0 ? ";" : "") << " state set '" << labels[k]
+                << "': " << sets[k].size() << " states, " << sets[k].dim() << " columns";
     }
     std::cout << "\n";
   }

@@ -147,11 +147,11 @@ class Reader {
     // The core driver refuses an image whose name is an existing file: the name must be one
     // no file has (it names nothing on disk; messages name path_).
     static std::atomic<unsigned long> counter{0};
-    const std::string name = "/nonexistent/secure-hdf5-image-" + std::to_string(::getpid()) +
-                             "-" + std::to_string(counter++);
+    const std::string name = "/nonexistent/secure-hdf5-image-" + std::to_string(::getpid()) + "-" +
+                             std::to_string(counter++);
     file_ = Handle(H5Fopen(name.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose);
-    SECURE_CHECK(file_.ok(), path_ << ": cannot open as HDF5 (corrupt or truncated file?)"
-                                   << Hdf5Reason());
+    SECURE_CHECK(file_.ok(),
+                 path_ << ": cannot open as HDF5 (corrupt or truncated file?)" << Hdf5Reason());
   }
 
   const std::string& path() const { return path_; }
@@ -194,11 +194,9 @@ class Reader {
     for (hsize_t i = 0; i < info.nlinks; ++i) {
       const ssize_t size =
           H5Lget_name_by_idx(group, ".", index, H5_ITER_INC, i, nullptr, 0, H5P_DEFAULT);
-      SECURE_CHECK(size >= 0, path_ << ": " << where << ": cannot read link " << i
-                                    << Hdf5Reason());
+      SECURE_CHECK(size >= 0, path_ << ": " << where << ": cannot read link " << i << Hdf5Reason());
       std::string name(static_cast<std::size_t>(size) + 1, '\0');
-      H5Lget_name_by_idx(group, ".", index, H5_ITER_INC, i, name.data(), name.size(),
-                         H5P_DEFAULT);
+      H5Lget_name_by_idx(group, ".", index, H5_ITER_INC, i, name.data(), name.size(), H5P_DEFAULT);
       name.resize(static_cast<std::size_t>(size));
       names.push_back(std::move(name));
     }
@@ -207,19 +205,20 @@ class Reader {
 
   // Opens dataset `name` in `loc` and checks it is (T,) or (T, k) floating point; returns its
   // width k (1 for (T,)) and sets *rows.
-  Handle OpenFloatDataset(hid_t loc, const std::string& name, const std::string& where,
-                          long* rows, long* cols) const {
+  Handle OpenFloatDataset(hid_t loc, const std::string& name, const std::string& where, long* rows,
+                          long* cols) const {
     const H5I_type_t kind = KindOf(loc, name);
     SECURE_CHECK(kind != H5I_BADID, path_ << ": no dataset '" << where << "'");
-    SECURE_CHECK(kind == H5I_DATASET,
-                 path_ << ": " << where << " is a group, expected a dataset of shape (T,) or (T, k)");
+    SECURE_CHECK(
+        kind == H5I_DATASET,
+        path_ << ": " << where << " is a group, expected a dataset of shape (T,) or (T, k)");
     Handle dataset(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), H5Dclose);
     SECURE_CHECK(dataset.ok(), path_ << ": " << where << ": cannot open" << Hdf5Reason());
     Handle type(H5Dget_type(dataset.get()), H5Tclose);
     const H5T_class_t type_class = type.ok() ? H5Tget_class(type.get()) : H5T_NO_CLASS;
-    SECURE_CHECK(type_class == H5T_FLOAT,
-                 path_ << ": " << where << ": data type is " << ClassName(type_class)
-                       << ", expected float32 or float64");
+    SECURE_CHECK(type_class == H5T_FLOAT, path_ << ": " << where << ": data type is "
+                                                << ClassName(type_class)
+                                                << ", expected float32 or float64");
     Handle space(H5Dget_space(dataset.get()), H5Sclose);
     const int rank = space.ok() ? H5Sget_simple_extent_ndims(space.get()) : -1;
     SECURE_CHECK(rank >= 0, path_ << ": " << where << ": cannot read the shape" << Hdf5Reason());
@@ -248,16 +247,16 @@ class Reader {
     const Handle dataset = OpenFloatDataset(loc, name, where, &t.rows, &t.cols);
     t.values.resize(static_cast<std::size_t>(t.rows * t.cols));
     if (!t.values.empty()) {
-      SECURE_CHECK(H5Dread(dataset.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT,
-                           t.values.data()) >= 0,
-                   path_ << ": " << where << ": cannot read the data (corrupt file?)"
-                         << Hdf5Reason());
+      SECURE_CHECK(
+          H5Dread(dataset.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT,
+                  t.values.data()) >= 0,
+          path_ << ": " << where << ": cannot read the data (corrupt file?)" << Hdf5Reason());
     }
     for (long r = 0; r < t.rows; ++r) {
       for (long c = 0; c < t.cols; ++c) {
         const double v = t.values[static_cast<std::size_t>(r * t.cols + c)];
-        SECURE_CHECK(std::isfinite(v), path_ << ": " << where << ": row " << r << ", column "
-                                             << c << ": value " << Shown(v) << " is not finite");
+        SECURE_CHECK(std::isfinite(v), path_ << ": " << where << ": row " << r << ", column " << c
+                                             << ": value " << Shown(v) << " is not finite");
         SECURE_CHECK(std::abs(v) <= std::numeric_limits<float>::max(),
                      path_ << ": " << where << ": row " << r << ", column " << c << ": value "
                            << Shown(v) << " is out of the float range");
@@ -319,11 +318,11 @@ class Reader {
         add(name, it->second);
         continue;
       }
-      const auto key = std::find_if(keys.begin(), keys.end(),
-                                    [&](const Key& k) { return k.name == name; });
-      SECURE_CHECK(key != keys.end(), path_ << ": " << where << ": no key or column '"
-                                            << Excerpt(name) << "'; the keys are: "
-                                            << Excerpt(DescribeKeys(keys), 400));
+      const auto key =
+          std::find_if(keys.begin(), keys.end(), [&](const Key& k) { return k.name == name; });
+      SECURE_CHECK(key != keys.end(),
+                   path_ << ": " << where << ": no key or column '" << Excerpt(name)
+                         << "'; the keys are: " << Excerpt(DescribeKeys(keys), 400));
       usable(*key);
       const auto k = static_cast<std::size_t>(key - keys.begin());
       for (long j = 0; j < key->cols; ++j) add(ColumnName(key->name, key->cols, j), {k, j});
@@ -358,9 +357,9 @@ class Reader {
     for (std::size_t k = 0; k < keys.size(); ++k) {
       if (!used[k]) continue;
       const std::string dataset = where + "/" + keys[k].name;
-      SECURE_CHECK(KindOf(loc, keys[k].name) != H5I_BADID,
-                   path_ << ": " << where << ": no key '" << keys[k].name << "' (dataset "
-                         << dataset << ")");
+      SECURE_CHECK(KindOf(loc, keys[k].name) != H5I_BADID, path_ << ": " << where << ": no key '"
+                                                                 << keys[k].name << "' (dataset "
+                                                                 << dataset << ")");
       tables[k] = ReadFloatDataset(loc, keys[k].name, dataset);
       SECURE_CHECK(tables[k].cols == keys[k].cols,
                    path_ << ": " << dataset << ": " << tables[k].cols << " columns, but "
@@ -369,9 +368,9 @@ class Reader {
         *rows = tables[k].rows;
         *rows_from = dataset;
       }
-      SECURE_CHECK(tables[k].rows == *rows,
-                   path_ << ": " << dataset << ": " << tables[k].rows << " rows, but " << *rows_from
-                         << " has " << *rows << " (one row per step)");
+      SECURE_CHECK(tables[k].rows == *rows, path_ << ": " << dataset << ": " << tables[k].rows
+                                                  << " rows, but " << *rows_from << " has " << *rows
+                                                  << " (one row per step)");
     }
     out->resize(columns.size());
     for (std::size_t i = 0; i < columns.size(); ++i) {
@@ -395,8 +394,7 @@ class Reader {
     SECURE_CHECK((c == H5T_INTEGER || c == H5T_FLOAT) && space.ok() &&
                      H5Sget_simple_extent_npoints(space.get()) == 1 &&
                      H5Aread(attr.get(), H5T_NATIVE_LLONG, value) >= 0,
-                 path_ << ": " << where << ": attribute '" << name
-                       << "' is not a single integer");
+                 path_ << ": " << where << ": attribute '" << name << "' is not a single integer");
     return true;
   }
 
@@ -440,17 +438,28 @@ class Reader {
 
   static const char* ClassName(H5T_class_t c) {
     switch (c) {
-      case H5T_INTEGER: return "integer";
-      case H5T_FLOAT: return "float";
-      case H5T_STRING: return "string";
-      case H5T_BITFIELD: return "bitfield";
-      case H5T_OPAQUE: return "opaque";
-      case H5T_COMPOUND: return "compound";
-      case H5T_REFERENCE: return "reference";
-      case H5T_ENUM: return "enum";
-      case H5T_VLEN: return "variable-length";
-      case H5T_ARRAY: return "array";
-      default: return "unknown";
+      case H5T_INTEGER:
+        return "integer";
+      case H5T_FLOAT:
+        return "float";
+      case H5T_STRING:
+        return "string";
+      case H5T_BITFIELD:
+        return "bitfield";
+      case H5T_OPAQUE:
+        return "opaque";
+      case H5T_COMPOUND:
+        return "compound";
+      case H5T_REFERENCE:
+        return "reference";
+      case H5T_ENUM:
+        return "enum";
+      case H5T_VLEN:
+        return "variable-length";
+      case H5T_ARRAY:
+        return "array";
+      default:
+        return "unknown";
     }
   }
 
@@ -465,7 +474,8 @@ std::vector<std::string> DemoNames(const Reader& r, hid_t data) {
   std::vector<std::pair<long long, std::string>> demos;
   for (const std::string& name : r.Children(data, "data")) {
     long long index = -1;
-    const std::string_view digits = std::string_view(name).substr(std::min<std::size_t>(5, name.size()));
+    const std::string_view digits =
+        std::string_view(name).substr(std::min<std::size_t>(5, name.size()));
     const auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), index);
     SECURE_CHECK(name.rfind("demo_", 0) == 0 && !digits.empty() && ec == std::errc() &&
                      ptr == digits.data() + digits.size() && index >= 0,
@@ -473,7 +483,8 @@ std::vector<std::string> DemoNames(const Reader& r, hid_t data) {
                           << ": not a demo (expected groups demo_0, demo_1, ...)");
     demos.emplace_back(index, name);
   }
-  SECURE_CHECK(!demos.empty(), r.path() << ": data: no demos (expected groups demo_0, demo_1, ...)");
+  SECURE_CHECK(!demos.empty(), r.path()
+                                   << ": data: no demos (expected groups demo_0, demo_1, ...)");
   std::sort(demos.begin(), demos.end());
   std::vector<std::string> names;
   for (auto& d : demos) names.push_back(std::move(d.second));
@@ -497,9 +508,9 @@ std::vector<Key> ActionKeys(const Reader& r, hid_t data, long cols,
 void CheckNumSamples(const Reader& r, hid_t group, const std::string& where, long rows) {
   long long num_samples = 0;
   if (r.ReadIntAttribute(group, "num_samples", where, &num_samples)) {
-    SECURE_CHECK(num_samples == rows, r.path() << ": " << where << ": attribute num_samples = "
-                                               << num_samples << ", but the data hold " << rows
-                                               << " rows");
+    SECURE_CHECK(num_samples == rows, r.path() << ": " << where
+                                               << ": attribute num_samples = " << num_samples
+                                               << ", but the data hold " << rows << " rows");
   }
 }
 
@@ -517,8 +528,8 @@ struct Chunk {
 // Reads data/demo_*: the selected obs columns and action columns of every demo.
 TrajectorySet ReadDemos(const Reader& r, const std::vector<std::string>& state_features,
                         const std::vector<std::string>& action_features, bool need_actions) {
-  const Handle data = r.OpenGroup(r.file(), "data", "data",
-                                  "robomimic demonstrations: data/demo_<i>/obs/<key>");
+  const Handle data =
+      r.OpenGroup(r.file(), "data", "data", "robomimic demonstrations: data/demo_<i>/obs/<key>");
   const std::vector<std::string> demos = DemoNames(r, data.get());
   TrajectorySet set;
   set.source = r.path();
@@ -548,8 +559,7 @@ TrajectorySet ReadDemos(const Reader& r, const std::vector<std::string>& state_f
         // Action columns by name: the attribute's names (or actions[j]), or "actions" for all.
         std::map<std::string, long> col_of;
         for (std::size_t j = 0; j < names.size(); ++j) col_of.emplace(names[j], long(j));
-        const std::vector<std::string> wanted =
-            action_features.empty() ? names : action_features;
+        const std::vector<std::string> wanted = action_features.empty() ? names : action_features;
         for (const std::string& name : wanted) {
           const auto it = col_of.find(name);
           if (it == col_of.end() && name == "actions") {
@@ -559,9 +569,9 @@ TrajectorySet ReadDemos(const Reader& r, const std::vector<std::string>& state_f
             }
             continue;
           }
-          SECURE_CHECK(it != col_of.end(), r.path() << ": " << where << "/actions: no action column '"
-                                                    << Excerpt(name) << "'; the columns are: "
-                                                    << Excerpt(Join(names), 400));
+          SECURE_CHECK(it != col_of.end(),
+                       r.path() << ": " << where << "/actions: no action column '" << Excerpt(name)
+                                << "'; the columns are: " << Excerpt(Join(names), 400));
           SECURE_CHECK(std::find(set.action_features.begin(), set.action_features.end(), name) ==
                            set.action_features.end(),
                        r.path() << ": " << where << "/actions: column '" << Excerpt(name)
@@ -600,8 +610,8 @@ class Writer {
                  "cannot write '" << path_ << "': HDF5 setup failed" << Hdf5Reason());
     // The name is only the in-memory file's: nothing is written to disk until Finish().
     file_ = Handle(H5Fcreate(path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.get()), H5Fclose);
-    SECURE_CHECK(file_.ok(), "cannot write '" << path_ << "': HDF5 could not create the file"
-                                              << Hdf5Reason());
+    SECURE_CHECK(file_.ok(),
+                 "cannot write '" << path_ << "': HDF5 could not create the file" << Hdf5Reason());
   }
 
   hid_t file() const { return file_.get(); }
@@ -624,9 +634,9 @@ class Writer {
     Handle space(H5Screate_simple(rank, dims, nullptr), H5Sclose);
     Handle dcpl(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
     H5Pset_obj_track_times(dcpl.get(), 0);
-    Handle dataset(H5Dcreate2(loc, name.c_str(), file_type, space.get(), H5P_DEFAULT, dcpl.get(),
-                              H5P_DEFAULT),
-                   H5Dclose);
+    Handle dataset(
+        H5Dcreate2(loc, name.c_str(), file_type, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
+        H5Dclose);
     Check(dataset.ok() &&
               H5Dwrite(dataset.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, values) >= 0,
           name);
@@ -657,8 +667,7 @@ class Writer {
     H5Tset_size(type.get(), H5T_VARIABLE);
     H5Tset_cset(type.get(), H5T_CSET_UTF8);
     Handle space(H5Screate(H5S_SCALAR), H5Sclose);
-    Handle attr(H5Acreate2(loc, name, type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT),
-                H5Aclose);
+    Handle attr(H5Acreate2(loc, name, type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose);
     const char* text = value.c_str();
     Check(attr.ok() && H5Awrite(attr.get(), type.get(), &text) >= 0, name);
   }
@@ -696,8 +705,8 @@ std::vector<KeyRange> GroupKeys(const std::string& path, const std::vector<std::
   std::vector<KeyRange> keys;
   const auto base_of = [](const std::string& name, long index) -> std::string {
     const std::string suffix = "[" + std::to_string(index) + "]";
-    if (name.size() <= suffix.size() || name.compare(name.size() - suffix.size(), suffix.size(),
-                                                     suffix) != 0)
+    if (name.size() <= suffix.size() ||
+        name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0)
       return {};
     return name.substr(0, name.size() - suffix.size());
   };
@@ -732,10 +741,10 @@ void CheckFinite(const std::string& path, const Eigen::MatrixXf& m,
                  const std::vector<std::string>& names) {
   for (Eigen::Index t = 0; t < m.cols(); ++t)
     for (Eigen::Index j = 0; j < m.rows(); ++j)
-      SECURE_CHECK(std::isfinite(m(j, t)),
-                   "cannot write '" << path << "': value " << m(j, t) << " of feature '"
-                                    << names[static_cast<std::size_t>(j)] << "', row " << t
-                                    << " (0-based) is not finite");
+      SECURE_CHECK(std::isfinite(m(j, t)), "cannot write '"
+                                               << path << "': value " << m(j, t) << " of feature '"
+                                               << names[static_cast<std::size_t>(j)] << "', row "
+                                               << t << " (0-based) is not finite");
 }
 
 void WriteObs(Writer& w, hid_t group, const std::vector<KeyRange>& keys, const Eigen::MatrixXf& m,
@@ -762,8 +771,8 @@ void WriteDemos(Writer& w, const std::string& path, const TrajectorySet& set) {
   SECURE_CHECK(begin.size() >= 2 && begin.front() == 0 && begin.back() == steps,
                "cannot write '" << path << "': episode_begin must start at 0 and end at " << steps);
   for (std::size_t k = 0; k + 1 < begin.size(); ++k)
-    SECURE_CHECK(begin[k] < begin[k + 1], "cannot write '" << path << "': episode " << k
-                                                           << " is empty or reversed");
+    SECURE_CHECK(begin[k] < begin[k + 1],
+                 "cannot write '" << path << "': episode " << k << " is empty or reversed");
   for (const std::string& name : set.action_features)
     SECURE_CHECK(!name.empty() && name.find(',') == std::string::npos,
                  "cannot write '" << path << "': action feature '" << name
@@ -784,11 +793,10 @@ void WriteDemos(Writer& w, const std::string& path, const TrajectorySet& set) {
     w.Matrix(demo.get(), "actions", set.actions, 0, action_dim, b, e);
     std::vector<long long> dones(static_cast<std::size_t>(n), 0);
     dones.back() = 1;
-    w.Dataset(demo.get(), "dones", H5T_STD_I64LE, H5T_NATIVE_LLONG, dones.data(), hsize_t(n), 1,
-              1);
+    w.Dataset(demo.get(), "dones", H5T_STD_I64LE, H5T_NATIVE_LLONG, dones.data(), hsize_t(n), 1, 1);
     const std::vector<double> rewards(static_cast<std::size_t>(n), 0.0);
-    w.Dataset(demo.get(), "rewards", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, rewards.data(),
-              hsize_t(n), 1, 1);
+    w.Dataset(demo.get(), "rewards", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, rewards.data(), hsize_t(n),
+              1, 1);
     w.Matrix(demo.get(), "states", set.states, 0, state_dim, b, e);
   }
 }
@@ -874,10 +882,11 @@ StateSet ReadHdf5StateSet(const std::string& path, const std::vector<std::string
   if (std::find(labels.begin(), labels.end(), label) != labels.end()) {
     chosen = label;
   } else {
-    SECURE_CHECK(labels.size() == 1,
-                 path << ": " << (label.empty() ? "name the state set to read"
-                                                : "no state set 'safety/" + label + "'")
-                      << "; the file has " << labels.size() << ": " << Excerpt(Join(labels), 400));
+    SECURE_CHECK(labels.size() == 1, path << ": "
+                                          << (label.empty() ? "name the state set to read"
+                                                            : "no state set 'safety/" + label + "'")
+                                          << "; the file has " << labels.size() << ": "
+                                          << Excerpt(Join(labels), 400));
     chosen = labels.front();
   }
   const std::string where = "safety/" + chosen;

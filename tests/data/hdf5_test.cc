@@ -129,6 +129,34 @@ TEST_F(Hdf5Test, TrajectoriesRoundTripBitExactly) {
   EXPECT_TRUE(c.has_demonstrations);
   EXPECT_EQ(c.observation_features, set.state_features);
   EXPECT_TRUE(c.state_sets.empty());
+  // What robomimic reads: data.total, data.env_args (a JSON string), demo num_samples, dones.
+  {
+    const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    long long total = 0, num_samples = 0;
+    const hid_t a_total = H5Aopen_by_name(file, "data", "total", H5P_DEFAULT, H5P_DEFAULT);
+    H5Aread(a_total, H5T_NATIVE_LLONG, &total);
+    H5Aclose(a_total);
+    const hid_t a_n = H5Aopen_by_name(file, "data/demo_1", "num_samples", H5P_DEFAULT, H5P_DEFAULT);
+    H5Aread(a_n, H5T_NATIVE_LLONG, &num_samples);
+    H5Aclose(a_n);
+    EXPECT_EQ(total, 9);
+    EXPECT_EQ(num_samples, 1);
+    const hid_t a_env = H5Aopen_by_name(file, "data", "env_args", H5P_DEFAULT, H5P_DEFAULT);
+    const hid_t type = H5Aget_type(a_env);
+    EXPECT_GT(H5Tis_variable_str(type), 0);
+    char* env = nullptr;
+    H5Aread(a_env, type, &env);
+    EXPECT_EQ(std::string(env), R"({"env_name": "secure", "type": 2, "env_kwargs": {}})");
+    H5free_memory(env);
+    H5Tclose(type);
+    H5Aclose(a_env);
+    long long dones[4] = {};
+    const hid_t d = H5Dopen2(file, "data/demo_0/dones", H5P_DEFAULT);
+    H5Dread(d, H5T_NATIVE_LLONG, H5S_ALL, H5S_ALL, H5P_DEFAULT, dones);
+    H5Dclose(d);
+    EXPECT_EQ(std::vector<long long>(dones, dones + 4), (std::vector<long long>{0, 0, 0, 1}));
+    H5Fclose(file);
+  }
   // Same data, same bytes (no time stamps).
   const std::string again = PathOf("again.hdf5");
   WriteTrajectories(again, set);
@@ -181,7 +209,9 @@ TEST_F(Hdf5Test, RejectsMissingGroupsAndKeys) {
     f.Demo(0, 3);
     f.Floats("data/demo_1/obs/pos", {2, 2}, {1, 2, 3, 4});  // no vel, no actions
   }
-  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"pos", "vel"}, {}); }),
+  ExpectContainsAll(ErrorOf([&] {
+                      ReadTrajectories(path, {"pos", "vel"}, {});
+                    }),
                     {path, "data/demo_1/obs", "no key 'vel'"});
   ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"pos"}, kActions); }),
                     {path, "data/demo_1/actions"});
@@ -189,9 +219,9 @@ TEST_F(Hdf5Test, RejectsMissingGroupsAndKeys) {
   ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"speed"}, {}); }),
                     {path, "data/demo_0/obs", "no key or column 'speed'",
                      "pos (2 columns: pos[0] .. pos[1]), vel"});
-  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"pos"}, {"throttle"}); }),
-                    {path, "data/demo_0/actions", "no action column 'throttle'",
-                     "actions[0], actions[1]"});
+  ExpectContainsAll(
+      ErrorOf([&] { ReadTrajectories(path, {"pos"}, {"throttle"}); }),
+      {path, "data/demo_0/actions", "no action column 'throttle'", "actions[0], actions[1]"});
   const std::string empty = PathOf("empty.h5");
   {
     Hdf5TestFile f(empty);
@@ -226,9 +256,9 @@ TEST_F(Hdf5Test, RejectsWrongRankShapeAndType) {
   // An unusable key (robomimic's images) is an error only when selected, or with no selection.
   for (const std::vector<std::string>& select :
        {std::vector<std::string>{"image"}, std::vector<std::string>{}}) {
-    ExpectContainsAll(ErrorOf([&] { ReadStateSet(path, select); }),
-                      {path, "data/demo_0/obs/image", "shape (2, 2, 2) has rank 3",
-                       "expected (T,) or (T, k)"});
+    ExpectContainsAll(
+        ErrorOf([&] { ReadStateSet(path, select); }),
+        {path, "data/demo_0/obs/image", "shape (2, 2, 2) has rank 3", "expected (T,) or (T, k)"});
   }
   EXPECT_EQ(ReadStateSet(path, {"x"}).size(), 2);
   ExpectContainsAll(ErrorOf([&] { ReadStateSet(path, {"y"}); }),
@@ -239,9 +269,9 @@ TEST_F(Hdf5Test, RejectsWrongRankShapeAndType) {
     Hdf5TestFile f(types);
     f.Ints("safety/safe/obs/count", {2}, {1, 2});
   }
-  ExpectContainsAll(ErrorOf([&] { ReadStateSet(types); }),
-                    {types, "safety/safe/obs/count", "data type is integer",
-                     "expected float32 or float64"});
+  ExpectContainsAll(
+      ErrorOf([&] { ReadStateSet(types); }),
+      {types, "safety/safe/obs/count", "data type is integer", "expected float32 or float64"});
   const std::string zero = PathOf("zero.h5");
   {
     Hdf5TestFile f(zero);
@@ -275,11 +305,13 @@ TEST_F(Hdf5Test, RejectsNonFiniteValuesNamingRowAndColumn) {
     f.Doubles("safety/near_dangerous/obs/x", {2}, {1, -HUGE_VAL});
     f.Doubles("safety/near_dangerous/obs/y", {2}, {1e300, 1});
   }
-  ExpectContainsAll(ErrorOf([&] { ReadStateSet(inf, {"x"}); }),
-                    {inf, "safety/near_dangerous/obs/x: row 1, column 0: value -inf is not finite"});
+  ExpectContainsAll(
+      ErrorOf([&] { ReadStateSet(inf, {"x"}); }),
+      {inf, "safety/near_dangerous/obs/x: row 1, column 0: value -inf is not finite"});
   ExpectContainsAll(ErrorOf([&] { ReadStateSet(inf, {"y"}); }),
-                    {inf, "safety/near_dangerous/obs/y: row 0, column 0: value 1e+300 is out of "
-                          "the float range"});
+                    {inf,
+                     "safety/near_dangerous/obs/y: row 0, column 0: value 1e+300 is out of "
+                     "the float range"});
 }
 
 TEST_F(Hdf5Test, RejectsLengthMismatchesAndEmptyDemos) {
@@ -290,7 +322,9 @@ TEST_F(Hdf5Test, RejectsLengthMismatchesAndEmptyDemos) {
     f.Doubles("data/demo_0/obs/y", {2}, {1, 2});
     f.Doubles("data/demo_0/actions", {2, 1}, {1, 2});
   }
-  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"x", "y"}, {}); }),
+  ExpectContainsAll(ErrorOf([&] {
+                      ReadTrajectories(path, {"x", "y"}, {});
+                    }),
                     {path, "data/demo_0/obs/y: 2 rows, but data/demo_0/obs/x has 3"});
   ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"x"}, {"actions"}); }),
                     {path, "data/demo_0/actions: 2 rows, but data/demo_0/obs/x has 3"});

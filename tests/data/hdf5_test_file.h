@@ -69,7 +69,8 @@ class Hdf5TestFile {
     for (std::size_t k = 0; k < keys.size(); ++k) {
       std::vector<double> v;
       for (long t = 0; t < steps; ++t)
-        for (hsize_t j = 0; j < widths[k]; ++j) v.push_back(100.0 * double(k) + double(t) + double(j) / 10);
+        for (hsize_t j = 0; j < widths[k]; ++j)
+          v.push_back(100.0 * double(k) + double(t) + double(j) / 10);
       Doubles(demo + "/obs/" + keys[k], {hsize_t(steps), widths[k]}, v);
     }
     std::vector<float> a;
