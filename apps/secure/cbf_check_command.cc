@@ -283,8 +283,7 @@ struct CheckCommand {
     p.region_description = "the validation box x, y in [0, 10), vx, vy in [-1.5, 1.5)";
     if (!safe_path.empty()) {
       p.held_out_safe = data::ReadStateSet(safe_path, features, data::kSafeLabel);
-      p.held_out_near_dangerous =
-          data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
+      p.held_out_near_dangerous = data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
     } else {
       Rng rng(data_seed != 0 ? data_seed : check_seed ^ 0x5a3b1e0d7ULL);
       di::LabelledStates l = di::SampleLabelled(t, box, held_out, held_out, rng);

@@ -385,8 +385,7 @@ struct PredictCommand {
         const data::NumericTable table = data::ReadCsv(states, net.features);
         where = std::to_string(table.lines[static_cast<std::size_t>(i)]);
       }
-      SECURE_THROW(states << ":" << where << ": the model "
-                          << model << " gives h = "
+      SECURE_THROW(states << ":" << where << ": the model " << model << " gives h = "
                           << (std::isnan(h[i]) ? "nan"
                               : h[i] > 0       ? "inf"
                                                : "-inf")

@@ -381,8 +381,7 @@ void RegisterPipelineCommands(CLI::App& app, const Config& config) {
   static DemosGenerateCommand generate;
   static PolicyTrainCommand train;
   static EvalCommand evaluate;
-  CLI::App* demos =
-      app.add_subcommand("demos", "Generate, convert and check demonstrations");
+  CLI::App* demos = app.add_subcommand("demos", "Generate, convert and check demonstrations");
   demos->require_subcommand(1);
   generate.Register(*demos);
   RegisterLabelCheckCommand(*demos, config);

@@ -431,7 +431,8 @@ TEST(CliTest, Hdf5InputErrorsAreOneLineNamingTheFile) {
   expect_error(RunCli("cbf train --safe-states " + text + " --near-dangerous-states " + text +
                       " --out y.model"),
                {text, "not an HDF5 file"});
-  const std::string csv = Write("xy_demos.csv", "episode,step,x,y,ax,ay\n0,0,1,2,0,0\n0,1,1,3,0,1\n");
+  const std::string csv =
+      Write("xy_demos.csv", "episode,step,x,y,ax,ay\n0,0,1,2,0,0\n0,1,1,3,0,1\n");
   const std::string h5 = (TempDir() / "xy_demos.h5").string();
   // CSV demonstrations need their action columns named.
   expect_error(RunCli("demos convert " + csv + " " + h5), {csv, "--action-features"});

@@ -206,7 +206,8 @@ TEST_F(DerbyDataFileTest, DemonstrationsRoundTripThroughHdf5AsThroughCsv) {
   options.count = 100;
   const data::StateSet nd = GenerateDerbyNearDangerous({}, d, options, rng);
   const std::string h5 = PathOf("derby.h5"), csv = PathOf("demos.csv");
-  data::WriteHdf5(h5, &d.trajectories, {{data::kSafeLabel, &safe}, {data::kNearDangerousLabel, &nd}});
+  data::WriteHdf5(h5, &d.trajectories,
+                  {{data::kSafeLabel, &safe}, {data::kNearDangerousLabel, &nd}});
   data::WriteTrajectories(csv, d.trajectories);
   for (const std::string& path : {h5, csv}) {
     SCOPED_TRACE(path);

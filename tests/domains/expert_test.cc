@@ -496,8 +496,7 @@ TEST_F(DemonstrationFileTest, TrajectoriesAndStateSetsRoundTripThroughHdf5) {
   const data::TrajectorySet all = data::ReadTrajectories(path, {}, {});
   EXPECT_EQ(all.state_features, StateFeatures());
   EXPECT_EQ(all.action_features, ActionFeatures());
-  EXPECT_EQ(data::ReadStateSet(path, StateFeatures(), data::kNearDangerousLabel).states,
-            nd.states);
+  EXPECT_EQ(data::ReadStateSet(path, StateFeatures(), data::kNearDangerousLabel).states, nd.states);
 }
 
 // ---------------------------------------------------------------------------------------------
