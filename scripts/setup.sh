@@ -20,6 +20,7 @@ set -euo pipefail
 #   libcli11-dev                command-line parsing
 #   nlohmann-json3-dev          --json results, model file headers
 #   libhdf5-dev                 demonstrations in robomimic's HDF5 layout (secure/data)
+#   pkgconf                     finds HDF5 (its pkg-config file) for the build and for find_package(secure)
 #   libyaml-cpp-dev             experiment config files
 #   libboost-dev                Boost.CRC (model file checksums); Boost.Math (statistics)
 #   libmujoco-dev libqhull-dev  MuJoCo for the Panda domain (its CMake config needs qhull)
@@ -32,7 +33,7 @@ PACKAGES=(
   build-essential cmake git
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
   libeigen3-dev libxsmm-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
-  libhdf5-dev
+  libhdf5-dev pkgconf
   libmujoco-dev libqhull-dev libosmesa6-dev
   ffmpeg
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
