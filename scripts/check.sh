@@ -34,7 +34,8 @@ jobs="$(nproc)"
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_string_checks=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 common=(-DCMAKE_BUILD_TYPE=Release -DSECURE_SANITIZE=address,undefined
-        -DSECURE_BUILD_BENCHMARKS=OFF -DCMAKE_GTEST_DISCOVER_TESTS_DISCOVERY_MODE=PRE_TEST)
+        -DSECURE_BUILD_BENCHMARKS=OFF -DSECURE_BUILD_PYTHON=OFF
+        -DCMAKE_GTEST_DISCOVER_TESTS_DISCOVERY_MODE=PRE_TEST)
 
 if [[ " $steps " == *" sanitizers "* ]]; then
   cmake -S "$root" -B "$asan_dir" "${common[@]}"

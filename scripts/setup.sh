@@ -29,6 +29,8 @@ set -euo pipefail
 #   libgtest-dev libgmock-dev   unit tests
 #   librapidcheck-dev           property-based tests
 #   libbenchmark-dev            benchmarks under bench/
+#   python3-dev pybind11-dev    the Python module (python/): headers, the binding library
+#   python3-numpy python3-pytest  the module's arrays; its tests (ctest -L python)
 PACKAGES=(
   build-essential cmake git
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
@@ -37,6 +39,7 @@ PACKAGES=(
   libmujoco-dev libqhull-dev libosmesa6-dev
   ffmpeg
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
+  python3-dev pybind11-dev python3-numpy python3-pytest
 )
 # The checking build (scripts/check.sh), installed only with --check-deps:
 #   clang libclang-rt-14-dev    clang and its AddressSanitizer / UBSan runtimes

@@ -1,0 +1,218 @@
+// NumPy/YAML/JSON conversions, secure.Rng, the exception translation, and the module itself.
+#include "python/src/common.h"
+
+#include <cmath>
+#include <cstring>
+#include <new>
+#include <sstream>
+
+#include "secure/common/build_info.h"
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+#include "secure/eval/policy_eval.h"
+
+namespace secure::python {
+
+namespace {
+
+std::string ShapeOf(const py::array& a) {
+  std::ostringstream out;
+  out << "(";
+  for (py::ssize_t k = 0; k < a.ndim(); ++k) out << (k ? ", " : "") << a.shape(k);
+  out << (a.ndim() == 1 ? ",)" : ")");
+  return out.str();
+}
+
+}  // namespace
+
+FloatArray AsFloat32(py::handle obj, const std::string& what) {
+  py::array array = py::array::ensure(obj);
+  if (!array) {
+    throw py::type_error(what + ": expected a NumPy array (or a nested list of numbers), got " +
+                         std::string(py::str(py::type::handle_of(obj).attr("__name__"))));
+  }
+  const char kind = array.dtype().kind();
+  if (kind != 'f' && kind != 'i' && kind != 'u') {
+    throw py::type_error(what + ": dtype " + std::string(py::str(array.dtype())) +
+                         " is not a real number type (use float32; float64 and integer arrays "
+                         "are converted)");
+  }
+  // float32 and C-contiguous: the same object, no copy. Otherwise a converted copy.
+  FloatArray out = FloatArray::ensure(array);
+  if (!out) throw py::error_already_set();
+  return out;
+}
+
+StatesArg States(py::handle obj, int dim, const std::string& what, bool allow_1d) {
+  StatesArg s;
+  s.array = AsFloat32(obj, what);
+  const py::ssize_t ndim = s.array.ndim();
+  const std::string expected =
+      "(N, " + (dim >= 0 ? std::to_string(dim) : std::string("d")) + ")" +
+      (allow_1d ? " or (" + (dim >= 0 ? std::to_string(dim) : std::string("d")) + ",)" : "");
+  if (ndim == 1 && allow_1d) {
+    s.one = true;
+    if (dim >= 0 && s.array.shape(0) != dim) {
+      throw py::value_error(what + ": expected shape " + expected + ", got " + ShapeOf(s.array) +
+                            " (" + std::to_string(dim) + " values per state)");
+    }
+    new (&s.map) Eigen::Map<const Eigen::MatrixXf>(s.array.data(), s.array.shape(0), 1);
+    return s;
+  }
+  if (ndim != 2 || (dim >= 0 && s.array.shape(1) != dim)) {
+    throw py::value_error(what + ": expected shape " + expected + ", got " + ShapeOf(s.array) +
+                          (dim >= 0 ? " (" + std::to_string(dim) + " values per state)" : ""));
+  }
+  new (&s.map)
+      Eigen::Map<const Eigen::MatrixXf>(s.array.data(), s.array.shape(1), s.array.shape(0));
+  return s;
+}
+
+Eigen::VectorXf Vector(py::handle obj, int n, const std::string& what) {
+  const FloatArray a = AsFloat32(obj, what);
+  if (a.ndim() != 1 || (n >= 0 && a.shape(0) != n)) {
+    throw py::value_error(what + ": expected shape (" + std::to_string(n) + ",), got " +
+                          ShapeOf(a));
+  }
+  return Eigen::Map<const Eigen::VectorXf>(a.data(), a.shape(0));
+}
+
+Eigen::MatrixXf Matrix(py::handle obj, int rows, int cols, const std::string& what) {
+  const FloatArray a = AsFloat32(obj, what);
+  if (a.ndim() != 2 || (rows >= 0 && a.shape(0) != rows) || (cols >= 0 && a.shape(1) != cols)) {
+    throw py::value_error(what + ": expected shape (" +
+                          (rows >= 0 ? std::to_string(rows) : std::string("rows")) + ", " +
+                          (cols >= 0 ? std::to_string(cols) : std::string("cols")) + "), got " +
+                          ShapeOf(a));
+  }
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  return Eigen::Map<const RowMajor>(a.data(), a.shape(0), a.shape(1));
+}
+
+py::array_t<float> ToNumpy(const Eigen::Ref<const Eigen::VectorXf>& v) {
+  py::array_t<float> out(v.size());
+  std::memcpy(out.mutable_data(), v.data(), sizeof(float) * static_cast<std::size_t>(v.size()));
+  return out;
+}
+
+py::array_t<float> StatesToNumpy(const Eigen::Ref<const Eigen::MatrixXf>& m) {
+  py::array_t<float> out({m.cols(), m.rows()});
+  float* data = out.mutable_data();
+  for (Eigen::Index j = 0; j < m.cols(); ++j)
+    for (Eigen::Index i = 0; i < m.rows(); ++i) data[j * m.rows() + i] = m(i, j);
+  return out;
+}
+
+YAML::Node ToYaml(py::handle obj, const std::string& where) {
+  if (obj.is_none()) return YAML::Node(YAML::NodeType::Null);
+  if (py::isinstance<py::bool_>(obj)) return YAML::Node(obj.cast<bool>() ? "true" : "false");
+  if (py::isinstance<py::dict>(obj)) {
+    YAML::Node node(YAML::NodeType::Map);
+    for (const auto& item : obj.cast<py::dict>()) {
+      if (!py::isinstance<py::str>(item.first))
+        throw py::type_error(where + ": option names must be strings, got " +
+                             std::string(py::repr(item.first)));
+      const std::string key = item.first.cast<std::string>();
+      node[key] = ToYaml(item.second, where + " [" + key + "]");
+    }
+    return node;
+  }
+  if (py::isinstance<py::str>(obj)) return YAML::Node(obj.cast<std::string>());
+  if (py::isinstance<py::list>(obj) || py::isinstance<py::tuple>(obj) ||
+      py::isinstance<py::array>(obj)) {
+    YAML::Node node(YAML::NodeType::Sequence);
+    py::object seq = py::isinstance<py::array>(obj) ? obj.attr("tolist")()
+                                                     : py::reinterpret_borrow<py::object>(obj);
+    for (py::handle item : seq) node.push_back(ToYaml(item, where));
+    return node;
+  }
+  // Numbers (Python or NumPy scalars): integers as integers, others by repr (all digits).
+  py::module_ numbers = py::module_::import("numbers");
+  if (py::isinstance(obj, numbers.attr("Integral")))
+    return YAML::Node(std::string(py::str(py::int_(py::reinterpret_borrow<py::object>(obj)))));
+  if (py::isinstance(obj, numbers.attr("Real")))
+    return YAML::Node(std::string(py::repr(py::float_(py::reinterpret_borrow<py::object>(obj)))));
+  throw py::type_error(where + ": cannot use a value of type " +
+                       std::string(py::str(py::type::handle_of(obj).attr("__name__"))) +
+                       " as an option (use numbers, strings, booleans, lists or dicts)");
+}
+
+py::object ToPython(const nlohmann::json& j) {
+  switch (j.type()) {
+    case nlohmann::json::value_t::null: return py::none();
+    case nlohmann::json::value_t::boolean: return py::bool_(j.get<bool>());
+    case nlohmann::json::value_t::number_integer: return py::int_(j.get<std::int64_t>());
+    case nlohmann::json::value_t::number_unsigned: return py::int_(j.get<std::uint64_t>());
+    case nlohmann::json::value_t::number_float: return py::float_(j.get<double>());
+    case nlohmann::json::value_t::string: return py::str(j.get<std::string>());
+    case nlohmann::json::value_t::array: {
+      py::list list;
+      for (const auto& item : j) list.append(ToPython(item));
+      return list;
+    }
+    case nlohmann::json::value_t::object: {
+      py::dict dict;
+      for (const auto& [key, value] : j.items()) dict[py::str(key)] = ToPython(value);
+      return dict;
+    }
+    default: return py::none();
+  }
+}
+
+std::vector<std::string> FeatureNames(py::handle names, int dim, const std::string& prefix,
+                                      const std::string& what) {
+  std::vector<std::string> out;
+  if (names.is_none()) {
+    for (int k = 0; k < dim; ++k) out.push_back(prefix + std::to_string(k));
+    return out;
+  }
+  out = names.cast<std::vector<std::string>>();
+  if (static_cast<int>(out.size()) != dim) {
+    throw py::value_error(what + ": " + std::to_string(out.size()) + " names for " +
+                          std::to_string(dim) + " columns");
+  }
+  return out;
+}
+
+std::shared_ptr<Barrier> MakeBarrier(std::string kind,
+                                     std::function<std::unique_ptr<cbf::Barrier>()> factory) {
+  auto b = std::make_shared<Barrier>();
+  b->kind = std::move(kind);
+  b->factory = std::move(factory);
+  b->evaluator = b->factory();
+  return b;
+}
+
+void RegisterCommon(py::module_& m) {
+  // secure::Error (bad input, bad option, bad file) becomes ValueError with the library's
+  // message; pybind11 maps std::bad_alloc to MemoryError.
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const secure::Error& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    }
+  });
+
+  m.attr("__version__") = std::string(secure::Version());
+  m.def("build_info", [] {
+    py::dict d;
+    d["version"] = std::string(secure::Version());
+    d["git_sha"] = std::string(secure::GitSha());
+    return d;
+  }, "The library's version and git sha.");
+
+  py::class_<Rng>(m, "Rng", R"doc(
+The library's random stream (xoshiro256++ with its own normal transform): the same numbers as
+the C++ code for the same seed, so a Python loop can replay a C++ run.)doc")
+      .def(py::init<std::uint64_t>(), py::arg("seed") = 0)
+      .def("seed", &Rng::Seed, py::arg("seed"))
+      .def("next_u64", &Rng::NextU64)
+      .def("uniform", py::overload_cast<>(&Rng::Uniform), "Uniform in [0, 1).")
+      .def("normal", &Rng::Normal, "Standard normal.");
+
+  m.def("episode_seed", &eval::EpisodeSeed, py::arg("seed"), py::arg("episode"),
+        "The stream of episode `episode` of an evaluation with `seed` (eval::EpisodeSeed).");
+}
+
+}  // namespace secure::python

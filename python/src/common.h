@@ -1,0 +1,120 @@
+#pragma once
+// Shared by the binding's translation units: NumPy <-> Eigen conversion with the module's dtype
+// rule, Python values -> YAML (the options' field tables read them), JSON -> Python, and the
+// wrapper types that cross translation units (a barrier goes into a shield, an environment hands
+// out its dynamics model). No <torch/torch.h> here: the binding never includes it.
+//
+// The dtype rule (python/README.md): arrays of states, actions and matrices are float32. A
+// C-contiguous float32 array is read in place (no copy); any other floating or integer array
+// (float64, int64, a strided view, ...) is converted to a C-contiguous float32 copy; bool,
+// complex, object and string arrays are a TypeError. Wrong shapes are a ValueError naming the
+// expected and the given shape.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Core>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "secure/cbf/barrier.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
+#include "secure/domains/dynamics.h"
+#include "secure/domains/environment.h"
+#include "secure/experiments/domain.h"
+
+namespace secure::python {
+
+namespace py = pybind11;
+
+using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
+
+/// `obj` as a C-contiguous float32 array: the same object when it already is one, else a
+/// converted copy (dtype rule above). `what` names the argument in messages.
+FloatArray AsFloat32(py::handle obj, const std::string& what);
+
+/// A batch of states: a (N, dim) array (or, with allow_1d, one (dim,) state: N = 1). The map
+/// views the array's buffer as the library's (dim x N) column-major matrix (one state per
+/// column): the same bytes, no copy. `array` keeps the buffer alive.
+struct StatesArg {
+  FloatArray array;
+  Eigen::Map<const Eigen::MatrixXf> map{nullptr, 0, 0};
+  bool one = false;  // a single (dim,) state was given
+};
+/// dim < 0: any width. @throws ValueError "states: expected shape (N, 4), got (10, 3)".
+StatesArg States(py::handle obj, int dim, const std::string& what, bool allow_1d = true);
+
+/// A (n,) vector, copied. @throws ValueError naming `what`, expected and given shapes.
+Eigen::VectorXf Vector(py::handle obj, int n, const std::string& what);
+
+/// A (rows, cols) matrix, copied into a column-major Eigen matrix; rows/cols < 0: any.
+Eigen::MatrixXf Matrix(py::handle obj, int rows, int cols, const std::string& what);
+
+/// A (n,) float32 NumPy array copied from `v`.
+py::array_t<float> ToNumpy(const Eigen::Ref<const Eigen::VectorXf>& v);
+/// The (d x N) column-major matrix `m` as a (N, d) float32 NumPy array (copied).
+py::array_t<float> StatesToNumpy(const Eigen::Ref<const Eigen::MatrixXf>& m);
+
+/// A Python value (dict, list/tuple, bool, int, float, str, None, NumPy scalar) as YAML, for the
+/// options' ApplyYaml field tables (floats keep all their digits: repr()).
+YAML::Node ToYaml(py::handle obj, const std::string& where);
+/// A JSON value as Python (dict, list, int, float, str, bool, None).
+py::object ToPython(const nlohmann::json& json);
+
+/// Feature names: `names` if not None (length `dim`), else x0, x1, ... (`prefix` + index).
+std::vector<std::string> FeatureNames(py::handle names, int dim, const std::string& prefix,
+                                      const std::string& what);
+
+// ---------------------------------------------------------------------------------------------
+// Wrapper types shared between translation units.
+
+/// A barrier model (immutable, shared) and this Python object's own evaluator. Evaluations lock
+/// `mutex` (after releasing the GIL), so two Python threads never share the scratch memory.
+struct Barrier {
+  std::string kind;  // "barrier_mlp", "car_barrier", or "ground_truth"
+  std::shared_ptr<const cbf::BarrierNet> net;
+  std::shared_ptr<const cbf::CarBarrierNet> car;
+  std::function<std::unique_ptr<cbf::Barrier>()> factory;  // a fresh evaluator
+  std::unique_ptr<cbf::Barrier> evaluator;
+  std::mutex mutex;
+
+  int state_dim() const { return evaluator->state_dim(); }
+};
+std::shared_ptr<Barrier> MakeBarrier(std::string kind,
+                                     std::function<std::unique_ptr<cbf::Barrier>()> factory);
+
+/// A dynamics model T(s, a) with whatever keeps it alive (an environment owns its shield model).
+/// `python`: the model calls back into Python (each Step re-acquires the GIL).
+struct Dynamics {
+  std::shared_ptr<const void> owner;
+  const domains::DynamicsModel* model = nullptr;
+  std::string kind;  // "builtin:<domain>", "linear", "python"
+  bool python = false;
+  // Held while the model steps (models keep scratch memory: one caller at a time). Shields lock
+  // it after their own lock; an environment locks it while it steps (its model may be its own).
+  std::mutex mutex;
+};
+
+/// A domain from the registry with its options for a profile ("full" | "quick") and the keyword
+/// arguments applied over them (the domain's config-file keys; unknown keys are a ValueError).
+std::unique_ptr<experiments::Domain> MakeDomain(const std::string& name, const std::string& profile,
+                                                const py::dict& options);
+
+/// The environment an AIRL trainer rolls out in: a secure.Env, or a domain name.
+std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env);
+
+/// Registration, one per translation unit.
+void RegisterCommon(py::module_& m);
+void RegisterBarrier(py::module_& m);
+void RegisterDynamics(py::module_& m);
+void RegisterShield(py::module_& m);
+void RegisterPolicy(py::module_& m);
+void RegisterEnvironment(py::module_& m);
+
+}  // namespace secure::python

@@ -1,0 +1,209 @@
+// secure.domains(), secure.make_env / secure.Env (Gymnasium-style), Dynamics.builtin,
+// Barrier.ground_truth, secure.generate_data.
+#include <algorithm>
+#include <optional>
+
+#include "python/src/common.h"
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+#include "secure/data/data.h"
+#include "secure/experiments/domain.h"
+
+namespace secure::python {
+
+std::unique_ptr<experiments::Domain> MakeDomain(const std::string& name, const std::string& profile,
+                                                const py::dict& options) {
+  SECURE_CHECK(profile == "full" || profile == "quick",
+               "profile = '" << profile << "', must be full or quick");
+  std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
+      name, profile == "quick" ? experiments::Profile::kQuick : experiments::Profile::kFull);
+  if (!options.empty()) {
+    const std::string source = "domain '" + name + "' options";
+    d->ApplyYaml(ToYaml(options, source), source);
+  }
+  d->Validate();
+  return d;
+}
+
+namespace {
+
+// A domain's environment with an episode stream, in the Gymnasium API.
+class Env {
+ public:
+  Env(const std::string& name, const std::string& profile, bool terminate_on_collision,
+      const py::dict& options)
+      : name_(name), terminate_on_collision_(terminate_on_collision) {
+    domain_ = MakeDomain(name, profile, options);
+    env_ = std::shared_ptr<domains::Environment>(domain_->MakeEnvironment());
+    observation_.setZero(env_->observation_dim());
+    dynamics_ = std::make_shared<Dynamics>();
+    dynamics_->owner = env_;
+    dynamics_->model = &env_->ShieldModel();
+    dynamics_->kind = "builtin:" + name;
+  }
+
+  py::tuple Reset(std::optional<std::uint64_t> seed) {
+    if (seed) rng_.Seed(*seed);
+    {
+      std::lock_guard<std::mutex> lock(dynamics_->mutex);
+      env_->Reset(rng_, observation_);
+    }
+    steps_ = 0;
+    started_ = true;
+    return py::make_tuple(ToNumpy(observation_), py::dict());
+  }
+
+  py::tuple Step(py::handle action) {
+    if (!started_) throw std::runtime_error(name_ + ": call reset() before step()");
+    const Eigen::VectorXf a = Vector(action, env_->action_dim(), "action");
+    domains::StepOutcome outcome;
+    {
+      std::lock_guard<std::mutex> lock(dynamics_->mutex);
+      outcome = env_->Step(a, observation_);
+    }
+    ++steps_;
+    const bool terminated = outcome.reached_goal || (outcome.collided && terminate_on_collision_);
+    const bool truncated = !terminated && steps_ >= env_->max_steps();
+    const double reward =
+        (outcome.reached_goal ? 1.0 : 0.0) -
+        (outcome.collided ? static_cast<double>(std::max(1, outcome.collisions)) : 0.0);
+    py::dict info;
+    info["reached_goal"] = outcome.reached_goal;
+    info["collided"] = outcome.collided;
+    info["collisions"] = outcome.collisions;
+    info["step"] = steps_;
+    return py::make_tuple(ToNumpy(observation_), reward, terminated, truncated, info);
+  }
+
+  py::object Backup(py::handle observation) const {
+    const Eigen::VectorXf o = Vector(observation, env_->observation_dim(), "observation");
+    Eigen::VectorXf a(env_->action_dim());
+    if (!env_->BackupAction(o, a)) return py::none();
+    return ToNumpy(a);
+  }
+
+  const std::string& name() const { return name_; }
+  const domains::Environment& env() const { return *env_; }
+  std::shared_ptr<const domains::Environment> shared_env() const { return env_; }
+  const experiments::Domain& domain() const { return *domain_; }
+  std::shared_ptr<Dynamics> dynamics() const { return dynamics_; }
+  Rng& rng() { return rng_; }
+
+ private:
+  std::string name_;
+  bool terminate_on_collision_;
+  std::shared_ptr<experiments::Domain> domain_;
+  std::shared_ptr<domains::Environment> env_;
+  std::shared_ptr<Dynamics> dynamics_;
+  Rng rng_;
+  Eigen::VectorXf observation_;
+  int steps_ = 0;
+  bool started_ = false;
+};
+
+}  // namespace
+
+std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
+  if (py::isinstance<py::str>(env)) {
+    std::shared_ptr<experiments::Domain> d = MakeDomain(env.cast<std::string>(), "full", py::dict());
+    return std::shared_ptr<const domains::Environment>(d->MakeEnvironment());
+  }
+  return env.cast<Env&>().shared_env();
+}
+
+void RegisterEnvironment(py::module_& m) {
+  m.def("domains", [] { return experiments::DomainRegistry::Global().Names(); },
+        "The registered domains (names for make_env, Dynamics.builtin, ...).");
+
+  py::class_<Env, std::shared_ptr<Env>>(m, "Env", R"doc(
+A domain's task environment in the Gymnasium API (without needing Gymnasium): reset(seed) ->
+(obs, info), step(action) -> (obs, reward, terminated, truncated, info). Make one with
+secure.make_env(name, profile='full', terminate_on_collision=False, **domain_options).
+Rewards: +1 when the goal is reached, -1 per collision event, else 0 (the library's domains
+define outcomes, not rewards); terminated: the goal was reached (or a collision, with
+terminate_on_collision); truncated: max_steps reached. info: reached_goal, collided, collisions,
+step.)doc")
+      .def("reset", &Env::Reset, py::arg("seed") = py::none(), R"doc(
+Starts an episode. With a seed, the episode stream (env.rng) is re-seeded first; without one the
+stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
+      .def("step", &Env::Step, py::arg("action"),
+           "Applies the action (clipped to the actuator bounds by the domain).")
+      .def("backup_action", &Env::Backup, py::arg("observation"),
+           "The domain's safe fallback action at `observation` (e.g. braking), or None.")
+      .def_property_readonly("name", &Env::name)
+      .def_property_readonly("observation_dim", [](const Env& e) { return e.env().observation_dim(); })
+      .def_property_readonly("action_dim", [](const Env& e) { return e.env().action_dim(); })
+      .def_property_readonly("observation_features",
+                             [](const Env& e) { return e.env().ObservationFeatures(); })
+      .def_property_readonly("action_features", [](const Env& e) { return e.env().ActionFeatures(); })
+      .def_property_readonly("max_steps", [](const Env& e) { return e.env().max_steps(); })
+      .def_property_readonly("dynamics", &Env::dynamics,
+                             "The shield's model of this environment (a secure.Dynamics).")
+      .def_property_readonly("shield_model_is_exact",
+                             [](const Env& e) { return e.env().ShieldModelIsExact(); })
+      .def_property_readonly("rng", &Env::rng, py::return_value_policy::reference_internal,
+                             "The episode stream (a secure.Rng): reset() draws the start from it.")
+      .def_property_readonly("options", [](const Env& e) { return ToPython(e.domain().OptionsJson()); })
+      .def("describe", [](const Env& e) { return e.env().Describe(); })
+      .def("__repr__", [](const Env& e) { return "<secure.Env " + e.env().Describe() + ">"; });
+
+  m.def(
+      "make_env",
+      [](const std::string& name, const std::string& profile, bool terminate_on_collision,
+         py::kwargs options) {
+        return std::make_shared<Env>(name, profile, terminate_on_collision, options);
+      },
+      py::arg("name"), py::arg("profile") = "full", py::arg("terminate_on_collision") = false,
+      R"doc(
+The environment of domain `name` (secure.domains()). Keyword arguments are the domain's options
+(its config-file keys, e.g. task={'max_steps': 200} for double-integrator); unknown keys are a
+ValueError naming them.)doc");
+
+  // Dynamics.builtin and Barrier.ground_truth live on the classes registered elsewhere.
+  py::object dynamics = m.attr("Dynamics");
+  dynamics.attr("builtin") = py::reinterpret_steal<py::object>(PyStaticMethod_New(
+      py::cpp_function(
+          [](const std::string& name, const std::string& profile, py::kwargs options) {
+            Env env(name, profile, false, options);
+            return env.dynamics();  // keeps the environment that owns the model alive
+          },
+          py::arg("domain"), py::arg("profile") = "full",
+          "The shield model of a domain (the one its environment hands out), with its options.")
+          .ptr()));
+
+  py::object barrier = m.attr("Barrier");
+  barrier.attr("ground_truth") = py::reinterpret_steal<py::object>(PyStaticMethod_New(
+      py::cpp_function(
+          [](const std::string& name, const std::string& profile,
+             py::kwargs options) -> py::object {
+            std::shared_ptr<experiments::Domain> d = MakeDomain(name, profile, options);
+            if (!d->MakeGroundTruth()) return py::none();
+            return py::cast(MakeBarrier("ground_truth", [d] { return d->MakeGroundTruth(); }));
+          },
+          py::arg("domain"), py::arg("profile") = "full",
+          "The domain's analytic ground-truth barrier, or None if it has none.")
+          .ptr()));
+
+  m.def(
+      "generate_data",
+      [](const std::string& name, std::uint64_t seed, const std::string& profile,
+         py::kwargs options) {
+        std::shared_ptr<experiments::Domain> d = MakeDomain(name, profile, options);
+        experiments::DomainData data;
+        {
+          py::gil_scoped_release release;
+          data = d->GenerateData(seed);
+        }
+        py::dict out;
+        out["features"] = data.safe.features;
+        out["safe"] = StatesToNumpy(data.safe.states);
+        out["near_dangerous"] = StatesToNumpy(data.near_dangerous.states);
+        out["demonstrations"] = py::cast(std::move(data.demonstrations));
+        return out;
+      },
+      py::arg("domain"), py::arg("seed") = 0, py::arg("profile") = "quick", R"doc(
+A domain's experiment data from a data seed: {'features', 'safe' (N, d), 'near_dangerous'
+(M, d), 'demonstrations' (secure.Demonstrations)}; profile 'quick' (default) is small.)doc");
+}
+
+}  // namespace secure::python

@@ -1,0 +1,204 @@
+// secure.Demonstrations, secure.Policy (load, mean, sample), secure.train_bc, secure.train_airl.
+#include <optional>
+
+#include "python/src/common.h"
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+#include "secure/data/data.h"
+#include "secure/nn/torch_threads.h"
+#include "secure/policy/airl_trainer.h"
+#include "secure/policy/bc_trainer.h"
+#include "secure/policy/gaussian_policy.h"
+
+namespace secure::python {
+namespace {
+
+// Demonstrations from arrays: states (T, d), actions (T, n), episode (T,) labels (adjacent equal
+// labels form one episode, as the CSV's `episode` column).
+data::TrajectorySet DemosFromArrays(py::handle states, py::handle actions, py::handle episode,
+                                    py::handle state_features, py::handle action_features) {
+  const StatesArg s = States(states, -1, "states", false);
+  const StatesArg a = States(actions, -1, "actions", false);
+  const long t = static_cast<long>(s.map.cols());
+  if (a.map.cols() != t)
+    throw py::value_error("actions: " + std::to_string(a.map.cols()) + " rows, states have " +
+                          std::to_string(t));
+  data::TrajectorySet d;
+  d.source = "demonstrations (NumPy arrays)";
+  d.state_features = FeatureNames(state_features, static_cast<int>(s.map.rows()), "s", "state_features");
+  d.action_features =
+      FeatureNames(action_features, static_cast<int>(a.map.rows()), "a", "action_features");
+  d.states = s.map;
+  d.actions = a.map;
+  d.episode_begin.push_back(0);
+  if (!episode.is_none()) {
+    py::array_t<long long, py::array::c_style | py::array::forcecast> e =
+        py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(episode);
+    if (!e || e.ndim() != 1 || e.shape(0) != t)
+      throw py::value_error("episode: expected " + std::to_string(t) +
+                            " integer labels (one per row), got another shape");
+    for (long i = 1; i < t; ++i)
+      if (e.data()[i] != e.data()[i - 1]) d.episode_begin.push_back(i);
+  }
+  d.episode_begin.push_back(t);
+  if (t == 0) throw py::value_error("states: no rows (demonstrations need at least one step)");
+  return d;
+}
+
+class Policy {
+ public:
+  explicit Policy(policy::GaussianPolicy p)
+      : model_(std::make_shared<const policy::GaussianPolicy>(std::move(p))),
+        evaluator_(*model_) {}
+
+  py::object Mean(py::handle observation) {
+    const StatesArg o = States(observation, model_->observation_dim(), "observation");
+    Eigen::MatrixXf mu(model_->action_dim(), o.map.cols());
+    {
+      py::gil_scoped_release release;
+      std::lock_guard<std::mutex> lock(mutex_);
+      evaluator_.Means(o.map, mu);
+    }
+    if (o.one) return ToNumpy(mu.col(0));
+    return StatesToNumpy(mu);
+  }
+
+  py::array_t<float> Sample(py::handle observation, py::handle rng) {
+    const Eigen::VectorXf o = Vector(observation, model_->observation_dim(), "observation");
+    Eigen::VectorXf a(model_->action_dim());
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (py::isinstance<Rng>(rng)) {
+      evaluator_.Sample(o, rng.cast<Rng&>(), a);
+    } else {
+      Rng r(rng.cast<std::uint64_t>());
+      evaluator_.Sample(o, r, a);
+    }
+    return ToNumpy(a);
+  }
+
+  double LogProb(py::handle observation, py::handle action) {
+    const Eigen::VectorXf o = Vector(observation, model_->observation_dim(), "observation");
+    const Eigen::VectorXf a = Vector(action, model_->action_dim(), "action");
+    std::lock_guard<std::mutex> lock(mutex_);
+    return evaluator_.LogProb(o, a);
+  }
+
+  const policy::GaussianPolicy& model() const { return *model_; }
+
+ private:
+  std::shared_ptr<const policy::GaussianPolicy> model_;
+  policy::PolicyEvaluator evaluator_;
+  std::mutex mutex_;
+};
+
+template <typename Options>
+Options OptionsFrom(const py::kwargs& kwargs, const std::string& source) {
+  Options o;
+  o.ApplyYaml(ToYaml(kwargs, source), source);
+  return o;
+}
+
+}  // namespace
+
+void RegisterPolicy(py::module_& m) {
+  py::class_<data::TrajectorySet>(m, "Demonstrations", R"doc(
+Task demonstrations: state/action pairs grouped into episodes.
+  Demonstrations(states (T, d), actions (T, n), episode=None (T,) labels,
+                 state_features=None, action_features=None)
+  Demonstrations.load(path, state_features, action_features, episode_column='episode'))doc")
+      .def(py::init(&DemosFromArrays), py::arg("states"), py::arg("actions"),
+           py::arg("episode") = py::none(), py::arg("state_features") = py::none(),
+           py::arg("action_features") = py::none())
+      .def_static("load", &data::ReadTrajectories, py::arg("path"), py::arg("state_features"),
+                  py::arg("action_features"), py::arg("episode_column") = "episode")
+      .def("save",
+           [](const data::TrajectorySet& d, const std::string& path, const std::string& column) {
+             data::WriteTrajectories(path, d, column);
+           },
+           py::arg("path"), py::arg("episode_column") = "episode")
+      .def_property_readonly("states", [](const data::TrajectorySet& d) { return StatesToNumpy(d.states); })
+      .def_property_readonly("actions", [](const data::TrajectorySet& d) { return StatesToNumpy(d.actions); })
+      .def_readonly("state_features", &data::TrajectorySet::state_features)
+      .def_readonly("action_features", &data::TrajectorySet::action_features)
+      .def_readonly("episode_begin", &data::TrajectorySet::episode_begin)
+      .def_property_readonly("num_episodes", &data::TrajectorySet::num_episodes)
+      .def_property_readonly("num_steps", &data::TrajectorySet::num_steps)
+      .def("__repr__", [](const data::TrajectorySet& d) {
+        return "<secure.Demonstrations " + std::to_string(d.num_episodes()) + " episodes, " +
+               std::to_string(d.num_steps()) + " steps>";
+      });
+
+  py::class_<Policy, std::shared_ptr<Policy>>(m, "Policy", R"doc(
+A Gaussian policy N(mu(o), diag(sigma^2)) (a `secure policy train` model): Policy.load(path),
+mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
+      .def_static("load",
+                  [](const std::string& path) {
+                    return std::make_shared<Policy>(policy::GaussianPolicy::Load(path));
+                  },
+                  py::arg("path"))
+      .def("mean", &Policy::Mean, py::arg("observation"),
+           "mu(o) of one (observation_dim,) observation -> (action_dim,), or of a batch (N, "
+           "observation_dim) -> (N, action_dim). Releases the GIL.")
+      .def("sample", &Policy::Sample, py::arg("observation"), py::arg("rng"),
+           "a ~ N(mu(o), sigma): `rng` is a secure.Rng (advanced by action_dim normals) or an "
+           "integer seed.")
+      .def("log_prob", &Policy::LogProb, py::arg("observation"), py::arg("action"))
+      .def("save", [](const Policy& p, const std::string& path) { p.model().Save(path); },
+           py::arg("path"))
+      .def_property_readonly("sigma",
+                             [](const Policy& p) {
+                               return ToNumpy(p.model().log_std.array().exp().matrix());
+                             })
+      .def_property_readonly("log_std", [](const Policy& p) { return ToNumpy(p.model().log_std); })
+      .def_property_readonly("observation_dim", [](const Policy& p) { return p.model().observation_dim(); })
+      .def_property_readonly("action_dim", [](const Policy& p) { return p.model().action_dim(); })
+      .def_property_readonly("observation_features",
+                             [](const Policy& p) { return p.model().observation_features; })
+      .def_property_readonly("action_features",
+                             [](const Policy& p) { return p.model().action_features; })
+      .def_property_readonly("provenance", [](const Policy& p) { return ToPython(p.model().provenance); })
+      .def("__repr__", [](const Policy& p) {
+        return "<secure.Policy " + std::to_string(p.model().observation_dim()) + " -> " +
+               std::to_string(p.model().action_dim()) + ">";
+      });
+
+  m.def(
+      "train_bc",
+      [](const data::TrajectorySet& demos, py::kwargs options) {
+        const auto o = OptionsFrom<policy::BcOptions>(options, "train_bc options");
+        policy::BcSummary summary;
+        policy::GaussianPolicy p;
+        {
+          py::gil_scoped_release release;
+          nn::SetTorchThreads(1);
+          p = policy::TrainBc(o, demos, &summary);
+        }
+        return py::make_tuple(std::make_shared<Policy>(std::move(p)), ToPython(summary.ToJson()));
+      },
+      py::arg("demonstrations"), R"doc(
+Behaviour cloning on secure.Demonstrations; keyword arguments are BcOptions (the `bc` section of
+a config: hidden, epochs, seed, ...). Returns (policy, summary dict). Releases the GIL.)doc");
+
+  m.def(
+      "train_airl",
+      [](const data::TrajectorySet& demos, py::handle env, std::shared_ptr<Policy> warm_start,
+         py::kwargs options) {
+        auto o = OptionsFrom<policy::AirlOptions>(options, "train_airl options");
+        const std::shared_ptr<const domains::Environment> e = EnvironmentOf(env);
+        policy::AirlSummary summary;
+        policy::GaussianPolicy p;
+        {
+          py::gil_scoped_release release;
+          nn::SetTorchThreads(1);
+          p = policy::TrainAirl(o, demos, *e, warm_start ? &warm_start->model() : nullptr,
+                                &summary);
+        }
+        return py::make_tuple(std::make_shared<Policy>(std::move(p)), ToPython(summary.ToJson()));
+      },
+      py::arg("demonstrations"), py::arg("env"), py::arg("warm_start") = nullptr, R"doc(
+AIRL (discriminator + PPO) on secure.Demonstrations, rolling out in `env` (a secure.Env or a
+domain name); keyword arguments are AirlOptions (the `airl` section of a config: iterations,
+steps_per_iteration, seed, ...). Returns (policy, summary dict). Releases the GIL.)doc");
+}
+
+}  // namespace secure::python

@@ -1,0 +1,288 @@
+// secure.Dynamics (built-in by domain, linear, Python callable), secure.Shield, secure.Decision.
+#include <cstring>
+
+#include "python/src/common.h"
+#include "secure/common/enum_strings.h"
+#include "secure/common/error.h"
+#include "secure/common/yaml_fields.h"
+#include "secure/domains/linear_dynamics.h"
+#include "secure/shield/shield.h"
+
+namespace secure::python {
+namespace {
+
+// T(s, a) in Python: fn(state (d,), actions (M, n)) -> next_states (M, d). Each Step acquires
+// the GIL, copies the state and actions into new float32 arrays, calls fn and copies its result
+// (any real dtype, converted) back; an exception raised by fn propagates out of the shield.
+class CallableDynamics final : public domains::DynamicsModel {
+ public:
+  CallableDynamics(py::object fn, int state_dim, int action_dim, std::string name)
+      : fn_(std::move(fn)), state_dim_(state_dim), action_dim_(action_dim), name_(std::move(name)) {
+    SECURE_CHECK(state_dim >= 1 && action_dim >= 1,
+                 "Dynamics.from_callable: state_dim = " << state_dim << ", action_dim = "
+                                                        << action_dim << ", must be >= 1");
+  }
+  ~CallableDynamics() override {
+    py::gil_scoped_acquire gil;
+    fn_ = py::object();
+  }
+  int state_dim() const override { return state_dim_; }
+  int action_dim() const override { return action_dim_; }
+  std::string Describe() const override { return name_; }
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override {
+    py::gil_scoped_acquire gil;
+    const py::ssize_t m = actions.cols();
+    py::array_t<float> s = ToNumpy(state);
+    py::array_t<float> a({m, static_cast<py::ssize_t>(action_dim_)});
+    for (py::ssize_t j = 0; j < m; ++j)
+      std::memcpy(a.mutable_data(j, 0), actions.col(j).data(), sizeof(float) * action_dim_);
+    const py::object result = fn_(s, a);
+    const FloatArray r = AsFloat32(result, name_ + ": the returned next states");
+    if (r.ndim() != 2 || r.shape(0) != m || r.shape(1) != state_dim_) {
+      std::ostringstream shape;
+      for (py::ssize_t k = 0; k < r.ndim(); ++k) shape << (k ? ", " : "") << r.shape(k);
+      throw py::value_error(name_ + ": returned next states of shape (" + shape.str() +
+                            "), expected (" + std::to_string(m) + ", " +
+                            std::to_string(state_dim_) + ") for " + std::to_string(m) +
+                            " actions");
+    }
+    for (py::ssize_t j = 0; j < m; ++j)
+      std::memcpy(next_states.col(j).data(), r.data(j, 0), sizeof(float) * state_dim_);
+  }
+
+ private:
+  py::object fn_;
+  int state_dim_, action_dim_;
+  std::string name_;
+};
+
+std::shared_ptr<Dynamics> Linear(py::handle a, py::handle b) {
+  const Eigen::MatrixXf am = Matrix(a, -1, -1, "A");
+  const Eigen::MatrixXf bm = Matrix(b, -1, -1, "B");
+  auto model = std::make_shared<const domains::LinearDynamics>(am, bm);
+  auto d = std::make_shared<Dynamics>();
+  d->model = model.get();
+  d->owner = model;
+  d->kind = "linear";
+  return d;
+}
+
+std::shared_ptr<Dynamics> FromCallable(py::object fn, int state_dim, int action_dim,
+                                       const std::string& name) {
+  if (!PyCallable_Check(fn.ptr())) throw py::type_error("Dynamics.from_callable: fn is not callable");
+  auto model = std::make_shared<const CallableDynamics>(std::move(fn), state_dim, action_dim, name);
+  auto d = std::make_shared<Dynamics>();
+  d->model = model.get();
+  d->owner = model;
+  d->kind = "python";
+  d->python = true;
+  return d;
+}
+
+py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
+  const Eigen::VectorXf s = Vector(state, d.model->state_dim(), "state");
+  const StatesArg a = States(actions, d.model->action_dim(), "actions", false);
+  Eigen::MatrixXf next(d.model->state_dim(), a.map.cols());
+  {
+    py::gil_scoped_release release;
+    std::lock_guard<std::mutex> lock(d.mutex);
+    d.model->Step(s, a.map, next);
+  }
+  return StatesToNumpy(next);
+}
+
+// ShieldOptions from keyword arguments: the fields of shield::ShieldOptions by name, enums by
+// their names (class_k: linear | cubic, aggregation: mean | random-safe, resampling: adaptive |
+// none); an unknown key is an error naming it and listing the valid keys.
+shield::ShieldOptions ShieldOptionsFrom(const py::kwargs& kwargs) {
+  shield::ShieldOptions o;
+  std::string class_k = ToString(shield::kClassKNames, o.class_k);
+  std::string aggregation = ToString(shield::kAggregationNames, o.aggregation);
+  std::string resampling = ToString(shield::kResamplingNames, o.resampling);
+  const std::string source = "Shield options";
+  YamlFields()
+      .Field("num_samples", &o.num_samples)
+      .Field("safe_ratio", &o.safe_ratio)
+      .Field("dt", &o.dt)
+      .Field("class_k", &class_k)
+      .Field("class_k_gain", &o.class_k_gain)
+      .Field("aggregation", &aggregation)
+      .Field("resampling", &resampling)
+      .Field("num_probes", &o.num_probes)
+      .Field("probe_extent", &o.probe_extent)
+      .Field("sigma_step", &o.sigma_step)
+      .Field("max_iterations", &o.max_iterations)
+      .Field("time_budget_us", &o.time_budget_us)
+      .Field("seed", &o.seed)
+      .Apply(ToYaml(kwargs, source), source);
+  o.class_k = FromString(shield::kClassKNames, class_k, source + ": class_k");
+  o.aggregation = FromString(shield::kAggregationNames, aggregation, source + ": aggregation");
+  o.resampling = FromString(shield::kResamplingNames, resampling, source + ": resampling");
+  o.Validate();
+  return o;
+}
+
+class Shield {
+ public:
+  Shield(std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
+         const shield::ShieldOptions& options)
+      : barrier_(std::move(barrier)), dynamics_(std::move(dynamics)) {
+    evaluator_ = barrier_->factory();  // the shield's own: it owns scratch memory
+    shield_ = std::make_unique<shield::Shield>(options, *evaluator_, *dynamics_->model);
+  }
+
+  shield::Decision Decide(py::handle state, py::handle mu, py::handle sigma) {
+    const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
+    const Eigen::VectorXf m = Vector(mu, shield_->action_dim(), "mu");
+    const Eigen::VectorXf sg = Vector(sigma, shield_->action_dim(), "sigma");
+    // Without the GIL, then the lock (in this order: a Python dynamics model re-acquires the GIL
+    // inside Decide, so no thread may wait for the lock while holding it).
+    py::gil_scoped_release release;
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<std::mutex> model_lock(dynamics_->mutex);
+    return shield_->Decide(s, m, sg);
+  }
+
+  double EvaluateH(py::handle state) {
+    const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
+    py::gil_scoped_release release;
+    std::lock_guard<std::mutex> lock(mutex_);
+    return shield_->EvaluateH(s);
+  }
+
+  py::array_t<double> EvaluateG(py::handle state, py::handle actions) {
+    const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
+    const StatesArg a = States(actions, shield_->action_dim(), "actions", false);
+    const long limit = std::max(shield_->options().num_samples, shield_->options().num_probes);
+    if (a.map.cols() > limit)
+      throw py::value_error("actions: " + std::to_string(a.map.cols()) +
+                            " actions, at most max(num_samples, num_probes) = " +
+                            std::to_string(limit));
+    py::array_t<double> g(a.map.cols());
+    Eigen::Map<Eigen::VectorXd> out(g.mutable_data(), a.map.cols());
+    py::gil_scoped_release release;
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<std::mutex> model_lock(dynamics_->mutex);
+    shield_->EvaluateG(s, shield_->EvaluateH(s), a.map, out);
+    return g;
+  }
+
+  void SetBackup(py::handle action) {
+    if (action.is_none()) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      shield_->ClearBackupAction();
+      return;
+    }
+    const Eigen::VectorXf a = Vector(action, shield_->action_dim(), "backup_action");
+    std::lock_guard<std::mutex> lock(mutex_);
+    shield_->SetBackupAction(a);
+  }
+  void Seed(std::uint64_t seed) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    shield_->Seed(seed);
+  }
+  const shield::Shield& get() const { return *shield_; }
+  const Barrier& barrier() const { return *barrier_; }
+  const Dynamics& dynamics() const { return *dynamics_; }
+
+ private:
+  std::shared_ptr<Barrier> barrier_;
+  std::shared_ptr<Dynamics> dynamics_;
+  std::unique_ptr<cbf::Barrier> evaluator_;
+  std::unique_ptr<shield::Shield> shield_;
+  std::mutex mutex_;
+};
+
+}  // namespace
+
+void RegisterDynamics(py::module_& m) {
+  py::class_<Dynamics, std::shared_ptr<Dynamics>>(m, "Dynamics", R"doc(
+A dynamics model T(s, a) the shield looks one step ahead with. Made by
+  Dynamics.builtin(domain, **domain_options)  a domain's shield model (secure.domains())
+  Dynamics.linear(A, B)                        next = A s + B a
+  Dynamics.from_callable(fn, state_dim, action_dim)
+                                               fn(state (d,), actions (M, n)) -> (M, d)
+  env.dynamics                                 the shield model of an environment)doc")
+      .def_static("linear", &Linear, py::arg("A"), py::arg("B"),
+                  "next = A s + B a; A is (d, d), B is (d, n) (copied).")
+      .def_static("from_callable", &FromCallable, py::arg("fn"), py::arg("state_dim"),
+                  py::arg("action_dim"), py::arg("name") = "python dynamics", R"doc(
+A model written in Python: fn(state, actions) gets a (state_dim,) float32 array and an
+(M, action_dim) float32 array (M actions, one per row) and returns the (M, state_dim) next states.
+Called with the GIL held, once per batch the shield evaluates (a few per decision); see
+python/README.md for its cost.)doc")
+      .def_property_readonly("state_dim", [](const Dynamics& d) { return d.model->state_dim(); })
+      .def_property_readonly("action_dim", [](const Dynamics& d) { return d.model->action_dim(); })
+      .def_property_readonly("kind", [](const Dynamics& d) { return d.kind; })
+      .def("describe", [](const Dynamics& d) { return d.model->Describe(); })
+      .def("__repr__",
+           [](const Dynamics& d) { return "<secure.Dynamics " + d.model->Describe() + ">"; })
+      .def("step", &Step, py::arg("state"), py::arg("actions"),
+           "next states (M, state_dim) of one state under M actions (M, action_dim).");
+}
+
+void RegisterShield(py::module_& m) {
+  py::class_<shield::Decision>(m, "Decision", "One shield decision with its diagnostics.")
+      .def_property_readonly("status",
+                             [](const shield::Decision& d) {
+                               return ToString(shield::kStatusNames, d.status);
+                             },
+                             "safe | safe_after_resampling | no_safe_action | invalid_input")
+      .def_property_readonly("action",
+                             [](const shield::Decision& d) { return ToNumpy(d.action); })
+      .def_readonly("g", &shield::Decision::g)
+      .def_readonly("h", &shield::Decision::h)
+      .def_readonly("iterations", &shield::Decision::iterations)
+      .def_readonly("safe_ratio", &shield::Decision::safe_ratio)
+      .def_readonly("intervened", &shield::Decision::intervened)
+      .def_readonly("distance_to_mean", &shield::Decision::distance_to_mean)
+      .def_property_readonly("fallback",
+                             [](const shield::Decision& d) {
+                               return ToString(shield::kFallbackNames, d.fallback);
+                             },
+                             "none | best_sample | backup_action | random_sample")
+      .def_readonly("seconds", &shield::Decision::seconds)
+      .def_property_readonly("safe", &shield::Decision::safe)
+      .def("to_dict", [](const shield::Decision& d) { return ToPython(d.ToJson()); })
+      .def("__repr__", [](const shield::Decision& d) {
+        return "<secure.Decision " + d.ToJson().dump() + ">";
+      });
+
+  py::class_<Shield, std::shared_ptr<Shield>>(m, "Shield", R"doc(
+The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the options being the
+fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
+class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
+sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0). The shield keeps the barrier (with
+its own evaluator) and the dynamics model alive.)doc")
+      .def(py::init([](std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
+                       py::kwargs options) {
+             return std::make_shared<Shield>(std::move(barrier), std::move(dynamics),
+                                             ShieldOptionsFrom(options));
+           }),
+           py::arg("barrier"), py::arg("dynamics"))
+      .def("decide", &Shield::Decide, py::arg("state"), py::arg("mu"), py::arg("sigma"), R"doc(
+One shielded decision for the policy's Gaussian N(mu, diag(sigma^2)) at `state`: a Decision
+(action, status, g, h, iterations, ...). Bad numbers (NaN) give status 'invalid_input'; wrong
+shapes raise ValueError. Releases the GIL (a Python dynamics model re-acquires it).)doc")
+      .def("evaluate_h", &Shield::EvaluateH, py::arg("state"), "h(state) through the shield.")
+      .def("evaluate_g", &Shield::EvaluateG, py::arg("state"), py::arg("actions"),
+           "g(a) of each row of `actions` (K, action_dim), K <= max(num_samples, num_probes).")
+      .def("set_backup_action", &Shield::SetBackup, py::arg("action"),
+           "The fallback action competing on g when no safe sample exists (None: clear).")
+      .def("seed", &Shield::Seed, py::arg("seed"), "Re-seeds the shield's random stream.")
+      .def_property_readonly("options",
+                             [](const Shield& s) { return ToPython(s.get().options().ToJson()); })
+      .def_property_readonly("state_dim", [](const Shield& s) { return s.get().state_dim(); })
+      .def_property_readonly("action_dim", [](const Shield& s) { return s.get().action_dim(); })
+      .def_property_readonly("dynamics", [](const Shield& s) { return s.dynamics().model->Describe(); })
+      .def("__repr__", [](const Shield& s) {
+        return "<secure.Shield barrier=" + s.barrier().evaluator->Describe() +
+               " dynamics=" + s.dynamics().model->Describe() + ">";
+      });
+}
+
+}  // namespace secure::python

@@ -1,0 +1,178 @@
+import numpy as np
+import pytest
+
+import secure
+from conftest import run_cli
+
+SIGMA = np.full(2, 0.3, dtype=np.float32)
+
+
+def pd_mean(s, goal=8.5, kp=0.25, kd=1.0, bound=3.0):
+    """The nominal policy of `secure shield run` (eval::PdEpisodePolicy), in double then float32."""
+    s = s.astype(np.float64)
+    mu = [kp * (goal - s[0]) - kd * s[2], kp * (goal - s[1]) - kd * s[3]]
+    return np.clip(np.array(mu), -bound, bound).astype(np.float32)
+
+
+def double_integrator(dt=0.1, bound=3.0):
+    """The double integrator's shield model (ClippedDoubleIntegrator) in NumPy float32."""
+    dt = np.float32(dt)
+    half_dt2 = np.float32(0.5) * dt * dt
+
+    def step(s, a):
+        a = np.clip(a, np.float32(-bound), np.float32(bound))
+        nxt = np.empty((a.shape[0], 4), dtype=np.float32)
+        nxt[:, 0] = s[0] + s[2] * dt + a[:, 0] * half_dt2
+        nxt[:, 1] = s[1] + s[3] * dt + a[:, 1] * half_dt2
+        nxt[:, 2] = s[2] + a[:, 0] * dt
+        nxt[:, 3] = s[3] + a[:, 1] * dt
+        return nxt
+    return step
+
+
+def shield_run_episode(env, shield, seed):
+    """One episode of `secure shield run` (episode 0 of --seed `seed`), step by step in Python."""
+    episode_seed = (seed ^ 0xD1B54A32D192ED03) & 0xFFFFFFFFFFFFFFFF
+    obs, _ = env.reset(seed=episode_seed)
+    shield.seed(env.rng.next_u64())
+    counts = dict(steps=0, decisions=0, interventions=0, resampled_decisions=0,
+                  no_safe_action_decisions=0, backup_action_decisions=0,
+                  success_episodes=0, dangerous_episodes=0)
+    for _ in range(env.max_steps):
+        shield.set_backup_action(env.backup_action(obs))
+        d = shield.decide(obs, pd_mean(obs), SIGMA)
+        counts["decisions"] += 1
+        counts["interventions"] += d.intervened
+        counts["resampled_decisions"] += d.status == "safe_after_resampling"
+        counts["no_safe_action_decisions"] += d.status == "no_safe_action"
+        counts["backup_action_decisions"] += d.fallback == "backup_action"
+        obs, reward, terminated, truncated, info = env.step(d.action)
+        counts["steps"] += 1
+        if info["collided"]:
+            counts["dangerous_episodes"] += 1
+            break
+        if info["reached_goal"]:
+            counts["success_episodes"] += 1
+            break
+    return counts
+
+
+@pytest.mark.parametrize("seed", [0, 11])
+def test_shielded_episode_equals_cli_shield_run(cli, tiny_barrier, seed):
+    path, barrier, _ = tiny_barrier
+    env = secure.make_env("double-integrator")
+    shield = secure.Shield(barrier, env.dynamics)
+    ours = shield_run_episode(env, shield, seed)
+    theirs = run_cli(cli, "shield", "run", "--domain", "double-integrator", "--barrier", path,
+                     "--episodes", "1", "--seed", str(seed))
+    for key, value in ours.items():
+        assert theirs[key] == value, key
+
+
+def test_ground_truth_episode_equals_cli(cli):
+    env = secure.make_env("double-integrator")
+    barrier = secure.Barrier.ground_truth("double-integrator")
+    assert barrier.kind == "ground_truth"
+    ours = shield_run_episode(env, secure.Shield(barrier, env.dynamics), 5)
+    theirs = run_cli(cli, "shield", "run", "--domain", "double-integrator", "--barrier",
+                     "ground-truth", "--episodes", "1", "--seed", "5")
+    for key, value in ours.items():
+        assert theirs[key] == value, key
+
+
+def decisions(shield, states, seed=4):
+    shield.seed(seed)
+    return [shield.decide(s, pd_mean(s), SIGMA) for s in states]
+
+
+def test_python_dynamics_give_the_builtin_decisions(tiny_barrier, di_data):
+    _, barrier, _ = tiny_barrier
+    builtin = secure.Dynamics.builtin("double-integrator")
+    states = np.concatenate([di_data["safe"][:40], di_data["near_dangerous"][:40]])
+    reference = decisions(secure.Shield(barrier, builtin), states)
+    assert {d.status for d in reference} >= {"safe"}
+    # The built-in model called through Python: the same numbers, so identical decisions.
+    through_python = secure.Dynamics.from_callable(builtin.step, 4, 2)
+    for a, b in zip(reference, decisions(secure.Shield(barrier, through_python), states)):
+        assert a.to_dict() | {"seconds": 0} == b.to_dict() | {"seconds": 0}
+    # A NumPy reimplementation: the same decisions (to float rounding: C++ may fuse a * b + c).
+    numpy_model = secure.Dynamics.from_callable(double_integrator(), 4, 2, name="numpy DI")
+    assert numpy_model.describe() == "numpy DI"
+    for a, b in zip(reference, decisions(secure.Shield(barrier, numpy_model), states)):
+        assert (a.status, a.iterations, a.intervened, a.fallback) == \
+               (b.status, b.iterations, b.intervened, b.fallback)
+        np.testing.assert_allclose(a.action, b.action, rtol=1e-5, atol=1e-5)
+        assert a.g == pytest.approx(b.g, rel=1e-4, abs=1e-4)
+
+
+def test_linear_dynamics(tiny_barrier):
+    _, barrier, _ = tiny_barrier
+    dt = 0.1
+    A = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]])
+    B = np.array([[0.5 * dt * dt, 0], [0, 0.5 * dt * dt], [dt, 0], [0, dt]])
+    linear = secure.Dynamics.linear(A, B)
+    assert (linear.state_dim, linear.action_dim, linear.kind) == (4, 2, "linear")
+    s = np.array([1, 2, 0.5, -0.5], dtype=np.float32)
+    actions = np.array([[1, 0], [0, -2], [0.5, 0.5]], dtype=np.float32)
+    expected = (A @ s + actions @ B.T).astype(np.float32)
+    np.testing.assert_allclose(linear.step(s, actions), expected, rtol=1e-6)
+    # Within the action bound the linear model is the double integrator: same decisions.
+    reference = secure.Shield(barrier, secure.Dynamics.builtin("double-integrator"), seed=2)
+    ours = secure.Shield(barrier, linear, seed=2)
+    d1, d2 = reference.decide(s, np.zeros(2), SIGMA), ours.decide(s, np.zeros(2), SIGMA)
+    assert d1.status == d2.status
+    np.testing.assert_allclose(d1.action, d2.action, atol=1e-5)
+    with pytest.raises(ValueError, match="LinearDynamics: A is 4 x 3"):
+        secure.Dynamics.linear(np.zeros((4, 3)), B)
+
+
+def test_decision_record(tiny_barrier):
+    _, barrier, _ = tiny_barrier
+    shield = secure.Shield(barrier, secure.Dynamics.builtin("double-integrator"), num_samples=32)
+    assert shield.options["num_samples"] == 32
+    d = shield.decide(np.array([1, 1, 0, 0]), np.zeros(2), SIGMA)
+    record = d.to_dict()
+    assert set(record) == {"status", "action", "g", "h", "iterations", "safe_ratio",
+                           "intervened", "distance_to_mean", "fallback", "seconds"}
+    assert record["status"] == d.status and d.action.dtype == np.float32
+    assert d.safe == (d.status in ("safe", "safe_after_resampling"))
+    assert shield.evaluate_h(np.array([1, 1, 0, 0])) == pytest.approx(d.h)
+    g = shield.evaluate_g(np.array([1, 1, 0, 0]), np.zeros((3, 2)))
+    assert g.shape == (3,)
+
+
+def test_shield_bad_input(tiny_barrier):
+    _, barrier, _ = tiny_barrier
+    model = secure.Dynamics.builtin("double-integrator")
+    with pytest.raises(ValueError, match="Shield options: unknown key 'samples'"):
+        secure.Shield(barrier, model, samples=3)
+    with pytest.raises(ValueError, match="ShieldOptions::num_samples = 0"):
+        secure.Shield(barrier, model, num_samples=0)
+    with pytest.raises(ValueError, match="class_k"):
+        secure.Shield(barrier, model, class_k="quadratic")
+    shield = secure.Shield(barrier, model)
+    with pytest.raises(ValueError, match=r"mu: expected shape \(2,\), got \(3,\)"):
+        shield.decide(np.zeros(4), np.zeros(3), SIGMA)
+    d = shield.decide(np.array([np.nan, 0, 0, 0]), np.zeros(2), SIGMA)
+    assert d.status == "invalid_input"
+    with pytest.raises(ValueError):  # 3-D barrier states vs a 4-D model
+        secure.Shield(barrier, secure.Dynamics.linear(np.eye(3), np.ones((3, 1))))
+
+
+def test_python_dynamics_errors_propagate(tiny_barrier):
+    _, barrier, _ = tiny_barrier
+
+    def wrong_shape(s, a):
+        return np.zeros((a.shape[0], 3))
+
+    def raises(s, a):
+        raise KeyError("from the model")
+
+    shield = secure.Shield(barrier, secure.Dynamics.from_callable(wrong_shape, 4, 2))
+    with pytest.raises(ValueError, match=r"returned next states of shape \(64, 3\), expected \(64, 4\)"):
+        shield.decide(np.zeros(4), np.zeros(2), SIGMA)
+    shield = secure.Shield(barrier, secure.Dynamics.from_callable(raises, 4, 2))
+    with pytest.raises(KeyError, match="from the model"):
+        shield.decide(np.zeros(4), np.zeros(2), SIGMA)
+    with pytest.raises(TypeError):
+        secure.Dynamics.from_callable(42, 4, 2)
