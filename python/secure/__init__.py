@@ -24,6 +24,7 @@ from ._secure import (  # noqa: F401
     episode_seed,
     generate_data,
     make_env,
+    run_episodes,
     train_airl,
     train_barrier,
     train_bc,
@@ -31,6 +32,6 @@ from ._secure import (  # noqa: F401
 
 __all__ = [
     "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "Policy", "Rng", "Shield",
-    "build_info", "domains", "episode_seed", "generate_data", "make_env", "train_airl",
+    "build_info", "domains", "episode_seed", "generate_data", "make_env", "run_episodes", "train_airl",
     "train_barrier", "train_bc",
 ]

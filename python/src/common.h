@@ -28,6 +28,7 @@
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
 #include "secure/experiments/domain.h"
+#include "secure/shield/shield.h"
 
 namespace secure::python {
 
@@ -108,6 +109,10 @@ std::unique_ptr<experiments::Domain> MakeDomain(const std::string& name, const s
 
 /// The environment an AIRL trainer rolls out in: a secure.Env, or a domain name.
 std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env);
+
+/// ShieldOptions from keyword arguments (the fields by name, enums by their names); validated.
+/// @throws secure::Error naming an unknown key (and the valid ones) or a bad value.
+shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs);
 
 /// Registration, one per translation unit.
 void RegisterCommon(py::module_& m);

@@ -5,6 +5,7 @@
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
+#include "secure/eval/policy_eval.h"
 #include "secure/nn/torch_threads.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/bc_trainer.h"
@@ -57,7 +58,11 @@ class Policy {
     {
       py::gil_scoped_release release;
       std::lock_guard<std::mutex> lock(mutex_);
-      evaluator_.Means(o.map, mu);
+      if (o.one) {
+        evaluator_.Mean(o.map.col(0), mu.col(0));  // what the C++ episode loop calls
+      } else {
+        evaluator_.Means(o.map, mu);
+      }
     }
     if (o.one) return ToNumpy(mu.col(0));
     return StatesToNumpy(mu);
@@ -199,6 +204,38 @@ a config: hidden, epochs, seed, ...). Returns (policy, summary dict). Releases t
 AIRL (discriminator + PPO) on secure.Demonstrations, rolling out in `env` (a secure.Env or a
 domain name); keyword arguments are AirlOptions (the `airl` section of a config: iterations,
 steps_per_iteration, seed, ...). Returns (policy, summary dict). Releases the GIL.)doc");
+
+  m.def(
+      "run_episodes",
+      [](py::handle env, std::shared_ptr<Policy> policy, std::shared_ptr<Barrier> barrier,
+         long episodes, std::uint64_t seed, bool stop_on_collision, py::kwargs shield_options) {
+        const std::unique_ptr<domains::Environment> e = EnvironmentOf(env)->Clone();
+        const shield::ShieldOptions options = ShieldOptionsFrom(shield_options);
+        std::unique_ptr<cbf::Barrier> evaluator;
+        std::optional<shield::Shield> shield;
+        if (barrier) {
+          evaluator = barrier->factory();
+          shield.emplace(options, *evaluator, e->ShieldModel());
+        }
+        policy::PolicyEvaluator evaluate(policy->model());
+        eval::EpisodeRunnerOptions runner_options;
+        runner_options.stop_on_collision = stop_on_collision;
+        eval::EpisodeRunner runner(*e, runner_options);
+        eval::SeedResult result;
+        {
+          py::gil_scoped_release release;
+          result = runner.Run(evaluate, shield ? &*shield : nullptr, episodes, seed);
+        }
+        return ToPython(result.ToJson());
+      },
+      py::arg("env"), py::arg("policy"), py::arg("barrier") = nullptr, py::arg("episodes") = 1,
+      py::arg("seed") = 0, py::arg("stop_on_collision") = false, R"doc(
+Runs `episodes` episodes of `policy` in (a fresh copy of) `env` (a secure.Env or a domain name)
+with the library's episode loop (eval::EpisodeRunner, as `secure eval` runs a method): shielded
+by `barrier` with the environment's shield model when given (keyword arguments: the shield's
+options), else sampling the policy. Episode i draws from secure.episode_seed(seed, i). Returns
+the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...).
+Releases the GIL.)doc");
 }
 
 }  // namespace secure::python

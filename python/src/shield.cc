@@ -98,7 +98,9 @@ py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
 // ShieldOptions from keyword arguments: the fields of shield::ShieldOptions by name, enums by
 // their names (class_k: linear | cubic, aggregation: mean | random-safe, resampling: adaptive |
 // none); an unknown key is an error naming it and listing the valid keys.
-shield::ShieldOptions ShieldOptionsFrom(const py::kwargs& kwargs) {
+}  // namespace
+
+shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
   shield::ShieldOptions o;
   std::string class_k = ToString(shield::kClassKNames, o.class_k);
   std::string aggregation = ToString(shield::kAggregationNames, o.aggregation);
@@ -125,6 +127,8 @@ shield::ShieldOptions ShieldOptionsFrom(const py::kwargs& kwargs) {
   o.Validate();
   return o;
 }
+
+namespace {
 
 class Shield {
  public:

@@ -69,3 +69,46 @@ def test_airl_tiny(demos):
     assert policy.action_dim == 2
     with pytest.raises(ValueError, match="train_airl options: unknown (key|field) 'iteration'"):
         secure.train_airl(demos, "double-integrator", iteration=1)
+
+
+def python_episodes(env, policy, shield, episodes, seed):
+    """secure.run_episodes (eval::EpisodeRunner) step by step in Python."""
+    counts = dict(successes=0, dangerous=0, collision_events=0, steps=0, decisions=0,
+                  interventions=0)
+    for i in range(episodes):
+        obs, _ = env.reset(seed=secure.episode_seed(seed, i))
+        if shield is not None:
+            shield.seed(env.rng.next_u64())
+        collided = False
+        for _ in range(env.max_steps):
+            if shield is not None:
+                shield.set_backup_action(env.backup_action(obs))
+                d = shield.decide(obs, policy.mean(obs), policy.sigma)
+                action = d.action
+                counts["decisions"] += 1
+                counts["interventions"] += d.intervened
+            else:
+                action = policy.sample(obs, env.rng)
+            obs, reward, terminated, truncated, info = env.step(action)
+            counts["steps"] += 1
+            if info["collided"]:
+                collided = True
+                counts["collision_events"] += max(1, info["collisions"])
+            if info["reached_goal"]:
+                counts["successes"] += 1
+                break
+        counts["dangerous"] += collided
+    return counts
+
+
+@pytest.mark.parametrize("shielded", [False, True])
+def test_run_episodes_equals_a_python_loop(demos, tiny_barrier, shielded):
+    _, barrier, _ = tiny_barrier
+    policy, _ = secure.train_bc(demos, hidden=[16], epochs=3, seed=2)
+    env = secure.make_env("double-integrator", task={"max_steps": 60})
+    shield = secure.Shield(barrier, env.dynamics) if shielded else None
+    ours = python_episodes(env, policy, shield, 3, seed=4)
+    theirs = secure.run_episodes(env, policy, barrier if shielded else None, episodes=3, seed=4)
+    assert theirs["episodes"] == 3
+    for key, value in ours.items():
+        assert theirs[key] == value, key

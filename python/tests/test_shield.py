@@ -176,3 +176,28 @@ def test_python_dynamics_errors_propagate(tiny_barrier):
         shield.decide(np.zeros(4), np.zeros(2), SIGMA)
     with pytest.raises(TypeError):
         secure.Dynamics.from_callable(42, 4, 2)
+
+
+def test_objects_can_be_shared_between_threads(tiny_barrier, di_data):
+    """Calls release the GIL and lock the object: no deadlock with a Python model, same results."""
+    import threading
+    _, barrier, _ = tiny_barrier
+    states = di_data["safe"][:200]
+    expected = barrier.h(states)
+    shield = secure.Shield(barrier, secure.Dynamics.from_callable(double_integrator(), 4, 2))
+    errors = []
+
+    def work():
+        try:
+            for s in states[:20]:
+                np.testing.assert_array_equal(barrier.h(states), expected)
+                assert shield.decide(s, pd_mean(s), SIGMA).status != "invalid_input"
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert not errors and not any(t.is_alive() for t in threads)
