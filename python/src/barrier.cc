@@ -88,20 +88,22 @@ domain's analytic ground truth with Barrier.ground_truth(domain).)doc")
       .def_static("load", &Load, py::arg("path"), "Loads a barrier model file (any barrier kind).")
       .def_property_readonly("kind", [](const Barrier& b) { return b.kind; })
       .def_property_readonly("state_dim", &Barrier::state_dim)
-      .def_property_readonly("features",
-                             [](const Barrier& b) -> std::vector<std::string> {
-                               if (b.net) return b.net->features;
-                               if (b.car) return b.car->features;
-                               return {};
-                             },
-                             "Names of the state rows the model reads (empty if unknown).")
-      .def_property_readonly("provenance",
-                             [](const Barrier& b) -> py::object {
-                               if (b.net) return ToPython(b.net->provenance);
-                               if (b.car) return ToPython(b.car->provenance);
-                               return py::dict();
-                             },
-                             "The training options, summary and data the model file records.")
+      .def_property_readonly(
+          "features",
+          [](const Barrier& b) -> std::vector<std::string> {
+            if (b.net) return b.net->features;
+            if (b.car) return b.car->features;
+            return {};
+          },
+          "Names of the state rows the model reads (empty if unknown).")
+      .def_property_readonly(
+          "provenance",
+          [](const Barrier& b) -> py::object {
+            if (b.net) return ToPython(b.net->provenance);
+            if (b.car) return ToPython(b.car->provenance);
+            return py::dict();
+          },
+          "The training options, summary and data the model file records.")
       .def("describe", [](const Barrier& b) { return b.evaluator->Describe(); })
       .def("__repr__",
            [](const Barrier& b) { return "<secure.Barrier " + b.evaluator->Describe() + ">"; })
@@ -109,14 +111,15 @@ domain's analytic ground truth with Barrier.ground_truth(domain).)doc")
 h(s) of a batch of states, an (N, state_dim) array -> (N,) float32 array; or of one state, a
 (state_dim,) array -> float. C-contiguous float32 input is read in place; other real dtypes are
 converted. Raises ValueError on a wrong width or a non-finite entry. Releases the GIL.)doc")
-      .def("save",
-           [](const Barrier& b, const std::string& path) {
-             py::gil_scoped_release release;
-             if (b.net) return b.net->Save(path);
-             if (b.car) return b.car->Save(path);
-             SECURE_THROW("a " << b.kind << " barrier has no model file to save");
-           },
-           py::arg("path"), "Writes the model file (atomically).");
+      .def(
+          "save",
+          [](const Barrier& b, const std::string& path) {
+            py::gil_scoped_release release;
+            if (b.net) return b.net->Save(path);
+            if (b.car) return b.car->Save(path);
+            SECURE_THROW("a " << b.kind << " barrier has no model file to save");
+          },
+          py::arg("path"), "Writes the model file (atomically).");
 
   m.def(
       "train_barrier",

@@ -80,10 +80,9 @@ Eigen::VectorXf Vector(py::handle obj, int n, const std::string& what) {
 Eigen::MatrixXf Matrix(py::handle obj, int rows, int cols, const std::string& what) {
   const FloatArray a = AsFloat32(obj, what);
   if (a.ndim() != 2 || (rows >= 0 && a.shape(0) != rows) || (cols >= 0 && a.shape(1) != cols)) {
-    throw py::value_error(what + ": expected shape (" +
-                          (rows >= 0 ? std::to_string(rows) : std::string("rows")) + ", " +
-                          (cols >= 0 ? std::to_string(cols) : std::string("cols")) + "), got " +
-                          ShapeOf(a));
+    throw py::value_error(
+        what + ": expected shape (" + (rows >= 0 ? std::to_string(rows) : std::string("rows")) +
+        ", " + (cols >= 0 ? std::to_string(cols) : std::string("cols")) + "), got " + ShapeOf(a));
   }
   using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   return Eigen::Map<const RowMajor>(a.data(), a.shape(0), a.shape(1));
@@ -122,7 +121,7 @@ YAML::Node ToYaml(py::handle obj, const std::string& where) {
       py::isinstance<py::array>(obj)) {
     YAML::Node node(YAML::NodeType::Sequence);
     py::object seq = py::isinstance<py::array>(obj) ? obj.attr("tolist")()
-                                                     : py::reinterpret_borrow<py::object>(obj);
+                                                    : py::reinterpret_borrow<py::object>(obj);
     for (py::handle item : seq) node.push_back(ToYaml(item, where));
     return node;
   }
@@ -139,12 +138,18 @@ YAML::Node ToYaml(py::handle obj, const std::string& where) {
 
 py::object ToPython(const nlohmann::json& j) {
   switch (j.type()) {
-    case nlohmann::json::value_t::null: return py::none();
-    case nlohmann::json::value_t::boolean: return py::bool_(j.get<bool>());
-    case nlohmann::json::value_t::number_integer: return py::int_(j.get<std::int64_t>());
-    case nlohmann::json::value_t::number_unsigned: return py::int_(j.get<std::uint64_t>());
-    case nlohmann::json::value_t::number_float: return py::float_(j.get<double>());
-    case nlohmann::json::value_t::string: return py::str(j.get<std::string>());
+    case nlohmann::json::value_t::null:
+      return py::none();
+    case nlohmann::json::value_t::boolean:
+      return py::bool_(j.get<bool>());
+    case nlohmann::json::value_t::number_integer:
+      return py::int_(j.get<std::int64_t>());
+    case nlohmann::json::value_t::number_unsigned:
+      return py::int_(j.get<std::uint64_t>());
+    case nlohmann::json::value_t::number_float:
+      return py::float_(j.get<double>());
+    case nlohmann::json::value_t::string:
+      return py::str(j.get<std::string>());
     case nlohmann::json::value_t::array: {
       py::list list;
       for (const auto& item : j) list.append(ToPython(item));
@@ -155,7 +160,8 @@ py::object ToPython(const nlohmann::json& j) {
       for (const auto& [key, value] : j.items()) dict[py::str(key)] = ToPython(value);
       return dict;
     }
-    default: return py::none();
+    default:
+      return py::none();
   }
 }
 
@@ -195,12 +201,15 @@ void RegisterCommon(py::module_& m) {
   });
 
   m.attr("__version__") = std::string(secure::Version());
-  m.def("build_info", [] {
-    py::dict d;
-    d["version"] = std::string(secure::Version());
-    d["git_sha"] = std::string(secure::GitSha());
-    return d;
-  }, "The library's version and git sha.");
+  m.def(
+      "build_info",
+      [] {
+        py::dict d;
+        d["version"] = std::string(secure::Version());
+        d["git_sha"] = std::string(secure::GitSha());
+        return d;
+      },
+      "The library's version and git sha.");
 
   py::class_<Rng>(m, "Rng", R"doc(
 The library's random stream (xoshiro256++ with its own normal transform): the same numbers as

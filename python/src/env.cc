@@ -105,15 +105,17 @@ class Env {
 
 std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
   if (py::isinstance<py::str>(env)) {
-    std::shared_ptr<experiments::Domain> d = MakeDomain(env.cast<std::string>(), "full", py::dict());
+    std::shared_ptr<experiments::Domain> d =
+        MakeDomain(env.cast<std::string>(), "full", py::dict());
     return std::shared_ptr<const domains::Environment>(d->MakeEnvironment());
   }
   return env.cast<Env&>().shared_env();
 }
 
 void RegisterEnvironment(py::module_& m) {
-  m.def("domains", [] { return experiments::DomainRegistry::Global().Names(); },
-        "The registered domains (names for make_env, Dynamics.builtin, ...).");
+  m.def(
+      "domains", [] { return experiments::DomainRegistry::Global().Names(); },
+      "The registered domains (names for make_env, Dynamics.builtin, ...).");
 
   py::class_<Env, std::shared_ptr<Env>>(m, "Env", R"doc(
 A domain's task environment in the Gymnasium API (without needing Gymnasium): reset(seed) ->
@@ -131,11 +133,13 @@ stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
       .def("backup_action", &Env::Backup, py::arg("observation"),
            "The domain's safe fallback action at `observation` (e.g. braking), or None.")
       .def_property_readonly("name", &Env::name)
-      .def_property_readonly("observation_dim", [](const Env& e) { return e.env().observation_dim(); })
+      .def_property_readonly("observation_dim",
+                             [](const Env& e) { return e.env().observation_dim(); })
       .def_property_readonly("action_dim", [](const Env& e) { return e.env().action_dim(); })
       .def_property_readonly("observation_features",
                              [](const Env& e) { return e.env().ObservationFeatures(); })
-      .def_property_readonly("action_features", [](const Env& e) { return e.env().ActionFeatures(); })
+      .def_property_readonly("action_features",
+                             [](const Env& e) { return e.env().ActionFeatures(); })
       .def_property_readonly("max_steps", [](const Env& e) { return e.env().max_steps(); })
       .def_property_readonly("dynamics", &Env::dynamics,
                              "The shield's model of this environment (a secure.Dynamics).")
@@ -143,7 +147,8 @@ stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
                              [](const Env& e) { return e.env().ShieldModelIsExact(); })
       .def_property_readonly("rng", &Env::rng, py::return_value_policy::reference_internal,
                              "The episode stream (a secure.Rng): reset() draws the start from it.")
-      .def_property_readonly("options", [](const Env& e) { return ToPython(e.domain().OptionsJson()); })
+      .def_property_readonly("options",
+                             [](const Env& e) { return ToPython(e.domain().OptionsJson()); })
       .def("describe", [](const Env& e) { return e.env().Describe(); })
       .def("__repr__", [](const Env& e) { return "<secure.Env " + e.env().Describe() + ">"; });
 

@@ -26,7 +26,8 @@ data::TrajectorySet DemosFromArrays(py::handle states, py::handle actions, py::h
                           std::to_string(t));
   data::TrajectorySet d;
   d.source = "demonstrations (NumPy arrays)";
-  d.state_features = FeatureNames(state_features, static_cast<int>(s.map.rows()), "s", "state_features");
+  d.state_features =
+      FeatureNames(state_features, static_cast<int>(s.map.rows()), "s", "state_features");
   d.action_features =
       FeatureNames(action_features, static_cast<int>(a.map.rows()), "a", "action_features");
   d.states = s.map;
@@ -49,8 +50,7 @@ data::TrajectorySet DemosFromArrays(py::handle states, py::handle actions, py::h
 class Policy {
  public:
   explicit Policy(policy::GaussianPolicy p)
-      : model_(std::make_shared<const policy::GaussianPolicy>(std::move(p))),
-        evaluator_(*model_) {}
+      : model_(std::make_shared<const policy::GaussianPolicy>(std::move(p))), evaluator_(*model_) {}
 
   py::object Mean(py::handle observation) {
     const StatesArg o = States(observation, model_->observation_dim(), "observation");
@@ -116,13 +116,16 @@ Task demonstrations: state/action pairs grouped into episodes.
            py::arg("action_features") = py::none())
       .def_static("load", &data::ReadTrajectories, py::arg("path"), py::arg("state_features"),
                   py::arg("action_features"), py::arg("episode_column") = "episode")
-      .def("save",
-           [](const data::TrajectorySet& d, const std::string& path, const std::string& column) {
-             data::WriteTrajectories(path, d, column);
-           },
-           py::arg("path"), py::arg("episode_column") = "episode")
-      .def_property_readonly("states", [](const data::TrajectorySet& d) { return StatesToNumpy(d.states); })
-      .def_property_readonly("actions", [](const data::TrajectorySet& d) { return StatesToNumpy(d.actions); })
+      .def(
+          "save",
+          [](const data::TrajectorySet& d, const std::string& path, const std::string& column) {
+            data::WriteTrajectories(path, d, column);
+          },
+          py::arg("path"), py::arg("episode_column") = "episode")
+      .def_property_readonly("states",
+                             [](const data::TrajectorySet& d) { return StatesToNumpy(d.states); })
+      .def_property_readonly("actions",
+                             [](const data::TrajectorySet& d) { return StatesToNumpy(d.actions); })
       .def_readonly("state_features", &data::TrajectorySet::state_features)
       .def_readonly("action_features", &data::TrajectorySet::action_features)
       .def_readonly("episode_begin", &data::TrajectorySet::episode_begin)
@@ -136,11 +139,12 @@ Task demonstrations: state/action pairs grouped into episodes.
   py::class_<Policy, std::shared_ptr<Policy>>(m, "Policy", R"doc(
 A Gaussian policy N(mu(o), diag(sigma^2)) (a `secure policy train` model): Policy.load(path),
 mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
-      .def_static("load",
-                  [](const std::string& path) {
-                    return std::make_shared<Policy>(policy::GaussianPolicy::Load(path));
-                  },
-                  py::arg("path"))
+      .def_static(
+          "load",
+          [](const std::string& path) {
+            return std::make_shared<Policy>(policy::GaussianPolicy::Load(path));
+          },
+          py::arg("path"))
       .def("mean", &Policy::Mean, py::arg("observation"),
            "mu(o) of one (observation_dim,) observation -> (action_dim,), or of a batch (N, "
            "observation_dim) -> (N, action_dim). Releases the GIL.")
@@ -148,20 +152,22 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
            "a ~ N(mu(o), sigma): `rng` is a secure.Rng (advanced by action_dim normals) or an "
            "integer seed.")
       .def("log_prob", &Policy::LogProb, py::arg("observation"), py::arg("action"))
-      .def("save", [](const Policy& p, const std::string& path) { p.model().Save(path); },
-           py::arg("path"))
-      .def_property_readonly("sigma",
-                             [](const Policy& p) {
-                               return ToNumpy(p.model().log_std.array().exp().matrix());
-                             })
+      .def(
+          "save", [](const Policy& p, const std::string& path) { p.model().Save(path); },
+          py::arg("path"))
+      .def_property_readonly(
+          "sigma",
+          [](const Policy& p) { return ToNumpy(p.model().log_std.array().exp().matrix()); })
       .def_property_readonly("log_std", [](const Policy& p) { return ToNumpy(p.model().log_std); })
-      .def_property_readonly("observation_dim", [](const Policy& p) { return p.model().observation_dim(); })
+      .def_property_readonly("observation_dim",
+                             [](const Policy& p) { return p.model().observation_dim(); })
       .def_property_readonly("action_dim", [](const Policy& p) { return p.model().action_dim(); })
       .def_property_readonly("observation_features",
                              [](const Policy& p) { return p.model().observation_features; })
       .def_property_readonly("action_features",
                              [](const Policy& p) { return p.model().action_features; })
-      .def_property_readonly("provenance", [](const Policy& p) { return ToPython(p.model().provenance); })
+      .def_property_readonly("provenance",
+                             [](const Policy& p) { return ToPython(p.model().provenance); })
       .def("__repr__", [](const Policy& p) {
         return "<secure.Policy " + std::to_string(p.model().observation_dim()) + " -> " +
                std::to_string(p.model().action_dim()) + ">";

@@ -47,8 +47,7 @@ class CallableDynamics final : public domains::DynamicsModel {
       for (py::ssize_t k = 0; k < r.ndim(); ++k) shape << (k ? ", " : "") << r.shape(k);
       throw py::value_error(name_ + ": returned next states of shape (" + shape.str() +
                             "), expected (" + std::to_string(m) + ", " +
-                            std::to_string(state_dim_) + ") for " + std::to_string(m) +
-                            " actions");
+                            std::to_string(state_dim_) + ") for " + std::to_string(m) + " actions");
     }
     for (py::ssize_t j = 0; j < m; ++j)
       std::memcpy(next_states.col(j).data(), r.data(j, 0), sizeof(float) * state_dim_);
@@ -73,7 +72,8 @@ std::shared_ptr<Dynamics> Linear(py::handle a, py::handle b) {
 
 std::shared_ptr<Dynamics> FromCallable(py::object fn, int state_dim, int action_dim,
                                        const std::string& name) {
-  if (!PyCallable_Check(fn.ptr())) throw py::type_error("Dynamics.from_callable: fn is not callable");
+  if (!PyCallable_Check(fn.ptr()))
+    throw py::type_error("Dynamics.from_callable: fn is not callable");
   auto model = std::make_shared<const CallableDynamics>(std::move(fn), state_dim, action_dim, name);
   auto d = std::make_shared<Dynamics>();
   d->model = model.get();
@@ -163,9 +163,9 @@ class Shield {
     const StatesArg a = States(actions, shield_->action_dim(), "actions", false);
     const long limit = std::max(shield_->options().num_samples, shield_->options().num_probes);
     if (a.map.cols() > limit)
-      throw py::value_error("actions: " + std::to_string(a.map.cols()) +
-                            " actions, at most max(num_samples, num_probes) = " +
-                            std::to_string(limit));
+      throw py::value_error(
+          "actions: " + std::to_string(a.map.cols()) +
+          " actions, at most max(num_samples, num_probes) = " + std::to_string(limit));
     py::array_t<double> g(a.map.cols());
     Eigen::Map<Eigen::VectorXd> out(g.mutable_data(), a.map.cols());
     py::gil_scoped_release release;
@@ -231,30 +231,26 @@ python/README.md for its cost.)doc")
 
 void RegisterShield(py::module_& m) {
   py::class_<shield::Decision>(m, "Decision", "One shield decision with its diagnostics.")
-      .def_property_readonly("status",
-                             [](const shield::Decision& d) {
-                               return ToString(shield::kStatusNames, d.status);
-                             },
-                             "safe | safe_after_resampling | no_safe_action | invalid_input")
-      .def_property_readonly("action",
-                             [](const shield::Decision& d) { return ToNumpy(d.action); })
+      .def_property_readonly(
+          "status",
+          [](const shield::Decision& d) { return ToString(shield::kStatusNames, d.status); },
+          "safe | safe_after_resampling | no_safe_action | invalid_input")
+      .def_property_readonly("action", [](const shield::Decision& d) { return ToNumpy(d.action); })
       .def_readonly("g", &shield::Decision::g)
       .def_readonly("h", &shield::Decision::h)
       .def_readonly("iterations", &shield::Decision::iterations)
       .def_readonly("safe_ratio", &shield::Decision::safe_ratio)
       .def_readonly("intervened", &shield::Decision::intervened)
       .def_readonly("distance_to_mean", &shield::Decision::distance_to_mean)
-      .def_property_readonly("fallback",
-                             [](const shield::Decision& d) {
-                               return ToString(shield::kFallbackNames, d.fallback);
-                             },
-                             "none | best_sample | backup_action | random_sample")
+      .def_property_readonly(
+          "fallback",
+          [](const shield::Decision& d) { return ToString(shield::kFallbackNames, d.fallback); },
+          "none | best_sample | backup_action | random_sample")
       .def_readonly("seconds", &shield::Decision::seconds)
       .def_property_readonly("safe", &shield::Decision::safe)
       .def("to_dict", [](const shield::Decision& d) { return ToPython(d.ToJson()); })
-      .def("__repr__", [](const shield::Decision& d) {
-        return "<secure.Decision " + d.ToJson().dump() + ">";
-      });
+      .def("__repr__",
+           [](const shield::Decision& d) { return "<secure.Decision " + d.ToJson().dump() + ">"; });
 
   py::class_<Shield, std::shared_ptr<Shield>>(m, "Shield", R"doc(
 The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the options being the
@@ -282,7 +278,8 @@ shapes raise ValueError. Releases the GIL (a Python dynamics model re-acquires i
                              [](const Shield& s) { return ToPython(s.get().options().ToJson()); })
       .def_property_readonly("state_dim", [](const Shield& s) { return s.get().state_dim(); })
       .def_property_readonly("action_dim", [](const Shield& s) { return s.get().action_dim(); })
-      .def_property_readonly("dynamics", [](const Shield& s) { return s.dynamics().model->Describe(); })
+      .def_property_readonly("dynamics",
+                             [](const Shield& s) { return s.dynamics().model->Describe(); })
       .def("__repr__", [](const Shield& s) {
         return "<secure.Shield barrier=" + s.barrier().evaluator->Describe() +
                " dynamics=" + s.dynamics().model->Describe() + ">";

@@ -25,8 +25,8 @@ LinearDynamics::LinearDynamics(const Eigen::Ref<const Eigen::MatrixXf>& a,
                "LinearDynamics: A is " << a.rows() << " x " << a.cols()
                                        << ", must be square (state x state) and non-empty");
   SECURE_CHECK(b.rows() == a.rows() && b.cols() >= 1,
-               "LinearDynamics: B is " << b.rows() << " x " << b.cols() << ", must be "
-                                       << a.rows() << " x n (state x action) with n >= 1");
+               "LinearDynamics: B is " << b.rows() << " x " << b.cols() << ", must be " << a.rows()
+                                       << " x n (state x action) with n >= 1");
   CheckFinite(a, "A");
   CheckFinite(b, "B");
   as_.resize(a.rows());

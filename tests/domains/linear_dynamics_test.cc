@@ -43,8 +43,9 @@ TEST(LinearDynamics, RejectsBadShapesAndValues) {
             "LinearDynamics: B[1, 0] = nan, must be finite");
   const LinearDynamics model(Eigen::MatrixXf::Zero(2, 2), Eigen::MatrixXf::Zero(2, 1));
   Eigen::MatrixXf next(2, 1);
-  EXPECT_NE(ErrorOf([&] { model.Step(Eigen::VectorXf::Zero(3), Eigen::MatrixXf::Zero(1, 1), next); })
-                .find("state has 3 values, expected 2"),
+  EXPECT_NE(ErrorOf([&] {
+              model.Step(Eigen::VectorXf::Zero(3), Eigen::MatrixXf::Zero(1, 1), next);
+            }).find("state has 3 values, expected 2"),
             std::string::npos);
 }
 
