@@ -27,11 +27,12 @@ from ._secure import (  # noqa: F401
     run_episodes,
     train_airl,
     train_barrier,
+    train_car_barrier,
     train_bc,
 )
 
 __all__ = [
     "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "Policy", "Rng", "Shield",
     "build_info", "domains", "episode_seed", "generate_data", "make_env", "run_episodes", "train_airl",
-    "train_barrier", "train_bc",
+    "train_barrier", "train_bc", "train_car_barrier",
 ]

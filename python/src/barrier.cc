@@ -5,8 +5,10 @@
 
 #include "python/src/common.h"
 #include "secure/cbf/barrier_trainer.h"
+#include "secure/cbf/car_barrier_trainer.h"
 #include "secure/common/error.h"
 #include "secure/data/data.h"
+#include "secure/experiments/experiment.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::python {
@@ -145,6 +147,46 @@ arrays with the same d. `features` names the d columns (default x0, x1, ...); th
 arguments are the trainer's options, the keys of `secure cbf train`'s config section `trainer`
 (hidden=[64, 64], max_epochs=400, seed=0, ...; an unknown key is a ValueError naming it and
 listing the valid ones). Returns (barrier, summary dict). Releases the GIL while training.)doc");
+
+  m.def(
+      "train_car_barrier",
+      [](py::handle safe, py::handle near_dangerous, py::object domain, py::handle features,
+         py::kwargs options) {
+        // The domain's preset (its obstacle layout, radii and trainer settings), or the defaults
+        // (then `layout` must be given), with the keyword arguments on top.
+        cbf::CarBarrierTrainerOptions o;
+        std::vector<std::string> domain_features;
+        if (!domain.is_none()) {
+          const std::unique_ptr<experiments::Domain> d =
+              MakeDomain(domain.cast<std::string>(), "full", py::dict());
+          o = d->Preset().per_obstacle_barrier;
+          domain_features = d->MakeEnvironment()->ObservationFeatures();
+        }
+        o.ApplyYaml(ToYaml(options, "train_car_barrier"), "train_car_barrier options");
+        const StatesArg probe = States(safe, -1, "safe", false);
+        const int dim = static_cast<int>(probe.map.rows());
+        const std::vector<std::string> names =
+            features.is_none() && static_cast<int>(domain_features.size()) == dim
+                ? domain_features
+                : FeatureNames(features, dim, "x", "features");
+        const data::StateSet s = StateSetOf(safe, dim, &names, "safe");
+        const data::StateSet nd = StateSetOf(near_dangerous, dim, &names, "near_dangerous");
+        cbf::CarBarrierTrainingSummary summary;
+        cbf::CarBarrierNet net;
+        {
+          py::gil_scoped_release release;
+          net = cbf::TrainCarBarrier(o, s, nd, &summary);
+        }
+        return py::make_tuple(FromCar(std::move(net)), ToPython(summary.ToJson()));
+      },
+      py::arg("safe"), py::arg("near_dangerous"), py::arg("domain") = py::none(),
+      py::arg("features") = py::none(), R"doc(
+Trains a per-obstacle barrier (cbf::CarBarrierNet: one MLP per car, min over the cars in range)
+on observations, two (N, obs_dim) arrays. `domain` (e.g. 'derby') starts from that domain's
+preset (its obstacle layout and trainer settings) and names the columns with its observation
+features; the keyword arguments are the car barrier trainer's options (the keys of a config's
+`per_obstacle_barrier` section: hidden, max_epochs, seed, layout={...}, ...). Returns
+(barrier, summary dict). Releases the GIL while training.)doc");
 }
 
 }  // namespace secure::python

@@ -104,3 +104,23 @@ def test_h_equals_cli_predict(cli, tiny_barrier, di_data, tmp_path):
     cli_h = np.array([float(r["h"]) for r in rows], dtype=np.float32)
     np.testing.assert_array_equal(barrier.h(states), cli_h)
     assert result["predicted_safe"] == int((barrier.h(states) >= 0).sum())
+
+
+def test_per_obstacle_barrier_on_derby(tmp_path):
+    data = secure.generate_data("derby", seed=1, profile="quick")
+    barrier, summary = secure.train_car_barrier(
+        data["safe"], data["near_dangerous"], domain="derby", hidden=[8, 8], max_epochs=2, seed=0)
+    assert barrier.kind == "car_barrier" and summary["epochs"] == 2
+    assert barrier.features == data["features"]
+    path = str(tmp_path / "car.model")
+    barrier.save(path)
+    loaded = secure.Barrier.load(path)
+    np.testing.assert_array_equal(loaded.h(data["safe"]), barrier.h(data["safe"]))
+    with pytest.raises(ValueError, match="unknown field 'hiden'"):
+        secure.train_car_barrier(data["safe"], data["near_dangerous"], domain="derby", hiden=[8])
+    # A shield over it with the domain's own model, from Python.
+    env = secure.make_env("derby")
+    shield = secure.Shield(barrier, env.dynamics, dt=env.options["task"]["dt"])
+    obs, _ = env.reset(seed=0)
+    d = shield.decide(obs, np.zeros(env.action_dim), np.full(env.action_dim, 0.5))
+    assert d.action.shape == (env.action_dim,)
