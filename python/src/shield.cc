@@ -177,15 +177,18 @@ class Shield {
 
   void SetBackup(py::handle action) {
     if (action.is_none()) {
+      py::gil_scoped_release release;  // never wait for the lock holding the GIL (see Decide)
       std::lock_guard<std::mutex> lock(mutex_);
       shield_->ClearBackupAction();
       return;
     }
     const Eigen::VectorXf a = Vector(action, shield_->action_dim(), "backup_action");
+    py::gil_scoped_release release;
     std::lock_guard<std::mutex> lock(mutex_);
     shield_->SetBackupAction(a);
   }
   void Seed(std::uint64_t seed) {
+    py::gil_scoped_release release;
     std::lock_guard<std::mutex> lock(mutex_);
     shield_->Seed(seed);
   }

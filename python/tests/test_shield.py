@@ -191,6 +191,7 @@ def test_objects_can_be_shared_between_threads(tiny_barrier, di_data):
         try:
             for s in states[:20]:
                 np.testing.assert_array_equal(barrier.h(states), expected)
+                shield.set_backup_action(np.zeros(2))  # waits for a decide in another thread
                 assert shield.decide(s, pd_mean(s), SIGMA).status != "invalid_input"
         except Exception as e:  # noqa: BLE001 - reported below
             errors.append(e)
@@ -199,5 +200,5 @@ def test_objects_can_be_shared_between_threads(tiny_barrier, di_data):
     for t in threads:
         t.start()
     for t in threads:
-        t.join(timeout=60)
+        t.join(timeout=30)
     assert not errors and not any(t.is_alive() for t in threads)
