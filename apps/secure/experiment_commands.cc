@@ -5,14 +5,22 @@
 //   secure demo                            the main job: the method comparison on the double
 //                                          integrator with every method (BC, AIRL, SECURE, the
 //                                          two shield ablations, BC + shield)
+//   secure experiment merge RUN_DIR...    the result of a sharded run (docs/CLUSTER.md)
 // Each prints a Markdown table (or, with --json, the result document in the format of
 // `secure eval --json`); --quick is the domain's small profile, used by the tests.
+// --shard k/N (or, without it, a SLURM array element's or an mpirun rank's place) runs only the
+// seeds with index = k (mod N), writing their task files into --out; `merge` assembles them.
+#include <cstdlib>
 #include <iostream>
 #include <memory>
+#include <optional>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "cli_common.h"
 #include "commands.h"
+#include "secure/common/atomic_file.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/filesystem.h"
 #include "secure/experiments/domain.h"
@@ -22,6 +30,129 @@ namespace secure::cli {
 namespace {
 
 using experiments::ExperimentKind;
+
+/// Which shard this process runs, and where that came from ("--shard",
+/// "SLURM_ARRAY_TASK_ID/COUNT", "OMPI_COMM_WORLD_RANK/SIZE", ...).
+struct Shard {
+  int index = 0;
+  int count = 1;
+  std::string source;  // empty: not sharded
+};
+
+// A non-negative integer at most `max`, all digits; else an error naming `what` and the text.
+bool ParseCount(const std::string& text, long max, long* value) {
+  if (text.empty() || text.size() > 9) return false;
+  for (char c : text)
+    if (c < '0' || c > '9') return false;
+  *value = std::stol(text);
+  return *value <= max;
+}
+
+std::optional<std::string> Env(const char* name) {
+  const char* v = std::getenv(name);
+  if (v == nullptr) return std::nullopt;
+  return std::string(v);
+}
+
+long EnvCount(const char* name, const std::string& value) {
+  long n = 0;
+  SECURE_CHECK(ParseCount(value, kMaxSeeds * 1000L, &n),
+               "environment variable " << name << " = '" << value
+                                       << "' is not a non-negative integer");
+  return n;
+}
+
+// A rank/size pair from the environment (rank_var and one of size_vars), if rank_var is set.
+std::optional<Shard> RankFromEnv(const char* rank_var, std::vector<const char*> size_vars,
+                                 const char* label) {
+  const std::optional<std::string> rank = Env(rank_var);
+  if (!rank) return std::nullopt;
+  for (const char* size_var : size_vars) {
+    const std::optional<std::string> size = Env(size_var);
+    if (!size) continue;
+    const long r = EnvCount(rank_var, *rank), n = EnvCount(size_var, *size);
+    SECURE_CHECK(n >= 1, "environment variable " << size_var << " = '" << *size << "' must be >= 1");
+    SECURE_CHECK(r < n, "environment variable " << rank_var << " = '" << *rank << "' must be below "
+                                                << size_var << " = " << n);
+    return Shard{static_cast<int>(r), static_cast<int>(n), label};
+  }
+  return std::nullopt;
+}
+
+// --shard k/N, else a SLURM array element (SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN of
+// SLURM_ARRAY_TASK_COUNT), else an MPI rank (Open MPI's OMPI_COMM_WORLD_RANK/SIZE, the PMI
+// PMI_RANK/SIZE, PMIx's PMIX_RANK with PMI_SIZE or OMPI_COMM_WORLD_SIZE); else not sharded.
+Shard ResolveShard(const std::string& flag) {
+  if (!flag.empty()) {
+    const std::size_t slash = flag.find('/');
+    long k = -1, n = 0;
+    const bool ok = slash != std::string::npos && ParseCount(flag.substr(0, slash), 1L << 30, &k) &&
+                    ParseCount(flag.substr(slash + 1), 1L << 30, &n) && n >= 1 && k < n;
+    SECURE_CHECK(ok, "--shard '" << flag
+                                 << "': expected k/N with 0 <= k < N (0-based shard k of N, "
+                                    "e.g. 0/4)");
+    return {static_cast<int>(k), static_cast<int>(n), "--shard"};
+  }
+  std::optional<Shard> slurm;
+  if (const std::optional<std::string> id = Env("SLURM_ARRAY_TASK_ID")) {
+    const std::optional<std::string> count = Env("SLURM_ARRAY_TASK_COUNT");
+    SECURE_CHECK(count.has_value(), "environment variable SLURM_ARRAY_TASK_ID = '"
+                                        << *id << "' is set but SLURM_ARRAY_TASK_COUNT is not");
+    long k = EnvCount("SLURM_ARRAY_TASK_ID", *id);
+    const long n = EnvCount("SLURM_ARRAY_TASK_COUNT", *count);
+    SECURE_CHECK(n >= 1, "environment variable SLURM_ARRAY_TASK_COUNT = '" << *count
+                                                                          << "' must be >= 1");
+    std::string source = "SLURM_ARRAY_TASK_ID/COUNT";
+    if (const std::optional<std::string> min = Env("SLURM_ARRAY_TASK_MIN")) {
+      const long m = EnvCount("SLURM_ARRAY_TASK_MIN", *min);
+      SECURE_CHECK(m <= k, "environment variable SLURM_ARRAY_TASK_MIN = '"
+                               << *min << "' is above SLURM_ARRAY_TASK_ID = " << k);
+      k -= m;
+      source = "SLURM_ARRAY_TASK_ID-MIN/COUNT";
+    }
+    SECURE_CHECK(k < n, "environment variable SLURM_ARRAY_TASK_ID = '"
+                            << *id << "' gives shard " << k << ", not below SLURM_ARRAY_TASK_COUNT = "
+                            << n << " (use a contiguous array, --array=0-" << n - 1 << ")");
+    slurm = Shard{static_cast<int>(k), static_cast<int>(n), source};
+  }
+  std::optional<Shard> mpi = RankFromEnv("OMPI_COMM_WORLD_RANK", {"OMPI_COMM_WORLD_SIZE"},
+                                         "OMPI_COMM_WORLD_RANK/SIZE");
+  if (!mpi) mpi = RankFromEnv("PMI_RANK", {"PMI_SIZE"}, "PMI_RANK/SIZE");
+  if (!mpi)
+    mpi = RankFromEnv("PMIX_RANK", {"PMI_SIZE", "OMPI_COMM_WORLD_SIZE"}, "PMIX_RANK/SIZE");
+  if (slurm && mpi && slurm->count > 1 && mpi->count > 1) {
+    SECURE_THROW("both " << slurm->source << " (shard " << slurm->index << "/" << slurm->count
+                         << ") and " << mpi->source << " (" << mpi->index << "/" << mpi->count
+                         << ") are set: give --shard k/N");
+  }
+  if (slurm && (slurm->count > 1 || !mpi)) return *slurm;
+  if (mpi) return *mpi;
+  return {};
+}
+
+std::string SeedList(const std::vector<std::uint64_t>& seeds) {
+  if (seeds.empty()) return "none";
+  std::ostringstream out;
+  for (std::size_t i = 0; i < seeds.size(); ++i) out << (i ? ", " : "") << seeds[i];
+  return out.str();
+}
+
+// What an unsharded run prints on stdout (and merge prints).
+void PrintResult(const experiments::ExperimentResult& result, bool json,
+                 const std::string& command_name) {
+  if (json) {
+    nlohmann::json r = result.ToJson();
+    r["command"] = command_name;
+    PrintJson(r);
+  } else {
+    std::cout << "\n"
+              << result.Table() << "\nData: " << result.demonstrations
+              << " expert demonstrations (" << result.discarded_demonstrations
+              << " discarded), " << result.safe_states << " safe + "
+              << result.near_dangerous_states << " near-dangerous states. Total "
+              << result.seconds << " s.\n";
+  }
+}
 
 struct ExperimentCommand {
   std::string command_name;  // "demo", "experiment ablation", ...
@@ -34,7 +165,7 @@ struct ExperimentCommand {
   long episodes = 0;
   std::uint64_t first_seed = 0;
   int threads = 2;
-  std::string barrier, methods, out;
+  std::string barrier, methods, out, shard;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
   CLI::Option* episodes_option = nullptr;
@@ -71,6 +202,10 @@ struct ExperimentCommand {
                     "experiment's)");
     cmd->add_option("--out", out,
                     "directory for the data, per-seed models and learning curves, result.json");
+    cmd->add_option("--shard", shard,
+                    "k/N: run only the seeds with index k mod N (0-based; needs --out), then "
+                    "`secure experiment merge`; default: a SLURM array element's or an mpirun "
+                    "rank's place (docs/CLUSTER.md)");
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     cmd->callback([this] { Run(); });
     return cmd;
@@ -99,28 +234,82 @@ struct ExperimentCommand {
     options.first_seed = first_seed;
     options.threads = threads;
     options.output_dir = out;
+    const Shard where = ResolveShard(shard);
+    const bool sharded = where.count > 1;
+    SECURE_CHECK(!sharded || !out.empty(),
+                 "shard " << where.index << "/" << where.count << " (from " << where.source
+                          << ") needs --out: every shard writes its seeds' task files there, "
+                             "then `secure experiment merge` assembles the result");
+    if (sharded) {
+      options.shard = where.index;
+      options.shards = where.count;
+    }
     d->Validate();           // before the first line of progress
     options.Validate();
     d->CheckExperiment(options);
     CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
+    if (!where.source.empty())
+      std::cerr << "shard " << where.index << "/" << where.count << " (from " << where.source
+                << "): ";
     std::cerr << "secure " << command_name << " on " << d->name() << ": " << options.seeds
               << " seeds x " << options.episodes << " episodes per method on "
               << options.threads << " threads" << (out.empty() ? "" : ", writing to " + out)
               << "\n";
+    if (sharded) {
+      const experiments::ShardReport report =
+          experiments::RunExperimentShard(kind, *d, options, &std::cerr);
+      if (json) {
+        PrintJson({{"command", command_name},
+                   {"shard", where.index},
+                   {"shards", where.count},
+                   {"shard_from", where.source},
+                   {"computed_seeds", report.computed},
+                   {"reused_seeds", report.reused},
+                   {"out", out},
+                   {"seconds", report.seconds}});
+      } else {
+        std::cout << "shard " << where.index << "/" << where.count << ": seeds "
+                  << SeedList(report.computed) << " computed, " << SeedList(report.reused)
+                  << " reused, task files in " << out << "/seed-K/task.json (" << report.seconds
+                  << " s). When every shard is done: secure experiment merge " << out << "\n";
+      }
+      return;
+    }
     const experiments::ExperimentResult result =
         experiments::RunExperiment(kind, *d, options, &std::cerr);
-    if (json) {
-      nlohmann::json r = result.ToJson();
-      r["command"] = command_name;
-      PrintJson(r);
-    } else {
-      std::cout << "\n"
-                << result.Table() << "\nData: " << result.demonstrations
-                << " expert demonstrations (" << result.discarded_demonstrations
-                << " discarded), " << result.safe_states << " safe + "
-                << result.near_dangerous_states << " near-dangerous states. Total "
-                << result.seconds << " s.\n";
-    }
+    PrintResult(result, json, command_name);
+  }
+};
+
+// secure experiment merge RUN_DIR... [--out DIR] [--json]
+struct MergeCommand {
+  std::vector<std::string> dirs;
+  std::string out;
+  bool json = false;
+
+  void Register(CLI::App& parent) {
+    CLI::App* cmd = parent.add_subcommand(
+        "merge",
+        "The result of a sharded experiment (--shard, a SLURM array, mpirun): checks that the "
+        "task files of RUN_DIR... (the shards' --out directories, or the one they shared) are "
+        "of one experiment, with every seed once, and writes result.json and the table an "
+        "unsharded run writes");
+    cmd->add_option("run_dirs", dirs, "the shards' run directories")->required();
+    cmd->add_option("--out", out, "where to write result.json (default: the first RUN_DIR)");
+    cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    const std::string target = out.empty() ? dirs.front() : out;
+    CreateDirectories(target);
+    const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
+    WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
+    std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
+              << ToString(experiments::kExperimentKindNames, result.kind) << " on "
+              << result.domain << " from " << dirs.size() << " director"
+              << (dirs.size() == 1 ? "y" : "ies") << ", wrote " << target << "/result.json\n";
+    PrintResult(result, json, "experiment merge");
   }
 };
 
@@ -130,6 +319,7 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
   static ExperimentCommand demo;
   static ExperimentCommand kinds[4];
   static ExperimentCommand derby[4];
+  static MergeCommand merge;
   demo.all_methods = true;
   demo.Register(app, config, "demo",
                 "The main job: the complete SECURE pipeline on the double-integrator reach-avoid "
@@ -165,6 +355,7 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
                       std::string(table[i].description) + " (on the derby domain)",
                       table[i].kind, "derby");
   }
+  merge.Register(*cmd);
 }
 
 }  // namespace secure::cli

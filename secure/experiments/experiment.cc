@@ -6,6 +6,8 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <optional>
@@ -15,6 +17,7 @@
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/atomic_file.h"
+#include "secure/common/build_info.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/limits.h"
@@ -321,6 +324,329 @@ long RoundedCount(double fraction, long n) {
   return std::max<long>(1, static_cast<long>(std::lround(fraction * static_cast<double>(n))));
 }
 
+// ---------------------------------------------------------------------------------------------
+// Task files: seed-K/task.json, one per finished seed.
+
+constexpr const char* kTaskFile = "task.json";
+constexpr int kTaskFormat = 1;
+
+std::string SeedDir(const std::string& run_dir, std::uint64_t seed) {
+  return run_dir + "/seed-" + std::to_string(seed);
+}
+
+// A number of a result document: null (how nlohmann writes NaN) reads as NaN, a missing key as
+// `otherwise`.
+double Number(const nlohmann::json& j, const char* key, double otherwise = 0.0) {
+  const auto it = j.find(key);
+  if (it == j.end()) return otherwise;
+  if (it->is_null()) return std::nan("");
+  return it->get<double>();
+}
+
+nlohmann::json SeedResultJson(const eval::SeedResult& r) { return r.ToJson(); }
+
+eval::SeedResult SeedResultFromJson(const nlohmann::json& j) {
+  eval::SeedResult r;
+  r.episodes = j.at("episodes").get<long>();
+  r.successes = j.at("successes").get<long>();
+  r.dangerous = j.at("dangerous").get<long>();
+  r.collision_events = j.at("collision_events").get<long>();
+  r.steps = j.at("steps").get<long>();
+  r.mean_steps_to_goal = Number(j, "mean_steps_to_goal");
+  r.decisions = j.at("decisions").get<long>();
+  r.interventions = j.at("interventions").get<long>();
+  r.resampled_decisions = j.at("resampled_decisions").get<long>();
+  r.no_safe_action_decisions = j.at("no_safe_action_decisions").get<long>();
+  r.invalid_input_decisions = j.at("invalid_input_decisions").get<long>();
+  r.mean_iterations = Number(j, "mean_iterations");
+  const nlohmann::json& l = j.at("latency_us");
+  r.latency_us.count = l.at("count").get<long>();
+  r.latency_us.p50 = Number(l, "p50");
+  r.latency_us.p90 = Number(l, "p90");
+  r.latency_us.p99 = Number(l, "p99");
+  r.latency_us.max = Number(l, "max");
+  r.latency_us.mean = Number(l, "mean");
+  r.seconds = Number(j, "seconds");
+  return r;
+}
+
+// A JSON value for a message: its dump, cut at 80 characters.
+std::string Quote(const nlohmann::json& j) {
+  std::string text = j.dump();
+  if (text.size() > 80) text = text.substr(0, 77) + "...";
+  return text;
+}
+
+// The first difference between `a` and `b` as "path: A vs B" ("" if they are equal).
+std::string FirstDifference(const nlohmann::json& a, const nlohmann::json& b,
+                            const std::string& path) {
+  if (a == b) return "";
+  const std::string where = path.empty() ? "(the whole document)" : path;
+  if (a.is_object() && b.is_object()) {
+    for (const auto& [key, value] : a.items()) {
+      const std::string sub = path.empty() ? key : path + "." + key;
+      if (!b.contains(key)) return sub + ": " + Quote(value) + " vs (missing)";
+      std::string d = FirstDifference(value, b.at(key), sub);
+      if (!d.empty()) return d;
+    }
+    for (const auto& [key, value] : b.items())
+      if (!a.contains(key))
+        return (path.empty() ? key : path + "." + key) + ": (missing) vs " + Quote(value);
+  }
+  if (a.is_array() && b.is_array() && a.size() == b.size()) {
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      std::string d = FirstDifference(a[i], b[i], path + "[" + std::to_string(i) + "]");
+      if (!d.empty()) return d;
+    }
+  }
+  return where + ": " + Quote(a) + " vs " + Quote(b);
+}
+
+// What makes two task files tasks of the same experiment (everything that determines a seed's
+// numbers): version, kind, domain and its options, methods, variants, options but `threads`,
+// and the data's counts.
+nlohmann::json ExperimentIdentity(const ExperimentResult& r) {
+  nlohmann::json options = r.options_json;
+  options.erase("threads");
+  nlohmann::json method_names = nlohmann::json::array();
+  for (eval::Method m : r.methods) method_names.push_back(ToString(eval::kMethodNames, m));
+  nlohmann::json variants = nlohmann::json::array();
+  for (const BarrierDataVariant& v : r.variants) variants.push_back(v.ToJson());
+  return {{"format", kTaskFormat},
+          {"version", Version()},
+          {"kind", ToString(kExperimentKindNames, r.kind)},
+          {"domain", r.domain},
+          {"domain_title", r.domain_title},
+          {"domain_options", r.domain_options},
+          {"methods", method_names},
+          {"variants", variants},
+          {"options", options},
+          // Not in options.ToJson() (so not in result.json), but the tests across seeds use it.
+          {"evaluation",
+           {{"tost_bound", r.options.evaluation.tost_bound}, {"alpha", r.options.evaluation.alpha}}},
+          {"data",
+           {{"demonstrations", r.demonstrations},
+            {"discarded_demonstrations", r.discarded_demonstrations},
+            {"demonstration_steps", r.demonstration_steps},
+            {"safe_states", r.safe_states},
+            {"near_dangerous_states", r.near_dangerous_states}}}};
+}
+
+nlohmann::json TaskJson(const nlohmann::json& identity, std::uint64_t seed, int threads,
+                        double data_seconds, const SeedOutcome& outcome) {
+  nlohmann::json results = nlohmann::json::array();
+  for (const auto& per_variant : outcome.results) {
+    nlohmann::json methods = nlohmann::json::object();
+    for (const auto& [method, r] : per_variant)
+      methods[ToString(eval::kMethodNames, method)] = SeedResultJson(r);
+    results.push_back(std::move(methods));
+  }
+  return {{"experiment", identity},
+          {"seed", seed},
+          {"threads", threads},
+          {"data_seconds", data_seconds},
+          {"results", std::move(results)},
+          {"summary", outcome.summary}};
+}
+
+// A task file's content (parsed); an error naming the file if it is not one.
+nlohmann::json ReadTaskFile(const std::string& path) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(ReadFile(path));
+  } catch (const nlohmann::json::exception& e) {
+    SECURE_THROW(path << ": not a task file (" << e.what()
+                      << "); remove it to recompute the seed");
+  }
+  SECURE_CHECK(j.is_object() && j.contains("experiment") && j.contains("seed") &&
+                   j.contains("results") && j.contains("summary") && j["seed"].is_number_unsigned() &&
+                   j["results"].is_array(),
+               path << ": not a task file (expected an object with experiment, seed, results and "
+                       "summary); remove it to recompute the seed");
+  return j;
+}
+
+SeedOutcome OutcomeFromTask(const nlohmann::json& task, const std::string& path,
+                            std::size_t variants) {
+  SECURE_CHECK(task["results"].size() == variants,
+               path << ": " << task["results"].size() << " variants of results, expected "
+                    << variants);
+  SeedOutcome outcome;
+  try {
+    for (const nlohmann::json& per_variant : task["results"]) {
+      std::map<eval::Method, eval::SeedResult> methods;
+      for (const auto& [name, r] : per_variant.items())
+        methods[FromString(eval::kMethodNames, name, "method")] = SeedResultFromJson(r);
+      outcome.results.push_back(std::move(methods));
+    }
+  } catch (const nlohmann::json::exception& e) {
+    SECURE_THROW(path << ": malformed results (" << e.what() << ")");
+  }
+  outcome.summary = task["summary"];
+  return outcome;
+}
+
+// The seed's task file when there is one for this experiment (nullopt when there is none); an
+// error naming the file and the first difference when it is a task of another experiment.
+std::optional<SeedOutcome> ReusableTask(const std::string& run_dir, std::uint64_t seed,
+                                        const nlohmann::json& identity, std::size_t variants) {
+  if (run_dir.empty()) return std::nullopt;
+  const std::string path = SeedDir(run_dir, seed) + "/" + kTaskFile;
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return std::nullopt;
+  const nlohmann::json task = ReadTaskFile(path);
+  SECURE_CHECK(task["seed"].get<std::uint64_t>() == seed,
+               path << ": the task of seed " << task["seed"].get<std::uint64_t>()
+                    << ", expected seed " << seed);
+  const std::string difference = FirstDifference(task["experiment"], identity, "");
+  SECURE_CHECK(difference.empty(),
+               path << ": the task of a different experiment (" << difference
+                    << "; the file's vs this run's): remove it (or the run directory) to "
+                       "recompute, or write to another --out");
+  return OutcomeFromTask(task, path, variants);
+}
+
+// The shared state of a run: validated options, the data (written to output_dir), the result's
+// header and the experiment's identity.
+struct Prepared {
+  ExperimentResult result;
+  SharedData shared;
+  std::unique_ptr<domains::Environment> env;
+  nlohmann::json identity;
+};
+
+void Prepare(ExperimentKind kind, const Domain& domain, const ExperimentOptions& o,
+             const std::vector<int>& indices, Progress& progress, const Stopwatch& clock,
+             Prepared* p) {
+  ExperimentResult& result = p->result;
+  const std::vector<eval::Method>& methods = result.methods;
+  result.kind = kind;
+  result.domain = domain.name();
+  result.domain_title = domain.Title();
+  result.domain_options = domain.OptionsJson();
+  result.options = o;
+  result.options_json = o.ToJson();
+
+  // 1. Data.
+  SharedData& shared = p->shared;
+  shared.data = domain.GenerateData(o.data_seed);
+  shared.check = o.check_enabled && domain.HasCheck() && Any(methods, NeedsBarrier);
+  if (shared.check) {
+    domain.CheckHeldOut(o.data_seed, o.check_held_out, &shared.check_safe,
+                        &shared.check_near_dangerous);
+  }
+  const DomainData& data = shared.data;
+  result.demonstrations = data.demonstrations.num_episodes();
+  result.discarded_demonstrations = data.discarded_demonstrations;
+  result.demonstration_steps = data.demonstrations.num_steps();
+  result.safe_states = data.safe.size();
+  result.near_dangerous_states = data.near_dangerous.size();
+  result.data_seconds = clock.Seconds();
+  result.variants = kind == ExperimentKind::kSensitivity
+                        ? SensitivityVariants(o.data_fractions, o.imbalance_ratios, o.label_noise)
+                        : std::vector<BarrierDataVariant>{{"baseline", 1.0, 1, 0.0}};
+  p->env = domain.MakeEnvironment();
+  p->identity = ExperimentIdentity(result);
+  // Task files of another experiment fail before anything is written.
+  for (int i : indices)
+    ReusableTask(o.output_dir, o.first_seed + static_cast<std::uint64_t>(i), p->identity,
+                 result.variants.size());
+  // The data, by one shard only: shards may share the directory (on several hosts).
+  if (!o.output_dir.empty() && o.shard == 0) {
+    data::WriteTrajectories(o.output_dir + "/demos.csv", data.demonstrations);
+    data::WriteStateSet(o.output_dir + "/safe.csv", data.safe);
+    data::WriteStateSet(o.output_dir + "/near_dangerous.csv", data.near_dangerous);
+    if (shared.check) {
+      data::WriteStateSet(o.output_dir + "/check_safe.csv", shared.check_safe);
+      data::WriteStateSet(o.output_dir + "/check_near_dangerous.csv", shared.check_near_dangerous);
+    }
+  }
+  progress.Line([&](std::ostream& line) {
+    line << "data: " << result.demonstrations << " expert demonstrations ("
+         << result.discarded_demonstrations << " discarded), " << result.demonstration_steps
+         << " steps; " << result.safe_states << " safe and " << result.near_dangerous_states
+         << " near-dangerous states (" << clock.Seconds() << " s)";
+  });
+}
+
+// Validation shared by RunExperiment and RunExperimentShard; returns the methods.
+std::vector<eval::Method> CheckRun(ExperimentKind kind, const Domain& domain,
+                                   const ExperimentOptions& o) {
+  domain.Validate();
+  o.Validate();
+  domain.CheckExperiment(o);
+  const std::vector<eval::Method> methods = o.methods.empty() ? DefaultMethods(kind) : o.methods;
+  SECURE_CHECK(kind != ExperimentKind::kSensitivity ||
+                   std::find(methods.begin(), methods.end(), eval::Method::kSecure) !=
+                       methods.end(),
+               "the sensitivity experiment reports SECURE: its methods must include secure");
+  // Before any work, so that an unusable --out (a file, a read-only place) fails at once.
+  CreateDirectories(o.output_dir);
+  return methods;
+}
+
+// 2. The seeds of `indices`, on `threads` workers taking the next one: each reused from its task
+// file, or computed and its task file written. Returns the outcomes in the order of `indices`.
+std::vector<SeedOutcome> RunSeeds(const Domain& domain, const ExperimentOptions& o,
+                                  const Prepared& p, const std::vector<int>& indices,
+                                  Progress& progress, ShardReport* report) {
+  std::vector<SeedOutcome> outcomes(indices.size());
+  std::vector<char> reused(indices.size(), 0);
+  const int count = static_cast<int>(indices.size());
+  // RunJobsInParallel labels failures by index: run over positions and name the seed here.
+  internal::RunJobsInParallel(
+      count, o.threads,
+      [&](int k) {
+        const std::size_t at = static_cast<std::size_t>(k);
+        const std::uint64_t seed = o.first_seed + static_cast<std::uint64_t>(indices[at]);
+        try {
+          if (std::optional<SeedOutcome> done =
+                  ReusableTask(o.output_dir, seed, p.identity, p.result.variants.size())) {
+            outcomes[at] = std::move(*done);
+            reused[at] = 1;
+            progress.Line([&](std::ostream& out) {
+              out << "[seed " << seed << "] done before: reused "
+                  << SeedDir(o.output_dir, seed) << "/" << kTaskFile;
+            });
+            return;
+          }
+          outcomes[at] = RunSeed(domain, o, p.result.methods, indices[at], p.shared, *p.env,
+                                 p.result.variants, progress);
+          if (!o.output_dir.empty()) {
+            WriteFileAtomically(SeedDir(o.output_dir, seed) + "/" + kTaskFile,
+                                TaskJson(p.identity, seed, o.threads, p.result.data_seconds,
+                                         outcomes[at])
+                                        .dump(2) +
+                                    "\n");
+          }
+        } catch (const std::exception& e) {
+          SECURE_THROW("seed " << seed << ": " << e.what());
+        }
+      },
+      nullptr, 0);  // the job's errors name the seed
+  if (report != nullptr) {
+    for (std::size_t k = 0; k < indices.size(); ++k) {
+      const std::uint64_t seed = o.first_seed + static_cast<std::uint64_t>(indices[k]);
+      (reused[k] ? report->reused : report->computed).push_back(seed);
+    }
+  }
+  return outcomes;
+}
+
+// 3. Across seeds (all of them, in order), one evaluation per variant.
+void Assemble(std::vector<SeedOutcome> outcomes, ExperimentResult* result) {
+  for (std::size_t v = 0; v < result->variants.size(); ++v) {
+    eval::Evaluation evaluation(result->options.evaluation);
+    for (const SeedOutcome& outcome : outcomes)
+      for (const auto& [method, r] : outcome.results[v]) evaluation.Add(method, r);
+    evaluation.Finish();
+    result->evaluations.emplace_back(
+        result->kind == ExperimentKind::kSensitivity ? result->variants[v].name : "main",
+        std::move(evaluation));
+  }
+  for (SeedOutcome& outcome : outcomes) result->seed_summaries.push_back(std::move(outcome.summary));
+}
+
 
 }  // namespace
 
@@ -420,6 +746,9 @@ void ExperimentOptions::Validate() const {
   SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, kOptions, "episodes", episodes,
                      "in [1, " << kMaxEpisodes << "]");
   SECURE_CHECK_FIELD(threads > 0, kOptions, "threads", threads, "> 0");
+  SECURE_CHECK_FIELD(shards >= 1, kOptions, "shards", shards, ">= 1");
+  SECURE_CHECK_FIELD(shard >= 0 && shard < shards, kOptions, "shard", shard,
+                     "in [0, shards - 1] (shards = " << shards << ")");
   SECURE_CHECK_FIELD(std::isfinite(evaluation.tost_bound) && evaluation.tost_bound > 0, kOptions,
                      "evaluation.tost_bound", evaluation.tost_bound, "> 0");
   for (double f : data_fractions)
@@ -524,7 +853,7 @@ nlohmann::json ExperimentResult::ToJson() const {
       {"seeds", seed_summaries},
       {"data_seconds", data_seconds},
       {"seconds", seconds},
-      {"options", options.ToJson()}};
+      {"options", options_json.is_null() ? options.ToJson() : options_json}};
   if (kind != ExperimentKind::kSensitivity) {
     nlohmann::json j = evaluations.front().second.ToJson();
     j["experiment"] = std::move(experiment_json);
@@ -605,106 +934,192 @@ std::string ExperimentResult::CheckTable() const {
           (seed_summaries[i]["check_augmented"].value("flagged", false) ? "flagged" : "pass");
     double acc_safe = 0, acc_nd = 0;
     if (c.contains("accuracy") && c["accuracy"].is_object()) {
-      acc_safe = c["accuracy"].value("safe", 0.0);
-      acc_nd = c["accuracy"].value("near_dangerous", 0.0);
+      acc_safe = Number(c["accuracy"], "safe");
+      acc_nd = Number(c["accuracy"], "near_dangerous");
     }
     char line[256];
     std::snprintf(line, sizeof line, "| %llu | %s | %.4f | %.4f | %.4f | %.3f / %.3f | %s |\n",
                   static_cast<unsigned long long>(options.first_seed + i), verdict.c_str(),
-                  kinds["no_safe_action"].value("rate", 0.0),
-                  kinds["near_dangerous"].value("rate", 0.0), kinds["unsafe"].value("rate", 0.0),
+                  Number(kinds["no_safe_action"], "rate"), Number(kinds["near_dangerous"], "rate"),
+                  Number(kinds["unsafe"], "rate"),
                   acc_safe, acc_nd, dangerous.c_str());
     out << line;
   }
   out << "\n"
       << flagged << " of " << seed_summaries.size()
-      << " seeds flagged (thresholds: " << options.check.thresholds.ToJson().dump() << ").\n";
+      << " seeds flagged (thresholds: "
+      << (options_json.is_null() ? options.check.thresholds.ToJson()
+                                 : options_json["check"]["thresholds"])
+             .dump()
+      << ").\n";
   return out.str();
 }
 
 ExperimentResult RunExperiment(ExperimentKind kind, const Domain& domain,
                                const ExperimentOptions& o, std::ostream* out) {
-  domain.Validate();
-  o.Validate();
-  domain.CheckExperiment(o);
-  const std::vector<eval::Method> methods = o.methods.empty() ? DefaultMethods(kind) : o.methods;
-  SECURE_CHECK(kind != ExperimentKind::kSensitivity ||
-                   std::find(methods.begin(), methods.end(), eval::Method::kSecure) !=
-                       methods.end(),
-               "the sensitivity experiment reports SECURE: its methods must include secure");
-  // Before any work, so that an unusable --out (a file, a read-only place) fails at once.
-  CreateDirectories(o.output_dir);
+  SECURE_CHECK(o.shards == 1, "RunExperiment runs every seed (shards = "
+                                  << o.shards << "): use RunExperimentShard and MergeExperiment");
+  const std::vector<eval::Method> methods = CheckRun(kind, domain, o);
   const Stopwatch clock;
   Progress progress(out, o.verbose);
   nn::SetTorchThreads(1);  // parallelism comes from the seeds; 1 is fastest for small nets
-  ExperimentResult result;
-  result.kind = kind;
-  result.domain = domain.name();
-  result.domain_title = domain.Title();
-  result.domain_options = domain.OptionsJson();
-  result.methods = methods;
-  result.options = o;
-
-  // 1. Data.
-  SharedData shared;
-  shared.data = domain.GenerateData(o.data_seed);
-  shared.check = o.check_enabled && domain.HasCheck() && Any(methods, NeedsBarrier);
-  if (shared.check) {
-    domain.CheckHeldOut(o.data_seed, o.check_held_out, &shared.check_safe,
-                        &shared.check_near_dangerous);
-  }
-  const DomainData& data = shared.data;
-  result.demonstrations = data.demonstrations.num_episodes();
-  result.discarded_demonstrations = data.discarded_demonstrations;
-  result.demonstration_steps = data.demonstrations.num_steps();
-  result.safe_states = data.safe.size();
-  result.near_dangerous_states = data.near_dangerous.size();
-  result.data_seconds = clock.Seconds();
-  if (!o.output_dir.empty()) {
-    data::WriteTrajectories(o.output_dir + "/demos.csv", data.demonstrations);
-    data::WriteStateSet(o.output_dir + "/safe.csv", data.safe);
-    data::WriteStateSet(o.output_dir + "/near_dangerous.csv", data.near_dangerous);
-    if (shared.check) {
-      data::WriteStateSet(o.output_dir + "/check_safe.csv", shared.check_safe);
-      data::WriteStateSet(o.output_dir + "/check_near_dangerous.csv", shared.check_near_dangerous);
-    }
-  }
-  progress.Line([&](std::ostream& line) {
-    line << "data: " << result.demonstrations << " expert demonstrations ("
-         << result.discarded_demonstrations << " discarded), " << result.demonstration_steps
-         << " steps; " << result.safe_states << " safe and " << result.near_dangerous_states
-         << " near-dangerous states (" << clock.Seconds() << " s)";
-  });
-
-  // 2. Seeds, on `threads` workers taking the next seed index.
-  result.variants = kind == ExperimentKind::kSensitivity
-                        ? SensitivityVariants(o.data_fractions, o.imbalance_ratios, o.label_noise)
-                        : std::vector<BarrierDataVariant>{{"baseline", 1.0, 1, 0.0}};
-  const std::unique_ptr<domains::Environment> env = domain.MakeEnvironment();
-  std::vector<SeedOutcome> outcomes(static_cast<std::size_t>(o.seeds));
-  internal::RunJobsInParallel(
-      o.seeds, o.threads,
-      [&](int i) {
-        outcomes[static_cast<std::size_t>(i)] =
-            RunSeed(domain, o, methods, i, shared, *env, result.variants, progress);
-      },
-      "seed", static_cast<long>(o.first_seed));
-
-  // 3. Across seeds, one evaluation per variant.
-  for (std::size_t v = 0; v < result.variants.size(); ++v) {
-    eval::Evaluation evaluation(o.evaluation);
-    for (const SeedOutcome& outcome : outcomes)
-      for (const auto& [method, r] : outcome.results[v]) evaluation.Add(method, r);
-    evaluation.Finish();
-    result.evaluations.emplace_back(
-        kind == ExperimentKind::kSensitivity ? result.variants[v].name : "main",
-        std::move(evaluation));
-  }
-  for (const SeedOutcome& outcome : outcomes) result.seed_summaries.push_back(outcome.summary);
+  std::vector<int> all(static_cast<std::size_t>(o.seeds));
+  for (int i = 0; i < o.seeds; ++i) all[static_cast<std::size_t>(i)] = i;
+  Prepared p;
+  p.result.methods = methods;
+  Prepare(kind, domain, o, all, progress, clock, &p);
+  std::vector<SeedOutcome> outcomes = RunSeeds(domain, o, p, all, progress, nullptr);
+  ExperimentResult& result = p.result;
+  Assemble(std::move(outcomes), &result);
   result.seconds = clock.Seconds();
   if (!o.output_dir.empty()) {
     WriteFileAtomically(o.output_dir + "/result.json", result.ToJson().dump(2) + "\n");
   }
+  return std::move(p.result);
+}
+
+ShardReport RunExperimentShard(ExperimentKind kind, const Domain& domain,
+                               const ExperimentOptions& o, std::ostream* out) {
+  SECURE_CHECK_FIELD(!o.output_dir.empty(), kOptions, "output_dir", "(empty)",
+                     "a directory: a shard writes its seeds' task files there");
+  const std::vector<eval::Method> methods = CheckRun(kind, domain, o);
+  const Stopwatch clock;
+  Progress progress(out, o.verbose);
+  nn::SetTorchThreads(1);
+  std::vector<int> mine;
+  for (int i = o.shard; i < o.seeds; i += o.shards) mine.push_back(i);
+  Prepared p;
+  p.result.methods = methods;
+  Prepare(kind, domain, o, mine, progress, clock, &p);
+  ShardReport report;
+  RunSeeds(domain, o, p, mine, progress, &report);
+  report.seconds = clock.Seconds();
+  return report;
+}
+
+ExperimentResult MergeExperiment(const std::vector<std::string>& run_dirs) {
+  SECURE_CHECK(!run_dirs.empty(), "merge: no run directory given");
+  // Every task file, by seed (a directory given twice counts once).
+  std::vector<std::string> dirs;
+  std::vector<std::filesystem::path> seen;
+  for (const std::string& dir : run_dirs) {
+    std::error_code ec;
+    SECURE_CHECK(std::filesystem::is_directory(dir, ec),
+                 "merge: '" << dir << "' is not a directory (a run directory of a shard)");
+    const std::filesystem::path canonical = std::filesystem::canonical(dir, ec);
+    if (std::find(seen.begin(), seen.end(), canonical) != seen.end()) continue;
+    seen.push_back(canonical);
+    dirs.push_back(dir);
+  }
+  std::map<std::uint64_t, std::pair<std::string, nlohmann::json>> tasks;  // seed -> (path, task)
+  std::string first_path;
+  nlohmann::json identity;
+  for (const std::string& dir : dirs) {
+    std::vector<std::string> paths;
+    for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+      const std::string name = entry.path().filename().string();
+      if (entry.is_directory() && name.rfind("seed-", 0) == 0 &&
+          std::filesystem::exists(entry.path() / kTaskFile))
+        paths.push_back((entry.path() / kTaskFile).string());
+    }
+    std::sort(paths.begin(), paths.end());
+    for (const std::string& path : paths) {
+      nlohmann::json task = ReadTaskFile(path);
+      if (first_path.empty()) {
+        first_path = path;
+        identity = task["experiment"];
+      } else {
+        const std::string difference = FirstDifference(task["experiment"], identity, "");
+        SECURE_CHECK(difference.empty(), "merge: " << path << " and " << first_path
+                                                   << " are tasks of different experiments ("
+                                                   << difference << ")");
+      }
+      const std::uint64_t seed = task["seed"].get<std::uint64_t>();
+      const auto [it, inserted] = tasks.emplace(seed, std::make_pair(path, std::move(task)));
+      SECURE_CHECK(inserted, "merge: seed " << seed << " is there twice: " << it->second.first
+                                            << " and " << path);
+    }
+  }
+  SECURE_CHECK(!first_path.empty(), "merge: no task file (seed-K/" << kTaskFile << ") in "
+                                        << dirs.front()
+                                        << (dirs.size() > 1 ? " and the others" : "")
+                                        << ": run the experiment's shards with --out first");
+  SECURE_CHECK(identity.value("format", 0) == kTaskFormat,
+               "merge: " << first_path << ": task format " << identity.value("format", 0)
+                         << ", this version reads " << kTaskFormat);
+  SECURE_CHECK(identity.value("version", std::string()) == Version(),
+               "merge: " << first_path << " was written by secure "
+                         << identity.value("version", std::string("?")) << ", this is "
+                         << Version());
+
+  ExperimentResult result;
+  try {
+    result.kind = FromString(kExperimentKindNames, identity.at("kind").get<std::string>(), "kind");
+    result.domain = identity.at("domain").get<std::string>();
+    result.domain_title = identity.at("domain_title").get<std::string>();
+    result.domain_options = identity.at("domain_options");
+    for (const nlohmann::json& m : identity.at("methods"))
+      result.methods.push_back(FromString(eval::kMethodNames, m.get<std::string>(), "method"));
+    for (const nlohmann::json& v : identity.at("variants"))
+      result.variants.push_back({v.at("name").get<std::string>(), v.at("data_fraction").get<double>(),
+                                 v.at("imbalance").get<int>(), v.at("label_noise").get<double>()});
+    const nlohmann::json& data = identity.at("data");
+    result.demonstrations = data.at("demonstrations").get<long>();
+    result.discarded_demonstrations = data.at("discarded_demonstrations").get<long>();
+    result.demonstration_steps = data.at("demonstration_steps").get<long>();
+    result.safe_states = data.at("safe_states").get<long>();
+    result.near_dangerous_states = data.at("near_dangerous_states").get<long>();
+    const nlohmann::json& options = identity.at("options");
+    result.options.barrier_kind =
+        FromString(kBarrierKindNames, options.at("barrier_kind").get<std::string>(), "barrier_kind");
+    result.options.seeds = options.at("seeds").get<int>();
+    result.options.episodes = options.at("episodes").get<long>();
+    result.options.first_seed = options.at("first_seed").get<std::uint64_t>();
+    const nlohmann::json& evaluation = identity.at("evaluation");
+    result.options.evaluation.tost_bound = evaluation.at("tost_bound").get<double>();
+    result.options.evaluation.alpha = evaluation.at("alpha").get<double>();
+  } catch (const nlohmann::json::exception& e) {
+    SECURE_THROW("merge: " << first_path << ": malformed experiment record (" << e.what() << ")");
+  }
+  const std::pair<std::string, nlohmann::json>& first = tasks.begin()->second;
+  result.options.threads = first.second.value("threads", 1);
+  // options.ToJson()'s key order: `threads` is its last key.
+  result.options_json = identity["options"];
+  result.options_json["threads"] = result.options.threads;
+
+  // Every seed exactly once.
+  const std::uint64_t first_seed = result.options.first_seed;
+  std::vector<std::uint64_t> missing;
+  for (int i = 0; i < result.options.seeds; ++i)
+    if (tasks.count(first_seed + static_cast<std::uint64_t>(i)) == 0)
+      missing.push_back(first_seed + static_cast<std::uint64_t>(i));
+  if (!missing.empty()) {
+    std::ostringstream list;
+    for (std::size_t i = 0; i < missing.size() && i < 20; ++i) list << (i ? ", " : "") << missing[i];
+    if (missing.size() > 20) list << ", ...";
+    SECURE_THROW("merge: " << missing.size() << " of " << result.options.seeds
+                           << " seeds have no task file (seed " << list.str()
+                           << "): rerun the shard(s) that own them");
+  }
+  for (const auto& [seed, entry] : tasks)
+    SECURE_CHECK(seed >= first_seed && seed < first_seed + static_cast<std::uint64_t>(
+                                                               result.options.seeds),
+                 "merge: " << entry.first << " is the task of seed " << seed
+                           << ", outside the experiment's seeds " << first_seed << " to "
+                           << first_seed + static_cast<std::uint64_t>(result.options.seeds) - 1);
+
+  std::vector<SeedOutcome> outcomes;
+  double seed_seconds = 0.0;
+  for (const auto& [seed, entry] : tasks) {
+    outcomes.push_back(OutcomeFromTask(entry.second, entry.first, result.variants.size()));
+    result.data_seconds = std::max(result.data_seconds, Number(entry.second, "data_seconds"));
+    const nlohmann::json stages =
+        entry.second["summary"].value("seconds", nlohmann::json::object());
+    for (const auto& [stage, seconds] : stages.items())
+      if (seconds.is_number()) seed_seconds += seconds.get<double>();
+  }
+  Assemble(std::move(outcomes), &result);
+  result.seconds = result.data_seconds + seed_seconds;
   return result;
 }
 

@@ -124,8 +124,15 @@ struct ExperimentOptions {
   std::vector<double> label_noise = {0.0, 0.1, 0.3, 0.5};
 
   int threads = 2;         // seeds trained and evaluated in parallel
-  std::string output_dir;  // if set: data CSVs, per-seed models and curves, result.json
+  std::string output_dir;  // if set: data CSVs, per-seed models, curves and task files
+                           // (seed-K/task.json), result.json
   bool verbose = true;     // progress lines on the progress stream
+
+  // Sharding (RunExperimentShard): this process runs the seeds whose index (0-based, from
+  // first_seed) is congruent to `shard` modulo `shards`. Like threads, output_dir and verbose it
+  // is not part of ToJson(): the results do not depend on it.
+  int shard = 0;
+  int shards = 1;
 
   /// Throws secure::Error naming the field, value and rule.
   void Validate() const;
@@ -153,7 +160,9 @@ struct ExperimentResult {
   std::vector<nlohmann::json> seed_summaries;  // per seed: training summaries and timings
   double data_seconds = 0.0;
   double seconds = 0.0;
-  ExperimentOptions options;
+  ExperimentOptions options;  // in a merged result only barrier_kind, seeds, episodes,
+                              // first_seed and threads are set: the rest is in options_json
+  nlohmann::json options_json;  // options.ToJson(): what ToJson() and Table() report
 
   /// Outside `sensitivity`: the evaluation's eval::Evaluation::ToJson() (the format of
   /// `secure eval`) plus "experiment": {kind, domain, data counts, per-seed summaries, options}.
@@ -169,7 +178,40 @@ struct ExperimentResult {
 /// Runs one experiment of `kind` on `domain`; progress lines go to `progress` when
 /// options.verbose (may be null). @throws secure::Error on invalid options, or if any stage fails
 /// (naming the seed and stage).
+///
+/// Tasks. Every seed (with all its barrier-data variants, which share the seed's BC and AIRL
+/// policies) is one task. With output_dir set, a finished seed's results are written atomically
+/// to output_dir/seed-K/task.json (the task file: the experiment it belongs to -- version, kind,
+/// domain and its options, methods, variants, options but `threads` -- the seed, its per-method
+/// results and its summary). A rerun into the same directory reuses every task file whose
+/// experiment and seed match instead of recomputing the seed (so a killed run, or a killed shard,
+/// resumes); a task file of another experiment is an error naming the file and the first
+/// difference. options.shards must be 1.
 ExperimentResult RunExperiment(ExperimentKind kind, const Domain& domain,
                                const ExperimentOptions& options, std::ostream* progress);
+
+/// What one shard did: the seeds it computed and the seeds whose task files it reused.
+struct ShardReport {
+  std::vector<std::uint64_t> computed, reused;
+  double seconds = 0.0;
+};
+
+/// Runs the tasks (seeds) of shard options.shard of options.shards (output_dir required): the
+/// data (every shard generates it; only shard 0 writes the data files, since shards may share
+/// output_dir), then each of the shard's seeds (index = shard mod shards), reused from its task
+/// file or computed and written to it. Writes no result.json: MergeExperiment does. Shards
+/// never communicate; their seed directories are disjoint.
+ShardReport RunExperimentShard(ExperimentKind kind, const Domain& domain,
+                               const ExperimentOptions& options, std::ostream* progress);
+
+/// The result of an experiment from the task files its shards wrote into `run_dirs` (several
+/// shard directories, or one directory all shards wrote into): checks that every task file
+/// belongs to the same experiment (else an error naming the files and the first difference) and
+/// that every seed is there exactly once (else an error naming the seed and files), then
+/// assembles the result exactly as RunExperiment does: ToJson() and Table() equal an unsharded
+/// run's but for the timing fields (`seconds`, `data_seconds`: here the largest data time of the
+/// task files and the data time plus the sum of the seeds' times) and options.threads (the first
+/// task file's). Writes nothing.
+ExperimentResult MergeExperiment(const std::vector<std::string>& run_dirs);
 
 }  // namespace secure::experiments

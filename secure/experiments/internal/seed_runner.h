@@ -37,7 +37,8 @@ class Progress {
 
 /// Runs job(i) for i = 0 .. count - 1 on `threads` workers (the calling thread is one of them),
 /// each worker taking the next index; LibTorch and OpenBLAS run one thread per worker. The
-/// first failure stops the remaining jobs and is rethrown as "<label> <first_label + i>: what".
+/// first failure stops the remaining jobs and is rethrown as "<label> <first_label + i>: what"
+/// (as it is when `label` is null).
 inline void RunJobsInParallel(int count, int threads, const std::function<void(int)>& job,
                               const char* label, long first_label) {
   std::vector<std::exception_ptr> errors(static_cast<std::size_t>(count));
@@ -64,6 +65,7 @@ inline void RunJobsInParallel(int count, int threads, const std::function<void(i
     try {
       std::rethrow_exception(errors[static_cast<std::size_t>(i)]);
     } catch (const std::exception& e) {
+      if (label == nullptr) SECURE_THROW(e.what());
       SECURE_THROW(label << " " << first_label + i << ": " << e.what());
     }
   }
