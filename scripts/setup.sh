@@ -29,6 +29,7 @@ set -euo pipefail
 #   libgtest-dev libgmock-dev   unit tests
 #   librapidcheck-dev           property-based tests
 #   libbenchmark-dev            benchmarks under bench/
+#   openmpi-bin                 mpirun, for the sharded-experiment tests (tests/apps/shard_test.cc); nothing links MPI
 #   python3-dev pybind11-dev    the Python module (python/): headers, the binding library
 #   python3-numpy python3-pytest  the module's arrays; its tests (ctest -L python)
 PACKAGES=(
@@ -40,6 +41,7 @@ PACKAGES=(
   ffmpeg
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy python3-pytest
+  openmpi-bin
 )
 # The checking build (scripts/check.sh), installed only with --check-deps:
 #   clang libclang-rt-14-dev    clang and its AddressSanitizer / UBSan runtimes

@@ -9,6 +9,7 @@
 #include <yaml-cpp/yaml.h>
 #include <limits>
 
+#include "secure/common/atomic_file.h"
 #include "tests/test_util.h"
 
 namespace secure::experiments {
@@ -142,6 +143,94 @@ TEST(PipelineTest, OptionsAreValidated) {
   EXPECT_EQ(d.options().near_dangerous.count, 9);
   EXPECT_HAS(ErrorOf([&] { d.ApplyYaml(YAML::Load("{near_dangerous: {rho: 1}}"), "x.yaml"); }),
              "unknown key 'rho'");
+}
+
+// Everything but what measures time (seconds, data_seconds, the decision latencies).
+nlohmann::json WithoutTimings(const nlohmann::json& j) {
+  if (j.is_object()) {
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto& [key, value] : j.items())
+      if (key.find("second") == std::string::npos && key != "latency_us")
+        out[key] = WithoutTimings(value);
+    return out;
+  }
+  if (j.is_array()) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& value : j) out.push_back(WithoutTimings(value));
+    return out;
+  }
+  return j;
+}
+
+class ShardedPipelineTest : public test::TempDirTest {};
+
+// The sensitivity kind (several barrier-data variants per seed, its own table) run whole and as
+// three shards of one directory: the merged result is the unsharded one; a rerun reuses every
+// task file; a task file of another experiment is refused, naming the file and the difference.
+TEST_F(ShardedPipelineTest, ShardsMergeToTheUnshardedResultAndTaskFilesAreReused) {
+  ExperimentOptions o = Tiny();
+  o.methods = {eval::Method::kSecure};
+  o.seeds = 4;
+  o.data_fractions = {1.0, 0.5};
+  o.imbalance_ratios = {1};
+  o.label_noise = {0.0, 0.3};
+  o.output_dir = PathOf("full");
+  const ExperimentKind kind = ExperimentKind::kSensitivity;
+  const ExperimentResult whole = RunExperiment(kind, TinyDomain(), o, nullptr);
+  ASSERT_EQ(whole.variants.size(), 3u);
+  for (int k = 0; k < 3; ++k) {
+    ExperimentOptions shard = o;
+    shard.output_dir = PathOf("run");
+    shard.shard = k;
+    shard.shards = 3;
+    const ShardReport report = RunExperimentShard(kind, TinyDomain(), shard, nullptr);
+    EXPECT_EQ(report.computed.size(), k == 0 ? 2u : 1u);
+    EXPECT_TRUE(report.reused.empty());
+  }
+  EXPECT_FALSE(std::filesystem::exists(PathOf("run/result.json")));
+  const ExperimentResult merged = MergeExperiment({PathOf("run")});
+  // (Compared as text: a NaN in a summary -- an accuracy without held-out states -- is null in a
+  // task file, and NaN != NaN.)
+  EXPECT_EQ(WithoutTimings(merged.ToJson()).dump(), WithoutTimings(whole.ToJson()).dump());
+  EXPECT_EQ(merged.Table(), whole.Table());  // the sensitivity table has no timing column
+  // result.json of the unsharded run: the in-memory result's document.
+  EXPECT_EQ(ReadFile(PathOf("full/result.json")), whole.ToJson().dump(2) + "\n");
+
+  // A rerun (with other threads: not part of the experiment) reuses every seed: the same
+  // result, seed timings included.
+  ExperimentOptions again = o;
+  again.threads = 1;
+  nlohmann::json rerun = RunExperiment(kind, TinyDomain(), again, nullptr).ToJson();
+  nlohmann::json first = whole.ToJson();
+  EXPECT_EQ(rerun["experiment"]["seeds"].dump(), first["experiment"]["seeds"].dump());
+  rerun["experiment"]["options"].erase("threads");
+  first["experiment"]["options"].erase("threads");
+  EXPECT_EQ(WithoutTimings(rerun).dump(), WithoutTimings(first).dump());
+
+  // Another experiment into the same directory: refused before anything is written.
+  again.episodes = 9;
+  EXPECT_HAS(ErrorOf([&] { RunExperiment(kind, TinyDomain(), again, nullptr); }),
+             PathOf("full") + "/seed-0/task.json: the task of a different experiment "
+                              "(options.episodes: 8 vs 9");
+  // Merge: a seed missing, a directory of another experiment.
+  std::filesystem::remove(PathOf("run/seed-3/task.json"));
+  EXPECT_HAS(ErrorOf([&] { MergeExperiment({PathOf("run")}); }),
+             "1 of 4 seeds have no task file (seed 3)");
+  EXPECT_HAS(ErrorOf([&] { MergeExperiment({PathOf("run"), PathOf("full")}); }),
+             "seed 0 is there twice");
+
+  // Shard options.
+  ExperimentOptions bad = o;
+  bad.shards = 2;
+  bad.shard = 2;
+  EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ExperimentOptions::shard = 2");
+  bad.shard = 1;
+  bad.output_dir.clear();
+  EXPECT_HAS(ErrorOf([&] { RunExperimentShard(kind, TinyDomain(), bad, nullptr); }),
+             "ExperimentOptions::output_dir");
+  bad.output_dir = PathOf("full");
+  EXPECT_HAS(ErrorOf([&] { RunExperiment(kind, TinyDomain(), bad, nullptr); }),
+             "use RunExperimentShard");
 }
 
 }  // namespace
