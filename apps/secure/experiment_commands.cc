@@ -56,9 +56,9 @@ std::optional<std::string> Env(const char* name) {
 
 long EnvCount(const char* name, const std::string& value) {
   long n = 0;
-  SECURE_CHECK(ParseCount(value, kMaxSeeds * 1000L, &n),
-               "environment variable " << name << " = '" << value
-                                       << "' is not a non-negative integer");
+  SECURE_CHECK(ParseCount(value, kMaxSeeds * 1000L, &n), "environment variable "
+                                                             << name << " = '" << value
+                                                             << "' is not a non-negative integer");
   return n;
 }
 
@@ -71,7 +71,8 @@ std::optional<Shard> RankFromEnv(const char* rank_var, std::vector<const char*> 
     const std::optional<std::string> size = Env(size_var);
     if (!size) continue;
     const long r = EnvCount(rank_var, *rank), n = EnvCount(size_var, *size);
-    SECURE_CHECK(n >= 1, "environment variable " << size_var << " = '" << *size << "' must be >= 1");
+    SECURE_CHECK(n >= 1,
+                 "environment variable " << size_var << " = '" << *size << "' must be >= 1");
     SECURE_CHECK(r < n, "environment variable " << rank_var << " = '" << *rank << "' must be below "
                                                 << size_var << " = " << n);
     return Shard{static_cast<int>(r), static_cast<int>(n), label};
@@ -100,8 +101,8 @@ Shard ResolveShard(const std::string& flag) {
                                         << *id << "' is set but SLURM_ARRAY_TASK_COUNT is not");
     long k = EnvCount("SLURM_ARRAY_TASK_ID", *id);
     const long n = EnvCount("SLURM_ARRAY_TASK_COUNT", *count);
-    SECURE_CHECK(n >= 1, "environment variable SLURM_ARRAY_TASK_COUNT = '" << *count
-                                                                          << "' must be >= 1");
+    SECURE_CHECK(n >= 1,
+                 "environment variable SLURM_ARRAY_TASK_COUNT = '" << *count << "' must be >= 1");
     std::string source = "SLURM_ARRAY_TASK_ID/COUNT";
     if (const std::optional<std::string> min = Env("SLURM_ARRAY_TASK_MIN")) {
       const long m = EnvCount("SLURM_ARRAY_TASK_MIN", *min);
@@ -111,15 +112,15 @@ Shard ResolveShard(const std::string& flag) {
       source = "SLURM_ARRAY_TASK_ID-MIN/COUNT";
     }
     SECURE_CHECK(k < n, "environment variable SLURM_ARRAY_TASK_ID = '"
-                            << *id << "' gives shard " << k << ", not below SLURM_ARRAY_TASK_COUNT = "
-                            << n << " (use a contiguous array, --array=0-" << n - 1 << ")");
+                            << *id << "' gives shard " << k
+                            << ", not below SLURM_ARRAY_TASK_COUNT = " << n
+                            << " (use a contiguous array, --array=0-" << n - 1 << ")");
     slurm = Shard{static_cast<int>(k), static_cast<int>(n), source};
   }
-  std::optional<Shard> mpi = RankFromEnv("OMPI_COMM_WORLD_RANK", {"OMPI_COMM_WORLD_SIZE"},
-                                         "OMPI_COMM_WORLD_RANK/SIZE");
+  std::optional<Shard> mpi =
+      RankFromEnv("OMPI_COMM_WORLD_RANK", {"OMPI_COMM_WORLD_SIZE"}, "OMPI_COMM_WORLD_RANK/SIZE");
   if (!mpi) mpi = RankFromEnv("PMI_RANK", {"PMI_SIZE"}, "PMI_RANK/SIZE");
-  if (!mpi)
-    mpi = RankFromEnv("PMIX_RANK", {"PMI_SIZE", "OMPI_COMM_WORLD_SIZE"}, "PMIX_RANK/SIZE");
+  if (!mpi) mpi = RankFromEnv("PMIX_RANK", {"PMI_SIZE", "OMPI_COMM_WORLD_SIZE"}, "PMIX_RANK/SIZE");
   if (slurm && mpi && slurm->count > 1 && mpi->count > 1) {
     SECURE_THROW("both " << slurm->source << " (shard " << slurm->index << "/" << slurm->count
                          << ") and " << mpi->source << " (" << mpi->index << "/" << mpi->count
@@ -146,10 +147,9 @@ void PrintResult(const experiments::ExperimentResult& result, bool json,
     PrintJson(r);
   } else {
     std::cout << "\n"
-              << result.Table() << "\nData: " << result.demonstrations
-              << " expert demonstrations (" << result.discarded_demonstrations
-              << " discarded), " << result.safe_states << " safe + "
-              << result.near_dangerous_states << " near-dangerous states. Total "
+              << result.Table() << "\nData: " << result.demonstrations << " expert demonstrations ("
+              << result.discarded_demonstrations << " discarded), " << result.safe_states
+              << " safe + " << result.near_dangerous_states << " near-dangerous states. Total "
               << result.seconds << " s.\n";
   }
 }
@@ -306,9 +306,9 @@ struct MergeCommand {
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
     std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
-              << ToString(experiments::kExperimentKindNames, result.kind) << " on "
-              << result.domain << " from " << dirs.size() << " director"
-              << (dirs.size() == 1 ? "y" : "ies") << ", wrote " << target << "/result.json\n";
+              << ToString(experiments::kExperimentKindNames, result.kind) << " on " << result.domain
+              << " from " << dirs.size() << " director" << (dirs.size() == 1 ? "y" : "ies")
+              << ", wrote " << target << "/result.json\n";
     PrintResult(result, json, "experiment merge");
   }
 };

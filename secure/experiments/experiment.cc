@@ -412,24 +412,25 @@ nlohmann::json ExperimentIdentity(const ExperimentResult& r) {
   for (eval::Method m : r.methods) method_names.push_back(ToString(eval::kMethodNames, m));
   nlohmann::json variants = nlohmann::json::array();
   for (const BarrierDataVariant& v : r.variants) variants.push_back(v.ToJson());
-  return {{"format", kTaskFormat},
-          {"version", Version()},
-          {"kind", ToString(kExperimentKindNames, r.kind)},
-          {"domain", r.domain},
-          {"domain_title", r.domain_title},
-          {"domain_options", r.domain_options},
-          {"methods", method_names},
-          {"variants", variants},
-          {"options", options},
-          // Not in options.ToJson() (so not in result.json), but the tests across seeds use it.
-          {"evaluation",
-           {{"tost_bound", r.options.evaluation.tost_bound}, {"alpha", r.options.evaluation.alpha}}},
-          {"data",
-           {{"demonstrations", r.demonstrations},
-            {"discarded_demonstrations", r.discarded_demonstrations},
-            {"demonstration_steps", r.demonstration_steps},
-            {"safe_states", r.safe_states},
-            {"near_dangerous_states", r.near_dangerous_states}}}};
+  return {
+      {"format", kTaskFormat},
+      {"version", Version()},
+      {"kind", ToString(kExperimentKindNames, r.kind)},
+      {"domain", r.domain},
+      {"domain_title", r.domain_title},
+      {"domain_options", r.domain_options},
+      {"methods", method_names},
+      {"variants", variants},
+      {"options", options},
+      // Not in options.ToJson() (so not in result.json), but the tests across seeds use it.
+      {"evaluation",
+       {{"tost_bound", r.options.evaluation.tost_bound}, {"alpha", r.options.evaluation.alpha}}},
+      {"data",
+       {{"demonstrations", r.demonstrations},
+        {"discarded_demonstrations", r.discarded_demonstrations},
+        {"demonstration_steps", r.demonstration_steps},
+        {"safe_states", r.safe_states},
+        {"near_dangerous_states", r.near_dangerous_states}}}};
 }
 
 nlohmann::json TaskJson(const nlohmann::json& identity, std::uint64_t seed, int threads,
@@ -455,12 +456,11 @@ nlohmann::json ReadTaskFile(const std::string& path) {
   try {
     j = nlohmann::json::parse(ReadFile(path));
   } catch (const nlohmann::json::exception& e) {
-    SECURE_THROW(path << ": not a task file (" << e.what()
-                      << "); remove it to recompute the seed");
+    SECURE_THROW(path << ": not a task file (" << e.what() << "); remove it to recompute the seed");
   }
   SECURE_CHECK(j.is_object() && j.contains("experiment") && j.contains("seed") &&
-                   j.contains("results") && j.contains("summary") && j["seed"].is_number_unsigned() &&
-                   j["results"].is_array(),
+                   j.contains("results") && j.contains("summary") &&
+                   j["seed"].is_number_unsigned() && j["results"].is_array(),
                path << ": not a task file (expected an object with experiment, seed, results and "
                        "summary); remove it to recompute the seed");
   return j;
@@ -468,9 +468,9 @@ nlohmann::json ReadTaskFile(const std::string& path) {
 
 SeedOutcome OutcomeFromTask(const nlohmann::json& task, const std::string& path,
                             std::size_t variants) {
-  SECURE_CHECK(task["results"].size() == variants,
-               path << ": " << task["results"].size() << " variants of results, expected "
-                    << variants);
+  SECURE_CHECK(task["results"].size() == variants, path << ": " << task["results"].size()
+                                                        << " variants of results, expected "
+                                                        << variants);
   SeedOutcome outcome;
   try {
     for (const nlohmann::json& per_variant : task["results"]) {
@@ -495,9 +495,9 @@ std::optional<SeedOutcome> ReusableTask(const std::string& run_dir, std::uint64_
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) return std::nullopt;
   const nlohmann::json task = ReadTaskFile(path);
-  SECURE_CHECK(task["seed"].get<std::uint64_t>() == seed,
-               path << ": the task of seed " << task["seed"].get<std::uint64_t>()
-                    << ", expected seed " << seed);
+  SECURE_CHECK(task["seed"].get<std::uint64_t>() == seed, path << ": the task of seed "
+                                                               << task["seed"].get<std::uint64_t>()
+                                                               << ", expected seed " << seed);
   const std::string difference = FirstDifference(task["experiment"], identity, "");
   SECURE_CHECK(difference.empty(),
                path << ": the task of a different experiment (" << difference
@@ -576,10 +576,10 @@ std::vector<eval::Method> CheckRun(ExperimentKind kind, const Domain& domain,
   o.Validate();
   domain.CheckExperiment(o);
   const std::vector<eval::Method> methods = o.methods.empty() ? DefaultMethods(kind) : o.methods;
-  SECURE_CHECK(kind != ExperimentKind::kSensitivity ||
-                   std::find(methods.begin(), methods.end(), eval::Method::kSecure) !=
-                       methods.end(),
-               "the sensitivity experiment reports SECURE: its methods must include secure");
+  SECURE_CHECK(
+      kind != ExperimentKind::kSensitivity ||
+          std::find(methods.begin(), methods.end(), eval::Method::kSecure) != methods.end(),
+      "the sensitivity experiment reports SECURE: its methods must include secure");
   // Before any work, so that an unusable --out (a file, a read-only place) fails at once.
   CreateDirectories(o.output_dir);
   return methods;
@@ -605,19 +605,18 @@ std::vector<SeedOutcome> RunSeeds(const Domain& domain, const ExperimentOptions&
             outcomes[at] = std::move(*done);
             reused[at] = 1;
             progress.Line([&](std::ostream& out) {
-              out << "[seed " << seed << "] done before: reused "
-                  << SeedDir(o.output_dir, seed) << "/" << kTaskFile;
+              out << "[seed " << seed << "] done before: reused " << SeedDir(o.output_dir, seed)
+                  << "/" << kTaskFile;
             });
             return;
           }
           outcomes[at] = RunSeed(domain, o, p.result.methods, indices[at], p.shared, *p.env,
                                  p.result.variants, progress);
           if (!o.output_dir.empty()) {
-            WriteFileAtomically(SeedDir(o.output_dir, seed) + "/" + kTaskFile,
-                                TaskJson(p.identity, seed, o.threads, p.result.data_seconds,
-                                         outcomes[at])
-                                        .dump(2) +
-                                    "\n");
+            WriteFileAtomically(
+                SeedDir(o.output_dir, seed) + "/" + kTaskFile,
+                TaskJson(p.identity, seed, o.threads, p.result.data_seconds, outcomes[at]).dump(2) +
+                    "\n");
           }
         } catch (const std::exception& e) {
           SECURE_THROW("seed " << seed << ": " << e.what());
@@ -644,9 +643,9 @@ void Assemble(std::vector<SeedOutcome> outcomes, ExperimentResult* result) {
         result->kind == ExperimentKind::kSensitivity ? result->variants[v].name : "main",
         std::move(evaluation));
   }
-  for (SeedOutcome& outcome : outcomes) result->seed_summaries.push_back(std::move(outcome.summary));
+  for (SeedOutcome& outcome : outcomes)
+    result->seed_summaries.push_back(std::move(outcome.summary));
 }
-
 
 }  // namespace
 
@@ -941,13 +940,11 @@ std::string ExperimentResult::CheckTable() const {
     std::snprintf(line, sizeof line, "| %llu | %s | %.4f | %.4f | %.4f | %.3f / %.3f | %s |\n",
                   static_cast<unsigned long long>(options.first_seed + i), verdict.c_str(),
                   Number(kinds["no_safe_action"], "rate"), Number(kinds["near_dangerous"], "rate"),
-                  Number(kinds["unsafe"], "rate"),
-                  acc_safe, acc_nd, dangerous.c_str());
+                  Number(kinds["unsafe"], "rate"), acc_safe, acc_nd, dangerous.c_str());
     out << line;
   }
   out << "\n"
-      << flagged << " of " << seed_summaries.size()
-      << " seeds flagged (thresholds: "
+      << flagged << " of " << seed_summaries.size() << " seeds flagged (thresholds: "
       << (options_json.is_null() ? options.check.thresholds.ToJson()
                                  : options_json["check"]["thresholds"])
              .dump()
@@ -1040,8 +1037,8 @@ ExperimentResult MergeExperiment(const std::vector<std::string>& run_dirs) {
                                             << " and " << path);
     }
   }
-  SECURE_CHECK(!first_path.empty(), "merge: no task file (seed-K/" << kTaskFile << ") in "
-                                        << dirs.front()
+  SECURE_CHECK(!first_path.empty(), "merge: no task file (seed-K/"
+                                        << kTaskFile << ") in " << dirs.front()
                                         << (dirs.size() > 1 ? " and the others" : "")
                                         << ": run the experiment's shards with --out first");
   SECURE_CHECK(identity.value("format", 0) == kTaskFormat,
@@ -1061,8 +1058,9 @@ ExperimentResult MergeExperiment(const std::vector<std::string>& run_dirs) {
     for (const nlohmann::json& m : identity.at("methods"))
       result.methods.push_back(FromString(eval::kMethodNames, m.get<std::string>(), "method"));
     for (const nlohmann::json& v : identity.at("variants"))
-      result.variants.push_back({v.at("name").get<std::string>(), v.at("data_fraction").get<double>(),
-                                 v.at("imbalance").get<int>(), v.at("label_noise").get<double>()});
+      result.variants.push_back({v.at("name").get<std::string>(),
+                                 v.at("data_fraction").get<double>(), v.at("imbalance").get<int>(),
+                                 v.at("label_noise").get<double>()});
     const nlohmann::json& data = identity.at("data");
     result.demonstrations = data.at("demonstrations").get<long>();
     result.discarded_demonstrations = data.at("discarded_demonstrations").get<long>();
@@ -1070,8 +1068,8 @@ ExperimentResult MergeExperiment(const std::vector<std::string>& run_dirs) {
     result.safe_states = data.at("safe_states").get<long>();
     result.near_dangerous_states = data.at("near_dangerous_states").get<long>();
     const nlohmann::json& options = identity.at("options");
-    result.options.barrier_kind =
-        FromString(kBarrierKindNames, options.at("barrier_kind").get<std::string>(), "barrier_kind");
+    result.options.barrier_kind = FromString(
+        kBarrierKindNames, options.at("barrier_kind").get<std::string>(), "barrier_kind");
     result.options.seeds = options.at("seeds").get<int>();
     result.options.episodes = options.at("episodes").get<long>();
     result.options.first_seed = options.at("first_seed").get<std::uint64_t>();
@@ -1095,18 +1093,19 @@ ExperimentResult MergeExperiment(const std::vector<std::string>& run_dirs) {
       missing.push_back(first_seed + static_cast<std::uint64_t>(i));
   if (!missing.empty()) {
     std::ostringstream list;
-    for (std::size_t i = 0; i < missing.size() && i < 20; ++i) list << (i ? ", " : "") << missing[i];
+    for (std::size_t i = 0; i < missing.size() && i < 20; ++i)
+      list << (i ? ", " : "") << missing[i];
     if (missing.size() > 20) list << ", ...";
     SECURE_THROW("merge: " << missing.size() << " of " << result.options.seeds
                            << " seeds have no task file (seed " << list.str()
                            << "): rerun the shard(s) that own them");
   }
   for (const auto& [seed, entry] : tasks)
-    SECURE_CHECK(seed >= first_seed && seed < first_seed + static_cast<std::uint64_t>(
-                                                               result.options.seeds),
-                 "merge: " << entry.first << " is the task of seed " << seed
-                           << ", outside the experiment's seeds " << first_seed << " to "
-                           << first_seed + static_cast<std::uint64_t>(result.options.seeds) - 1);
+    SECURE_CHECK(
+        seed >= first_seed && seed < first_seed + static_cast<std::uint64_t>(result.options.seeds),
+        "merge: " << entry.first << " is the task of seed " << seed
+                  << ", outside the experiment's seeds " << first_seed << " to "
+                  << first_seed + static_cast<std::uint64_t>(result.options.seeds) - 1);
 
   std::vector<SeedOutcome> outcomes;
   double seed_seconds = 0.0;

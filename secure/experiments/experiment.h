@@ -160,8 +160,8 @@ struct ExperimentResult {
   std::vector<nlohmann::json> seed_summaries;  // per seed: training summaries and timings
   double data_seconds = 0.0;
   double seconds = 0.0;
-  ExperimentOptions options;  // in a merged result only barrier_kind, seeds, episodes,
-                              // first_seed and threads are set: the rest is in options_json
+  ExperimentOptions options;    // in a merged result only barrier_kind, seeds, episodes,
+                                // first_seed and threads are set: the rest is in options_json
   nlohmann::json options_json;  // options.ToJson(): what ToJson() and Table() report
 
   /// Outside `sensitivity`: the evaluation's eval::Evaluation::ToJson() (the format of

@@ -54,8 +54,8 @@ class ShardTest : public secure::test::TempDirTest {
   // and stderr of the command (all its processes) are captured.
   Result Run(const std::string& args, const std::string& prefix = "") {
     const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    const std::string cmd = kClean + prefix + " " + SECURE_CLI + " " + args + " >" +
-                            out.string() + " 2>" + err.string();
+    const std::string cmd = kClean + prefix + " " + SECURE_CLI + " " + args + " >" + out.string() +
+                            " 2>" + err.string();
     const int status = std::system(cmd.c_str());
     return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, Slurp(out), Slurp(err)};
   }
@@ -68,8 +68,8 @@ class ShardTest : public secure::test::TempDirTest {
                             " & " + kClean + prefix1 + " " + SECURE_CLI + " " + args1 + " >" +
                             (dir_ / "s1.out").string() + " 2>" + (dir_ / "s1.err").string() +
                             " ; r1=$?; wait $!; r0=$?; test $r0 = 0 -a $r1 = 0)";
-    ASSERT_EQ(std::system(cmd.c_str()), 0)
-        << Slurp(dir_ / "s0.err") << "\n---\n" << Slurp(dir_ / "s1.err");
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << Slurp(dir_ / "s0.err") << "\n---\n"
+                                           << Slurp(dir_ / "s1.err");
   }
 
   // The unsharded reference: its result.json and stdout (the table).
@@ -134,7 +134,8 @@ class ShardTest : public secure::test::TempDirTest {
 TEST_F(ShardTest, TwoShardsInOneDirectoryMergeToTheUnshardedResult) {
   RunReference();
   const std::string run = (dir_ / "run").string();
-  RunTwo("", kExperiment + " --shard 0/2 --out " + run, "", kExperiment + " --shard 1/2 --out " + run);
+  RunTwo("", kExperiment + " --shard 0/2 --out " + run, "",
+         kExperiment + " --shard 1/2 --out " + run);
   EXPECT_HAS(Slurp(dir_ / "s1.err"), "shard 1/2 (from --shard)");
   EXPECT_HAS(Slurp(dir_ / "s0.out"), "seeds 0, 2 computed");
   EXPECT_HAS(Slurp(dir_ / "s1.out"), "seeds 1 computed");
@@ -176,7 +177,7 @@ TEST_F(ShardTest, SlurmArrayElementsInTheirOwnDirectoriesMergeToTheUnshardedResu
   const std::string err = Slurp(dir_ / "s1.err");
   EXPECT_EQ(err.rfind("shard 1/2 (from SLURM_ARRAY_TASK_ID/COUNT): secure experiment", 0), 0u)
       << "the first line says where the shard came from: " << err;
-  EXPECT_TRUE(fs::exists(dir_ / "a" / "demos.csv"));   // the data: shard 0 writes it
+  EXPECT_TRUE(fs::exists(dir_ / "a" / "demos.csv"));  // the data: shard 0 writes it
   EXPECT_FALSE(fs::exists(dir_ / "b" / "demos.csv"));
   MergeAndCompare(a + " " + b, dir_ / "merged", " --out " + (dir_ / "merged").string());
 }
@@ -186,8 +187,8 @@ TEST_F(ShardTest, MpirunRanksMergeToTheUnshardedResult) {
       << "mpirun not found: scripts/setup.sh installs it (Debian package openmpi-bin)";
   RunReference();
   const std::string run = (dir_ / "run").string();
-  const Result r = Run(kExperiment + " --out " + run,
-                       "mpirun -np 2 --oversubscribe --allow-run-as-root");
+  const Result r =
+      Run(kExperiment + " --out " + run, "mpirun -np 2 --oversubscribe --allow-run-as-root");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_HAS(r.err, "shard 0/2 (from OMPI_COMM_WORLD_RANK/SIZE)");
   EXPECT_HAS(r.err, "shard 1/2 (from OMPI_COMM_WORLD_RANK/SIZE)");
@@ -221,7 +222,8 @@ TEST_F(ShardTest, MergeNamesMissingDuplicateAndForeignTasks) {
   // into b with the first experiment's options refuses to reuse it, naming the file.
   fs::remove_all(dir_ / "b");
   ASSERT_EQ(Run("experiment method-comparison --domain double-integrator --quick --seeds 2 "
-                "--episodes 3 --methods bc --shard 1/2 --out " + b)
+                "--episodes 3 --methods bc --shard 1/2 --out " +
+                b)
                 .exit_code,
             0);
   r = Run("experiment merge " + a + " " + b);

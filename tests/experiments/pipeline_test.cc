@@ -210,13 +210,16 @@ TEST_F(ShardedPipelineTest, ShardsMergeToTheUnshardedResultAndTaskFilesAreReused
   // Another experiment into the same directory: refused before anything is written.
   again.episodes = 9;
   EXPECT_HAS(ErrorOf([&] { RunExperiment(kind, TinyDomain(), again, nullptr); }),
-             PathOf("full") + "/seed-0/task.json: the task of a different experiment "
-                              "(options.episodes: 8 vs 9");
+             PathOf("full") +
+                 "/seed-0/task.json: the task of a different experiment "
+                 "(options.episodes: 8 vs 9");
   // Merge: a seed missing, a directory of another experiment.
   std::filesystem::remove(PathOf("run/seed-3/task.json"));
   EXPECT_HAS(ErrorOf([&] { MergeExperiment({PathOf("run")}); }),
              "1 of 4 seeds have no task file (seed 3)");
-  EXPECT_HAS(ErrorOf([&] { MergeExperiment({PathOf("run"), PathOf("full")}); }),
+  EXPECT_HAS(ErrorOf([&] {
+               MergeExperiment({PathOf("run"), PathOf("full")});
+             }),
              "seed 0 is there twice");
 
   // Shard options.
