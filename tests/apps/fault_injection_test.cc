@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "secure/common/rng.h"
+#include "tests/json_util.h"
 #include "tests/test_util.h"
 
 namespace {
@@ -145,22 +146,7 @@ class FaultInjectionTest : public secure::test::TempDirTest {
 
 // Result documents: everything but what measures time (and the build context).
 nlohmann::json WithoutTimings(const nlohmann::json& j) {
-  if (j.is_object()) {
-    nlohmann::json out = nlohmann::json::object();
-    for (const auto& [key, value] : j.items()) {
-      if (key == "context" || key.find("second") != std::string::npos ||
-          key.find("latency") != std::string::npos)
-        continue;
-      out[key] = WithoutTimings(value);
-    }
-    return out;
-  }
-  if (j.is_array()) {
-    nlohmann::json out = nlohmann::json::array();
-    for (const auto& value : j) out.push_back(WithoutTimings(value));
-    return out;
-  }
-  return j;
+  return secure::test::WithoutTimings(j, {"context"});
 }
 
 TEST_F(FaultInjectionTest, KilledBarrierTrainingRerunsToTheSameModel) {

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/json_util.h"
 #include "tests/test_util.h"
 
 namespace {
@@ -90,27 +91,11 @@ class ShardTest : public secure::test::TempDirTest {
     const Result m = Run("experiment merge " + dirs + extra);
     ASSERT_EQ(m.exit_code, 0) << m.err;
     const nlohmann::json merged = nlohmann::json::parse(Slurp(result_dir / "result.json"));
-    EXPECT_EQ(WithoutTimings(merged), WithoutTimings(reference_));
+    EXPECT_EQ(secure::test::WithoutTimings(merged), secure::test::WithoutTimings(reference_));
     EXPECT_EQ(merged["experiment"]["seeds"].size(), 3u);
     EXPECT_EQ(TableWithoutTimings(m.out), TableWithoutTimings(reference_table_));
   }
 
-  // Everything but what measures time.
-  static nlohmann::json WithoutTimings(const nlohmann::json& j) {
-    if (j.is_object()) {
-      nlohmann::json out = nlohmann::json::object();
-      for (const auto& [key, value] : j.items())
-        if (key.find("second") == std::string::npos && key != "latency_us")
-          out[key] = WithoutTimings(value);
-      return out;
-    }
-    if (j.is_array()) {
-      nlohmann::json out = nlohmann::json::array();
-      for (const auto& value : j) out.push_back(WithoutTimings(value));
-      return out;
-    }
-    return j;
-  }
   // The table without the latency column (each row's last cell) and the total time.
   static std::string TableWithoutTimings(const std::string& table) {
     std::string out, line;

@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "secure/common/atomic_file.h"
+#include "tests/json_util.h"
 #include "tests/test_util.h"
 
 namespace secure::experiments {
@@ -145,22 +146,7 @@ TEST(PipelineTest, OptionsAreValidated) {
              "unknown key 'rho'");
 }
 
-// Everything but what measures time (seconds, data_seconds, the decision latencies).
-nlohmann::json WithoutTimings(const nlohmann::json& j) {
-  if (j.is_object()) {
-    nlohmann::json out = nlohmann::json::object();
-    for (const auto& [key, value] : j.items())
-      if (key.find("second") == std::string::npos && key != "latency_us")
-        out[key] = WithoutTimings(value);
-    return out;
-  }
-  if (j.is_array()) {
-    nlohmann::json out = nlohmann::json::array();
-    for (const auto& value : j) out.push_back(WithoutTimings(value));
-    return out;
-  }
-  return j;
-}
+using test::WithoutTimings;
 
 class ShardedPipelineTest : public test::TempDirTest {};
 
