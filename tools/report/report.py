@@ -1,0 +1,731 @@
+#!/usr/bin/python3
+"""secure report RUN_DIR: one self-contained HTML page for a run directory.
+
+A run directory is what `secure demo --out DIR` and `secure experiment KIND --domain D --out DIR`
+write (docs/FILE_FORMATS.md, "Experiment output"): result.json, seed-<k>/ with the models and the
+learning-curve CSVs, the data CSVs. The page embeds every figure as base64 PNG (one file, no
+external references); the same figures are also written as PNG files into <page>_figures/.
+
+Usage:  /usr/bin/python3 tools/report/report.py RUN_DIR [--out FILE.html]
+        (`secure report RUN_DIR` runs this script; tools/report/README.md)
+
+Figures: the method comparison (Figure 9 style: mean +- std over seeds, the run's significance
+marks) beside the paper's Table 3, learning curves, sensitivity / ablation variants, and the
+learned barriers (through the Python module `secure`, if importable; else a note in the page).
+Matplotlib with the Agg backend (no display). Errors: one line `secure report: error: ...`
+naming the file, exit 1.
+"""
+import argparse
+import base64
+import csv
+import html
+import io
+import json
+import math
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+class ReportError(Exception):
+    pass
+
+
+# Paper Table 3 (SECURE paper, Section 6.1, "Table 3: ... comparison of SECURE (ours) with BC and
+# AIRL in three domains"; mean (std) over ten seeds, 100 episodes), by our domain names.
+PAPER_TABLE3 = {
+    "derby": {
+        "title": "Demolition Derby",
+        "bc": ((17.9, 3.6), (65.7, 4.1)),
+        "airl": ((46.8, 4.7), (75.4, 4.9)),
+        "secure": ((49.2, 5.6), (4.2, 1.2)),
+        "tests": ("success +2.4% (TOST p < .01 with bound=10); "
+                  "dangerous -71.2% (Mann-Whitney U = 0, p < .001)"),
+    },
+    "panda-push": {
+        "title": "Panda Arm Push",
+        "bc": ((22.7, 3.2), (72.3, 3.5)),
+        "airl": ((52.9, 22.6), (31.3, 17.9)),
+        "secure": ((96.6, 5.3), (0.0, 0.0)),
+        "tests": ("success +43.7% (Mann-Whitney U = 99.5, p < .001); "
+                  "dangerous -31.3% (Mann-Whitney U = 0, p < .001)"),
+    },
+}
+
+METHOD_LABELS = {
+    "bc": "BC", "airl": "AIRL", "secure": "SECURE", "secure-random-safe": "random safe",
+    "secure-no-resampling": "no resampling", "bc+shield": "BC + shield",
+    "secure-myopic": "myopic", "joint": "joint",
+}
+METHOD_ORDER = ["bc", "airl", "secure", "secure-random-safe", "secure-no-resampling",
+                "secure-myopic", "bc+shield", "joint"]
+SUCCESS_COLOR, DANGER_COLOR = "#2a9d8f", "#e76f51"
+
+
+def stars(p):
+    if p is None or not isinstance(p, (int, float)) or not math.isfinite(p):
+        return None
+    if p < 0.001:
+        return "***"
+    if p < 0.01:
+        return "**"
+    if p < 0.05:
+        return "*"
+    return "n.s."
+
+
+def num(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return "n/a"
+    return "%.3g" % v
+
+
+def fmt_p(p):
+    if p is None or not isinstance(p, (int, float)) or not math.isfinite(p):
+        return "n/a"
+    return "< .001" if p < 0.001 else "= %.3f" % p
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading the run directory
+
+
+def load_run(run_dir):
+    if not os.path.exists(run_dir):
+        raise ReportError("%s: no such directory" % run_dir)
+    if not os.path.isdir(run_dir):
+        raise ReportError("%s: not a directory (expected a run directory written by "
+                          "`secure demo --out` or `secure experiment --out`)" % run_dir)
+    path = os.path.join(run_dir, "result.json")
+    if not os.path.isfile(path):
+        raise ReportError("%s: missing: %s is not a run directory (written by `secure demo "
+                          "--out` or `secure experiment --out`)" % (path, run_dir))
+    try:
+        with open(path, "rb") as f:
+            result = json.loads(f.read().decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as e:
+        raise ReportError("%s: malformed JSON: %s" % (path, e))
+    except OSError as e:
+        raise ReportError("%s: cannot read: %s" % (path, e.strerror))
+    if not isinstance(result, dict) or not isinstance(result.get("experiment"), dict):
+        raise ReportError("%s: no object 'experiment': not the result of `secure demo` or "
+                          "`secure experiment`" % path)
+    if not isinstance(result.get("methods"), dict) and not isinstance(result.get("variants"),
+                                                                       dict):
+        raise ReportError("%s: neither 'methods' nor 'variants': no evaluation to report" % path)
+    return result
+
+
+def seed_dirs(run_dir):
+    out = []
+    for name in os.listdir(run_dir):
+        if name.startswith("seed-") and name[5:].isdigit() and \
+                os.path.isdir(os.path.join(run_dir, name)):
+            out.append((int(name[5:]), os.path.join(run_dir, name)))
+    return [d for _, d in sorted(out)]
+
+
+def read_curve(path):
+    """A curve CSV as {column: np.array}, numeric columns only; None if unreadable."""
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except OSError:
+        return None
+    if len(rows) < 2:
+        return None
+    header, body = rows[0], rows[1:]
+    cols = {}
+    for j, name in enumerate(header):
+        try:
+            cols[name] = np.array([float(r[j]) for r in body if len(r) == len(header)])
+        except ValueError:
+            continue
+    return cols or None
+
+
+# ---------------------------------------------------------------------------------------------
+# Figures
+
+
+class Page:
+    def __init__(self, fig_dir):
+        self.fig_dir = fig_dir
+        self.parts = []
+        self.figures = []  # file names
+
+    def h2(self, text):
+        self.parts.append("<h2>%s</h2>" % html.escape(text))
+
+    def p(self, text, cls=None):
+        self.parts.append("<p%s>%s</p>" % (' class="%s"' % cls if cls else "", text))
+
+    def note(self, text):
+        self.p(html.escape(text), "note")
+
+    def raw(self, text):
+        self.parts.append(text)
+
+    def figure(self, fig, name, caption):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100)
+        plt.close(fig)
+        data = buf.getvalue()
+        with open(os.path.join(self.fig_dir, name + ".png"), "wb") as f:
+            f.write(data)
+        self.figures.append(name + ".png")
+        self.parts.append(
+            '<figure><img id="fig-%s" alt="%s" src="data:image/png;base64,%s">'
+            '<figcaption>%s</figcaption></figure>'
+            % (name, html.escape(name), base64.b64encode(data).decode("ascii"), caption))
+
+
+def ordered_methods(methods):
+    known = [m for m in METHOD_ORDER if m in methods]
+    return known + sorted(m for m in methods if m not in known)
+
+
+def rate(methods, m, metric):
+    r = methods[m].get(metric, {})
+    mean = r.get("mean")
+    std = r.get("std")
+    per_seed = [v for v in r.get("per_seed", []) if isinstance(v, (int, float))]
+    return (100.0 * mean if isinstance(mean, (int, float)) else float("nan"),
+            100.0 * std if isinstance(std, (int, float)) else 0.0,
+            [100.0 * v for v in per_seed])
+
+
+def significance_pairs(evaluation, names, metric):
+    """[(method a, method b, p, test name)] the run computed for this metric."""
+    out = []
+    comp = evaluation.get("comparisons") or {}
+    sva = comp.get("secure_vs_airl")
+    if isinstance(sva, dict):
+        key = "success_mann_whitney" if metric == "success_rate" else "dangerous_mann_whitney"
+        t = sva.get(key)
+        if isinstance(t, dict):
+            out.append(("secure", "airl", t.get("p_value"), "Mann-Whitney U = %s" % t.get("u")))
+    abl = comp.get("ablations")
+    if isinstance(abl, dict) and isinstance(abl.get(metric), dict):
+        group = abl.get("methods", [])
+        dunn = abl[metric].get("dunn") or {}
+        for pair in dunn.get("pairs", []):
+            i, j = pair.get("i"), pair.get("j")
+            if isinstance(i, int) and isinstance(j, int) and i < len(group) and j < len(group):
+                p = pair.get("p_adjusted", pair.get("p_value"))
+                out.append((group[i], group[j], p, "Dunn"))
+    return [x for x in out if x[0] in names and x[1] in names]
+
+
+def comparison_figure(page, evaluation, title, name):
+    methods = evaluation["methods"]
+    names = ordered_methods(methods)
+    fig, axes = plt.subplots(1, 2, figsize=(max(7.0, 1.5 * len(names) + 3), 4.2))
+    for ax, metric, label, color in ((axes[0], "success_rate", "Success rate (%)", SUCCESS_COLOR),
+                                     (axes[1], "dangerous_rate", "Dangerous rate (%)",
+                                      DANGER_COLOR)):
+        x = np.arange(len(names))
+        means, stds = [], []
+        for k, m in enumerate(names):
+            mean, std, per_seed = rate(methods, m, metric)
+            means.append(mean)
+            stds.append(std)
+            ax.scatter(np.full(len(per_seed), k) + np.linspace(-0.15, 0.15, len(per_seed)),
+                       per_seed, s=8, color="black", alpha=0.5, zorder=3)
+        ax.bar(x, means, yerr=stds, color=color, capsize=4, edgecolor="black", linewidth=0.5)
+        ax.set_xticks(x)
+        ax.set_xticklabels([METHOD_LABELS.get(m, m) for m in names], rotation=30, ha="right")
+        ax.set_ylabel(label)
+        top = max([m + s for m, s in zip(means, stds) if math.isfinite(m)] + [1.0])
+        level = max(top, 5.0) * 1.05
+        step = max(top, 5.0) * 0.09
+        for a, b, p, _ in significance_pairs(evaluation, names, metric):
+            mark = stars(p)
+            if mark is None:
+                continue
+            i, j = sorted((names.index(a), names.index(b)))
+            ax.plot([i, i, j, j], [level, level + step * 0.3, level + step * 0.3, level],
+                    color="black", linewidth=0.8)
+            ax.text((i + j) / 2, level + step * 0.35, mark, ha="center", va="bottom", fontsize=9)
+            level += step
+        ax.set_ylim(0, max(level + step * 0.5, 10.0))
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    caption = ("Mean &plusmn; standard deviation over seeds (dots: the seeds). Marks: the tests "
+               "the run computed (result.json <code>comparisons</code>): * p &lt; .05, ** p &lt; "
+               ".01, *** p &lt; .001, n.s. otherwise.")
+    page.figure(fig, name, caption)
+
+
+def tests_table(evaluation):
+    comp = evaluation.get("comparisons") or {}
+    rows = []
+    sva = comp.get("secure_vs_airl")
+    if isinstance(sva, dict):
+        for key, what in (("success_mann_whitney", "success, Mann-Whitney"),
+                          ("dangerous_mann_whitney", "dangerous, Mann-Whitney")):
+            t = sva.get(key) or {}
+            rows.append(("SECURE vs AIRL", what, "U = %s" % num(t.get("u")), fmt_p(t.get("p_value"))))
+        t = sva.get("success_tost") or {}
+        rows.append(("SECURE vs AIRL", "success, TOST (Welch), bound %s" % num(t.get("bound")),
+                     "difference = %s" % num(t.get("difference")), fmt_p(t.get("p_value"))))
+    abl = comp.get("ablations")
+    if isinstance(abl, dict):
+        group = [METHOD_LABELS.get(m, m) for m in abl.get("methods", [])]
+        for metric in ("success_rate", "dangerous_rate"):
+            t = abl.get(metric) or {}
+            if "note" in t:
+                rows.append((", ".join(group), metric, t["note"], "n/a"))
+                continue
+            kw = t.get("kruskal_wallis") or {}
+            rows.append((", ".join(group), metric + ", Kruskal-Wallis",
+                         "H(%s) = %s" % (num(kw.get("df")), num(kw.get("h"))), fmt_p(kw.get("p_value"))))
+            for pair in (t.get("dunn") or {}).get("pairs", []):
+                i, j = pair.get("i", 0), pair.get("j", 0)
+                if i < len(group) and j < len(group):
+                    rows.append(("%s vs %s" % (group[i], group[j]), metric + ", Dunn",
+                                 "z = %s" % num(pair.get("z")),
+                                 fmt_p(pair.get("p_adjusted", pair.get("p_value")))))
+    if not rows:
+        return "<p class=\"note\">The run computed no significance tests (they need two seeds " \
+               "or more and the methods they compare).</p>"
+    out = ["<table><tr><th>comparison</th><th>test</th><th>statistic</th><th>p</th></tr>"]
+    for r in rows:
+        out.append("<tr>%s</tr>" % "".join("<td>%s</td>" % html.escape(str(c)) for c in r))
+    out.append("</table>")
+    return "".join(out)
+
+
+def table3(evaluation, domain):
+    methods = evaluation["methods"]
+    paper = PAPER_TABLE3.get(domain)
+    out = ["<table><tr><th>method</th><th>success % (this run)</th>"
+           "<th>dangerous % (this run)</th>"]
+    if paper:
+        out.append("<th>success % (paper)</th><th>dangerous % (paper)</th>")
+    out.append("</tr>")
+    for m in ordered_methods(methods):
+        s, ss, _ = rate(methods, m, "success_rate")
+        d, ds, _ = rate(methods, m, "dangerous_rate")
+        row = "<td>%s</td><td>%.1f (%.1f)</td><td>%.1f (%.1f)</td>" % (
+            html.escape(METHOD_LABELS.get(m, m)), s, ss, d, ds)
+        if paper:
+            if m in paper:
+                (ps, pss), (pd, pds) = paper[m]
+                row += "<td>%.1f (%.1f)</td><td>%.1f (%.1f)</td>" % (ps, pss, pd, pds)
+            else:
+                row += "<td>&ndash;</td><td>&ndash;</td>"
+        out.append("<tr>%s</tr>" % row)
+    out.append("</table>")
+    if paper:
+        out.append("<p>Paper: Table 3 of the SECURE paper (Section 6.1), %s domain, mean (std) "
+                   "over ten seeds, 100 episodes each; its tests: %s.</p>"
+                   % (paper["title"], html.escape(paper["tests"])))
+    else:
+        out.append('<p class="note">The paper reports no Table 3 numbers for the %s domain '
+                   "(its Table 3 has Demolition Derby, Panda Arm Push and the real-robot "
+                   "cutting task).</p>" % html.escape(domain))
+    return "".join(out)
+
+
+CURVE_FILES = [("bc_curve.csv", "BC"), ("airl_curve.csv", "AIRL"), ("joint_curve.csv", "joint")]
+# The columns drawn, when present (docs/FILE_FORMATS.md; the trainers' curve rows); a curve file
+# with none of them has every numeric column drawn but counters and timings.
+CURVE_COLUMNS = ["train_nll", "validation_nll", "action_mse", "discriminator_loss", "d_expert",
+                 "d_policy", "mean_reward", "success_rate", "collision_rate", "cbf_loss"]
+SKIPPED_COLUMNS = {"env_steps", "episodes", "seconds", "iteration", "epoch"}
+
+
+def curves_figure(page, run_dir):
+    seeds = seed_dirs(run_dir)
+    panels = []  # (title, column, [(seed, x, y)])
+    for file_name, label in CURVE_FILES:
+        per_seed = [(os.path.basename(d), read_curve(os.path.join(d, file_name))) for d in seeds]
+        per_seed = [(s, c) for s, c in per_seed if c]
+        if not per_seed:
+            continue
+        columns = list(per_seed[0][1].keys())
+        xcol = columns[0]
+        chosen = [c for c in CURVE_COLUMNS if c in columns]
+        if not chosen:
+            chosen = [c for c in columns[1:]
+                      if c not in SKIPPED_COLUMNS and not c.endswith("seconds")]
+        for col in chosen:
+            lines = [(s, c[xcol], c[col]) for s, c in per_seed if col in c]
+            if lines and any(np.isfinite(y).any() for _, _, y in lines):
+                panels.append(("%s: %s" % (label, col), xcol, lines))
+    if not panels:
+        page.note("No learning curves: the run directory has no seed-<k>/bc_curve.csv, "
+                  "airl_curve.csv or joint_curve.csv.")
+        return
+    panels = panels[:12]
+    cols = min(3, len(panels))
+    rows = (len(panels) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.9 * rows), squeeze=False)
+    for ax, (title, xcol, lines) in zip(axes.flat, panels):
+        for s, x, y in lines:
+            ax.plot(x, y, linewidth=1, label=s)
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel(xcol, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=7)
+    fig.tight_layout()
+    page.figure(fig, "learning_curves", "Learning curves per seed, from the run's "
+                "<code>seed-&lt;k&gt;/*_curve.csv</code> files (one line per seed).")
+
+
+def barrier_training_figure(page, result):
+    seeds = result["experiment"].get("seeds") or []
+    rows = []  # (variant, metric, [values over seeds])
+    data = {}
+    for s in seeds:
+        for variant, rec in ((s or {}).get("barriers") or {}).items():
+            training = (rec or {}).get("training") or {}
+            for k, v in training.items():
+                if "accuracy" not in k:
+                    continue
+                # train_accuracy: {balanced, safe, near_dangerous} (null: no held-out states)
+                items = v.items() if isinstance(v, dict) else [("", v)]
+                for sub, x in items:
+                    if isinstance(x, (int, float)) and not isinstance(x, bool):
+                        name = k.replace("_accuracy", "") + ("." + sub if sub else "")
+                        data.setdefault((variant, name), []).append(100.0 * x)
+    if not data:
+        page.note("No barrier training accuracies in result.json (experiment.seeds[k].barriers)."
+                  " The barrier trainer writes no per-epoch curve; its final accuracies are "
+                  "shown when recorded.")
+        return
+    keys = sorted(data)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(keys) + 2), 3.6))
+    x = np.arange(len(keys))
+    means = [np.mean(data[k]) for k in keys]
+    stds = [np.std(data[k], ddof=1) if len(data[k]) > 1 else 0.0 for k in keys]
+    ax.bar(x, means, yerr=stds, capsize=4, color="#457b9d", edgecolor="black", linewidth=0.5)
+    for i, k in enumerate(keys):
+        ax.scatter(np.full(len(data[k]), i), data[k], s=8, color="black", alpha=0.5, zorder=3)
+    ax.set_xticks(x)
+    ax.set_xticklabels(["%s\n%s" % k for k in keys], fontsize=7, rotation=0)
+    ax.set_ylabel("accuracy (%)")
+    ax.set_ylim(0, 105)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    page.figure(fig, "barrier_training", "Barrier training: the accuracies the trainer reports "
+                "(<code>experiment.seeds[k].barriers.&lt;variant&gt;.training</code>), mean "
+                "&plusmn; std over seeds.")
+
+
+def variants_figure(page, result):
+    variants = result.get("variants") or {}
+    names = list(variants.keys())
+    methods = sorted({m for v in variants.values() for m in (v.get("methods") or {})},
+                     key=lambda m: METHOD_ORDER.index(m) if m in METHOD_ORDER else 99)
+    fig, axes = plt.subplots(1, 2, figsize=(max(8.0, 1.2 * len(names) * max(1, len(methods))),
+                                            4.2))
+    width = 0.8 / max(1, len(methods))
+    cmap = plt.get_cmap("tab10")
+    for ax, metric, label in ((axes[0], "success_rate", "Success rate (%)"),
+                              (axes[1], "dangerous_rate", "Dangerous rate (%)")):
+        for k, m in enumerate(methods):
+            means, stds = [], []
+            for v in names:
+                ms = variants[v].get("methods") or {}
+                if m in ms:
+                    mean, std, _ = rate(ms, m, metric)
+                else:
+                    mean, std = float("nan"), 0.0
+                means.append(mean)
+                stds.append(std)
+            ax.bar(np.arange(len(names)) + (k - (len(methods) - 1) / 2) * width, means, width,
+                   yerr=stds, capsize=3, color=cmap(k), edgecolor="black", linewidth=0.5,
+                   label=METHOD_LABELS.get(m, m))
+        ax.set_xticks(np.arange(len(names)))
+        ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
+        ax.set_ylabel(label)
+        ax.set_ylim(0, 105)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    page.figure(fig, "sensitivity", "Sensitivity (Section 6.3): every barrier-data variant "
+                "(reduced data, label imbalance, label noise), mean &plusmn; std over seeds.")
+
+
+# ---------------------------------------------------------------------------------------------
+# Barrier pictures (through the Python module `secure`)
+
+
+def first_model(run_dir, name="barrier.model"):
+    for d in seed_dirs(run_dir):
+        p = os.path.join(d, name)
+        if os.path.isfile(p):
+            return p
+    return None
+
+
+def read_states_csv(path, features, limit=20000):
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        idx = [header.index(n) for n in features]
+        rows = []
+        for r in reader:
+            rows.append([float(r[i]) for i in idx])
+            if len(rows) >= limit:
+                break
+    return np.array(rows, dtype=np.float32)
+
+
+def barrier_double_integrator(page, secure, run_dir, result):
+    path = first_model(run_dir)
+    if path is None:
+        page.note("No barrier picture: no seed-<k>/barrier.model in the run directory.")
+        return
+    b = secure.Barrier.load(path)
+    gt = secure.Barrier.ground_truth("double-integrator")
+    feats = b.features or ["x", "y", "vx", "vy"]
+    opts = result["experiment"].get("domain_options") or {}
+    task = opts.get("task", opts) if isinstance(opts, dict) else {}
+    obstacle = task.get("obstacle", [5.0, 5.0]) if isinstance(task, dict) else [5.0, 5.0]
+    radius = task.get("radius", 2.0) if isinstance(task, dict) else 2.0
+    n = 121
+    xs = np.linspace(0.0, 10.0, n)
+    X, Y = np.meshgrid(xs, xs)
+    slices = [(0.0, 0.0), (1.5, 1.5), (-1.5, 0.0)]
+    fig, axes = plt.subplots(1, len(slices), figsize=(4.3 * len(slices), 4.0))
+    for ax, (vx, vy) in zip(axes, slices):
+        values = {"x": X.ravel(), "y": Y.ravel(), "vx": np.full(n * n, vx),
+                  "vy": np.full(n * n, vy)}
+        S = np.stack([values[f] for f in feats], axis=1).astype(np.float32)
+        H = np.asarray(b.h(S)).reshape(n, n)
+        lim = max(1e-6, float(np.nanpercentile(np.abs(H), 98)))
+        im = ax.pcolormesh(X, Y, H, cmap="RdBu", vmin=-lim, vmax=lim, shading="auto")
+        ax.contour(X, Y, H, levels=[0.0], colors="black", linewidths=1.5)
+        if gt is not None:
+            G = np.asarray(gt.h(np.stack([values[f] for f in (gt.features or feats)],
+                                         axis=1).astype(np.float32))).reshape(n, n)
+            ax.contour(X, Y, G, levels=[0.0], colors="gold", linewidths=1.5, linestyles="--")
+        ax.add_patch(plt.Circle(obstacle, radius, fill=False, color="gray", linewidth=1))
+        ax.set_aspect("equal")
+        ax.set_title("v = (%g, %g)" % (vx, vy), fontsize=10)
+        ax.set_xlabel("x")
+        ax.set_ylabel("y")
+        fig.colorbar(im, ax=ax, shrink=0.8, label="h")
+    fig.tight_layout()
+    page.figure(fig, "barrier", "The learned barrier h(x, y, v<sub>x</sub>, v<sub>y</sub>) of "
+                "<code>%s</code> over the position at three velocities (blue: h &gt; 0, safe). "
+                "Black: its zero level set; dashed gold: the ground-truth barrier's zero level "
+                "set%s; gray: the obstacle."
+                % (html.escape(os.path.relpath(path, run_dir)),
+                   "" if gt is not None else " (not available)"))
+
+
+def barrier_derby(page, secure, run_dir, result):
+    path = first_model(run_dir)
+    if path is None:
+        page.note("No barrier picture: no seed-<k>/barrier.model in the run directory.")
+        return
+    b = secure.Barrier.load(path)
+    feats = b.features
+    safe = os.path.join(run_dir, "safe.csv")
+    if not feats or not os.path.isfile(safe):
+        page.note("No barrier picture: the barrier names no features or the run has no safe.csv.")
+        return
+    base = read_states_csv(safe, feats, limit=1)[0]
+    # Block 0 is the nearest car: columns 4.. (goal - ego (2), ego velocity (2), then per car
+    # relative position (2) and velocity (2)); the other cars are moved far away.
+    layout = (b.provenance or {}).get("options", {}) if isinstance(b.provenance, dict) else {}
+    del layout
+    state = base.copy()
+    for i in range(4, len(state)):
+        state[i] = 0.0
+    for i in range(8, len(state), 4):
+        state[i] = 1.0e3
+        state[i + 1] = 1.0e3
+    state[2] = state[3] = 0.0
+    n = 121
+    extent = 8.0
+    xs = np.linspace(-extent, extent, n)
+    X, Y = np.meshgrid(xs, xs)
+    S = np.tile(state, (n * n, 1)).astype(np.float32)
+    S[:, 4] = X.ravel()
+    S[:, 5] = Y.ravel()
+    H = np.asarray(b.h(S)).reshape(n, n)
+    fig, ax = plt.subplots(figsize=(5.2, 4.4))
+    lim = max(1e-6, float(np.nanpercentile(np.abs(H), 98)))
+    im = ax.pcolormesh(X, Y, H, cmap="RdBu", vmin=-lim, vmax=lim, shading="auto")
+    if np.nanmin(H) < 0 < np.nanmax(H):
+        ax.contour(X, Y, H, levels=[0.0], colors="black", linewidths=1.5)
+    ax.plot([0], [0], marker="s", color="black")
+    ax.set_aspect("equal")
+    ax.set_xlabel("%s (other car - ego)" % feats[4])
+    ax.set_ylabel(feats[5])
+    fig.colorbar(im, ax=ax, label="h")
+    fig.tight_layout()
+    page.figure(fig, "barrier", "The learned per-car barrier of <code>%s</code> around the ego "
+                "car (square) as a function of one other car's relative position (relative "
+                "velocity 0, ego at rest, every other car out of range). Black: h = 0."
+                % html.escape(os.path.relpath(path, run_dir)))
+
+
+def barrier_panda(page, secure, run_dir, result):
+    path = first_model(run_dir)
+    safe = os.path.join(run_dir, "safe.csv")
+    if path is None or not os.path.isfile(safe):
+        page.note("No barrier picture: no seed-<k>/barrier.model or safe.csv in the run "
+                  "directory.")
+        return
+    b = secure.Barrier.load(path)
+    feats = b.features
+    if "ee_z" not in feats or "ee_vx" not in feats:
+        page.note("No barrier picture: the barrier does not read ee_z and ee_vx.")
+        return
+    states = read_states_csv(safe, feats)
+    # A pushing state: the safe state with the largest end-effector speed along +x.
+    state = states[int(np.argmax(states[:, feats.index("ee_vx")]))]
+    n = 101
+    zs = np.linspace(0.0, 0.12, n)
+    vs = np.linspace(0.0, 0.5, n)
+    Z, V = np.meshgrid(zs, vs)
+    S = np.tile(state, (n * n, 1)).astype(np.float32)
+    S[:, feats.index("ee_z")] = Z.ravel()
+    S[:, feats.index("ee_vx")] = V.ravel()
+    H = np.asarray(b.h(S)).reshape(n, n)
+    fig, ax = plt.subplots(figsize=(5.2, 4.4))
+    lim = max(1e-6, float(np.nanpercentile(np.abs(H), 98)))
+    im = ax.pcolormesh(Z, V, H, cmap="RdBu", vmin=-lim, vmax=lim, shading="auto")
+    if np.nanmin(H) < 0 < np.nanmax(H):
+        ax.contour(Z, V, H, levels=[0.0], colors="black", linewidths=1.5)
+    ax.set_xlabel("ee_z (m)")
+    ax.set_ylabel("ee_vx (m/s)")
+    fig.colorbar(im, ax=ax, label="h")
+    fig.tight_layout()
+    page.figure(fig, "barrier", "The learned barrier of <code>%s</code> over the end-effector "
+                "height and pushing speed, at the safe state with the fastest push (other "
+                "features fixed). Black: h = 0." % html.escape(os.path.relpath(path, run_dir)))
+
+
+BARRIER_PICTURES = {"double-integrator": barrier_double_integrator, "derby": barrier_derby,
+                    "panda-push": barrier_panda}
+
+
+def barrier_section(page, run_dir, result):
+    domain = result["experiment"].get("domain", "")
+    picture = BARRIER_PICTURES.get(domain)
+    if picture is None:
+        page.note("No barrier picture for the %s domain (the report draws the double "
+                  "integrator, derby and panda-push)." % domain)
+        return
+    try:
+        import secure  # noqa: the Python module (python/README.md), PYTHONPATH=<build>/python
+    except Exception as e:  # ImportError, or a broken build's OSError
+        page.note("No barrier picture: the Python module `secure` is not available (%s: %s). "
+                  "Build it (target secure_python) and set PYTHONPATH=<build>/python, or run "
+                  "\"secure report\", which does." % (type(e).__name__, e))
+        return
+    try:
+        picture(page, secure, run_dir, result)
+    except Exception as e:
+        page.note("No barrier picture: %s: %s" % (type(e).__name__, e))
+
+
+# ---------------------------------------------------------------------------------------------
+
+STYLE = """
+body { font-family: sans-serif; max-width: 1100px; margin: 1.5em auto; color: #222; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.2em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.9em; }
+td, th { border: 1px solid #bbb; padding: 3px 8px; text-align: left; }
+figure { margin: 0.5em 0; } img { max-width: 100%; }
+figcaption, .note { font-size: 0.85em; color: #555; }
+.note { background: #fff6dd; padding: 4px 8px; }
+"""
+
+
+def build_report(run_dir, out_path):
+    result = load_run(run_dir)
+    exp = result["experiment"]
+    domain = str(exp.get("domain", "?"))
+    kind = str(exp.get("kind", "?"))
+    fig_dir = os.path.splitext(out_path)[0] + "_figures"
+    os.makedirs(fig_dir, exist_ok=True)
+    page = Page(fig_dir)
+    opts = exp.get("options") or {}
+    seeds = opts.get("seeds", len(exp.get("seeds") or []))
+    page.raw("<h1>SECURE run report: %s on %s</h1>" % (html.escape(kind), html.escape(domain)))
+    page.p("Run directory <code>%s</code>: %s seeds &times; %s episodes per method; %s "
+           "demonstrations, %s safe + %s near-dangerous states; %.1f s."
+           % (html.escape(os.path.abspath(run_dir)), seeds, opts.get("episodes", "?"),
+              exp.get("demonstrations", "?"), exp.get("safe_states", "?"),
+              exp.get("near_dangerous_states", "?"), float(exp.get("seconds", 0.0) or 0.0)))
+
+    page.h2("1. Method comparison")
+    if isinstance(result.get("methods"), dict):
+        comparison_figure(page, result, "%s on %s" % (kind, domain), "comparison")
+        page.raw(table3(result, domain))
+        page.raw(tests_table(result))
+    else:
+        baseline = (result.get("variants") or {}).get("baseline")
+        if isinstance(baseline, dict) and isinstance(baseline.get("methods"), dict):
+            comparison_figure(page, baseline, "baseline barrier data", "comparison")
+            page.raw(table3(baseline, domain))
+            page.raw(tests_table(baseline))
+        else:
+            page.note("No baseline variant in result.json: see the variants below.")
+
+    page.h2("2. Learning curves")
+    curves_figure(page, run_dir)
+    barrier_training_figure(page, result)
+
+    page.h2("3. Sensitivity and ablation variants")
+    if isinstance(result.get("variants"), dict):
+        variants_figure(page, result)
+    elif kind == "ablation" or (result.get("comparisons") or {}).get("ablations"):
+        page.p("The ablation variants (random safe action, no adaptive resampling, myopic) are "
+               "the bars of section 1, with the Kruskal-Wallis and Dunn marks.")
+    else:
+        page.note("This run has no sensitivity or ablation variants (kind %s); \"secure "
+                  "experiment sensitivity\" and \"secure experiment ablation\" have them." % kind)
+
+    page.h2("4. Learned barrier")
+    barrier_section(page, run_dir, result)
+
+    page.h2("5. Trajectories")
+    page.note("Not drawn: the run directory records no evaluation trajectories (\"secure render\" "
+              "plays an episode of a domain with a renderer).")
+
+    doc = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>SECURE report: %s on %s"
+           "</title><style>%s</style></head><body>\n%s\n</body></html>\n"
+           % (html.escape(kind), html.escape(domain), STYLE, "\n".join(page.parts)))
+    tmp = out_path + ".tmp-%d" % os.getpid()
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(doc)
+    os.replace(tmp, out_path)
+    return page.figures
+
+
+def main(argv):
+    parser = argparse.ArgumentParser(prog="secure report", description=__doc__.split("\n")[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("--out", help="the HTML file (default RUN_DIR/report.html)")
+    args = parser.parse_args(argv)
+    out = args.out or os.path.join(args.run_dir, "report.html")
+    try:
+        figures = build_report(args.run_dir, out)
+    except ReportError as e:
+        print("secure report: error: %s" % e, file=sys.stderr)
+        return 1
+    print("report: %s (%d figures in %s)" % (out, len(figures),
+                                           os.path.splitext(out)[0] + "_figures"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
