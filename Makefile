@@ -1,6 +1,7 @@
 # The two commands of the README. Both set up the machine if needed (scripts/setup.sh installs
 # missing Debian packages, configures and builds), then run.
-#   make demo   the main job: the SECURE pipeline on the default domain, printing its table
+#   make demo   the main job: the SECURE pipeline on the default domain, printing its table,
+#               then its HTML report (secure report; the run directory is $(BUILD)/demo-run)
 #   make test   every unit test (ctest)
 BUILD ?= build
 JOBS  ?= $(shell nproc)
@@ -11,7 +12,8 @@ build:
 	SECURE_BUILD_DIR=$(BUILD) scripts/setup.sh
 
 demo: build
-	$(BUILD)/apps/secure/secure demo
+	$(BUILD)/apps/secure/secure demo --out $(BUILD)/demo-run
+	$(BUILD)/apps/secure/secure report $(BUILD)/demo-run
 
 # Every test but the `long` label (ctest -L long: the shield's properties at 10^6 cases).
 test: build

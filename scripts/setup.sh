@@ -32,6 +32,8 @@ set -euo pipefail
 #   openmpi-bin                 mpirun, for the sharded-experiment tests (tests/apps/shard_test.cc); nothing links MPI
 #   python3-dev pybind11-dev    the Python module (python/): headers, the binding library
 #   python3-numpy python3-pytest  the module's arrays; its tests (ctest -L python)
+#   python3-matplotlib          `secure report`: the run's figures (tools/report/report.py, Agg backend)
+#   chromium                    the report's test renders the page headless (ctest -L report)
 PACKAGES=(
   build-essential cmake git
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
@@ -42,6 +44,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy python3-pytest
   openmpi-bin
+  python3-matplotlib chromium
 )
 # The checking build (scripts/check.sh), installed only with --check-deps:
 #   clang libclang-rt-14-dev    clang and its AddressSanitizer / UBSan runtimes

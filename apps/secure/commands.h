@@ -20,4 +20,6 @@ void RegisterConvertCommand(CLI::App& demos);
 void RegisterRenderCommand(CLI::App& app, const Config& config);
 /// secure demo; secure experiment KIND --domain NAME (and the derby-* aliases).
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
+/// secure report RUN_DIR (report_command.cc): the run's HTML report (tools/report/report.py).
+void RegisterReportCommand(CLI::App& app);
 }  // namespace secure::cli

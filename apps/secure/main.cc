@@ -1,6 +1,6 @@
 // secure: learn safe behaviour from demonstrations (SECURE, CBF shielding). main() only parses
 // and dispatches; see cbf_commands.cc, shield_commands.cc, pipeline_commands.cc, render_command.cc
-// and experiment_commands.cc.
+// experiment_commands.cc and report_command.cc.
 #include <CLI/CLI.hpp>
 #include <iostream>
 #include <new>
@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterPipelineCommands(app, config);
     secure::cli::RegisterRenderCommand(app, config);
     secure::cli::RegisterExperimentCommands(app, config);
+    secure::cli::RegisterReportCommand(app);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // --help and --version end parsing with exit code 0: CLI11 prints them. Every other parse

@@ -533,30 +533,23 @@ def barrier_derby(page, secure, run_dir, result):
         page.note("No barrier picture: no seed-<k>/barrier.model in the run directory.")
         return
     b = secure.Barrier.load(path)
-    feats = b.features
-    safe = os.path.join(run_dir, "safe.csv")
-    if not feats or not os.path.isfile(safe):
-        page.note("No barrier picture: the barrier names no features or the run has no safe.csv.")
+    feats = list(b.features)
+    if "car0_dx" not in feats or "car0_dy" not in feats:
+        page.note("No barrier picture: the barrier does not read car0_dx, car0_dy.")
         return
-    base = read_states_csv(safe, feats, limit=1)[0]
-    # Block 0 is the nearest car: columns 4.. (goal - ego (2), ego velocity (2), then per car
-    # relative position (2) and velocity (2)); the other cars are moved far away.
-    layout = (b.provenance or {}).get("options", {}) if isinstance(b.provenance, dict) else {}
-    del layout
-    state = base.copy()
-    for i in range(4, len(state)):
-        state[i] = 0.0
-    for i in range(8, len(state), 4):
-        state[i] = 1.0e3
-        state[i + 1] = 1.0e3
-    state[2] = state[3] = 0.0
+    # One state: ego at rest, car 0 (the nearest) at the grid's relative position with zero
+    # relative velocity, every other car far out of sensing range.
+    state = np.zeros(len(feats), dtype=np.float32)
+    for i, f in enumerate(feats):
+        if f.startswith("car") and not f.startswith("car0_") and f.endswith(("_dx", "_dy")):
+            state[i] = 1.0e3
     n = 121
     extent = 8.0
     xs = np.linspace(-extent, extent, n)
     X, Y = np.meshgrid(xs, xs)
     S = np.tile(state, (n * n, 1)).astype(np.float32)
-    S[:, 4] = X.ravel()
-    S[:, 5] = Y.ravel()
+    S[:, feats.index("car0_dx")] = X.ravel()
+    S[:, feats.index("car0_dy")] = Y.ravel()
     H = np.asarray(b.h(S)).reshape(n, n)
     fig, ax = plt.subplots(figsize=(5.2, 4.4))
     lim = max(1e-6, float(np.nanpercentile(np.abs(H), 98)))
@@ -565,8 +558,8 @@ def barrier_derby(page, secure, run_dir, result):
         ax.contour(X, Y, H, levels=[0.0], colors="black", linewidths=1.5)
     ax.plot([0], [0], marker="s", color="black")
     ax.set_aspect("equal")
-    ax.set_xlabel("%s (other car - ego)" % feats[4])
-    ax.set_ylabel(feats[5])
+    ax.set_xlabel("car0_dx (other car - ego)")
+    ax.set_ylabel("car0_dy")
     fig.colorbar(im, ax=ax, label="h")
     fig.tight_layout()
     page.figure(fig, "barrier", "The learned per-car barrier of <code>%s</code> around the ego "

@@ -1,0 +1,155 @@
+#!/usr/bin/python3
+"""ctest `report_html` (label `report`): `secure report` as a user sees it.
+
+A quick method comparison on the double integrator writes a run directory; `secure report` turns
+it into report.html; headless Chromium renders the page to a PNG. Checked: every expected figure
+is embedded (an <img> with a base64 PNG) and written next to the page, none is blank (pixel
+variance), the screenshot is not uniform and shows the figures' colours; the checker itself
+fails on a page with a figure removed; bad run directories are one-line errors naming the file,
+exit 1. Environment (set by tests/CMakeLists.txt): SECURE_CLI (the binary), SECURE_REPORT_WORK
+(a scratch directory), SECURE_EXPECT_BARRIER=1 when the Python module is built (then the
+barrier picture is required too), CHROMIUM (default `chromium`).
+"""
+import base64
+import io
+import os
+import re
+import shutil
+import subprocess
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.image as mpimg  # noqa: E402
+import numpy as np  # noqa: E402
+
+CLI = os.environ["SECURE_CLI"]
+WORK = os.environ["SECURE_REPORT_WORK"]
+EXPECT_BARRIER = os.environ.get("SECURE_EXPECT_BARRIER") == "1"
+CHROMIUM = os.environ.get("CHROMIUM", "chromium")
+failures = []
+
+
+def check(cond, message):
+    if not cond:
+        failures.append(message)
+        print("FAIL: " + message, file=sys.stderr)
+    return cond
+
+
+def run(args, **kw):
+    return subprocess.run(args, capture_output=True, text=True, timeout=120, **kw)
+
+
+def non_blank(png_bytes):
+    """True if the PNG's pixels vary (a blank or uniform image has no variance)."""
+    img = mpimg.imread(io.BytesIO(png_bytes), format="png")
+    return img.size > 0 and float(np.std(img[..., :3])) > 0.02
+
+
+def figure_problems(html_text, fig_dir, expected):
+    """What is missing or blank, as a list of messages (empty: all good)."""
+    problems = []
+    imgs = dict(re.findall(r'<img id="fig-([a-z_]+)"[^>]*src="data:image/png;base64,([^"]+)"',
+                           html_text))
+    for name in expected:
+        if name not in imgs:
+            problems.append("figure %s is not embedded in the page" % name)
+        elif not non_blank(base64.b64decode(imgs[name])):
+            problems.append("embedded figure %s is blank" % name)
+        path = os.path.join(fig_dir, name + ".png")
+        if not os.path.isfile(path):
+            problems.append("figure file %s is missing" % path)
+        else:
+            with open(path, "rb") as f:
+                if not non_blank(f.read()):
+                    problems.append("figure file %s is blank" % path)
+    if re.search(r'src="(?!data:)', html_text):
+        problems.append("the page references an external file (not self-contained)")
+    return problems
+
+
+def main():
+    shutil.rmtree(WORK, ignore_errors=True)
+    os.makedirs(WORK)
+    run_dir = os.path.join(WORK, "run")
+    r = run([CLI, "experiment", "method-comparison", "--domain", "double-integrator", "--quick",
+             "--out", run_dir])
+    if not check(r.returncode == 0, "the quick experiment failed: " + r.stderr[-2000:]):
+        return
+
+    r = run([CLI, "report", run_dir])
+    check(r.returncode == 0, "secure report failed: " + r.stderr[-3000:])
+    page = os.path.join(run_dir, "report.html")
+    check(page in r.stdout, "secure report does not print the page's path: " + r.stdout)
+    if not check(os.path.isfile(page), "no report.html"):
+        return
+    with open(page, encoding="utf-8") as f:
+        text = f.read()
+    expected = ["comparison", "learning_curves", "barrier_training"]
+    if EXPECT_BARRIER:
+        expected.append("barrier")
+        check("Python module `secure` is not available" not in text,
+              "the barrier picture was skipped though the module is built")
+    else:
+        check("No barrier picture" in text, "the page does not say the barrier picture is skipped")
+    fig_dir = os.path.join(run_dir, "report_figures")
+    for p in figure_problems(text, fig_dir, expected):
+        check(False, p)
+    check("Table 3" in text, "the page has no Table 3 section")
+    check("Mann-Whitney" in text, "the page does not list the run's tests")
+
+    # The checker notices a missing figure (so the checks above can fail).
+    broken = re.sub(r'<img id="fig-learning_curves"[^>]*>', "", text)
+    check(any("learning_curves" in p for p in figure_problems(broken, fig_dir, expected)),
+          "the checker does not notice a figure removed from the page")
+
+    # As a user sees it: headless Chromium's screenshot of the page.
+    shot = os.path.join(WORK, "screenshot.png")
+    r = run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+             "--screenshot=" + shot, "--window-size=1200,3000", "file://" + page])
+    if check(os.path.isfile(shot), "chromium wrote no screenshot: " + r.stderr[-2000:]):
+        img = mpimg.imread(shot)[..., :3]
+        check(float(np.std(img)) > 0.05, "the screenshot is (nearly) uniform")
+        # The success bars' colour (#2a9d8f) and the dangerous bars' (#e76f51) are on screen.
+        for hexcolor in ("2a9d8f", "e76f51"):
+            rgb = np.array([int(hexcolor[i:i + 2], 16) / 255.0 for i in (0, 2, 4)])
+            count = int((np.abs(img - rgb).max(axis=2) < 0.03).sum())
+            check(count > 2000, "the screenshot shows %d pixels of #%s (the comparison's bars)"
+                  % (count, hexcolor))
+
+    # Bad input: one line naming the file, exit 1.
+    not_dir = os.path.join(WORK, "plain-file")
+    with open(not_dir, "w") as f:
+        f.write("x")
+    empty = os.path.join(WORK, "empty")
+    os.makedirs(empty)
+    bad = os.path.join(WORK, "bad")
+    os.makedirs(bad)
+    with open(os.path.join(bad, "result.json"), "w") as f:
+        f.write('{"experiment": {')
+    other = os.path.join(WORK, "other")
+    os.makedirs(other)
+    with open(os.path.join(other, "result.json"), "w") as f:
+        f.write('{"a": 1}')
+    for path, named, what in ((os.path.join(WORK, "missing"), "missing", "no such directory"),
+                              (not_dir, not_dir, "not a directory"),
+                              (empty, os.path.join(empty, "result.json"), "missing"),
+                              (bad, os.path.join(bad, "result.json"), "malformed JSON"),
+                              (other, os.path.join(other, "result.json"), "experiment")):
+        r = run([CLI, "report", path])
+        lines = r.stderr.strip().splitlines()
+        check(r.returncode == 1, "%s: exit code %d, expected 1" % (path, r.returncode))
+        check(len(lines) == 1 and named in lines[0] and what in lines[0],
+              "%s: expected one line naming %s (%s), got %r" % (path, named, what, r.stderr))
+        check(not os.path.exists(os.path.join(path, "report.html")),
+              "%s: a page was written for a bad run directory" % path)
+
+
+if __name__ == "__main__":
+    main()
+    if failures:
+        print("%d check(s) failed" % len(failures), file=sys.stderr)
+        sys.exit(1)
+    print("report_html: all checks passed")
