@@ -383,44 +383,57 @@ def curves_figure(page, run_dir):
                 "<code>seed-&lt;k&gt;/*_curve.csv</code> files (one line per seed).")
 
 
+def accuracy_leaves(training):
+    """{"train safe": 0.99, ...} from a barrier training summary: the per-class accuracies
+    (train_accuracy / validation_accuracy: {safe, near_dangerous, balanced}; the per-obstacle
+    trainer nests them under states and entries: the states' are taken)."""
+    out = {}
+    for key, value in training.items():
+        if not key.endswith("_accuracy") or not isinstance(value, dict):
+            continue
+        if isinstance(value.get("states"), dict):
+            value = value["states"]
+        for cls in ("safe", "near_dangerous"):
+            x = value.get(cls)
+            if isinstance(x, (int, float)) and not isinstance(x, bool):
+                out["%s %s" % (key[:-len("_accuracy")], cls)] = 100.0 * x
+    return out
+
+
 def barrier_training_figure(page, result):
     seeds = result["experiment"].get("seeds") or []
-    rows = []  # (variant, metric, [values over seeds])
-    data = {}
+    data = {}  # variant -> metric -> [values over seeds]
     for s in seeds:
         for variant, rec in ((s or {}).get("barriers") or {}).items():
-            training = (rec or {}).get("training") or {}
-            for k, v in training.items():
-                if "accuracy" not in k:
-                    continue
-                # train_accuracy: {balanced, safe, near_dangerous} (null: no held-out states)
-                items = v.items() if isinstance(v, dict) else [("", v)]
-                for sub, x in items:
-                    if isinstance(x, (int, float)) and not isinstance(x, bool):
-                        name = k.replace("_accuracy", "") + ("." + sub if sub else "")
-                        data.setdefault((variant, name), []).append(100.0 * x)
+            for metric, v in accuracy_leaves((rec or {}).get("training") or {}).items():
+                data.setdefault(variant, {}).setdefault(metric, []).append(v)
     if not data:
-        page.note("No barrier training accuracies in result.json (experiment.seeds[k].barriers)."
-                  " The barrier trainer writes no per-epoch curve; its final accuracies are "
-                  "shown when recorded.")
+        page.note("No barrier training accuracies in result.json (experiment.seeds[k].barriers).")
         return
-    keys = sorted(data)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(keys) + 2), 3.6))
-    x = np.arange(len(keys))
-    means = [np.mean(data[k]) for k in keys]
-    stds = [np.std(data[k], ddof=1) if len(data[k]) > 1 else 0.0 for k in keys]
-    ax.bar(x, means, yerr=stds, capsize=4, color="#457b9d", edgecolor="black", linewidth=0.5)
-    for i, k in enumerate(keys):
-        ax.scatter(np.full(len(data[k]), i), data[k], s=8, color="black", alpha=0.5, zorder=3)
-    ax.set_xticks(x)
-    ax.set_xticklabels(["%s\n%s" % k for k in keys], fontsize=7, rotation=0)
+    variants = list(data)
+    metrics = sorted({m for v in data.values() for m in v})
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(variants) * max(1, len(metrics)) / 2 + 2),
+                                    3.8))
+    width = 0.8 / len(metrics)
+    cmap = plt.get_cmap("tab10")
+    for k, metric in enumerate(metrics):
+        vals = [data[v].get(metric, []) for v in variants]
+        means = [np.mean(x) if x else float("nan") for x in vals]
+        stds = [np.std(x, ddof=1) if len(x) > 1 else 0.0 for x in vals]
+        ax.bar(np.arange(len(variants)) + (k - (len(metrics) - 1) / 2) * width, means, width,
+               yerr=stds, capsize=3, color=cmap(k), edgecolor="black", linewidth=0.5,
+               label=metric)
+    ax.set_xticks(np.arange(len(variants)))
+    ax.set_xticklabels(variants, fontsize=8)
     ax.set_ylabel("accuracy (%)")
-    ax.set_ylim(0, 105)
+    ax.set_ylim(0, 115)
+    ax.legend(fontsize=7, ncol=min(4, len(metrics)), loc="upper center")
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    page.figure(fig, "barrier_training", "Barrier training: the accuracies the trainer reports "
-                "(<code>experiment.seeds[k].barriers.&lt;variant&gt;.training</code>), mean "
-                "&plusmn; std over seeds.")
+    page.figure(fig, "barrier_training", "The barrier's classification accuracy on its safe and "
+                "near-dangerous states at the end of training, per barrier-data variant (the "
+                "trainer records no per-epoch curve; <code>experiment.seeds[k].barriers"
+                ".&lt;variant&gt;.training</code>), mean &plusmn; std over seeds.")
 
 
 def variants_figure(page, result):
@@ -444,9 +457,12 @@ def variants_figure(page, result):
                     mean, std = float("nan"), 0.0
                 means.append(mean)
                 stds.append(std)
-            ax.bar(np.arange(len(names)) + (k - (len(methods) - 1) / 2) * width, means, width,
-                   yerr=stds, capsize=3, color=cmap(k), edgecolor="black", linewidth=0.5,
-                   label=METHOD_LABELS.get(m, m))
+            xs = np.arange(len(names)) + (k - (len(methods) - 1) / 2) * width
+            ax.bar(xs, means, width, yerr=stds, capsize=3, color=cmap(k), edgecolor="black",
+                   linewidth=0.5, label=METHOD_LABELS.get(m, m))
+            for x, mean in zip(xs, means):
+                if math.isfinite(mean):
+                    ax.text(x, mean + 1.0, "%.0f" % mean, ha="center", va="bottom", fontsize=7)
         ax.set_xticks(np.arange(len(names)))
         ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
         ax.set_ylabel(label)
