@@ -23,6 +23,7 @@ import io
 import json
 import math
 import os
+import re
 import sys
 
 import matplotlib
@@ -559,8 +560,12 @@ def barrier_derby(page, secure, run_dir, result):
     for i, f in enumerate(feats):
         if f.startswith("car") and not f.startswith("car0_") and f.endswith(("_dx", "_dy")):
             state[i] = 1.0e3
-    n = 121
-    extent = 8.0
+    # The collision radius r and sensing radius R from the model's description
+    # ("car_barrier 3-64-1 relu, 12 cars, r 0.07, R 1, cap 0.05, positions"): a window of a few r.
+    found = dict(re.findall(r"\b(r|R) ([0-9.eE+-]+)", b.describe()))
+    r = float(found.get("r", 0.07))
+    extent = min(float(found.get("R", 1.0)) * 1.05, max(5.0 * r, 0.2))
+    n = 161
     xs = np.linspace(-extent, extent, n)
     X, Y = np.meshgrid(xs, xs)
     S = np.tile(state, (n * n, 1)).astype(np.float32)
@@ -572,15 +577,17 @@ def barrier_derby(page, secure, run_dir, result):
     im = ax.pcolormesh(X, Y, H, cmap="RdBu", vmin=-lim, vmax=lim, shading="auto")
     if np.nanmin(H) < 0 < np.nanmax(H):
         ax.contour(X, Y, H, levels=[0.0], colors="black", linewidths=1.5)
-    ax.plot([0], [0], marker="s", color="black")
+    ax.plot([0], [0], marker="+", color="black")
+    ax.add_patch(plt.Circle((0, 0), r, fill=False, color="gray", linewidth=1, linestyle=":"))
     ax.set_aspect("equal")
     ax.set_xlabel("car0_dx (other car - ego)")
     ax.set_ylabel("car0_dy")
     fig.colorbar(im, ax=ax, label="h")
     fig.tight_layout()
     page.figure(fig, "barrier", "The learned per-car barrier of <code>%s</code> around the ego "
-                "car (square) as a function of one other car's relative position (relative "
-                "velocity 0, ego at rest, every other car out of range). Black: h = 0."
+                "car (+) as a function of one other car's relative position (relative "
+                "velocity 0, ego at rest, every other car out of range). Black: h = 0; "
+                "dotted gray: the collision radius."
                 % html.escape(os.path.relpath(path, run_dir)))
 
 
