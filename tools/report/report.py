@@ -254,7 +254,10 @@ def comparison_figure(page, evaluation, title, name):
                     color="black", linewidth=0.8)
             ax.text((i + j) / 2, level + step * 0.35, mark, ha="center", va="bottom", fontsize=9)
             level += step
-        ax.set_ylim(0, max(level + step * 0.5, 10.0))
+        ylim = max(level + step * 0.5, 10.0)
+        if ylim > 40:  # rates are at most 100 %: no ticks in the brackets' room above
+            ax.set_yticks([t for t in range(0, 101, 20) if t <= ylim])
+        ax.set_ylim(0, ylim)
         ax.grid(axis="y", alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
@@ -604,28 +607,43 @@ def barrier_panda(page, secure, run_dir, result):
         page.note("No barrier picture: the barrier does not read ee_z and ee_vx.")
         return
     states = read_states_csv(safe, feats)
-    # A pushing state: the safe state with the largest end-effector speed along +x.
-    state = states[int(np.argmax(states[:, feats.index("ee_vx")]))]
+    iz, iv = feats.index("ee_z"), feats.index("ee_vx")
+    # A pushing state: among the safe states moving along +x, the one with the end effector
+    # nearest the block (if the barrier reads the block's position), else the median-speed one.
+    moving = states[states[:, iv] > 0.02]
+    if len(moving) == 0:
+        moving = states
+    if "block_x" in feats:
+        gap = np.abs(moving[:, feats.index("block_x")] - moving[:, feats.index("ee_x")])
+        state = moving[int(np.argmin(gap))]
+    else:
+        state = moving[int(np.argsort(moving[:, iv])[len(moving) // 2])]
+    v_top = 1.0
+    nd_path = os.path.join(run_dir, "near_dangerous.csv")
+    if os.path.isfile(nd_path):  # up to the near-dangerous pushes' speeds
+        nd = read_states_csv(nd_path, feats)
+        v_top = max(0.5, 1.05 * float(np.percentile(nd[:, iv], 95)))
     n = 101
-    zs = np.linspace(0.0, 0.12, n)
-    vs = np.linspace(0.0, 0.5, n)
+    zs = np.linspace(0.0, 0.15, n)
+    vs = np.linspace(0.0, v_top, n)
     Z, V = np.meshgrid(zs, vs)
     S = np.tile(state, (n * n, 1)).astype(np.float32)
-    S[:, feats.index("ee_z")] = Z.ravel()
-    S[:, feats.index("ee_vx")] = V.ravel()
+    S[:, iz] = Z.ravel()
+    S[:, iv] = V.ravel()
     H = np.asarray(b.h(S)).reshape(n, n)
     fig, ax = plt.subplots(figsize=(5.2, 4.4))
     lim = max(1e-6, float(np.nanpercentile(np.abs(H), 98)))
     im = ax.pcolormesh(Z, V, H, cmap="RdBu", vmin=-lim, vmax=lim, shading="auto")
     if np.nanmin(H) < 0 < np.nanmax(H):
         ax.contour(Z, V, H, levels=[0.0], colors="black", linewidths=1.5)
+    ax.plot([state[iz]], [state[iv]], marker="o", color="black")
     ax.set_xlabel("ee_z (m)")
     ax.set_ylabel("ee_vx (m/s)")
     fig.colorbar(im, ax=ax, label="h")
     fig.tight_layout()
     page.figure(fig, "barrier", "The learned barrier of <code>%s</code> over the end-effector "
-                "height and pushing speed, at the safe state with the fastest push (other "
-                "features fixed). Black: h = 0." % html.escape(os.path.relpath(path, run_dir)))
+                "height and pushing speed (x), the other features those of a pushing safe state "
+                "(moving along +x, nearest the block). Black: h = 0; dot: that state." % html.escape(os.path.relpath(path, run_dir)))
 
 
 BARRIER_PICTURES = {"double-integrator": barrier_double_integrator, "derby": barrier_derby,
