@@ -8,7 +8,7 @@ variance), the screenshot is not uniform and shows the figures' colours; the che
 fails on a page with a figure removed; bad run directories are one-line errors naming the file,
 exit 1. Environment (set by tests/CMakeLists.txt): SECURE_CLI (the binary), SECURE_REPORT_WORK
 (a scratch directory), SECURE_EXPECT_BARRIER=1 when the Python module is built (then the
-barrier picture is required too), CHROMIUM (default `chromium`).
+barrier picture and the trajectories are required too), CHROMIUM (default `chromium`).
 """
 import base64
 import io
@@ -89,7 +89,7 @@ def main():
         text = f.read()
     expected = ["comparison", "learning_curves", "barrier_training"]
     if EXPECT_BARRIER:
-        expected.append("barrier")
+        expected += ["barrier", "trajectories"]
         check("Python module `secure` is not available" not in text,
               "the barrier picture was skipped though the module is built")
     else:

@@ -670,6 +670,109 @@ def barrier_section(page, run_dir, result):
         page.note("No barrier picture: %s: %s" % (type(e).__name__, e))
 
 
+def trajectories_double_integrator(page, secure, run_dir, result):
+    """The expert demonstrations and five episodes of AIRL and SECURE (seed 0's models)."""
+    exp = result["experiment"]
+    seed_dir = (seed_dirs(run_dir) or [None])[0]
+    if seed_dir is None or not os.path.isfile(os.path.join(seed_dir, "airl.model")) or \
+            not os.path.isfile(os.path.join(seed_dir, "barrier.model")):
+        page.note("No trajectories: the run's first seed has no airl.model and barrier.model.")
+        return
+    opts = exp.get("domain_options") or {}
+    task = opts.get("task") if isinstance(opts, dict) else None
+    env = secure.make_env("double-integrator", **({"task": task} if task else {}))
+    policy = secure.Policy.load(os.path.join(seed_dir, "airl.model"))
+    barrier = secure.Barrier.load(os.path.join(seed_dir, "barrier.model"))
+    try:
+        shield = secure.Shield(barrier, env.dynamics, **((exp.get("options") or {}).get("shield")
+                                                          or {}))
+        shield_note = "the run's shield options"
+    except ValueError as e:
+        shield = secure.Shield(barrier, env.dynamics)
+        shield_note = "the default shield options (the run's were not accepted: %s)" % e
+    first_seed = int((exp.get("options") or {}).get("first_seed", 0))
+    eval_seed = first_seed ^ 0x5EC07E5EED5  # eval::EvaluationSeed
+    episodes = 5
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.6))
+    demos = os.path.join(run_dir, "demos.csv")
+    if os.path.isfile(demos):
+        with open(demos, newline="") as f:
+            reader = csv.DictReader(f)
+            paths = {}
+            for row in reader:
+                if len(paths) > 20 and row["episode"] not in paths:
+                    break
+                paths.setdefault(row["episode"], []).append((float(row["x"]), float(row["y"])))
+        for xy in paths.values():
+            xy = np.array(xy)
+            axes[0].plot(xy[:, 0], xy[:, 1], color="#555555", linewidth=0.8, alpha=0.7)
+    axes[0].set_title("expert demonstrations (first 20)", fontsize=10)
+    for ax, name, shielded in ((axes[1], "AIRL", False), (axes[2], "SECURE (AIRL + shield)",
+                                                           True)):
+        outcomes = []
+        for i in range(episodes):
+            obs, _ = env.reset(seed=secure.episode_seed(eval_seed, i))
+            if shielded:
+                shield.seed(env.rng.next_u64())
+            xy, collided, reached = [obs[:2].copy()], False, False
+            for _ in range(env.max_steps):
+                if shielded:
+                    shield.set_backup_action(env.backup_action(obs))
+                    action = shield.decide(obs, policy.mean(obs), policy.sigma).action
+                else:
+                    action = policy.sample(obs, env.rng)
+                obs, _, _, _, info = env.step(action)
+                xy.append(obs[:2].copy())
+                collided = collided or bool(info["collided"])
+                if info["reached_goal"]:
+                    reached = True
+                    break
+            xy = np.array(xy)
+            color = "#d62828" if collided else ("#2a9d8f" if reached else "#457b9d")
+            ax.plot(xy[:, 0], xy[:, 1], color=color, linewidth=1.2)
+            ax.plot(xy[0, 0], xy[0, 1], marker="o", color=color, markersize=3)
+            outcomes.append("dangerous" if collided else ("success" if reached else "timeout"))
+        ax.set_title("%s: %d success, %d dangerous of %d" % (
+            name, outcomes.count("success"), outcomes.count("dangerous"), episodes), fontsize=10)
+    obstacle = (task or {}).get("obstacle", [5.0, 5.0])
+    radius = (task or {}).get("radius", 2.0)
+    goal = (task or {}).get("goal", [8.5, 8.5])
+    for ax in axes:
+        ax.add_patch(plt.Circle(obstacle, radius, color="gray", alpha=0.3))
+        ax.plot(goal[0], goal[1], marker="*", color="black", markersize=10)
+        ax.set_xlim(0, 10)
+        ax.set_ylim(0, 10)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x")
+        ax.set_ylabel("y")
+    fig.tight_layout()
+    page.figure(fig, "trajectories", "Left: the expert demonstrations (<code>demos.csv</code>). "
+                "Middle and right: five episodes of seed 0's AIRL policy without and with the "
+                "shield over its barrier (%s), start states drawn from the seed's evaluation "
+                "stream; green: reached the goal (star), red: entered the obstacle (gray), blue: "
+                "neither. Played with the Python module's environment and shield."
+                % html.escape(shield_note))
+
+
+def trajectories_section(page, run_dir, result):
+    domain = result["experiment"].get("domain", "")
+    if domain != "double-integrator":
+        page.note("No trajectories for the %s domain: the run directory records no evaluation "
+                  "trajectories, and the report draws them only for the double integrator "
+                  "(\"secure render\" plays an episode of a domain with a renderer)." % domain)
+        return
+    try:
+        import secure  # noqa
+    except Exception as e:
+        page.note("No trajectories: the Python module `secure` is not available (%s: %s)."
+                  % (type(e).__name__, e))
+        return
+    try:
+        trajectories_double_integrator(page, secure, run_dir, result)
+    except Exception as e:
+        page.note("No trajectories: %s: %s" % (type(e).__name__, e))
+
+
 # ---------------------------------------------------------------------------------------------
 
 STYLE = """
@@ -732,8 +835,7 @@ def build_report(run_dir, out_path):
     barrier_section(page, run_dir, result)
 
     page.h2("5. Trajectories")
-    page.note("Not drawn: the run directory records no evaluation trajectories (\"secure render\" "
-              "plays an episode of a domain with a renderer).")
+    trajectories_section(page, run_dir, result)
 
     doc = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>SECURE report: %s on %s"
            "</title><style>%s</style></head><body>\n%s\n</body></html>\n"
