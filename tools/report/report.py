@@ -775,6 +775,9 @@ def trajectories_section(page, run_dir, result):
 
 # ---------------------------------------------------------------------------------------------
 
+FIGURE_NAMES = ["comparison", "learning_curves", "barrier_training", "sensitivity", "barrier",
+                "trajectories"]
+
 STYLE = """
 body { font-family: sans-serif; max-width: 1100px; margin: 1.5em auto; color: #222; }
 h1 { font-size: 1.5em; } h2 { font-size: 1.2em; border-bottom: 1px solid #ccc; }
@@ -793,6 +796,10 @@ def build_report(run_dir, out_path):
     kind = str(exp.get("kind", "?"))
     fig_dir = os.path.splitext(out_path)[0] + "_figures"
     os.makedirs(fig_dir, exist_ok=True)
+    for name in FIGURE_NAMES:  # a figure this run does not get must not survive from an old one
+        old = os.path.join(fig_dir, name + ".png")
+        if os.path.isfile(old):
+            os.remove(old)
     page = Page(fig_dir)
     opts = exp.get("options") or {}
     seeds = opts.get("seeds", len(exp.get("seeds") or []))
