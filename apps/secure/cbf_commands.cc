@@ -16,6 +16,7 @@
 #include "domains/double_integrator/table1.h"
 #include "secure/cbf/validation.h"
 #include "secure/common/error.h"
+#include "secure/common/progress.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
@@ -106,6 +107,7 @@ struct TrainCommand {
   std::uint64_t seed = 0;
   double test_fraction = 0.0;
   bool json = false;
+  std::string progress = "auto";
   DeferredError config_error;  // thrown when this command runs, not at registration
 
   void Register(CLI::App& app, const Config& config) {
@@ -144,6 +146,10 @@ struct TrainCommand {
                     "a `cbf check` CSV: its states join the near-dangerous training states");
     trainer_flags.Add(cmd, cbf::BarrierTrainerOptions{});
     cmd->add_flag("--json", json, "print the result as JSON");
+    AddProgressOption(cmd, &progress)
+        ->description(
+            "a live progress line on stderr (epochs done/max-epochs, elapsed, time left at most; "
+            "early stopping may end sooner): auto (when stderr is a terminal), always, never");
     cmd->callback([this] {
       config_error.Rethrow();
       Run();
@@ -194,7 +200,15 @@ struct TrainCommand {
       nd.states.rightCols(augmented) = extra.states;
     }
     cbf::BarrierTrainingSummary summary;
-    cbf::BarrierNet net = cbf::TrainBarrier(trainer, safe, nd, &summary);
+    ProgressLine line(&std::cerr, ProgressIsLive(progress));
+    line.Install();  // the --verbose lines print above the live line
+    line.Start(trainer.max_epochs, "barrier epochs");
+    cbf::BarrierNet net =
+        cbf::TrainBarrier(trainer, safe, nd, &summary, [&line](int, double, double) {
+          line.Advance();
+          return true;
+        });
+    line.Finish();
     if (!augment_from.empty())
       net.provenance["augmented_from"] = {{"file", augment_from}, {"states", augmented}};
     std::optional<cbf::ClassAccuracy> test;

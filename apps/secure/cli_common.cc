@@ -11,6 +11,7 @@
 #include "secure/common/error.h"
 #include "secure/common/excerpt.h"
 #include "secure/common/filesystem.h"
+#include "secure/common/progress.h"
 #include "secure/common/strings.h"
 #include "secure/common/yaml_keys.h"
 #include "secure/experiments/domain.h"
@@ -118,6 +119,19 @@ const CLI::Validator& NonNegativeSeed() {
 CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
                            const std::string& help) {
   return cmd->add_option(name, *seed, help)->check(NonNegativeSeed())->capture_default_str();
+}
+
+CLI::Option* AddProgressOption(CLI::App* cmd, std::string* mode) {
+  return cmd
+      ->add_option("--progress", *mode,
+                   "a live progress line on stderr (done/total, elapsed, time left): auto (when "
+                   "stderr is a terminal), always, never")
+      ->check(CLI::IsMember({"auto", "always", "never"}))
+      ->capture_default_str();
+}
+
+bool ProgressIsLive(const std::string& mode) {
+  return ProgressLine::Live(FromString(kProgressModeNames, mode, "--progress"));
 }
 
 void CheckRange(const std::string& name, long value, long lo, long hi) {

@@ -70,6 +70,13 @@ const CLI::Validator& NonNegativeSeed();
 CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
                            const std::string& help);
 
+/// Adds --progress auto|always|never: a live progress line on stderr (done/total, elapsed, time
+/// left; common/progress.h) when stderr is a terminal (auto), always, or never. Without one only
+/// the milestone lines are printed, as they always were.
+CLI::Option* AddProgressOption(CLI::App* cmd, std::string* mode);
+/// Whether --progress's value (checked by AddProgressOption) draws the live line.
+bool ProgressIsLive(const std::string& mode);
+
 /// Throws "NAME = VALUE, must be in [LO, HI]" unless lo <= value <= hi (limits:
 /// secure/common/limits.h).
 void CheckRange(const std::string& name, long value, long lo, long hi);

@@ -23,6 +23,7 @@
 #include "secure/common/atomic_file.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/filesystem.h"
+#include "secure/common/progress.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
@@ -166,6 +167,7 @@ struct ExperimentCommand {
   std::uint64_t first_seed = 0;
   int threads = 2;
   std::string barrier, methods, out, shard;
+  std::string progress = "auto";
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
   CLI::Option* episodes_option = nullptr;
@@ -207,6 +209,7 @@ struct ExperimentCommand {
                     "`secure experiment merge`; default: a SLURM array element's or an mpirun "
                     "rank's place (docs/CLUSTER.md)");
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
+    AddProgressOption(cmd, &progress);
     cmd->callback([this] { Run(); });
     return cmd;
   }
@@ -275,8 +278,9 @@ struct ExperimentCommand {
       }
       return;
     }
+    ProgressLine line(&std::cerr, ProgressIsLive(progress));
     const experiments::ExperimentResult result =
-        experiments::RunExperiment(kind, *d, options, &std::cerr);
+        experiments::RunExperimentWithProgress(kind, *d, options, line);
     PrintResult(result, json, command_name);
   }
 };

@@ -18,6 +18,7 @@
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
+#include "secure/common/progress.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
 #include "domains/double_integrator/expert.h"
@@ -149,6 +150,7 @@ struct PolicyTrainCommand {
   policy::BcOptions bc;
   policy::AirlOptions airl;
   bool json = false;
+  std::string progress = "auto";
   // --seed and --curve serve both algorithms: copied onto the chosen one's options if given.
   std::uint64_t seed = 0;
   std::string curve;
@@ -216,6 +218,10 @@ struct PolicyTrainCommand {
         "restarted with the same command. A corrupt checkpoint, one from other options or "
         "data, or one with more iterations than --iterations is an error"));
     cmd->add_flag("--json", json, "print the training summary as JSON");
+    AddProgressOption(cmd, &progress)
+        ->description(
+            "AIRL: a live progress line on stderr (iterations done/total, elapsed, time left): "
+            "auto (when stderr is a terminal), always, never");
     cmd->callback([this] {
       config_error.Rethrow();
       Run();
@@ -263,7 +269,22 @@ struct PolicyTrainCommand {
         std::cerr << "policy train: --resume: no checkpoint yet at " << airl.checkpoint_path
                   << ": starting from scratch\n";
       policy::AirlSummary summary;
-      trained = policy::TrainAirl(airl, demos, env, start ? &*start : nullptr, &summary);
+      // The live line counts this run's iterations (a resumed run starts at its checkpoint's);
+      // the "[airl] it" status lines print above it.
+      ProgressLine line(&std::cerr, ProgressIsLive(progress));
+      line.Install();
+      bool started = false;
+      trained =
+          policy::TrainAirl(airl, demos, env, start ? &*start : nullptr, &summary,
+                            [&](const policy::AirlIterationStats& stats) {
+                              if (!started) {
+                                line.Start(airl.iterations, "AIRL iterations", stats.iteration - 1);
+                                started = true;
+                              }
+                              line.Advance();
+                              return true;
+                            });
+      line.Finish();
       summary_json = summary.ToJson();
       brief = summary.BriefReport();
     }

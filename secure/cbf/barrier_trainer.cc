@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "secure/common/error.h"
+#include "secure/common/progress.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
@@ -198,10 +199,9 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   steps.restore_best = [&] { model->LoadParams(best_params); };
   steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
     if (options.verbose && (r.epoch % 50 == 0 || r.epoch == options.max_epochs)) {
-      std::fprintf(stderr,
-                   "[cbf train] epoch %d/%d loss %.5f %s balanced acc %.4f (best %.4f @ %d)\n",
-                   r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
-                   r.score->accuracy.Balanced(), r.best->accuracy.Balanced(), r.best_epoch);
+      PrintStatusLineF("[cbf train] epoch %d/%d loss %.5f %s balanced acc %.4f (best %.4f @ %d)\n",
+                       r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
+                       r.score->accuracy.Balanced(), r.best->accuracy.Balanced(), r.best_epoch);
     }
     if (callback && !callback(r.epoch, r.train_loss, r.score->accuracy.Balanced()))
       return nn::EpochDecision::kStop;

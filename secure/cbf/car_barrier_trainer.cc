@@ -11,6 +11,7 @@
 #include "secure/cbf/internal/car_barrier_torch.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
+#include "secure/common/progress.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
 #include "secure/common/yaml_value.h"
@@ -542,10 +543,10 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   steps.restore_best = [&] { model->LoadMlpParams(best_params); };
   steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
     if (options.verbose && (r.epoch % 10 == 0 || r.epoch == options.max_epochs)) {
-      std::fprintf(
-          stderr, "[car cbf train] epoch %d/%d loss %.5f %s state acc %.4f (best %.4f @ %d)\n",
-          r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
-          r.score->accuracy.states.Balanced(), r.best->accuracy.states.Balanced(), r.best_epoch);
+      PrintStatusLineF("[car cbf train] epoch %d/%d loss %.5f %s state acc %.4f (best %.4f @ %d)\n",
+                       r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
+                       r.score->accuracy.states.Balanced(), r.best->accuracy.states.Balanced(),
+                       r.best_epoch);
     }
     if (callback && !callback(r.epoch, r.train_loss, r.score->accuracy.states.Balanced()))
       return nn::EpochDecision::kStop;

@@ -171,6 +171,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     progress.Line([&](std::ostream& out) {
       out << tag << " " << summary.BriefReport();
     });
+    progress.Advance();
   }
 
   // AIRL.
@@ -183,9 +184,12 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     if (!dir.empty()) options.curve_path = dir + "/airl_curve.csv";
     policy::AirlSummary summary;
     const int report_every = std::max(1, options.iterations / 4);
+    long counted = 0;
     airl = policy::TrainAirl(
         options, demos, env, o.airl_warm_start ? &*bc : nullptr, &summary,
         [&](const policy::AirlIterationStats& stats) {
+          ++counted;
+          progress.Advance();
           if (stats.iteration % report_every == 0) {
             progress.Line([&](std::ostream& out) {
               out << tag << " AIRL iteration " << stats.iteration << "/" << options.iterations
@@ -195,6 +199,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
           }
           return true;
         });
+    progress.Advance(options.iterations - counted);  // the units of a run stopped early
     outcome.summary["airl"] = summary.ToJson();
     timings["airl"] = clock.Seconds();
     if (!dir.empty()) airl->Save(dir + "/airl.model");
@@ -226,6 +231,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
             << near_dangerous.size() << " near-dangerous): " << brief << " (" << clock.Seconds()
             << " s)";
       });
+      progress.Advance();
 
       // The pre-deployment check (its own streams; nothing above or below depends on it), and
       // with augment_flagged one retraining round with the counterexamples as near-dangerous
@@ -262,6 +268,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
           if (!dir.empty())
             barrier->Save(dir + "/" + VariantFile("barrier", variant, "_augmented.model"));
         }
+        progress.Advance();
         if (&variant == &variants.front()) {
           outcome.summary["check"] = record["check"];
           if (record.contains("augmented"))
@@ -281,11 +288,18 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
       if (!dir.empty()) options.curve_path = dir + "/joint_curve.csv";
       policy::AirlSummary summary;
       const policy::GaussianPolicy* start = o.airl_warm_start ? &*bc : nullptr;
+      long counted = 0;
+      const policy::AirlCallback count = [&](const policy::AirlIterationStats&) {
+        ++counted;
+        progress.Advance();
+        return true;
+      };
       joint = barrier->per_obstacle
                   ? policy::TrainAirlJoint(options, o.joint, *barrier->per_obstacle,
-                                           env.ShieldModel(), demos, env, start, &summary)
+                                           env.ShieldModel(), demos, env, start, &summary, count)
                   : policy::TrainAirlJoint(options, o.joint, *barrier->flat, env.ShieldModel(),
-                                           demos, env, start, &summary);
+                                           demos, env, start, &summary, count);
+      progress.Advance(options.iterations - counted);
       outcome.summary["joint"] = summary.ToJson();
       timings["joint"] = clock.Seconds();
       if (!dir.empty()) joint->Save(dir + "/joint.model");
@@ -314,10 +328,28 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
       }
       out << " (success/dangerous, " << clock.Seconds() << " s)";
     });
+    progress.Advance();
   }
   timings["barriers"] = barrier_seconds;
   timings["evaluation"] = evaluation_seconds;
   return outcome;
+}
+
+// The work units of one seed, as RunSeed advances them: BC 1, an AIRL or joint policy one per
+// iteration, per variant a barrier 1 (its check and retraining 1), an evaluation 1.
+long SeedUnits(const ExperimentOptions& o, const std::vector<eval::Method>& methods,
+               const SharedData& shared, std::size_t variants) {
+  const bool needs_airl = Any(methods, UsesAirlPolicy);
+  const bool needs_joint = Any(methods, eval::UsesJointPolicy);
+  const bool needs_barrier = Any(methods, NeedsBarrier);
+  long units = 0;
+  if (Any(methods, eval::UsesBcPolicy) || ((needs_airl || needs_joint) && o.airl_warm_start))
+    ++units;
+  if (needs_airl) units += o.airl.iterations;
+  long per_variant = 1;
+  if (needs_barrier) per_variant += shared.check ? 2 : 1;
+  if (needs_joint) per_variant += o.airl.iterations;
+  return units + per_variant * static_cast<long>(variants);
 }
 
 long RoundedCount(double fraction, long n) {
@@ -593,6 +625,8 @@ std::vector<SeedOutcome> RunSeeds(const Domain& domain, const ExperimentOptions&
   std::vector<SeedOutcome> outcomes(indices.size());
   std::vector<char> reused(indices.size(), 0);
   const int count = static_cast<int>(indices.size());
+  const long seed_units = SeedUnits(o, p.result.methods, p.shared, p.result.variants.size());
+  progress.Start(count * seed_units, "experiment");
   // RunJobsInParallel labels failures by index: run over positions and name the seed here.
   internal::RunJobsInParallel(
       count, o.threads,
@@ -608,6 +642,7 @@ std::vector<SeedOutcome> RunSeeds(const Domain& domain, const ExperimentOptions&
               out << "[seed " << seed << "] done before: reused " << SeedDir(o.output_dir, seed)
                   << "/" << kTaskFile;
             });
+            progress.Advance(seed_units);
             return;
           }
           outcomes[at] = RunSeed(domain, o, p.result.methods, indices[at], p.shared, *p.env,
@@ -623,6 +658,7 @@ std::vector<SeedOutcome> RunSeeds(const Domain& domain, const ExperimentOptions&
         }
       },
       nullptr, 0);  // the job's errors name the seed
+  progress.Finish();
   if (report != nullptr) {
     for (std::size_t k = 0; k < indices.size(); ++k) {
       const std::uint64_t seed = o.first_seed + static_cast<std::uint64_t>(indices[k]);
@@ -954,11 +990,17 @@ std::string ExperimentResult::CheckTable() const {
 
 ExperimentResult RunExperiment(ExperimentKind kind, const Domain& domain,
                                const ExperimentOptions& o, std::ostream* out) {
+  ProgressLine line(out, /*live=*/false);
+  return RunExperimentWithProgress(kind, domain, o, line);
+}
+
+ExperimentResult RunExperimentWithProgress(ExperimentKind kind, const Domain& domain,
+                                           const ExperimentOptions& o, ProgressLine& line) {
   SECURE_CHECK(o.shards == 1, "RunExperiment runs every seed (shards = "
                                   << o.shards << "): use RunExperimentShard and MergeExperiment");
   const std::vector<eval::Method> methods = CheckRun(kind, domain, o);
   const Stopwatch clock;
-  Progress progress(out, o.verbose);
+  Progress progress(&line, o.verbose);
   nn::SetTorchThreads(1);  // parallelism comes from the seeds; 1 is fastest for small nets
   std::vector<int> all(static_cast<std::size_t>(o.seeds));
   for (int i = 0; i < o.seeds; ++i) all[static_cast<std::size_t>(i)] = i;
@@ -981,7 +1023,8 @@ ShardReport RunExperimentShard(ExperimentKind kind, const Domain& domain,
                      "a directory: a shard writes its seeds' task files there");
   const std::vector<eval::Method> methods = CheckRun(kind, domain, o);
   const Stopwatch clock;
-  Progress progress(out, o.verbose);
+  ProgressLine line(out, /*live=*/false);
+  Progress progress(&line, o.verbose);
   nn::SetTorchThreads(1);
   std::vector<int> mine;
   for (int i = o.shard; i < o.seeds; i += o.shards) mine.push_back(i);

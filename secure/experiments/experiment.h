@@ -31,6 +31,7 @@
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/car_barrier_trainer.h"
 #include "secure/common/enum_strings.h"
+#include "secure/common/progress.h"
 #include "secure/data/data.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/domain.h"
@@ -189,6 +190,12 @@ struct ExperimentResult {
 /// difference. options.shards must be 1.
 ExperimentResult RunExperiment(ExperimentKind kind, const Domain& domain,
                                const ExperimentOptions& options, std::ostream* progress);
+/// The same, with the progress on `progress` (common/progress.h): milestone lines as above (when
+/// options.verbose) and, when it is live, a line counting the work units of all seeds (BC, each
+/// AIRL / joint iteration, each barrier, check and evaluation), cleared before returning.
+ExperimentResult RunExperimentWithProgress(ExperimentKind kind, const Domain& domain,
+                                           const ExperimentOptions& options,
+                                           ProgressLine& progress);
 
 /// What one shard did: the seeds it computed and the seeds whose task files it reused.
 struct ShardReport {

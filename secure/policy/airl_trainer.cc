@@ -11,6 +11,7 @@
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
+#include "secure/common/progress.h"
 #include "secure/common/rng.h"
 #include "secure/common/strings.h"
 #include "secure/common/timer.h"
@@ -326,8 +327,8 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
                      << run.completed() << ", or start afresh without resume");
     s.resumed = true;
     if (options.verbose)
-      std::fprintf(stderr, "[airl] resumed from %s at iteration %d\n",
-                   options.checkpoint_path.c_str(), run.completed());
+      PrintStatusLineF("[airl] resumed from %s at iteration %d\n", options.checkpoint_path.c_str(),
+                       run.completed());
   }
   s.start_iteration = run.completed();
   const double previous_seconds = run.previous_seconds();
@@ -366,12 +367,12 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
     }
     if (options.verbose && (last || clock.Seconds() - last_report >= 2.0 || stats.iteration == 1)) {
       last_report = clock.Seconds();
-      std::fprintf(stderr,
-                   "[airl] it %d/%d steps %ld success %.3f collide %.3f D exp %.3f pol %.3f "
-                   "r %.3f ent %.3f sigma %.3f kl %.4f %.1f s\n",
-                   stats.iteration, options.iterations, stats.env_steps, stats.success_rate,
-                   stats.collision_rate, stats.d_expert, stats.d_policy, stats.mean_reward,
-                   stats.entropy, stats.mean_sigma, stats.approx_kl, stats.seconds);
+      PrintStatusLineF(
+          "[airl] it %d/%d steps %ld success %.3f collide %.3f D exp %.3f pol %.3f "
+          "r %.3f ent %.3f sigma %.3f kl %.4f %.1f s\n",
+          stats.iteration, options.iterations, stats.env_steps, stats.success_rate,
+          stats.collision_rate, stats.d_expert, stats.d_policy, stats.mean_reward, stats.entropy,
+          stats.mean_sigma, stats.approx_kl, stats.seconds);
     }
     if (stop) break;
   }

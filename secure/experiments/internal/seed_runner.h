@@ -6,33 +6,42 @@
 #include <atomic>
 #include <exception>
 #include <functional>
-#include <mutex>
 #include <ostream>
 #include <sstream>
+#include <string>
 #include <thread>
 #include <vector>
 
 #include "secure/common/error.h"
+#include "secure/common/progress.h"
 #include "secure/nn/torch_threads.h"
 
 namespace secure::experiments::internal {
 
-/// Progress lines ("[seed 3] ...") written whole, one at a time, from any thread.
+/// Progress lines ("[seed 3] ...") written whole, one at a time, from any thread, above the live
+/// line of a ProgressLine (common/progress.h) that counts the experiment's work units.
 class Progress {
  public:
-  Progress(std::ostream* out, bool enabled) : out_(enabled ? out : nullptr) {}
+  Progress(ProgressLine* line, bool enabled) : line_(enabled ? line : nullptr) {}
   template <typename F>
   void Line(F&& write) {
-    if (out_ == nullptr) return;
+    if (line_ == nullptr) return;
     std::ostringstream line;
     write(line);
-    const std::lock_guard<std::mutex> lock(mutex_);
-    *out_ << line.str() << std::endl;
+    line_->Milestone(line.str());
+  }
+  void Start(long total, const std::string& label) {
+    if (line_ != nullptr) line_->Start(total, label);
+  }
+  void Advance(long n = 1) {
+    if (line_ != nullptr && n > 0) line_->Advance(n);
+  }
+  void Finish() {
+    if (line_ != nullptr) line_->Finish();
   }
 
  private:
-  std::ostream* out_;
-  std::mutex mutex_;
+  ProgressLine* line_;
 };
 
 /// Runs job(i) for i = 0 .. count - 1 on `threads` workers (the calling thread is one of them),
