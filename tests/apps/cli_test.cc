@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -1073,6 +1074,71 @@ TEST(CliTest, RenderOfADomainThatCannotRenderIsAnError) {
   for (const char* flag : {"--domain", "--method", "--run", "--seed", "--policy", "--barrier",
                            "--episode", "--out", "--frames-dir", "--width", "--height", "--fps"})
     EXPECT_HAS(help.out, flag);
+}
+
+// --progress: a live line on stderr only when asked (or on a terminal); stdout and the milestone
+// lines unchanged.
+std::string WithoutDigits(const std::string& s) {
+  std::string out;
+  for (char c : s)
+    if (!std::isdigit(static_cast<unsigned char>(c)) && c != '.' && c != 'e') out += c;
+  return out;
+}
+
+// The lines a terminal keeps (the text after the last '\r' of each line); the rest after the
+// last newline (the cleared live line) must hold only '\r' and blanks.
+std::vector<std::string> KeptLines(const std::string& err) {
+  std::vector<std::string> lines;
+  std::size_t start = 0;
+  for (std::size_t nl = err.find('\n'); nl != std::string::npos; nl = err.find('\n', start)) {
+    const std::string line = err.substr(start, nl - start);
+    lines.push_back(WithoutDigits(
+        line.substr(line.rfind('\r') == std::string::npos ? 0 : line.rfind('\r') + 1)));
+    start = nl + 1;
+  }
+  EXPECT_EQ(err.substr(start).find_first_not_of("\r "), std::string::npos) << err.substr(start);
+  return lines;
+}
+
+TEST(CliTest, ProgressLineOnlyWhenAskedAndOutputOtherwiseUnchanged) {
+  // The demo: not a terminal here, so the default is as --progress never.
+  const std::string demo = "demo --quick --seeds 1 --episodes 3 --methods bc,airl,secure --json";
+  const Result plain = RunCli(demo);
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_EQ(plain.err.find('\r'), std::string::npos);
+  EXPECT_HAS(plain.err, "[seed 0] AIRL iteration ");
+  EXPECT_HAS(plain.err, "[seed 0] evaluated: ");
+  const Result live = RunCli(demo + " --progress always");
+  ASSERT_EQ(live.exit_code, 0) << live.err;
+  EXPECT_HAS(live.err, "\rexperiment: ");
+  EXPECT_HAS(live.err, " elapsed, ");
+  EXPECT_HAS(live.err, " left");
+  // The same milestone lines (up to their timings) and the same results on stdout.
+  EXPECT_EQ(KeptLines(live.err), KeptLines(plain.err));
+  auto results = [](const std::string& out) { return nlohmann::json::parse(out)["methods"]; };
+  EXPECT_EQ(results(live.out), results(plain.out));
+
+  // policy train --algo airl: --progress never keeps stderr as it was; always adds the line.
+  const std::string dir = (TempDir() / "progress").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 4 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string train = "policy train --algo airl --demos " + dir + "/demos.csv --out " + dir +
+                            "/airl.model --iterations 2 ";
+  r = RunCli(train + "--progress never");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err.find('\r'), std::string::npos);
+  EXPECT_HAS(r.err, "[airl] it 2/2");
+  const std::string never_out = r.out;
+  r = RunCli(train + "--progress always");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.err, "\rAIRL iterations: 1/2 (50%), ");
+  EXPECT_HAS(r.err, "\r[airl] it 2/2");
+  EXPECT_EQ(WithoutDigits(r.out), WithoutDigits(never_out));  // the summary's timings aside
+  KeptLines(r.err);                                           // cleared at the end
+
+  r = RunCli("policy train --algo airl --demos x.csv --out y.model --progress sometimes");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--progress");
 }
 
 }  // namespace
