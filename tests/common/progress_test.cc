@@ -55,10 +55,16 @@ TEST(ProgressLineTest, LiveLineShowsDoneTotalElapsedAndTimeLeftAndIsClearedAtThe
   line.Advance(3);
   EXPECT_EQ(Shown(out.str()).rfind("experiment: 4/4 (100%), ", 0), 0u) << out.str();
   line.Finish();
-  // Cleared: the line after the last milestone holds only '\r' and blanks.
-  const std::string after = out.str().substr(out.str().rfind('\n') + 1);
-  EXPECT_EQ(after.find_first_not_of("\r "), std::string::npos) << after;
-  EXPECT_EQ(after.back(), '\r');
+  // Cleared: the last line drawn is overwritten by blanks, and the cursor is back at its start.
+  const std::string text_after = out.str();
+  const std::string last_drawn = text_after.substr(0, text_after.rfind('\r'));
+  ASSERT_EQ(text_after.back(), '\r');
+  const std::size_t blank_start = last_drawn.rfind('\r') + 1;
+  const std::string blank = last_drawn.substr(blank_start);
+  EXPECT_EQ(blank.find_first_not_of(' '), std::string::npos) << text_after;
+  const std::string before_blank = last_drawn.substr(0, blank_start - 1);
+  EXPECT_GE(blank.size(), Shown(before_blank).size());
+  EXPECT_EQ(Shown(before_blank).rfind("experiment: 4/4", 0), 0u) << text_after;
   // Nothing more is drawn until the next Start.
   const std::size_t size = out.str().size();
   line.Advance();
