@@ -1,7 +1,8 @@
 # The two commands of the README. Both set up the machine if needed (scripts/setup.sh installs
 # missing Debian packages, configures and builds), then run.
 #   make demo   the main job: the SECURE pipeline on the default domain, printing its table,
-#               then its HTML report (secure report; the run directory is $(BUILD)/demo-run)
+#               then its HTML report (secure report; the run directory is $(BUILD)/demo-run,
+#               made anew by each `make demo`: a run directory's finished seeds are otherwise reused)
 #   make test   every unit test (ctest)
 BUILD ?= build
 JOBS  ?= $(shell nproc)
@@ -12,6 +13,7 @@ build:
 	SECURE_BUILD_DIR=$(BUILD) scripts/setup.sh
 
 demo: build
+	rm -rf $(BUILD)/demo-run
 	$(BUILD)/apps/secure/secure demo --out $(BUILD)/demo-run
 	$(BUILD)/apps/secure/secure report $(BUILD)/demo-run
 
