@@ -8,7 +8,8 @@ variance), the screenshot is not uniform and shows the figures' colours; the che
 fails on a page with a figure removed; bad run directories are one-line errors naming the file,
 exit 1. Environment (set by tests/CMakeLists.txt): SECURE_CLI (the binary), SECURE_REPORT_WORK
 (a scratch directory), SECURE_EXPECT_BARRIER=1 when the Python module is built (then the
-barrier picture and the trajectories are required too), CHROMIUM (default `chromium`).
+barrier picture and the trajectories are required too), CHROMIUM (default `chromium`). A fake
+.mp4 in the run directory must appear as an embedded <video> (one over the size cap as a link).
 """
 import base64
 import io
@@ -97,6 +98,10 @@ def main():
     fig_dir = os.path.join(run_dir, "report_figures")
     for p in figure_problems(text, fig_dir, expected):
         check(False, p)
+    if EXPECT_BARRIER:
+        check("the steps where the shield intervened" in text,
+              "the trajectories' caption does not explain the intervention markers")
+    check("<video" not in text, "a video is embedded though the run directory holds no .mp4")
     check("Table 3" in text, "the page has no Table 3 section")
     check("Mann-Whitney" in text, "the page does not list the run's tests")
 
@@ -104,6 +109,29 @@ def main():
     broken = re.sub(r'<img id="fig-learning_curves"[^>]*>', "", text)
     check(any("learning_curves" in p for p in figure_problems(broken, fig_dir, expected)),
           "the checker does not notice a figure removed from the page")
+
+    # Videos: each RUN_DIR/*.mp4 is embedded as an HTML5 video (a data URI; the bytes are not
+    # decoded here), one over the size cap is linked relatively instead.
+    with open(os.path.join(run_dir, "episode-0.mp4"), "wb") as f:
+        f.write(b"\x00\x00\x00\x18ftypmp42not-a-real-video")
+    with open(os.path.join(run_dir, "huge.mp4"), "wb") as f:
+        f.truncate(21 * 1000 * 1000)  # sparse: over the 20 MB cap
+    video_page = os.path.join(WORK, "video-report.html")
+    r = run([CLI, "report", run_dir, "--out", video_page])
+    if check(r.returncode == 0 and os.path.isfile(video_page),
+             "secure report with videos failed: " + r.stderr[-3000:]):
+        with open(video_page, encoding="utf-8") as f:
+            vtext = f.read()
+        embedded = re.findall(r'<video controls[^>]*src="data:video/mp4;base64,([^"]+)"', vtext)
+        check(len(embedded) == 1 and base64.b64decode(embedded[0]).endswith(b"not-a-real-video"),
+              "episode-0.mp4 is not embedded as a <video> with a data URI")
+        check("<figcaption>episode-0.mp4</figcaption>" in vtext,
+              "the embedded video has no caption naming the file")
+        check('href="run/huge.mp4"' in vtext and "over the 20 MB" in vtext,
+              "the video over the cap is not linked relatively with a note")
+        check(not re.search(r'src="(?!data:)', vtext), "the video page references an external file")
+    os.remove(os.path.join(run_dir, "episode-0.mp4"))
+    os.remove(os.path.join(run_dir, "huge.mp4"))
 
     # As a user sees it: headless Chromium's screenshot of the page.
     shot = os.path.join(WORK, "screenshot.png")

@@ -11,7 +11,9 @@ Usage:  /usr/bin/python3 tools/report/report.py RUN_DIR [--out FILE.html]
 
 Figures: the method comparison (Figure 9 style: mean +- std over seeds, the run's significance
 marks) beside the paper's Table 3, learning curves, sensitivity / ablation variants, and the
-learned barriers (through the Python module `secure`, if importable; else a note in the page).
+learned barriers and trajectories of AIRL and SECURE with the shield's interventions marked
+(double integrator, Derby; through the Python module `secure`, if importable; else a note in
+the page), and the run directory's *.mp4 videos (embedded as base64 up to 20 MB each).
 Matplotlib with the Agg backend (no display). Errors: one line `secure report: error: ...`
 naming the file, exit 1.
 """
@@ -670,17 +672,22 @@ def barrier_section(page, run_dir, result):
         page.note("No barrier picture: %s: %s" % (type(e).__name__, e))
 
 
-def trajectories_double_integrator(page, secure, run_dir, result):
-    """The expert demonstrations and five episodes of AIRL and SECURE (seed 0's models)."""
+INTERVENTION_COLOR = "#f77f00"  # orange: the shield changed the policy's action at this step
+COLLISION_COLOR = "#d62828"
+
+
+def seed0_players(secure, run_dir, result, domain):
+    """The environment, seed 0's AIRL policy, a shield over its barrier (the run's shield
+    options), a note on those options and the seed's evaluation stream; None if the first seed
+    lacks airl.model or barrier.model."""
     exp = result["experiment"]
     seed_dir = (seed_dirs(run_dir) or [None])[0]
     if seed_dir is None or not os.path.isfile(os.path.join(seed_dir, "airl.model")) or \
             not os.path.isfile(os.path.join(seed_dir, "barrier.model")):
-        page.note("No trajectories: the run's first seed has no airl.model and barrier.model.")
-        return
+        return None
     opts = exp.get("domain_options") or {}
     task = opts.get("task") if isinstance(opts, dict) else None
-    env = secure.make_env("double-integrator", **({"task": task} if task else {}))
+    env = secure.make_env(domain, **({"task": task} if task else {}))
     policy = secure.Policy.load(os.path.join(seed_dir, "airl.model"))
     barrier = secure.Barrier.load(os.path.join(seed_dir, "barrier.model"))
     try:
@@ -692,6 +699,61 @@ def trajectories_double_integrator(page, secure, run_dir, result):
         shield_note = "the default shield options (the run's were not accepted: %s)" % e
     first_seed = int((exp.get("options") or {}).get("first_seed", 0))
     eval_seed = first_seed ^ 0x5EC07E5EED5  # eval::EvaluationSeed
+    return env, policy, shield, shield_note, eval_seed, task or {}
+
+
+def play_episodes(secure, env, policy, shield, eval_seed, episodes):
+    """Episodes 0..episodes-1 of the seed's evaluation stream, with the shield if `shield` is not
+    None (else the policy's own samples). Each: obs (T+1, obs_dim), intervened (T,) and
+    collided (T,) per step (the decision at obs[t]; contact after step t), reached (bool)."""
+    out = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=secure.episode_seed(eval_seed, i))
+        if shield is not None:
+            shield.seed(env.rng.next_u64())
+        seen, intervened, collided, reached = [obs.copy()], [], [], False
+        for _ in range(env.max_steps):
+            if shield is not None:
+                shield.set_backup_action(env.backup_action(obs))
+                decision = shield.decide(obs, policy.mean(obs), policy.sigma)
+                action = decision.action
+                intervened.append(bool(decision.intervened))
+            else:
+                action = policy.sample(obs, env.rng)
+                intervened.append(False)
+            obs, _, _, _, info = env.step(action)
+            seen.append(obs.copy())
+            collided.append(bool(info["collided"]))
+            if info["reached_goal"]:
+                reached = True
+                break
+        out.append({"obs": np.array(seen), "intervened": np.array(intervened, dtype=bool),
+                    "collided": np.array(collided, dtype=bool), "reached": reached})
+    return out
+
+
+def outcome(ep):
+    return "dangerous" if ep["collided"].any() else ("success" if ep["reached"] else "timeout")
+
+
+def outcome_color(ep):
+    return {"dangerous": COLLISION_COLOR, "success": "#2a9d8f", "timeout": "#457b9d"}[outcome(ep)]
+
+
+def panel_title(name, eps):
+    kinds = [outcome(ep) for ep in eps]
+    title = "%s: %d success, %d dangerous of %d" % (name, kinds.count("success"),
+                                                    kinds.count("dangerous"), len(eps))
+    return title
+
+
+def trajectories_double_integrator(page, secure, run_dir, result):
+    """The expert demonstrations and five episodes of AIRL and SECURE (seed 0's models)."""
+    players = seed0_players(secure, run_dir, result, "double-integrator")
+    if players is None:
+        page.note("No trajectories: the run's first seed has no airl.model and barrier.model.")
+        return
+    env, policy, shield, shield_note, eval_seed, task = players
     episodes = 5
     fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.6))
     demos = os.path.join(run_dir, "demos.csv")
@@ -709,34 +771,23 @@ def trajectories_double_integrator(page, secure, run_dir, result):
     axes[0].set_title("expert demonstrations (first 20)", fontsize=10)
     for ax, name, shielded in ((axes[1], "AIRL", False), (axes[2], "SECURE (AIRL + shield)",
                                                            True)):
-        outcomes = []
-        for i in range(episodes):
-            obs, _ = env.reset(seed=secure.episode_seed(eval_seed, i))
-            if shielded:
-                shield.seed(env.rng.next_u64())
-            xy, collided, reached = [obs[:2].copy()], False, False
-            for _ in range(env.max_steps):
-                if shielded:
-                    shield.set_backup_action(env.backup_action(obs))
-                    action = shield.decide(obs, policy.mean(obs), policy.sigma).action
-                else:
-                    action = policy.sample(obs, env.rng)
-                obs, _, _, _, info = env.step(action)
-                xy.append(obs[:2].copy())
-                collided = collided or bool(info["collided"])
-                if info["reached_goal"]:
-                    reached = True
-                    break
-            xy = np.array(xy)
-            color = "#d62828" if collided else ("#2a9d8f" if reached else "#457b9d")
+        eps = play_episodes(secure, env, policy, shield if shielded else None, eval_seed,
+                            episodes)
+        for ep in eps:
+            xy = ep["obs"][:, :2]
+            color = outcome_color(ep)
             ax.plot(xy[:, 0], xy[:, 1], color=color, linewidth=1.2)
             ax.plot(xy[0, 0], xy[0, 1], marker="o", color=color, markersize=3)
-            outcomes.append("dangerous" if collided else ("success" if reached else "timeout"))
-        ax.set_title("%s: %d success, %d dangerous of %d" % (
-            name, outcomes.count("success"), outcomes.count("dangerous"), episodes), fontsize=10)
-    obstacle = (task or {}).get("obstacle", [5.0, 5.0])
-    radius = (task or {}).get("radius", 2.0)
-    goal = (task or {}).get("goal", [8.5, 8.5])
+            at = xy[:-1][ep["intervened"]]
+            ax.scatter(at[:, 0], at[:, 1], s=9, color=INTERVENTION_COLOR, zorder=3)
+        title = panel_title(name, eps)
+        if shielded:
+            title += "\n%d shield interventions (orange)" % sum(int(ep["intervened"].sum())
+                                                                for ep in eps)
+        ax.set_title(title, fontsize=10)
+    obstacle = task.get("obstacle", [5.0, 5.0])
+    radius = task.get("radius", 2.0)
+    goal = task.get("goal", [8.5, 8.5])
     for ax in axes:
         ax.add_patch(plt.Circle(obstacle, radius, color="gray", alpha=0.3))
         ax.plot(goal[0], goal[1], marker="*", color="black", markersize=10)
@@ -750,27 +801,149 @@ def trajectories_double_integrator(page, secure, run_dir, result):
                 "Middle and right: five episodes of seed 0's AIRL policy without and with the "
                 "shield over its barrier (%s), start states drawn from the seed's evaluation "
                 "stream; green: reached the goal (star), red: entered the obstacle (gray), blue: "
-                "neither. Played with the Python module's environment and shield."
+                "neither. Orange dots: the steps where the shield intervened (changed the "
+                "policy's action; their number is in the panel's title). Played with the Python "
+                "module's environment and shield."
                 % html.escape(shield_note))
 
 
-def trajectories_section(page, run_dir, result):
+def trajectories_derby(page, secure, run_dir, result):
+    """Three episodes of AIRL and SECURE (seed 0's AIRL policy and per-car barrier) over the
+    arena: the ego car's path, the observed cars' positions faint, collisions and the shield's
+    interventions marked."""
+    players = seed0_players(secure, run_dir, result, "derby")
+    if players is None:
+        page.note("No trajectories: the run's first seed has no airl.model and barrier.model.")
+        return
+    env, policy, shield, shield_note, eval_seed, task = players
+    feats = list(env.observation_features)
+    ig = (feats.index("goal_dx"), feats.index("goal_dy"))
+    cars = []  # (dx column, dy column) of each observed car block
+    k = 0
+    while "car%d_dx" % k in feats:
+        cars.append((feats.index("car%d_dx" % k), feats.index("car%d_dy" % k)))
+        k += 1
+    side = float(task.get("arena_side", 2 ** 0.5))
+    goal_radius = float(task.get("goal_radius", 0.05))
+    collision_radius = float(task.get("collision_radius", 0.07))
+    episodes = 3
+    rows = (("AIRL", None), ("SECURE (AIRL + shield)", shield))
+    fig, axes = plt.subplots(len(rows), episodes, figsize=(4.0 * episodes + 0.5, 8.2),
+                             squeeze=False)
+    lo, hi = -0.25, side + 0.25  # the axes' range: the arena, and every ego path (bounded)
+    for r, (name, sh) in enumerate(rows):
+        eps = play_episodes(secure, env, policy, sh, eval_seed, episodes)
+        for c, ep in enumerate(eps):
+            ax = axes[r][c]
+            obs = ep["obs"]
+            # The observation is ego-relative (goal - p, v, car - p, ...): the ego's path is
+            # drawn from its start, placed at the nominal start (0, 0).
+            goal = obs[0, list(ig)]
+            p = goal - obs[:, list(ig)]
+            for jx, jy in cars:
+                ax.scatter(p[:, 0] + obs[:, jx], p[:, 1] + obs[:, jy], s=2, color="#888888",
+                           alpha=0.35, linewidths=0, zorder=1)
+            ax.add_patch(plt.Rectangle((0, 0), side, side, fill=False, color="#999999",
+                                       linestyle="--", linewidth=0.8))
+            ax.add_patch(plt.Circle(goal, goal_radius, color="black", fill=False,
+                                    linewidth=0.8))
+            ax.plot(goal[0], goal[1], marker="*", color="black", markersize=9, zorder=4)
+            color = outcome_color(ep)
+            ax.plot(p[:, 0], p[:, 1], color=color, linewidth=1.4, zorder=2)
+            ax.plot(p[0, 0], p[0, 1], marker="o", color=color, markersize=4, zorder=3)
+            at = p[:-1][ep["intervened"]]
+            ax.scatter(at[:, 0], at[:, 1], s=12, color=INTERVENTION_COLOR, zorder=3)
+            hit = p[1:][ep["collided"]]
+            for x, y in hit:
+                ax.add_patch(plt.Circle((x, y), collision_radius, fill=False,
+                                        color=COLLISION_COLOR, linewidth=0.8, zorder=4))
+            ax.scatter(hit[:, 0], hit[:, 1], s=22, marker="x", color=COLLISION_COLOR,
+                       zorder=5)
+            title = "%s, episode %d: %s" % (name.split(" ")[0], c, outcome(ep))
+            if sh is not None:
+                title += ", %d interventions" % int(ep["intervened"].sum())
+            ax.set_title(title, fontsize=9)
+            lo = min(lo, float(p.min()) - 0.05)
+            hi = max(hi, float(p.max()) + 0.05)
+            if c == 0:
+                ax.set_ylabel("%s\ny" % panel_title(name, eps), fontsize=9)
+            if r == len(rows) - 1:
+                ax.set_xlabel("x")
+    lo, hi = max(lo, -1.0 - side), min(hi, 2.0 * side + 1.0)
+    for ax in axes.ravel():
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+        ax.set_aspect("equal")
+    fig.tight_layout()
+    page.figure(fig, "trajectories", "Episodes 0&ndash;%d of seed 0's evaluation stream, played "
+                "with seed 0's AIRL policy without (top) and with (bottom) the shield over its "
+                "per-car barrier (%s), the same episodes in each column. The ego car's path: "
+                "green reached the goal (star, circle: the goal radius), red touched a car, blue "
+                "neither; red crosses (circle: the collision radius): the steps it was in "
+                "contact; orange dots: the steps where the shield intervened (changed the "
+                "policy's action; counted in the titles). Faint gray dots: the %d nearest "
+                "(observed) cars' positions at every step, which trace their paths (the "
+                "observation does not name the cars). Dashed: the arena [0, %.2f]&sup2; of the "
+                "starts. The observation is ego-relative, so positions are drawn relative to "
+                "the ego's start placed at (0, 0) (its start jitter is not observed). Played "
+                "with the Python module's environment and shield."
+                % (episodes - 1, html.escape(shield_note), len(cars), side))
+
+
+TRAJECTORY_PICTURES = {"double-integrator": trajectories_double_integrator,
+                       "derby": trajectories_derby}
+VIDEO_CAP_BYTES = 20 * 1000 * 1000
+
+
+def videos_section(page, run_dir, out_path):
+    """Every RUN_DIR/*.mp4 (e.g. `secure render ... --out RUN_DIR/x.mp4`) as an HTML5 video,
+    embedded as a base64 data URI up to VIDEO_CAP_BYTES; a larger one is linked relatively."""
+    names = sorted(n for n in os.listdir(run_dir) if n.lower().endswith(".mp4") and
+                   os.path.isfile(os.path.join(run_dir, n)))
+    if not names:
+        page.p("No videos: the run directory holds no <code>*.mp4</code> (<code>secure render "
+               "... --out RUN_DIR/NAME.mp4</code> writes one; the report embeds it).", "note")
+        return
+    page.p("Videos: the run directory's <code>*.mp4</code> files.")
+    for name in names:
+        path = os.path.join(run_dir, name)
+        size = os.path.getsize(path)
+        if size > VIDEO_CAP_BYTES:
+            rel = os.path.relpath(path, os.path.dirname(os.path.abspath(out_path)))
+            page.raw('<figure class="video"><p class="note">%s is %.1f MB, over the %d MB '
+                     'embedding cap: not embedded; <a href="%s">open the file</a> (a link '
+                     'relative to this page).</p><figcaption>%s</figcaption></figure>'
+                     % (html.escape(name), size / 1e6, VIDEO_CAP_BYTES // 1000000,
+                        html.escape(rel), html.escape(name)))
+            continue
+        with open(path, "rb") as f:
+            data = base64.b64encode(f.read()).decode("ascii")
+        page.raw('<figure class="video"><video controls preload="metadata" '
+                 'src="data:video/mp4;base64,%s"></video><figcaption>%s</figcaption></figure>'
+                 % (data, html.escape(name)))
+
+
+def trajectories_section(page, run_dir, result, out_path):
     domain = result["experiment"].get("domain", "")
-    if domain != "double-integrator":
+    picture = TRAJECTORY_PICTURES.get(domain)
+    if picture is None:
         page.note("No trajectories for the %s domain: the run directory records no evaluation "
-                  "trajectories, and the report draws them only for the double integrator "
-                  "(\"secure render\" plays an episode of a domain with a renderer)." % domain)
-        return
-    try:
-        import secure  # noqa
-    except Exception as e:
-        page.note("No trajectories: the Python module `secure` is not available (%s: %s)."
-                  % (type(e).__name__, e))
-        return
-    try:
-        trajectories_double_integrator(page, secure, run_dir, result)
-    except Exception as e:
-        page.note("No trajectories: %s: %s" % (type(e).__name__, e))
+                  "trajectories, and the report draws them only for the double integrator and "
+                  "derby (\"secure render\" plays an episode of a domain with a renderer)."
+                  % domain)
+    else:
+        try:
+            import secure  # noqa
+        except Exception as e:
+            page.note("No trajectories: the Python module `secure` is not available (%s: %s)."
+                      % (type(e).__name__, e))
+            secure = None
+        if secure is not None:
+            try:
+                picture(page, secure, run_dir, result)
+            except Exception as e:
+                page.note("No trajectories: %s: %s" % (type(e).__name__, e))
+    videos_section(page, run_dir, out_path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -783,7 +956,7 @@ body { font-family: sans-serif; max-width: 1100px; margin: 1.5em auto; color: #2
 h1 { font-size: 1.5em; } h2 { font-size: 1.2em; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.9em; }
 td, th { border: 1px solid #bbb; padding: 3px 8px; text-align: left; }
-figure { margin: 0.5em 0; } img { max-width: 100%; }
+figure { margin: 0.5em 0; } img, video { max-width: 100%; }
 figcaption, .note { font-size: 0.85em; color: #555; }
 .note { background: #fff6dd; padding: 4px 8px; }
 """
@@ -842,7 +1015,7 @@ def build_report(run_dir, out_path):
     barrier_section(page, run_dir, result)
 
     page.h2("5. Trajectories")
-    trajectories_section(page, run_dir, result)
+    trajectories_section(page, run_dir, result, out_path)
 
     doc = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>SECURE report: %s on %s"
            "</title><style>%s</style></head><body>\n%s\n</body></html>\n"
