@@ -1127,7 +1127,8 @@ TEST(CliTest, ProgressLineOnlyWhenAskedAndOutputOtherwiseUnchanged) {
   EXPECT_EQ(KeptLines(live.err), KeptLines(plain.err));
   auto results = [](const std::string& out) {  // the rates (latencies and seconds are timings)
     nlohmann::json rates;
-    for (const auto& [method, r] : nlohmann::json::parse(out)["methods"].items())
+    const nlohmann::json doc = nlohmann::json::parse(out);  // alive through the loop
+    for (const auto& [method, r] : doc.at("methods").items())
       for (const char* key : {"success_rate", "dangerous_rate", "interventions_per_episode"})
         rates[method][key] = r[key];
     return rates;
