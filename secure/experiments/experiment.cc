@@ -818,6 +818,8 @@ void ExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
       airl.ApplyYaml(entry.second, where);
     } else if (key == "joint") {
       joint.ApplyYaml(entry.second, where);
+    } else if (key == "shield") {
+      shield.ApplyYaml(entry.second, where);
     } else if (key == "check") {
       SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping of check options");
       YAML::Node rest(YAML::NodeType::Map);
@@ -839,7 +841,7 @@ void ExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
     } else {
       SECURE_THROW(source << ": unknown section '" << key
                           << "' (valid: barrier, flat_barrier, per_obstacle_barrier, bc, airl, "
-                             "joint, check"
+                             "joint, shield, check"
                           << (domain != nullptr ? ", domain" : "") << ")");
     }
   }

@@ -7,11 +7,20 @@
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/timer.h"
+#include "secure/common/yaml_fields.h"
 
 namespace secure::shield {
 namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+
+// A YamlFields handler reading an enum by its name in `table`.
+template <typename E, std::size_t N>
+YamlFields::Handler EnumField(const EnumTable<E, N>& table, const char* key, E* field) {
+  return [&table, key, field](const YAML::Node& node, const std::string& where) {
+    *field = FromString(table, YamlValue<std::string>(node, key, where), where);
+  };
+}
 
 }  // namespace
 
@@ -50,6 +59,24 @@ nlohmann::json ShieldOptions::ToJson() const {
           {"max_iterations", max_iterations},
           {"time_budget_us", time_budget_us},
           {"seed", seed}};
+}
+
+void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("num_samples", &num_samples)
+      .Field("safe_ratio", &safe_ratio)
+      .Field("dt", &dt)
+      .Section("class_k", EnumField(kClassKNames, "class_k", &class_k))
+      .Field("class_k_gain", &class_k_gain)
+      .Section("aggregation", EnumField(kAggregationNames, "aggregation", &aggregation))
+      .Section("resampling", EnumField(kResamplingNames, "resampling", &resampling))
+      .Field("num_probes", &num_probes)
+      .Field("probe_extent", &probe_extent)
+      .Field("sigma_step", &sigma_step)
+      .Field("max_iterations", &max_iterations)
+      .Field("time_budget_us", &time_budget_us)
+      .Field("seed", &seed)
+      .Apply(node, source);
 }
 
 nlohmann::json Decision::ToJson() const {

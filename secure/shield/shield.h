@@ -41,6 +41,10 @@
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 
+namespace YAML {
+class Node;
+}  // namespace YAML
+
 namespace secure::shield {
 
 /// The class-K function alpha(h).
@@ -93,6 +97,10 @@ struct ShieldOptions {
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
   nlohmann::json ToJson() const;
+  /// Sets the fields named in the mapping `node` (the keys of ToJson(); enums by name, as
+  /// "class_k: cubic"). @throws secure::Error naming `source`, the key and the value on an
+  /// unknown key or a value of the wrong type; Validate() checks the ranges.
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
 
 enum class Status {

@@ -135,6 +135,22 @@ TEST(PipelineTest, OptionsAreValidated) {
   EXPECT_EQ(o.bc.epochs, 3);
   EXPECT_EQ(o.airl.iterations, 2);
   EXPECT_EQ(o.flat_barrier.max_epochs, 7);  // `barrier` is the preset's kind: flat here
+  // The shield's options through `shield:` (enums by name), over the preset's.
+  o.ApplyYaml(YAML::Load("{shield: {num_samples: 32, class_k: cubic, class_k_gain: 3, "
+                         "aggregation: random-safe, resampling: none}}"),
+              "x.yaml");
+  EXPECT_EQ(o.shield.num_samples, 32);
+  EXPECT_EQ(o.shield.class_k, shield::ClassK::kCubic);
+  EXPECT_EQ(o.shield.class_k_gain, 3.0);
+  EXPECT_EQ(o.shield.aggregation, shield::Aggregation::kRandomSafe);
+  EXPECT_EQ(o.shield.resampling, shield::Resampling::kNone);
+  EXPECT_EQ(o.shield.dt, Tiny().shield.dt);  // keys not given keep the preset's value
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{shield: {class_k: quadratic}}"), "x.yaml"); }),
+             "x.yaml [shield] [class_k] = 'quadratic', must be one of linear, cubic");
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{shield: {samples: 8}}"), "x.yaml"); }),
+             "x.yaml [shield]: unknown key 'samples'");
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{shield: {num_samples: many}}"), "x.yaml"); }),
+             "num_samples");
   // The domain's own options through `domain:`, only when the domain is given.
   EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{domain: {safe_states: 5}}"), "x.yaml"); }),
              "unknown section 'domain'");
