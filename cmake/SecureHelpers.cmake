@@ -27,7 +27,7 @@ function(secure_add_test name label)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR})  # "tests/test_util.h"
-  target_compile_options(${name} PRIVATE ${SECURE_WARNINGS})
+  target_compile_options(${name} PRIVATE ${SECURE_WARNINGS} ${SECURE_TEST_OPTIMIZATION})
   target_link_libraries(${name} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE
     SECURE_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
