@@ -149,6 +149,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   class_k = ToString(shield::kClassKNames, so->class_k);
   aggregation = ToString(shield::kAggregationNames, so->aggregation);
   resampling = ToString(shield::kResamplingNames, so->resampling);
+  sampler = ToString(shield::kSamplerNames, so->sampler);
   using Copy = std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>;
   auto track = [this](CLI::Option* option, Copy copy) { given_.emplace_back(option, copy); };
 #define SECURE_SHIELD_FIELD_COPY(field) \
@@ -169,6 +170,10 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
         SECURE_SHIELD_FIELD_COPY(aggregation));
   track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(resampling));
+  track(cmd->add_option("--sampler", sampler,
+                        "how each round's M actions are drawn: iid | antithetic | qmc")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(sampler));
   track(cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(max_iterations));
@@ -193,6 +198,7 @@ void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
   so->class_k = FromString(shield::kClassKNames, class_k, "--class-k");
   so->aggregation = FromString(shield::kAggregationNames, aggregation, "--aggregation");
   so->resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
+  so->sampler = FromString(shield::kSamplerNames, sampler, "--sampler");
 }
 
 void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,

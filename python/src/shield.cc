@@ -97,7 +97,8 @@ py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
 
 // ShieldOptions from keyword arguments: the fields of shield::ShieldOptions by name, enums by
 // their names (class_k: linear | cubic, aggregation: mean | random-safe, resampling: adaptive |
-// none); an unknown key is an error naming it and listing the valid keys.
+// none, sampler: iid | antithetic | qmc); an unknown key is an error naming it and listing the
+// valid keys.
 }  // namespace
 
 shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
@@ -105,6 +106,7 @@ shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
   std::string class_k = ToString(shield::kClassKNames, o.class_k);
   std::string aggregation = ToString(shield::kAggregationNames, o.aggregation);
   std::string resampling = ToString(shield::kResamplingNames, o.resampling);
+  std::string sampler = ToString(shield::kSamplerNames, o.sampler);
   const std::string source = "Shield options";
   YamlFields()
       .Field("num_samples", &o.num_samples)
@@ -120,10 +122,12 @@ shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
       .Field("max_iterations", &o.max_iterations)
       .Field("time_budget_us", &o.time_budget_us)
       .Field("seed", &o.seed)
+      .Field("sampler", &sampler)
       .Apply(ToYaml(kwargs, source), source);
   o.class_k = FromString(shield::kClassKNames, class_k, source + ": class_k");
   o.aggregation = FromString(shield::kAggregationNames, aggregation, source + ": aggregation");
   o.resampling = FromString(shield::kResamplingNames, resampling, source + ": resampling");
+  o.sampler = FromString(shield::kSamplerNames, sampler, source + ": sampler");
   o.Validate();
   return o;
 }
@@ -259,7 +263,8 @@ void RegisterShield(py::module_& m) {
 The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the options being the
 fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
 class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
-sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0). The shield keeps the barrier (with
+sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
+'qmc')). The shield keeps the barrier (with
 its own evaluator) and the dynamics model alive.)doc")
       .def(py::init([](std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
                        py::kwargs options) {

@@ -150,6 +150,8 @@ def test_shield_bad_input(tiny_barrier):
         secure.Shield(barrier, model, num_samples=0)
     with pytest.raises(ValueError, match="class_k"):
         secure.Shield(barrier, model, class_k="quadratic")
+    with pytest.raises(ValueError, match="sampler.*'sobol'"):
+        secure.Shield(barrier, model, sampler="sobol")
     shield = secure.Shield(barrier, model)
     with pytest.raises(ValueError, match=r"mu: expected shape \(2,\), got \(3,\)"):
         shield.decide(np.zeros(4), np.zeros(3), SIGMA)
@@ -202,3 +204,22 @@ def test_objects_can_be_shared_between_threads(tiny_barrier, di_data):
     for t in threads:
         t.join(timeout=30)
     assert not errors and not any(t.is_alive() for t in threads)
+
+
+@pytest.mark.parametrize("sampler", ["iid", "antithetic", "qmc"])
+def test_shield_sampler_option(tiny_barrier, sampler):
+    _, barrier, _ = tiny_barrier
+    model = secure.Dynamics.builtin("double-integrator")
+    shield = secure.Shield(barrier, model, sampler=sampler, num_samples=32, seed=4)
+    assert shield.options["sampler"] == sampler
+    again = secure.Shield(barrier, model, sampler=sampler, num_samples=32, seed=4)
+    state, mu = np.array([1, 1, 0.2, 0.1]), np.array([0.2, -0.1])
+    a, b = shield.decide(state, mu, SIGMA), again.decide(state, mu, SIGMA)
+    assert np.array_equal(a.action, b.action)  # deterministic per seed
+    assert np.isfinite(a.action).all()
+
+
+def test_shield_sampler_default_is_iid(tiny_barrier):
+    _, barrier, _ = tiny_barrier
+    model = secure.Dynamics.builtin("double-integrator")
+    assert secure.Shield(barrier, model).options["sampler"] == "iid"

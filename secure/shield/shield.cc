@@ -1,5 +1,8 @@
 #include "secure/shield/shield.h"
 
+#include <boost/math/distributions/normal.hpp>
+#include <boost/math/policies/policy.hpp>
+#include <boost/random/sobol.hpp>
 #include <cmath>
 #include <limits>
 
@@ -14,6 +17,15 @@ namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
 
+// The inverse normal CDF in double precision throughout (Boost.Math's default policy promotes
+// double to long double internally, which costs x87 arithmetic for no gain at float output).
+using NormalPolicy = boost::math::policies::policy<boost::math::policies::promote_double<false>>;
+const boost::math::normal_distribution<double, NormalPolicy> kStandardNormal(0.0, 1.0);
+
+// The Sobol generator: 64-bit integers, points left-aligned (the first coordinate of point 1 is
+// 2^63, i.e. 0.5).
+using SobolEngine = boost::random::sobol_engine<std::uint64_t, 64>;
+
 // A YamlFields handler reading an enum by its name in `table`.
 template <typename E, std::size_t N>
 YamlFields::Handler EnumField(const EnumTable<E, N>& table, const char* key, E* field) {
@@ -23,6 +35,24 @@ YamlFields::Handler EnumField(const EnumTable<E, N>& table, const char* key, E* 
 }
 
 }  // namespace
+
+int MaxQmcDimension() {
+  return static_cast<int>(boost::random::default_sobol_table::max_dimension);
+}
+
+namespace detail {
+
+double QmcUniform(std::uint64_t word) {
+  // The top 52 bits and half a step: in [2^-53, 1 - 2^-53], both exact in double, so the inverse
+  // normal CDF never sees 0 or 1 (|z| <= 8.1).
+  return (static_cast<double>(word >> 12) + 0.5) * 0x1.0p-52;
+}
+
+double QmcNormal(std::uint64_t word) {
+  return boost::math::quantile(kStandardNormal, QmcUniform(word));
+}
+
+}  // namespace detail
 
 void ShieldOptions::Validate() const {
   SECURE_CHECK_FIELD(num_samples > 0, "ShieldOptions", "num_samples", num_samples, "> 0");
@@ -45,6 +75,15 @@ void ShieldOptions::Validate() const {
                      "time_budget_us", time_budget_us, ">= 0");
 }
 
+void ShieldOptions::Validate(int action_dim) const {
+  Validate();
+  SECURE_CHECK(sampler != Sampler::kQmc || action_dim <= MaxQmcDimension(),
+               "ShieldOptions::sampler = qmc supports action dimensions up to "
+                   << MaxQmcDimension()
+                   << " (Boost.Random's Sobol tables); the action dimension is " << action_dim
+                   << ": use sampler = iid or antithetic");
+}
+
 nlohmann::json ShieldOptions::ToJson() const {
   return {{"num_samples", num_samples},
           {"safe_ratio", safe_ratio},
@@ -58,7 +97,8 @@ nlohmann::json ShieldOptions::ToJson() const {
           {"sigma_step", sigma_step},
           {"max_iterations", max_iterations},
           {"time_budget_us", time_budget_us},
-          {"seed", seed}};
+          {"seed", seed},
+          {"sampler", ToString(kSamplerNames, sampler)}};
 }
 
 void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -76,6 +116,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("max_iterations", &max_iterations)
       .Field("time_budget_us", &time_budget_us)
       .Field("seed", &seed)
+      .Section("sampler", EnumField(kSamplerNames, "sampler", &sampler))
       .Apply(node, source);
 }
 
@@ -112,7 +153,7 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
       state_dim_(dynamics.state_dim()),
       action_dim_(dynamics.action_dim()),
       rng_(options.seed) {
-  options_.Validate();
+  options_.Validate(action_dim_);
   SECURE_CHECK(barrier.state_dim() == state_dim_,
                "Shield: " << barrier.Describe() << " takes " << barrier.state_dim()
                           << "-dimensional states, " << dynamics.Describe() << " produces "
@@ -133,6 +174,14 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
   state_column_.resize(state_dim_, 1);
   h_one_.resize(1);
   d_sigma_.resize(action_dim_);
+  if (options_.sampler == Sampler::kQmc) {
+    // Point 0 is the origin (Boost's engine skips it), points 1 .. M - 1 follow: for M = 2^k the
+    // columns are a (t, k, d)-net, and a digital shift keeps them one.
+    sobol_.setZero(action_dim_, m);
+    SobolEngine engine(static_cast<std::size_t>(action_dim_));
+    for (int c = 1; c < m; ++c)
+      for (int r = 0; r < action_dim_; ++r) sobol_(r, c) = engine();
+  }
 }
 
 void Shield::SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action) {
@@ -171,9 +220,33 @@ void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
 
 int Shield::SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
   const int m = options_.num_samples;
-  for (int c = 0; c < m; ++c)
-    for (int r = 0; r < action_dim_; ++r)
-      samples_(r, c) = mu_[r] + sigma_[r] * static_cast<float>(rng_.Normal());
+  switch (options_.sampler) {
+    case Sampler::kIid:
+      for (int c = 0; c < m; ++c)
+        for (int r = 0; r < action_dim_; ++r)
+          samples_(r, c) = mu_[r] + sigma_[r] * static_cast<float>(rng_.Normal());
+      break;
+    case Sampler::kAntithetic:
+      // Columns 2k and 2k + 1 are mu + sigma z and mu - sigma z (exact mirrors about mu); with
+      // odd M the last column is mu + sigma z alone.
+      for (int c = 0; c < m; c += 2) {
+        for (int r = 0; r < action_dim_; ++r) {
+          const float step = sigma_[r] * static_cast<float>(rng_.Normal());
+          samples_(r, c) = mu_[r] + step;
+          if (c + 1 < m) samples_(r, c + 1) = mu_[r] - step;
+        }
+      }
+      break;
+    case Sampler::kQmc:
+      // A fresh digital shift per round and dimension, then z = Phi^-1(u).
+      for (int r = 0; r < action_dim_; ++r) {
+        const std::uint64_t shift = rng_.NextU64();
+        for (int c = 0; c < m; ++c)
+          samples_(r, c) =
+              mu_[r] + sigma_[r] * static_cast<float>(detail::QmcNormal(sobol_(r, c) ^ shift));
+      }
+      break;
+  }
   EvaluateG(state, h_state, samples_, g_.head(m));
   int num_safe = 0;
   for (int i = 0; i < m; ++i) {

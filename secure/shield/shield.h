@@ -6,7 +6,8 @@
 //   g(a) = (h(T(s, a)) - h(s)) / dt + alpha(h(s)) >= 0          (paper Eq. 5, requirement R3)
 //
 // holds, where alpha is a class-K function (strictly increasing, alpha(0) = 0). Algorithm 1:
-//   1. draw M actions from N(mu, sigma);
+//   1. draw M actions from N(mu, sigma) (i.i.d. by default; ShieldOptions::sampler also offers
+//      antithetic pairs and randomised quasi-Monte Carlo);
 //   2. while the safe ratio rho = #{g >= 0} / M is <= rho0: widen sigma along unsafe directions
 //      (Algorithm 2, below) and draw M new actions;
 //   3. a_bar = mean of the safe actions; return a_bar if g(a_bar) >= 0, else the safe action
@@ -78,6 +79,34 @@ inline constexpr EnumTable<Resampling, 2> kResamplingNames{{
     {Resampling::kNone, "none"},
 }};
 
+/// How a round's M standard-normal vectors z (the samples are mu + sigma * z) are drawn. Every
+/// round draws afresh (resampling rounds use the widened sigma); the adaptive step's probes are
+/// uniform whatever the sampler. docs/SHIELD.md compares them.
+enum class Sampler {
+  kIid,         // M independent normal vectors (Box–Muller), column by column
+  kAntithetic,  // ceil(M/2) normal vectors z, each used as the adjacent pair mu + sigma z,
+                // mu - sigma z (columns 2k, 2k + 1); with odd M the last column is unpaired
+  kQmc,         // randomised quasi-Monte Carlo: the first M points of the Sobol sequence in
+                // action_dim dimensions (Boost.Random, Joe–Kuo directions, the origin included),
+                // a fresh random digital shift per round (XOR with a random 64-bit word per
+                // dimension), then the inverse normal CDF
+};
+inline constexpr EnumTable<Sampler, 3> kSamplerNames{{
+    {Sampler::kIid, "iid"},
+    {Sampler::kAntithetic, "antithetic"},
+    {Sampler::kQmc, "qmc"},
+}};
+
+/// The largest action dimension Sampler::kQmc supports (Boost.Random's Sobol tables).
+int MaxQmcDimension();
+
+namespace detail {
+/// Sampler::kQmc's map from a (shifted) 64-bit Sobol coordinate to (0, 1): never 0 or 1.
+double QmcUniform(std::uint64_t word);
+/// The standard normal quantile of QmcUniform(word) (Boost.Math), always finite.
+double QmcNormal(std::uint64_t word);
+}  // namespace detail
+
 struct ShieldOptions {
   int num_samples = 64;     // M: actions drawn per iteration
   double safe_ratio = 0.1;  // rho0: resample while #safe / M <= rho0
@@ -87,15 +116,19 @@ struct ShieldOptions {
                               // to the myopic h(T(s, a)) >= 0 (linear: k dt = 1 exactly)
   Aggregation aggregation = Aggregation::kMean;
   Resampling resampling = Resampling::kAdaptive;
-  int num_probes = 64;          // N: probe actions per adaptive step
-  double probe_extent = 1.0;    // R: probes are uniform in mu + [-R, R]^n
-  double sigma_step = 0.5;      // alpha_sigma: sigma <- sigma + alpha_sigma * d_sigma
-  int max_iterations = 20;      // K: sampling rounds per decision (the first one included)
-  double time_budget_us = 0.0;  // wall-time budget per decision; 0: none (iterations only)
-  std::uint64_t seed = 0;       // the shield's random stream (deterministic per seed)
+  int num_probes = 64;              // N: probe actions per adaptive step
+  double probe_extent = 1.0;        // R: probes are uniform in mu + [-R, R]^n
+  double sigma_step = 0.5;          // alpha_sigma: sigma <- sigma + alpha_sigma * d_sigma
+  int max_iterations = 20;          // K: sampling rounds per decision (the first one included)
+  double time_budget_us = 0.0;      // wall-time budget per decision; 0: none (iterations only)
+  std::uint64_t seed = 0;           // the shield's random stream (deterministic per seed)
+  Sampler sampler = Sampler::kIid;  // how each round's M actions are drawn
 
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
+  /// Validate(), and the checks that depend on the action dimension (sampler = qmc supports at
+  /// most MaxQmcDimension() dimensions). The Shield's constructor calls this one.
+  void Validate(int action_dim) const;
   nlohmann::json ToJson() const;
   /// Sets the fields named in the mapping `node` (the keys of ToJson(); enums by name, as
   /// "class_k: cubic"). @throws secure::Error naming `source`, the key and the value on an
@@ -187,7 +220,8 @@ class Shield {
   int state_dim() const { return state_dim_; }
 
  private:
-  // One round: draw M samples from N(mu, sigma_) into samples_, evaluate g_, count the safe ones.
+  // One round: draw M samples from N(mu, sigma_) into samples_ (with options_.sampler), evaluate
+  // g_, count the safe ones.
   int SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
   // Algorithm 2: widen sigma_ along unsafe directions around mu.
   void AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
@@ -222,6 +256,9 @@ class Shield {
   Eigen::MatrixXf state_column_;  // (state_dim x 1) for h(s)
   Eigen::VectorXf h_one_;         // (1)
   Eigen::VectorXf d_sigma_;       // (action_dim)
+  // Sampler::kQmc: the first M Sobol points as 64-bit integers, (action_dim x M), column c =
+  // point c (built in the constructor; empty for the other samplers).
+  Eigen::Matrix<std::uint64_t, Eigen::Dynamic, Eigen::Dynamic> sobol_;
 };
 
 }  // namespace secure::shield

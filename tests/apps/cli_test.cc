@@ -326,6 +326,35 @@ TEST(CliTest, ShieldRunRejectsBadInput) {
   EXPECT_HAS(r.err, "quartic");
 }
 
+TEST(CliTest, ShieldRunTakesTheSampler) {
+  for (const char* sampler : {"iid", "antithetic", "qmc"}) {
+    const Result r = RunCli(
+        std::string("shield run --domain double-integrator --barrier ground-truth --episodes 3 "
+                    "--seed 3 --json --sampler ") +
+        sampler);
+    ASSERT_EQ(r.exit_code, 0) << sampler << ": " << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["options"]["shield"]["sampler"], sampler);
+    EXPECT_EQ(j["dangerous_episodes"], 0) << sampler;
+  }
+  // The default is iid, and it draws what it drew before the option existed.
+  const Result plain = RunCli(
+      "shield run --domain double-integrator --barrier ground-truth --episodes 3 --seed 3 --json");
+  const Result iid = RunCli(
+      "shield run --domain double-integrator --barrier ground-truth --episodes 3 --seed 3 --json "
+      "--sampler iid");
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  const auto a = nlohmann::json::parse(plain.out), b = nlohmann::json::parse(iid.out);
+  EXPECT_EQ(a["options"]["shield"]["sampler"], "iid");
+  for (const char* key : {"steps", "interventions", "resampled_decisions", "success_episodes"})
+    EXPECT_EQ(a[key], b[key]) << key;
+  const Result bad =
+      RunCli("shield run --domain double-integrator --barrier ground-truth --sampler sobol");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_HAS(bad.err, "sobol");
+  EXPECT_HAS(bad.err, "--sampler");
+}
+
 // ------------------------------------------------------------------------------------------
 // The SECURE pipeline and its stages.
 

@@ -318,6 +318,18 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   cubic.options.class_k = ClassK::kCubic;
   cubic.options.time_budget_us = 1e6;
   scenarios.push_back(cubic);
+
+  // Every path again with the other samplers (odd M for the antithetic one: an unpaired column).
+  const std::size_t iid_count = scenarios.size();
+  for (Sampler sampler : {Sampler::kAntithetic, Sampler::kQmc}) {
+    for (std::size_t i = 0; i < iid_count; ++i) {
+      Scenario s = scenarios[i];
+      s.name += ", sampler = " + std::string(ToString(kSamplerNames, sampler));
+      s.options.sampler = sampler;
+      if (sampler == Sampler::kAntithetic) s.options.num_samples = 63;
+      scenarios.push_back(s);
+    }
+  }
   return scenarios;
 }
 
@@ -419,6 +431,13 @@ TEST(ShieldAllocTest, PandaSizedLearnedBarrierDecisionsDoNotAllocate) {
   }
   // Fewer decisions than the other tests: one costs ~5 ms (3 batched passes of a 300k-MAC net).
   ExpectNoAllocations(s, barrier, dynamics, 200, note);
+  // The other samplers, 9-dimensional actions (QMC: a 9-D Sobol table built in the constructor).
+  for (Sampler sampler : {Sampler::kAntithetic, Sampler::kQmc}) {
+    Scenario other = s;
+    other.name += ", sampler = " + std::string(ToString(kSamplerNames, sampler));
+    other.options.sampler = sampler;
+    ExpectNoAllocations(other, barrier, dynamics, 50, note);
+  }
 }
 
 // Demolition Derby: the per-car barrier (3-64-128-64-1 over the 12 observed cars, min over cars
@@ -449,6 +468,9 @@ TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
   s.options.max_iterations = 3;
   s.expect_resampling = true;
   const domains::derby::DerbyShieldModel model(0.1, 3.0, 3);
+  ExpectNoAllocations(s, barrier, model, 300);
+  s.name += ", sampler = qmc";
+  s.options.sampler = Sampler::kQmc;
   ExpectNoAllocations(s, barrier, model, 300);
 }
 

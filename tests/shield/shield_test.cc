@@ -6,8 +6,10 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <ostream>
 #include <set>
@@ -739,6 +741,56 @@ TEST(ShieldTest, NoResamplingSingleRoundSafePickIsReportedSafe) {
 
 // ------------------------------------------------------------------------------------------------
 // Determinism.
+
+// The default sampler (i.i.d. normals) is pinned: these decisions were recorded before
+// ShieldOptions::sampler existed (commit 63d30f0), so the draws of every existing result are
+// unchanged. Each row: the state (0 far, 1 heading into the obstacle), then the action's bits, g,
+// iterations. Consecutive decisions of one shield continue its stream.
+struct PinnedDecision {
+  int state;
+  float a0, a1;
+  double g;
+  int iterations;
+};
+
+TEST(ShieldTest, IidSamplerDecisionsAreUnchanged) {
+  static const PinnedDecision kPinned[] = {
+      {0, 0x1.644684p-3f, -0x1.1321f2p-3f, 0x1.3f2d28p+4, 1},
+      {1, -0x1.751a64p+0f, 0x1.a12612p+1f, 0x1.096a34p+3, 14},
+      {1, 0x1.523442p-1f, 0x1.f00fc8p+1f, 0x1.6cd8a8p+3, 19},
+      {0, 0x1.104f8ep-3f, -0x1.565678p-3f, 0x1.4900c8p+4, 1},
+      {1, -0x1.c8a7b4p-2f, 0x1.617b34p+2f, 0x1.3c9ae5p+4, 15},
+      {0, 0x1.3e8422p-2f, -0x1.d87228p-4f, 0x1.2a6e74p+4, 1},
+  };
+  DoubleIntegrator sys;
+  const Eigen::VectorXf states[2] = {Vec({1.0f, 1.0f, 0.3f, 0.2f}), Vec({5.0f, 7.6f, 0.0f, -1.5f})};
+  const Eigen::VectorXf mus[2] = {Vec({0.2f, -0.1f}), Vec({0.0f, -5.0f})};
+  const Eigen::VectorXf sigmas[2] = {Vec({0.5f, 0.5f}), Vec({0.05f, 0.05f})};
+  ShieldOptions options;
+  options.seed = 99;
+  options.max_iterations = 50;
+  ASSERT_EQ(options.sampler, Sampler::kIid);  // the default
+  Shield shield(options, sys.barrier, sys.dynamics);
+  std::string recorded;
+  bool same = true;
+  const int order[] = {0, 1, 1, 0, 1, 0};
+  for (int i = 0; i < 6; ++i) {
+    const int k = order[i];
+    const Decision& d = shield.Decide(states[k], mus[k], sigmas[k]);
+    char line[160];
+    std::snprintf(line, sizeof line, "{%d, %af, %af, %a, %d},\n", k, d.action[0], d.action[1], d.g,
+                  d.iterations);
+    recorded += line;
+    if (i >= static_cast<int>(std::size(kPinned))) {
+      same = false;
+      continue;
+    }
+    const PinnedDecision& p = kPinned[i];
+    same = same && p.state == k && BitEqual(d.action, Vec({p.a0, p.a1})) && p.g == d.g &&
+           p.iterations == d.iterations;
+  }
+  EXPECT_TRUE(same) << "recorded:\n" << recorded;
+}
 
 TEST(ShieldTest, SameSeedGivesIdenticalDecisions) {
   DoubleIntegrator sys;
