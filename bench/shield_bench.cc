@@ -11,6 +11,9 @@
 //   DITruth  the double integrator's analytic ground truth (no network): the cost of the shield
 //          itself (sampling, dynamics, g, aggregation).
 //
+// Each with the three samplers of ShieldOptions::sampler (argument sampler: 0 iid, 1 antithetic,
+// 2 qmc); BM_SamplingOnly times each sampler with a barrier and dynamics that cost ~nothing.
+//
 // M = 64 and 128, each in two regimes:
 //   NoResampling  the first round has safe ratio > rho0 (iterations = 1): 1 + M + 1 barrier states
 //                 per decision (h(s), the M next states, the re-check of the mean);
@@ -469,7 +472,9 @@ namespace {
 void BM_ShieldDecision(benchmark::State& st, Net net, Regime regime) {
   Eigen::setNbThreads(1);
   const int m = static_cast<int>(st.range(0));
+  const auto sampler = static_cast<shield::Sampler>(st.range(1));
   Case c = MakeCase(net, regime, m);
+  c.options.sampler = sampler;  // the case's calibration draws i.i.d. normals whatever the sampler
   shield::Shield shield(c.options, *c.barrier, *c.dynamics);
   const RegimeCheck check = WarmUp(shield, c);
   if (const std::string error = RegimeError(c, check); !error.empty()) {
@@ -499,15 +504,79 @@ void BM_ShieldDecision(benchmark::State& st, Net net, Regime regime) {
   st.counters["status_safe_fraction"] = static_cast<double>(safe) / std::max(1L, decisions);
   st.counters["h_states"] =
       static_cast<double>(c.barrier->states_evaluated()) / std::max(1L, decisions);
-  st.SetLabel(c.label);
+  st.SetLabel(c.label + ", sampler " + ToString(shield::kSamplerNames, sampler));
 }
 
-// Arg: M (samples per round).
+/// The sampling cost of each sampler, near alone: a decision (one round of M actions, action_dim
+/// 2, 3 or 9) through a barrier and dynamics that cost almost nothing (h = 1 everywhere, next
+/// state = the state). The time is the M x dim draws plus a fixed remainder (M + 2 trivial
+/// evaluations, the mean, the bookkeeping), which is the same for every sampler, so differences
+/// between samplers are differences in sampling cost. ns_per_normal = decision time / (M dim).
+class ConstantBarrier final : public cbf::Barrier {
+ public:
+  explicit ConstantBarrier(int dim) : dim_(dim) {}
+  int state_dim() const override { return dim_; }
+  std::string Describe() const override { return "h = 1"; }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
+    h.setOnes();
+  }
+
+ private:
+  int dim_;
+};
+class StillDynamics final : public domains::DynamicsModel {
+ public:
+  explicit StillDynamics(int dim) : dim_(dim) {}
+  int state_dim() const override { return dim_; }
+  int action_dim() const override { return dim_; }
+  std::string Describe() const override { return "next = state"; }
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>&,
+              Eigen::Ref<Eigen::MatrixXf> next) const override {
+    next.colwise() = state;
+  }
+
+ private:
+  int dim_;
+};
+
+void BM_SamplingOnly(benchmark::State& st) {
+  const int m = static_cast<int>(st.range(0));
+  const auto sampler = static_cast<shield::Sampler>(st.range(1));
+  const int dim = static_cast<int>(st.range(2));
+  ConstantBarrier barrier(dim);
+  StillDynamics dynamics(dim);
+  shield::ShieldOptions options;
+  options.num_samples = m;
+  options.sampler = sampler;
+  shield::Shield shield(options, barrier, dynamics);
+  const Eigen::VectorXf state = Eigen::VectorXf::Zero(dim), mu = Eigen::VectorXf::Zero(dim),
+                        sigma = Eigen::VectorXf::Constant(dim, 0.5f);
+  for (auto _ : st) {
+    const shield::Decision& d = shield.Decide(state, mu, sigma);
+    benchmark::DoNotOptimize(d.action.data());
+  }
+  st.counters["ns_per_normal"] = benchmark::Counter(
+      static_cast<double>(m) * dim * 1e-9,
+      benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  st.SetLabel(std::string("sampler ") + ToString(shield::kSamplerNames, sampler));
+}
+BENCHMARK(BM_SamplingOnly)
+    ->ArgNames({"M", "sampler", "dim"})
+    ->ArgsProduct({{64, 128}, {0, 1, 2}, {2, 3, 9}})
+    ->Unit(benchmark::kMicrosecond);
+
+// Args: M (samples per round), sampler (0 iid, 1 antithetic, 2 qmc: shield::Sampler's order).
+static_assert(static_cast<int>(shield::Sampler::kQmc) == 2, "the benchmark's sampler argument");
 #define SECURE_SHIELD_CASE(name, net, regime)             \
   BENCHMARK_CAPTURE(BM_ShieldDecision, name, net, regime) \
-      ->ArgName("M")                                      \
-      ->Arg(64)                                           \
-      ->Arg(128)                                          \
+      ->ArgNames({"M", "sampler"})                        \
+      ->ArgsProduct({{64, 128}, {0, 1, 2}})               \
       ->Unit(benchmark::kMicrosecond)
 
 SECURE_SHIELD_CASE(DI_NoResampling, Net::kDoubleIntegrator, Regime::kNoResampling);
