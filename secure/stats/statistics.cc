@@ -99,6 +99,46 @@ std::vector<double> ExactUCounts(long n1, long n2) {
   return prev[n2];
 }
 
+// Checks an n x k matrix of a within-subject design (rows = blocks, columns = conditions): at
+// least `min_rows` rows, every row as long as row 0 and at least `min_cols` long, all finite.
+void CheckMatrix(std::string_view function, const std::vector<std::vector<double>>& data,
+                 std::size_t min_rows, std::size_t min_cols) {
+  SECURE_CHECK(data.size() >= min_rows, function << ": 'data' has " << data.size() << " row"
+                                                 << (data.size() == 1 ? "" : "s")
+                                                 << ", needs at least " << min_rows
+                                                 << " (one row per block, e.g. participant)");
+  const std::size_t k = data[0].size();
+  SECURE_CHECK(k >= min_cols, function << ": row 0 of 'data' has " << k << " value"
+                                       << (k == 1 ? "" : "s") << ", needs at least " << min_cols
+                                       << " (one value per condition)");
+  for (std::size_t b = 0; b < data.size(); ++b) {
+    SECURE_CHECK(data[b].size() == k, function << ": row " << b << " of 'data' has "
+                                               << data[b].size() << " values, row 0 has " << k
+                                               << " (every row needs one value per condition)");
+    for (std::size_t c = 0; c < k; ++c)
+      SECURE_CHECK(std::isfinite(data[b][c]), function << ": row " << b
+                                                       << " of 'data' holds a non-finite value ("
+                                                       << data[b][c] << ") at column " << c);
+  }
+}
+
+// The exact null distribution of the signed-rank statistic W+ for n untied, non-zero
+// differences: pmf[w] = P(W+ = w), w = 0..n (n + 1) / 2, each of the 2^n sign patterns equally
+// likely. Built rank by rank (rank r is positive or negative with probability 1/2), as SciPy's
+// _get_wilcoxon_distr; every value is a multiple of 2^-n, exact in double for n <= 50.
+std::vector<double> SignedRankPmf(long n) {
+  std::vector<double> pmf = {1.0};
+  for (long r = 1; r <= n; ++r) {
+    std::vector<double> next(pmf.size() + static_cast<std::size_t>(r), 0.0);
+    for (std::size_t w = 0; w < pmf.size(); ++w) {
+      next[w] += 0.5 * pmf[w];                                // rank r negative
+      next[w + static_cast<std::size_t>(r)] += 0.5 * pmf[w];  // rank r positive
+    }
+    pmf = std::move(next);
+  }
+  return pmf;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -279,6 +319,37 @@ KruskalWallisResult KruskalWallis(const std::vector<std::vector<double>>& groups
   return result;
 }
 
+std::vector<double> AdjustPValues(const std::vector<double>& p_values, PAdjust adjust) {
+  for (std::size_t k = 0; k < p_values.size(); ++k)
+    SECURE_CHECK(p_values[k] >= 0 && p_values[k] <= 1,
+                 "AdjustPValues: p_values[" << k << "] = " << p_values[k] << ", must be in [0, 1]");
+  const double m = static_cast<double>(p_values.size());
+  std::vector<double> adjusted(p_values.size());
+  switch (adjust) {
+    case PAdjust::kNone:
+      adjusted = p_values;
+      break;
+    case PAdjust::kBonferroni:
+      for (std::size_t k = 0; k < p_values.size(); ++k)
+        adjusted[k] = std::min(1.0, p_values[k] * m);
+      break;
+    case PAdjust::kHolm: {
+      std::vector<std::size_t> order(p_values.size());
+      std::iota(order.begin(), order.end(), std::size_t{0});
+      std::stable_sort(order.begin(), order.end(),
+                       [&](std::size_t x, std::size_t y) { return p_values[x] < p_values[y]; });
+      double running = 0;
+      for (std::size_t rank = 0; rank < order.size(); ++rank) {
+        const double p = p_values[order[rank]];
+        running = std::max(running, std::min(1.0, p * (m - static_cast<double>(rank))));
+        adjusted[order[rank]] = running;
+      }
+      break;
+    }
+  }
+  return adjusted;
+}
+
 nlohmann::json DunnPair::ToJson() const {
   return {{"i", i}, {"j", j}, {"z", z}, {"p_value", p_value}, {"p_adjusted", p_adjusted}};
 }
@@ -322,29 +393,177 @@ DunnResult Dunn(const std::vector<std::vector<double>>& groups, PAdjust adjust) 
     }
   }
 
-  const double m = static_cast<double>(result.pairs.size());
-  switch (adjust) {
-    case PAdjust::kNone:
-      for (DunnPair& p : result.pairs) p.p_adjusted = p.p_value;
-      break;
-    case PAdjust::kBonferroni:
-      for (DunnPair& p : result.pairs) p.p_adjusted = std::min(1.0, p.p_value * m);
-      break;
-    case PAdjust::kHolm: {
-      std::vector<std::size_t> order(result.pairs.size());
-      std::iota(order.begin(), order.end(), std::size_t{0});
-      std::stable_sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
-        return result.pairs[x].p_value < result.pairs[y].p_value;
-      });
-      double running = 0;
-      for (std::size_t rank = 0; rank < order.size(); ++rank) {
-        DunnPair& p = result.pairs[order[rank]];
-        running = std::max(running, std::min(1.0, p.p_value * (m - static_cast<double>(rank))));
-        p.p_adjusted = running;
-      }
-      break;
+  std::vector<double> p_values;
+  for (const DunnPair& p : result.pairs) p_values.push_back(p.p_value);
+  const std::vector<double> adjusted = AdjustPValues(p_values, adjust);
+  for (std::size_t k = 0; k < adjusted.size(); ++k) result.pairs[k].p_adjusted = adjusted[k];
+  return result;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+nlohmann::json FriedmanResult::ToJson() const {
+  return {{"statistic", statistic},
+          {"df", df},
+          {"p_value", p_value},
+          {"n", n},
+          {"k", k},
+          {"mean_ranks", mean_ranks},
+          {"kendall_w", kendall_w}};
+}
+
+FriedmanResult Friedman(const std::vector<std::vector<double>>& data) {
+  CheckMatrix("Friedman", data, 2, 3);
+  const std::size_t rows = data.size(), cols = data[0].size();
+  const double n = static_cast<double>(rows), k = static_cast<double>(cols);
+  std::vector<double> rank_sums(cols, 0.0);
+  double tie_sum = 0;  // sum over rows of sum(t^3 - t)
+  for (const auto& row : data) {
+    const Ranking r = Rank(row);
+    for (std::size_t c = 0; c < cols; ++c) rank_sums[c] += r.ranks[c];
+    tie_sum += r.tie_sum;
+  }
+  // Integers (or sums of them) in double: the comparison is exact.
+  SECURE_CHECK(tie_sum < n * (k * k * k - k), "Friedman: in every one of the "
+                                                  << rows << " rows of 'data' all " << cols
+                                                  << " values are the same; the statistic is "
+                                                     "undefined (0 / 0)");
+  double sum_sq = 0;
+  for (double r : rank_sums) sum_sq += r * r;
+  FriedmanResult result;
+  result.n = static_cast<long>(rows);
+  result.k = static_cast<int>(cols);
+  result.df = result.k - 1;
+  const double correction = 1.0 - tie_sum / (n * (k * k * k - k));
+  result.statistic = (12.0 / (k * n * (k + 1.0)) * sum_sq - 3.0 * n * (k + 1.0)) / correction;
+  result.statistic = std::max(result.statistic, 0.0);  // rounding near "all mean ranks equal"
+  result.p_value = boost::math::cdf(boost::math::complement(
+      boost::math::chi_squared_distribution<double>(result.df), result.statistic));
+  for (double r : rank_sums) result.mean_ranks.push_back(r / n);
+  result.kendall_w = std::min(1.0, result.statistic / (n * (k - 1.0)));
+  return result;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+nlohmann::json WilcoxonResult::ToJson() const {
+  return {{"statistic", statistic},
+          {"w_plus", w_plus},
+          {"w_minus", w_minus},
+          {"n", n},
+          {"zeros", zeros},
+          {"p_value", p_value},
+          {"method", method},
+          {"z", std::isfinite(z) ? nlohmann::json(z) : nlohmann::json(nullptr)},
+          {"rank_biserial", rank_biserial}};
+}
+
+WilcoxonResult WilcoxonSignedRank(const std::vector<double>& x, const std::vector<double>& y,
+                                  WilcoxonMethod method) {
+  CheckSample("WilcoxonSignedRank", "sample 'x'", x, 1);
+  CheckSample("WilcoxonSignedRank", "sample 'y'", y, 1);
+  SECURE_CHECK(x.size() == y.size(), "WilcoxonSignedRank: sample 'x' has "
+                                         << x.size() << " values, sample 'y' has " << y.size()
+                                         << "; the samples must be paired (the same length)");
+  WilcoxonResult result;
+  std::vector<double> d, magnitude;  // the non-zero differences and their |d|
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    const double diff = x[k] - y[k];
+    if (diff == 0) {
+      ++result.zeros;
+    } else {
+      d.push_back(diff);
+      magnitude.push_back(std::abs(diff));
     }
   }
+  result.n = static_cast<long>(d.size());
+  const Ranking r = Rank(magnitude);
+  for (std::size_t k = 0; k < d.size(); ++k)
+    (d[k] > 0 ? result.w_plus : result.w_minus) += r.ranks[k];
+  result.statistic = std::min(result.w_plus, result.w_minus);
+
+  const bool ties = r.tie_sum > 0;
+  SECURE_CHECK(method != WilcoxonMethod::kExact || (result.zeros == 0 && !ties),
+               "WilcoxonSignedRank: method = exact, but the differences x - y hold "
+                   << result.zeros << " zero" << (result.zeros == 1 ? "" : "s") << " and "
+                   << (ties ? "" : "no ") << "tied |x - y|; the exact distribution assumes "
+                   << "neither (use asymptotic or auto)");
+  const bool exact =
+      method == WilcoxonMethod::kExact || (method == WilcoxonMethod::kAuto && result.zeros == 0 &&
+                                           !ties && result.n <= kWilcoxonExactMaxSize);
+  if (result.n > 0) {
+    result.rank_biserial = (result.w_plus - result.w_minus) / (result.w_plus + result.w_minus);
+  }
+
+  if (exact) {
+    result.method = "exact";
+    result.z = kNaN;
+    const std::vector<double> pmf = SignedRankPmf(result.n);
+    const long w = std::lround(result.w_plus);  // no ties: an integer
+    // Both tails summed from their own end, so a tiny tail is not 1 minus nearly 1.
+    double lower = 0, upper = 0;
+    for (long v = 0; v <= w; ++v) lower += pmf[v];
+    for (long v = static_cast<long>(pmf.size()) - 1; v >= w; --v) upper += pmf[v];
+    result.p_value = std::min(1.0, 2.0 * std::min(lower, upper));
+    return result;
+  }
+
+  result.method = "asymptotic";
+  if (result.n == 0) {  // x = y: no difference to rank (SciPy raises here)
+    result.z = 0;
+    result.p_value = 1;
+    return result;
+  }
+  const double n = static_cast<double>(result.n);
+  const double sigma = std::sqrt(n * (n + 1.0) * (2.0 * n + 1.0) / 24.0 - r.tie_sum / 48.0);
+  result.z = (result.w_plus - n * (n + 1.0) / 4.0) / sigma;
+  result.p_value = std::min(1.0, 2.0 * NormalUpper(std::abs(result.z)));
+  return result;
+}
+
+nlohmann::json WilcoxonPair::ToJson() const {
+  return {{"i", i},
+          {"j", j},
+          {"statistic", statistic},
+          {"rank_biserial", rank_biserial},
+          {"method", method},
+          {"p_value", p_value},
+          {"p_adjusted", p_adjusted}};
+}
+
+nlohmann::json PairwiseWilcoxonResult::ToJson() const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const WilcoxonPair& p : pairs) list.push_back(p.ToJson());
+  return {{"adjustment", adjustment}, {"pairs", list}};
+}
+
+PairwiseWilcoxonResult PairwiseWilcoxon(const std::vector<std::vector<double>>& data,
+                                        PAdjust adjust, WilcoxonMethod method) {
+  CheckMatrix("PairwiseWilcoxon", data, 1, 2);
+  const int k = static_cast<int>(data[0].size());
+  std::vector<std::vector<double>> columns(k);
+  for (const auto& row : data)
+    for (int c = 0; c < k; ++c) columns[c].push_back(row[c]);
+
+  PairwiseWilcoxonResult result;
+  result.adjustment = ToString(kPAdjustNames, adjust);
+  std::vector<double> p_values;
+  for (int i = 0; i < k; ++i) {
+    for (int j = i + 1; j < k; ++j) {
+      const WilcoxonResult w = WilcoxonSignedRank(columns[i], columns[j], method);
+      WilcoxonPair p;
+      p.i = i;
+      p.j = j;
+      p.statistic = w.statistic;
+      p.rank_biserial = w.rank_biserial;
+      p.method = w.method;
+      p.p_value = w.p_value;
+      result.pairs.push_back(p);
+      p_values.push_back(w.p_value);
+    }
+  }
+  const std::vector<double> adjusted = AdjustPValues(p_values, adjust);
+  for (std::size_t m = 0; m < adjusted.size(); ++m) result.pairs[m].p_adjusted = adjusted[m];
   return result;
 }
 

@@ -1,8 +1,10 @@
 #pragma once
 // Statistics for comparing methods over seeds (the paper's Section 6 runs every method with 10
 // seeds): summaries, the Mann–Whitney U test, a TOST equivalence test (two one-sided Welch
-// t-tests), the Kruskal–Wallis H test and Dunn's post-hoc test. Results are plain structs with
-// documented fields and ToJson(), so the evaluation harness can store them next to its metrics.
+// t-tests), the Kruskal–Wallis H test and Dunn's post-hoc test; and, for within-subject designs
+// (the same participants under every condition), the Friedman test, the Wilcoxon signed-rank test
+// and pairwise Wilcoxon post-hoc tests. Results are plain structs with documented fields and
+// ToJson(), so the evaluation harness can store them next to its metrics.
 //
 //   using namespace secure::stats;
 //   const std::vector<double> secure_rate = {...}, bc_rate = {...};   // one value per seed
@@ -12,6 +14,11 @@
 //   if (tost.equivalent()) ...
 //   const DunnResult dunn = Dunn({secure_rate, bc_rate, airl_rate});  // which pairs differ?
 //
+//   // Within-subject: one row per participant, one column per condition.
+//   const std::vector<std::vector<double>> times = {{41.2, 38.5, 45.1, 36.9}, ...};
+//   const FriedmanResult f = Friedman(times);                      // do the conditions differ?
+//   const PairwiseWilcoxonResult post = PairwiseWilcoxon(times);   // which pairs (Holm)?
+//
 // Conventions (chosen to match SciPy, so numbers can be checked against scipy.stats):
 //   - Ranks are 1-based, and tied values get the average of the ranks they span (midranks).
 //     Values are compared exactly: 0.47 in one sample ties 0.47 in another.
@@ -19,8 +26,9 @@
 //   - Distributions (normal, Student's t, chi-squared) come from Boost.Math; upper tails are
 //     computed as complements, so small p-values keep their relative precision.
 //   - Bad input throws secure::Error naming the function, the argument and the value: empty
-//     samples, non-finite values, too few values, bound <= 0, fewer than 2 groups, and
-//     all-values-tied inputs where a statistic is undefined (see each function).
+//     samples, non-finite values, too few values, bound <= 0, fewer than 2 groups, unpaired
+//     samples or rows of different lengths, and all-values-tied inputs where a statistic is
+//     undefined (see each function).
 
 #include <nlohmann/json.hpp>
 #include <string>
@@ -150,6 +158,11 @@ inline constexpr EnumTable<PAdjust, 3> kPAdjustNames{{
     {PAdjust::kNone, "none"},
 }};
 
+/// The p-values of m simultaneous tests adjusted for multiplicity, in the input order (Dunn and
+/// PairwiseWilcoxon use this). Each p-value must be in [0, 1]; an empty input gives an empty
+/// result. Holm's ties keep their input order (a stable sort), which does not change the result.
+std::vector<double> AdjustPValues(const std::vector<double>& p_values, PAdjust adjust);
+
 struct DunnPair {
   int i = 0;              // first group (i < j)
   int j = 0;              // second group
@@ -170,5 +183,112 @@ struct DunnResult {
 /// rules as KruskalWallis, including the error when every value is the same (se = 0).
 DunnResult Dunn(const std::vector<std::vector<double>>& groups,
                 PAdjust adjust = PAdjust::kBonferroni);
+
+// ---------------------------------------------------------------------------------------------
+// Within-subject designs: Friedman, Wilcoxon signed-rank, pairwise Wilcoxon
+//
+// The data of a within-subject design is an n x k matrix: one row per block (participant, seed,
+// scenario), one column per condition, data[b][c] the measurement of block b under condition c.
+
+struct FriedmanResult {
+  // Friedman's chi-square statistic, tie-corrected as scipy.stats.friedmanchisquare: with R_c the
+  // sum over blocks of condition c's within-block midrank,
+  //   (12 / (n k (k + 1)) sum_c R_c^2 - 3 n (k + 1)) / (1 - sum(t^3 - t) / (n (k^3 - k))),
+  // the tie term summed over the groups of t equal values within each block.
+  double statistic = 0;
+  int df = 0;                      // k - 1
+  double p_value = 1;              // P(chi^2_df >= statistic): the asymptotic p-value, as SciPy's
+  long n = 0;                      // blocks (rows)
+  int k = 0;                       // conditions (columns)
+  std::vector<double> mean_ranks;  // per condition: its mean within-block rank, in [1, k]
+  // Kendall's coefficient of concordance W = statistic / (n (k - 1)) in [0, 1] (tie-corrected):
+  // 0 for no agreement between blocks on the order of the conditions, 1 for complete agreement.
+  double kendall_w = 0;
+  nlohmann::json ToJson() const;
+};
+
+/// Friedman test of whether k related conditions differ, on `data` (n x k, rows = blocks): at
+/// least 2 rows and 3 columns, every row the same length, all values finite. Ranks are taken
+/// within each row (midranks for ties, values compared exactly). A row whose values are all equal
+/// is allowed (it counts in n and in the tie term, as in SciPy); if every row is like that, the
+/// statistic is 0 / 0 and Friedman throws (SciPy returns NaN).
+FriedmanResult Friedman(const std::vector<std::vector<double>>& data);
+
+enum class WilcoxonMethod {
+  kAuto,        // exact if there are no zero differences, no tied |differences| and at most
+                // kWilcoxonExactMaxSize of them, else asymptotic (R's wilcox.test rule). SciPy
+                // 1.10's "auto" differs only with ties: see WilcoxonSignedRank.
+  kExact,       // the exact null distribution of W+; requires no zeros and no ties
+  kAsymptotic,  // normal approximation, tie-corrected variance, no continuity correction
+};
+inline constexpr EnumTable<WilcoxonMethod, 3> kWilcoxonMethodNames{{
+    {WilcoxonMethod::kAuto, "auto"},
+    {WilcoxonMethod::kExact, "exact"},
+    {WilcoxonMethod::kAsymptotic, "asymptotic"},
+}};
+
+/// The number of differences up to which kAuto still uses the exact distribution.
+inline constexpr long kWilcoxonExactMaxSize = 50;
+
+struct WilcoxonResult {
+  double statistic = 0;  // min(w_plus, w_minus): SciPy's two-sided statistic
+  double w_plus = 0;     // sum of the midranks of |d| over the positive differences d = x - y
+  double w_minus = 0;    // ... over the negative ones; w_plus + w_minus = n (n + 1) / 2
+  long n = 0;            // non-zero differences: the ones ranked
+  long zeros = 0;        // zero differences (x = y exactly), dropped before ranking
+  double p_value = 1;    // two-sided
+  std::string method;    // the method used: "exact" or "asymptotic" (never "auto")
+  // Asymptotic only: (w_plus - n (n + 1) / 4) / sigma, positive when x tends to be larger (SciPy
+  // reports -|z|). NaN for the exact method (null in JSON).
+  double z = 0;
+  // Matched-pairs rank-biserial correlation (w_plus - w_minus) / (w_plus + w_minus) in [-1, 1]:
+  // +1 if every non-zero difference is positive, -1 if every one is negative; 0 if n = 0.
+  double rank_biserial = 0;
+  nlohmann::json ToJson() const;
+};
+
+/// Two-sided Wilcoxon signed-rank test of whether the paired differences d = x - y are symmetric
+/// about 0, with SciPy's defaults (zero_method = "wilcox", correction = False). x and y need the
+/// same number (>= 1) of values, all finite. Zero differences are dropped; the remaining n are
+/// ranked by |d| (midranks, compared exactly: x - y is computed in double, so 0.55 - 0.50 and
+/// 0.70 - 0.65 need not tie, exactly as in SciPy).
+///   exact:      p = min(1, 2 min(P(W+ <= w_plus), P(W+ >= w_plus))) under the exact null
+///               distribution of W+ (each of the 2^n sign patterns equally likely; O(n^3)).
+///   asymptotic: sigma^2 = n (n + 1) (2 n + 1) / 24 - sum(t^3 - t) / 48 (tie groups of |d|),
+///               z = (w_plus - n (n + 1) / 4) / sigma, p = 2 P(Z >= |z|): scipy.stats.wilcoxon(x,
+///               y, method="approx") exactly.
+/// kAuto equals scipy.stats.wilcoxon(x, y) (SciPy 1.10: exact iff len(x) <= 50 and no zero
+/// differences) whenever the non-zero |d| hold no ties. With ties SciPy 1.10 still uses the
+/// exact distribution, which assumes untied ranks 1..n, and truncates a half-integer W+ to an
+/// integer; kAuto uses the tie-corrected normal approximation instead (as R's wilcox.test does).
+/// If every difference is 0 (x = y), SciPy raises; here the result is statistic 0, p = 1
+/// (asymptotic, z = 0, n = 0): the samples show no difference, and a pairwise post-hoc table
+/// stays complete. kExact throws on zeros or ties.
+WilcoxonResult WilcoxonSignedRank(const std::vector<double>& x, const std::vector<double>& y,
+                                  WilcoxonMethod method = WilcoxonMethod::kAuto);
+
+struct WilcoxonPair {
+  int i = 0;                 // first condition (column; i < j)
+  int j = 0;                 // second condition
+  double statistic = 0;      // WilcoxonSignedRank(column i, column j).statistic
+  double rank_biserial = 0;  // ... .rank_biserial: positive when condition i tends to be larger
+  std::string method;        // ... .method: "exact" or "asymptotic"
+  double p_value = 1;        // two-sided, unadjusted
+  double p_adjusted = 1;     // after PairwiseWilcoxonResult::adjustment over all pairs
+  nlohmann::json ToJson() const;
+};
+
+struct PairwiseWilcoxonResult {
+  std::vector<WilcoxonPair> pairs;  // every pair i < j, ordered (0,1), (0,2), ..., (1,2), ...
+  std::string adjustment = "holm";  // name of the PAdjust used
+  nlohmann::json ToJson() const;
+};
+
+/// Post-hoc Wilcoxon signed-rank tests between every pair of conditions (columns) of `data`
+/// (n x k, rows = blocks: at least 1 row and 2 columns, every row the same length, all values
+/// finite), p-values adjusted over the k (k - 1) / 2 pairs by AdjustPValues.
+PairwiseWilcoxonResult PairwiseWilcoxon(const std::vector<std::vector<double>>& data,
+                                        PAdjust adjust = PAdjust::kHolm,
+                                        WilcoxonMethod method = WilcoxonMethod::kAuto);
 
 }  // namespace secure::stats
