@@ -16,6 +16,10 @@ namespace {
 
 bool Finite(double x) { return std::isfinite(x); }
 
+// Along x, from the end-effector to the block's centre when the pusher touches the block: the
+// pusher's front is 0.04 ahead of the end-effector, the block's back 0.04 behind its centre.
+constexpr double kTouchingDistance = 0.08;
+
 double Draw(Rng& rng, const Range& r) { return r.lo + (r.hi - r.lo) * rng.Uniform(); }
 
 void CheckRange(const Range& r, const char* owner, const char* field, double min, double max) {
@@ -126,14 +130,32 @@ void PandaSafeOptions::Validate() const {
                      "in [1, 1e8]");
   SECURE_CHECK_FIELD(noisy_copies >= 0 && noisy_copies <= 1000, "PandaSafeOptions",
                      "noisy_copies", noisy_copies, "in [0, 1000]");
+  SECURE_CHECK_FIELD(hover_copies >= 0 && hover_copies <= 1000, "PandaSafeOptions",
+                     "hover_copies", hover_copies, "in [0, 1000]");
+  CheckRange(hover_gap, "PandaSafeOptions", "hover_gap", 0.0, 1.0);
+  CheckRange(hover_z, "PandaSafeOptions", "hover_z", 0.0, 1.0);
+  SECURE_CHECK_FIELD(Finite(hover_speed) && hover_speed >= 0 && hover_speed <= 1,
+                     "PandaSafeOptions", "hover_speed", hover_speed, "in [0, 1] m/s");
 }
 
 nlohmann::json PandaSafeOptions::ToJson() const {
-  return {{"count", count}, {"noisy_copies", noisy_copies}};
+  return {{"count", count},
+          {"noisy_copies", noisy_copies},
+          {"hover_copies", hover_copies},
+          {"hover_gap", RangeJson(hover_gap)},
+          {"hover_z", RangeJson(hover_z)},
+          {"hover_speed", hover_speed}};
 }
 
 void PandaSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields().Field("count", &count).Field("noisy_copies", &noisy_copies).Apply(node, source);
+  YamlFields()
+      .Field("count", &count)
+      .Field("noisy_copies", &noisy_copies)
+      .Field("hover_copies", &hover_copies)
+      .Section("hover_gap", RangeField(&hover_gap))
+      .Section("hover_z", RangeField(&hover_z))
+      .Field("hover_speed", &hover_speed)
+      .Apply(node, source);
 }
 
 void PandaNearDangerousOptions::Validate() const {
@@ -228,9 +250,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
     bool descended = false, success = false, toppled = false;
     for (int t = 0; t < task.max_steps; ++t) {
       a.setZero();
-      // The pusher's front is 0.04 ahead of the end-effector, the block's back 0.04 behind its
-      // centre.
-      const double gap = o[kBlockPos] - 0.04 - (o[kEePos] + 0.04);
+      const double gap = o[kBlockPos] - o[kEePos] - kTouchingDistance;
       if (!descended && o[kEePos + 2] > h + 0.01) {
         a[2] = static_cast<float>(-descend);
       } else {
@@ -296,9 +316,25 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
 data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafeOptions& options,
                                Rng& rng) {
   options.Validate();
-  const Eigen::MatrixXf all = WithNoisyCopies(demos.trajectories.states, options.noisy_copies, rng);
+  const Eigen::MatrixXf& demo = demos.trajectories.states;
+  const Eigen::MatrixXf noisy = WithNoisyCopies(demo, options.noisy_copies, rng);
+  Eigen::MatrixXf all(noisy.rows(), noisy.cols() + demo.cols() * options.hover_copies);
+  all.leftCols(noisy.cols()) = noisy;
+  for (int c = 0; c < options.hover_copies; ++c) {
+    for (long i = 0; i < demo.cols(); ++i) {
+      auto s = all.col(noisy.cols() + demo.cols() * c + i);
+      s = demo.col(i);
+      const double gap = Draw(rng, options.hover_gap);
+      s[kEePos] = static_cast<float>(s[kBlockPos] - kTouchingDistance - gap);
+      s[kEePos + 1] += static_cast<float>(rng.Uniform(-0.05, 0.05));
+      s[kEePos + 2] = static_cast<float>(Draw(rng, options.hover_z));
+      for (int k = 0; k < 3; ++k)
+        s[kEeVel + k] = static_cast<float>(rng.Uniform(-options.hover_speed, options.hover_speed));
+    }
+  }
   return Subset("panda-push safe states (demonstrations, " +
-                    std::to_string(options.noisy_copies) + " noisy copies each)",
+                    std::to_string(options.noisy_copies) + " noisy and " +
+                    std::to_string(options.hover_copies) + " hovering copies each)",
                 all, DrawIndices(all.cols(), options.count, rng, "panda-push safe states (count)"));
 }
 

@@ -76,6 +76,17 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
 struct PandaSafeOptions {
   long count = 1476;      // Table 2
   int noisy_copies = 10;  // the released noisy copies per demonstration state (0: none)
+  // Hovering copies per demonstration state (0: none; not in the paper): the arm behind the
+  // block, its face hover_gap away along x, at a height ~ U(hover_z), ee_y += U(-0.05, 0.05),
+  // moving in any direction (each ee velocity component ~ U(-hover_speed, hover_speed)); the
+  // block as in the state. They teach the barrier that away from the block the arm's height and
+  // velocity do not matter: without them it extrapolates in the velocity features, and the
+  // shield picks the never-seen velocities it rates safest (docs/RESULTS.md, Panda). The gap is
+  // more than one step at full speed (0.05 m), so the arm can still stop short of the block.
+  int hover_copies = 0;
+  Range hover_gap = {0.06, 0.25};  // m, from the pusher's face to the block's face
+  Range hover_z = {0.0, 0.5};      // m
+  double hover_speed = 1.0;        // m/s
   void Validate() const;
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
@@ -103,7 +114,7 @@ struct PandaNearDangerousOptions {
 enum class NearDangerousScenario { kUpper, kFastX, kFastZ, kBoth };
 const char* ScenarioName(NearDangerousScenario s);
 
-/// Safe states from the demonstrations (observations).
+/// Safe states from the demonstrations (observations), their noisy copies and hovering copies.
 data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafeOptions& options,
                                Rng& rng);
 /// Near-dangerous states from the pushing part of the demonstrations; `scenarios` (if not null)

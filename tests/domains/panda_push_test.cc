@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -10,6 +11,7 @@
 #include "domains/panda_push/domain.h"
 #include "domains/panda_push/panda_push.h"
 #include "secure/common/error.h"
+#include "tests/test_util.h"
 
 namespace secure::domains::panda_push {
 namespace {
@@ -226,6 +228,44 @@ TEST(PandaPushData, DemonstrationsSucceedAndNearDangerousStatesFollowTheirScenar
   EXPECT_EQ(safe.features, ObservationFeatures());
   so.count = 100000;  // more than 3 demonstrations x 11 copies hold
   EXPECT_THROW(PandaSafeStates(demos, so, rng), Error);
+}
+
+TEST(PandaPushData, HoveringSafeStatesLieBehindTheBlockAtAnyHeightAndVelocity) {
+  PandaDemonstrationOptions d;
+  d.episodes = 2;
+  const PandaDemonstrations demos = GeneratePandaDemonstrations(PandaPushOptions{}, d);
+  const Eigen::MatrixXf& demo = demos.trajectories.states;
+  PandaSafeOptions so;
+  so.noisy_copies = 0;
+  so.hover_copies = 2;
+  so.count = demo.cols() * 3;  // every state: the demonstrations and two hovering copies each
+  Rng rng(5);
+  const data::StateSet safe = PandaSafeStates(demos, so, rng);
+  ASSERT_EQ(safe.size(), demo.cols() * 3);
+  long hovering = 0;
+  double max_speed = 0, max_z = 0;
+  for (long i = 0; i < safe.size(); ++i) {
+    const Eigen::VectorXf s = safe.states.col(i);
+    bool is_demo = false;
+    for (long j = 0; j < demo.cols() && !is_demo; ++j) is_demo = (demo.col(j) == s);
+    if (is_demo) continue;
+    ++hovering;
+    const double gap = s[kBlockPos] - s[kEePos] - 0.08;  // pusher face to block face
+    EXPECT_GE(gap, so.hover_gap.lo - 1e-5);
+    EXPECT_LE(gap, so.hover_gap.hi + 1e-5);
+    EXPECT_GE(s[kEePos + 2], so.hover_z.lo);
+    EXPECT_LE(s[kEePos + 2], so.hover_z.hi);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_LE(std::abs(s[kEeVel + k]), so.hover_speed);
+      max_speed = std::max(max_speed, static_cast<double>(std::abs(s[kEeVel + k])));
+    }
+    max_z = std::max(max_z, static_cast<double>(s[kEePos + 2]));
+  }
+  EXPECT_EQ(hovering, demo.cols() * 2);
+  EXPECT_GT(max_speed, 0.5 * so.hover_speed);  // the velocities span the range
+  EXPECT_GT(max_z, 0.3);                          // so do the heights
+  so.hover_copies = -1;
+  EXPECT_HAS(test::ErrorOf([&] { PandaSafeStates(demos, so, rng); }), "hover_copies = -1");
 }
 
 TEST(PandaPushData, LabelsHoldAgainstPhysics) {
