@@ -30,4 +30,4 @@ check:
 	scripts/check.sh
 
 clean:
-	rm -rf $(BUILD) build-asan build-fuzz
+	rm -rf $(BUILD) build-check

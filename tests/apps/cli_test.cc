@@ -1101,8 +1101,9 @@ TEST(CliTest, RenderOfADomainThatCannotRenderIsAnError) {
   const Result help = RunCli("render --help");
   EXPECT_EQ(help.exit_code, 0);
   for (const char* flag : {"--domain", "--method", "--run", "--seed", "--policy", "--barrier",
-                           "--episode", "--out", "--frames-dir", "--width", "--height", "--fps"})
+                           "--episode", "--out", "--frames-dir", "--width", "--height", "--fps"}) {
     EXPECT_HAS(help.out, flag);
+  }
 }
 
 // --progress: a live line on stderr only when asked (or on a terminal); stdout and the milestone

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -743,9 +744,12 @@ TEST(ShieldTest, NoResamplingSingleRoundSafePickIsReportedSafe) {
 // Determinism.
 
 // The default sampler (i.i.d. normals) is pinned: these decisions were recorded before
-// ShieldOptions::sampler existed (commit 63d30f0), so the draws of every existing result are
-// unchanged. Each row: the state (0 far, 1 heading into the obstacle), then the action's bits, g,
-// iterations. Consecutive decisions of one shield continue its stream.
+// ShieldOptions::sampler existed (commit 63d30f0, GCC 12, AVX-512), so the draws of every existing
+// result are unchanged. Each row: the state (0 far, 1 heading into the obstacle), then the action,
+// g, iterations. Consecutive decisions of one shield continue its stream. Compared to a relative
+// 1e-4, not bit for bit: another compiler or instruction set rounds the barrier's arithmetic
+// differently (clang's build differs in the last bits of row 3), while a changed draw moves an
+// action by the order of sigma.
 struct PinnedDecision {
   int state;
   float a0, a1;
@@ -786,8 +790,11 @@ TEST(ShieldTest, IidSamplerDecisionsAreUnchanged) {
       continue;
     }
     const PinnedDecision& p = kPinned[i];
-    same = same && p.state == k && BitEqual(d.action, Vec({p.a0, p.a1})) && p.g == d.g &&
-           p.iterations == d.iterations;
+    const auto close = [](double a, double b) {
+      return std::abs(a - b) <= 1e-4 * std::max(1.0, std::abs(b));
+    };
+    same = same && p.state == k && close(d.action[0], p.a0) && close(d.action[1], p.a1) &&
+           close(d.g, p.g) && p.iterations == d.iterations;
   }
   EXPECT_TRUE(same) << "recorded:\n" << recorded;
 }
