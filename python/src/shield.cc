@@ -4,7 +4,6 @@
 #include "python/src/common.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
-#include "secure/common/yaml_fields.h"
 #include "secure/domains/linear_dynamics.h"
 #include "secure/shield/shield.h"
 
@@ -95,39 +94,16 @@ py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
   return StatesToNumpy(next);
 }
 
-// ShieldOptions from keyword arguments: the fields of shield::ShieldOptions by name, enums by
-// their names (class_k: linear | cubic, aggregation: mean | random-safe, resampling: adaptive |
-// none, sampler: iid | antithetic | qmc); an unknown key is an error naming it and listing the
-// valid keys.
+// ShieldOptions from keyword arguments, read by ShieldOptions::ApplyYaml (the experiment
+// configuration's `shield:` section): the fields by name, enums by their names (class_k: linear |
+// cubic, aggregation: mean | random-safe, resampling: adaptive | none, sampler: iid | antithetic |
+// qmc); an unknown key is an error naming it and listing the valid keys.
 }  // namespace
 
 shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
   shield::ShieldOptions o;
-  std::string class_k = ToString(shield::kClassKNames, o.class_k);
-  std::string aggregation = ToString(shield::kAggregationNames, o.aggregation);
-  std::string resampling = ToString(shield::kResamplingNames, o.resampling);
-  std::string sampler = ToString(shield::kSamplerNames, o.sampler);
   const std::string source = "Shield options";
-  YamlFields()
-      .Field("num_samples", &o.num_samples)
-      .Field("safe_ratio", &o.safe_ratio)
-      .Field("dt", &o.dt)
-      .Field("class_k", &class_k)
-      .Field("class_k_gain", &o.class_k_gain)
-      .Field("aggregation", &aggregation)
-      .Field("resampling", &resampling)
-      .Field("num_probes", &o.num_probes)
-      .Field("probe_extent", &o.probe_extent)
-      .Field("sigma_step", &o.sigma_step)
-      .Field("max_iterations", &o.max_iterations)
-      .Field("time_budget_us", &o.time_budget_us)
-      .Field("seed", &o.seed)
-      .Field("sampler", &sampler)
-      .Apply(ToYaml(kwargs, source), source);
-  o.class_k = FromString(shield::kClassKNames, class_k, source + ": class_k");
-  o.aggregation = FromString(shield::kAggregationNames, aggregation, source + ": aggregation");
-  o.resampling = FromString(shield::kResamplingNames, resampling, source + ": resampling");
-  o.sampler = FromString(shield::kSamplerNames, sampler, source + ": sampler");
+  o.ApplyYaml(ToYaml(kwargs, source), source);
   o.Validate();
   return o;
 }
