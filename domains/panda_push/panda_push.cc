@@ -1,6 +1,8 @@
 // GCC 12 reports false -Wmaybe-uninitialized inside Eigen's AVX-512 packet code for the small
 // double products below (Eigen 3.4); the whole translation unit is quiet about it.
+#if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #include "domains/panda_push/panda_push.h"
 
 #include <mujoco/mujoco.h>

@@ -502,7 +502,7 @@ std::vector<Key> ActionKeys(const Reader& r, hid_t data, long cols,
     names->clear();
     for (long j = 0; j < cols; ++j) names->push_back(ColumnName("actions", cols, j));
   }
-  return {{"actions", cols}};
+  return {{"actions", cols, ""}};
 }
 
 void CheckNumSamples(const Reader& r, hid_t group, const std::string& where, long rows) {

@@ -1132,10 +1132,11 @@ std::vector<std::string> KeptLines(const std::string& err) {
     EXPECT_EQ(rest.back(), '\r') << rest;
     const std::size_t blank = rest.rfind('\r', rest.size() - 2);
     EXPECT_NE(blank, std::string::npos) << rest;
-    if (blank != std::string::npos)
+    if (blank != std::string::npos) {
       EXPECT_EQ(rest.substr(blank + 1, rest.size() - blank - 2).find_first_not_of(' '),
                 std::string::npos)
           << rest;
+    }
   }
   return lines;
 }
