@@ -333,8 +333,10 @@ data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafe
     }
   }
   return Subset("panda-push safe states (demonstrations, " +
-                    std::to_string(options.noisy_copies) + " noisy and " +
-                    std::to_string(options.hover_copies) + " hovering copies each)",
+                    std::to_string(options.noisy_copies) + " noisy " +
+                    (options.hover_copies > 0
+                         ? "and " + std::to_string(options.hover_copies) + " hovering copies each)"
+                         : std::string("copies each)")),
                 all, DrawIndices(all.cols(), options.count, rng, "panda-push safe states (count)"));
 }
 
