@@ -166,7 +166,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   track(cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(class_k_gain));
-  track(cmd->add_option("--aggregation", aggregation, "mean | random-safe")->capture_default_str(),
+  track(cmd->add_option("--aggregation", aggregation, "mean | random-safe | policy-draw")->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(aggregation));
   track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(resampling));

@@ -389,7 +389,18 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     if (iteration > 1 && options_.resampling == Resampling::kAdaptive) AdaptSigma(state, mu);
     num_safe = SampleRound(state, h_state);
     decision_.iterations = iteration;
-    if (iteration == 1) decision_.intervened = !(g_[0] >= 0.0);  // the policy's own draw
+    if (iteration == 1) {
+      decision_.intervened = !(g_[0] >= 0.0);  // the policy's own draw
+      if (options_.aggregation == Aggregation::kPolicyDraw && !decision_.intervened) {
+        decision_.safe_ratio = static_cast<double>(num_safe) / m;
+        decision_.action = samples_.col(0);
+        decision_.g = g_[0];
+        decision_.status = Status::kSafe;
+        decision_.distance_to_mean = (decision_.action - mu).norm();
+        decision_.seconds = clock.Seconds();
+        return decision_;
+      }
+    }
     decision_.safe_ratio = static_cast<double>(num_safe) / m;
     if (decision_.safe_ratio > options_.safe_ratio) {
       enough = true;

@@ -62,10 +62,15 @@ inline constexpr EnumTable<ClassK, 2> kClassKNames{{
 enum class Aggregation {
   kMean,        // Algorithm 1: mean of the safe samples, re-checked, else the nearest safe sample
   kRandomSafe,  // ablation 1 (paper Section 6.2): one safe sample chosen at random
+  // Not in the paper: the policy's own draw (round 1's first sample, mu + sigma z) when its g >= 0,
+  // else as kMean. The shield then changes the policy's behaviour only where its draw is unsafe,
+  // instead of executing about the policy's mean at every step (docs/SHIELD.md).
+  kPolicyDraw,
 };
-inline constexpr EnumTable<Aggregation, 2> kAggregationNames{{
+inline constexpr EnumTable<Aggregation, 3> kAggregationNames{{
     {Aggregation::kMean, "mean"},
     {Aggregation::kRandomSafe, "random-safe"},
+    {Aggregation::kPolicyDraw, "policy-draw"},
 }};
 
 /// What happens while too few samples are safe.

@@ -306,6 +306,11 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   random_safe.options.aggregation = Aggregation::kRandomSafe;
   scenarios.push_back(random_safe);
 
+  Scenario policy_draw = none;
+  policy_draw.name = "policy-draw aggregation";
+  policy_draw.options.aggregation = Aggregation::kPolicyDraw;
+  scenarios.push_back(policy_draw);
+
   Scenario no_resampling = resampling;
   no_resampling.name = "resampling = none";
   no_resampling.options.resampling = Resampling::kNone;

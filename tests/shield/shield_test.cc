@@ -651,6 +651,46 @@ TEST(ShieldTest, RandomSafeAggregationReturnsOneOfTheSafeSamples) {
   EXPECT_GT(chosen.size(), 5u);  // different seeds, different choices
 }
 
+TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
+  DoubleIntegrator sys;
+  // Near the obstacle, so that the policy's draw is safe for some seeds and not for others.
+  const Eigen::VectorXf state = Vec({5.0f, 7.3f, 0.0f, -0.6f});
+  const Eigen::VectorXf mu = Vec({0.0f, -1.0f}), sigma = Vec({3.0f, 3.0f});
+  int safe_draws = 0, unsafe_draws = 0;
+  for (std::uint64_t seed = 0; seed < 20; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    ShieldOptions options;
+    options.seed = seed;
+    options.aggregation = Aggregation::kPolicyDraw;
+    Shield shield(options, sys.barrier, sys.dynamics);
+    const Decision d = shield.Decide(state, mu, sigma);
+    // The policy's draw is the first sample of round 1.
+    Rng rng(seed);
+    const Eigen::MatrixXf samples = DrawRounds(rng, mu, sigma, options.num_samples);
+    const double g0 = IndependentG(sys.independent, sys.dynamics, options, state, samples.col(0));
+    if (g0 >= 0.0) {
+      ++safe_draws;
+      EXPECT_TRUE(BitEqual(d.action, samples.col(0))) << d.action.transpose();
+      EXPECT_EQ(d.status, Status::kSafe);
+      EXPECT_EQ(d.iterations, 1);
+      EXPECT_FALSE(d.intervened);
+      EXPECT_EQ(d.fallback, Fallback::kNone);
+      EXPECT_NEAR(d.g, g0, 1e-9 * std::max(1.0, std::abs(g0)));
+      EXPECT_NEAR(d.distance_to_mean, (samples.col(0) - mu).norm(), 1e-6);
+    } else {
+      // An unsafe draw: exactly Algorithm 1's decision (same draws, same seed).
+      ++unsafe_draws;
+      ShieldOptions mean_options = options;
+      mean_options.aggregation = Aggregation::kMean;
+      Shield mean_shield(mean_options, sys.barrier, sys.dynamics);
+      EXPECT_TRUE(d.intervened);
+      ExpectSameDecision(d, mean_shield.Decide(state, mu, sigma));
+    }
+  }
+  EXPECT_GT(safe_draws, 0);
+  EXPECT_GT(unsafe_draws, 0);
+}
+
 TEST(ShieldTest, RandomSafeWithSameSamplesCanPickDifferentSamples) {
   // The pick is uniform among the safe samples: its rank among them varies with the seed (it is
   // not, e.g., always the first or the last safe sample).
