@@ -218,7 +218,7 @@ void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
     g[i] = (static_cast<double>(h_next_[i]) - h_state) * inv_dt + alpha;
 }
 
-int Shield::SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
+void Shield::DrawRound() {
   const int m = options_.num_samples;
   switch (options_.sampler) {
     case Sampler::kIid:
@@ -247,6 +247,10 @@ int Shield::SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h
       }
       break;
   }
+}
+
+int Shield::ScoreRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
+  const int m = options_.num_samples;
   EvaluateG(state, h_state, samples_, g_.head(m));
   int num_safe = 0;
   for (int i = 0; i < m; ++i) {
@@ -387,20 +391,24 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
   bool enough = false;
   for (int iteration = 1; iteration <= options_.max_iterations; ++iteration) {
     if (iteration > 1 && options_.resampling == Resampling::kAdaptive) AdaptSigma(state, mu);
-    num_safe = SampleRound(state, h_state);
+    DrawRound();
     decision_.iterations = iteration;
-    if (iteration == 1) {
-      decision_.intervened = !(g_[0] >= 0.0);  // the policy's own draw
-      if (options_.aggregation == Aggregation::kPolicyDraw && !decision_.intervened) {
-        decision_.safe_ratio = static_cast<double>(num_safe) / m;
+    if (iteration == 1 && options_.aggregation == Aggregation::kPolicyDraw) {
+      // The policy's own draw alone first: if it is safe it is the decision, and the other
+      // samples need no evaluation. Otherwise the round is scored as a whole, as for kMean.
+      EvaluateG(state, h_state, samples_.leftCols(1), one_g_);
+      if (one_g_[0] >= 0.0) {
+        decision_.safe_ratio = 1.0;
         decision_.action = samples_.col(0);
-        decision_.g = g_[0];
+        decision_.g = one_g_[0];
         decision_.status = Status::kSafe;
         decision_.distance_to_mean = (decision_.action - mu).norm();
         decision_.seconds = clock.Seconds();
         return decision_;
       }
     }
+    num_safe = ScoreRound(state, h_state);
+    if (iteration == 1) decision_.intervened = !(g_[0] >= 0.0);  // the policy's own draw
     decision_.safe_ratio = static_cast<double>(num_safe) / m;
     if (decision_.safe_ratio > options_.safe_ratio) {
       enough = true;

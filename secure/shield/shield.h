@@ -64,7 +64,8 @@ enum class Aggregation {
   kRandomSafe,  // ablation 1 (paper Section 6.2): one safe sample chosen at random
   // Not in the paper: the policy's own draw (round 1's first sample, mu + sigma z) when its g >= 0,
   // else as kMean. The shield then changes the policy's behaviour only where its draw is unsafe,
-  // instead of executing about the policy's mean at every step (docs/SHIELD.md).
+  // instead of executing about the policy's mean at every step (docs/SHIELD.md). A safe draw is
+  // the only sample evaluated: such a decision costs two barrier evaluations, h(s) and h(T(s, a)).
   kPolicyDraw,
 };
 inline constexpr EnumTable<Aggregation, 3> kAggregationNames{{
@@ -177,7 +178,7 @@ struct Decision {
   double g = 0.0;                 // g(action) as evaluated (NaN only for kInvalidInput)
   double h = 0.0;                 // h(s)
   int iterations = 0;             // sampling rounds used (1 = no resampling)
-  double safe_ratio = 0.0;        // #safe / M in the last round
+  double safe_ratio = 0.0;        // #safe / M in the last round (1: a safe policy-draw, alone)
   bool intervened = false;        // the policy's own sample (the first draw) had g < 0
   double distance_to_mean = 0.0;  // ||action - mu||_2
   Fallback fallback = Fallback::kNone;
@@ -227,7 +228,10 @@ class Shield {
  private:
   // One round: draw M samples from N(mu, sigma_) into samples_ (with options_.sampler), evaluate
   // g_, count the safe ones.
-  int SampleRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
+  // Draws a round's M samples (samples_) from mu_, sigma_.
+  void DrawRound();
+  // g of every sample of the round (g_), the best one so far; returns the number of safe ones.
+  int ScoreRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
   // Algorithm 2: widen sigma_ along unsafe directions around mu.
   void AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
                   const Eigen::Ref<const Eigen::VectorXf>& mu);

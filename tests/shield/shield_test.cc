@@ -691,6 +691,41 @@ TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
   EXPECT_GT(unsafe_draws, 0);
 }
 
+TEST(ShieldTest, PolicyDrawEvaluatesOnlyTheDrawWhenItIsSafe) {
+  // x' = x + 0.1 a, h = 1 - x at x = 0 with k = 1: the draw a0 ~ N(0, 1) is safe iff a0 <= 1.
+  long evaluated = 0;
+  IntegratorDynamics dynamics{1, 0.1};
+  FunctionBarrier barrier{1, "1 - x, counted", [&](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            ++evaluated;
+                            return 1.0 - s[0];
+                          }};
+  const Eigen::VectorXf state = Vec({0.0f}), mu = Vec({0.0f}), sigma = Vec({1.0f});
+  int safe_draws = 0, unsafe_draws = 0;
+  for (std::uint64_t seed = 0; seed < 20; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    ShieldOptions options;
+    options.seed = seed;
+    options.aggregation = Aggregation::kPolicyDraw;
+    Shield shield(options, barrier, dynamics);
+    evaluated = 0;
+    const Decision d = shield.Decide(state, mu, sigma);
+    Rng rng(seed);
+    const float a0 = DrawRounds(rng, mu, sigma, options.num_samples)(0, 0);
+    if (a0 <= 1.0f) {
+      ++safe_draws;
+      EXPECT_EQ(evaluated, 2);  // h(s) and h(T(s, a0))
+      EXPECT_EQ(d.action[0], a0);
+      EXPECT_EQ(d.safe_ratio, 1.0);
+    } else {
+      ++unsafe_draws;
+      EXPECT_GE(evaluated, 2 + options.num_samples);  // the draw, then the whole round
+      EXPECT_LE(d.action[0], 1.0f);
+    }
+  }
+  EXPECT_GT(safe_draws, 0);
+  EXPECT_GT(unsafe_draws, 0);
+}
+
 TEST(ShieldTest, RandomSafeWithSameSamplesCanPickDifferentSamples) {
   // The pick is uniform among the safe samples: its rank among them varies with the seed (it is
   // not, e.g., always the first or the last safe sample).
