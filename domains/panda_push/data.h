@@ -54,7 +54,11 @@ struct PandaDemonstrationOptions {
   Range descend_speed = {0.5, 0.9};   // -a_z while descending
   Range approach_speed = {0.4, 0.7};  // a_x while approaching
   Range push_speed = {0.08, 0.15};    // a_x while pushing
-  double approach_gap = 0.1;  // m: the approach speed eases to the push speed over this gap
+  // m: the approach speed eases to the push speed over this gap. 0.2 (was 0.1): the demonstrations
+  // then reach the block slowly, so that no safe state lies 1-2 cm from contact at approach speed,
+  // next to the "too fast" near-dangerous states; the shield then brakes a fast approach
+  // (docs/RESULTS.md, Panda: 10 seeds x 100, dangerous 13.6 -> 5.7 %).
+  double approach_gap = 0.2;
   double action_noise = 0.02;         // sd of the per-component action noise
   std::uint64_t seed = 0;
 
@@ -83,7 +87,8 @@ struct PandaSafeOptions {
   // velocity do not matter: without them it extrapolates in the velocity features, and the
   // shield picks the never-seen velocities it rates safest (docs/RESULTS.md, Panda). The gap is
   // more than one step at full speed (0.05 m), so the arm can still stop short of the block.
-  int hover_copies = 0;
+  // 3 by default (was 0, the paper's data): docs/RESULTS.md, Panda.
+  int hover_copies = 3;
   Range hover_gap = {0.06, 0.25};  // m, from the pusher's face to the block's face
   Range hover_z = {0.0, 0.5};      // m
   double hover_speed = 1.0;        // m/s
