@@ -6,7 +6,7 @@
 #include <cstring>
 #include <vector>
 
-#include "domains/panda_push/mujoco_model.h"
+#include "domains/franka/mujoco_model.h"
 #include "domains/panda_push/panda_push.h"
 #include "secure/common/error.h"
 
@@ -30,7 +30,7 @@ struct PandaPushRenderer::Impl {
 };
 
 PandaPushRenderer::PandaPushRenderer(const PandaPushSim& sim) : impl_(std::make_unique<Impl>()) {
-  InstallMujocoHandlers();
+  franka::InstallMujocoHandlers();
   Impl& r = *impl_;
   r.sim = &sim;
   const mjModel* m = static_cast<const mjModel*>(sim.model());
