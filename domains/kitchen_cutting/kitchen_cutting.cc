@@ -114,8 +114,9 @@ ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist) 
   p.wrist = p.shoulder + d * u;
   const double along = (l1 * l1 - l2 * l2 + d * d) / (2 * d);
   const double across = std::sqrt(std::max(0.0, l1 * l1 - along * along));
-  // The elbow hangs: towards world -z, orthogonal to the shoulder-wrist line.
-  Eigen::Vector3d n = Eigen::Vector3d(0, 0, -1) + u.z() * u;
+  // The elbow points back towards the person (+y) and down, orthogonal to the shoulder-wrist line.
+  const Eigen::Vector3d out = Eigen::Vector3d(0, 1, -1).normalized();
+  Eigen::Vector3d n = out - out.dot(u) * u;
   if (n.norm() < 1e-6) n = Eigen::Vector3d(1, 0, 0) - u.x() * u;
   n.normalize();
   p.elbow = p.shoulder + along * u + across * n;

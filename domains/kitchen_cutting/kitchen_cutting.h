@@ -20,9 +20,9 @@
 //    lifted). Success: strokes_required [3] strokes;
 //  - the person's arm: shoulder fixed, upper arm, forearm and hand as capsules; the wrist
 //    follows a minimum-jerk reach from its rest point to a goal, dwells, and returns; the elbow
-//    by the two-link arm's inverse kinematics (elbow hanging down). The goal is in the knife's
-//    workspace (over the cut line) with probability into_probability, else beside the board;
-//    start time, speed and dwell are drawn per episode;
+//    by the two-link arm's inverse kinematics (the elbow out towards the person and down). The goal
+//    is in the knife's workspace (over the cut line) with probability into_probability, else beside
+//    the board; start time, speed and dwell are drawn per episode;
 //  - dangerous: the blade's cutting edge (the knife box's bottom edge) within contact_distance
 //    [0.02 m] of an arm capsule's surface;
 //  - observation (26): ee position and velocity, the blade edge's centre, the person's wrist,
@@ -66,14 +66,14 @@ using Interval = std::array<double, 2>;  // [lo, hi], drawn uniformly
 /// The person's arm and its reaching paths. ASSUMPTIONS standing in for a person (README.md),
 /// not measurements of people.
 struct HumanArmOptions {
-  Vec3 shoulder = {0.30, 0.42, 0.28};  // m, fixed (a person standing at the table's +y side)
+  Vec3 shoulder = {0.30, 0.38, 0.38};  // m, fixed (a person standing at the table's +y side)
   double upper_arm = 0.30, forearm = 0.27, hand = 0.08;  // segment lengths (m)
   double upper_arm_radius = 0.045, forearm_radius = 0.035, hand_radius = 0.03;  // m
-  Vec3 rest = {0.30, 0.26, 0.10};  // the wrist's rest point (m)
+  Vec3 rest = {0.30, 0.24, 0.12};  // the wrist's rest point (m)
   double into_probability = 0.5;   // share of reaches that end over the cut line
   // Wrist goals of a reach into the knife's workspace (over the line) and of one beside it.
-  Interval into_x = {0.24, 0.36}, into_y = {-0.04, 0.06}, into_z = {0.04, 0.08};
-  Interval away_x = {0.15, 0.45}, away_y = {0.16, 0.26}, away_z = {0.04, 0.10};
+  Interval into_x = {0.24, 0.36}, into_y = {-0.04, 0.06}, into_z = {0.05, 0.09};
+  Interval away_x = {0.15, 0.45}, away_y = {0.16, 0.26}, away_z = {0.05, 0.10};
   Interval start_time = {0.0, 1.0};  // s after reset the reach begins
   Interval speed = {0.3, 0.6};       // m/s, the wrist's mean speed on the way (minimum jerk)
   Interval dwell = {0.5, 2.0};       // s at the goal before returning
