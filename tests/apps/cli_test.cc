@@ -496,7 +496,7 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_HAS(r.err, "'foo'");
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "unknown domain 'panda' (registered: derby | double-integrator | panda-push)");
+  EXPECT_HAS(r.err, "unknown domain 'panda' (registered: derby | double-integrator | kitchen-cutting | panda-push)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
   EXPECT_EQ(r.exit_code, 1);
@@ -514,7 +514,7 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   }
   const Result r = RunCli("experiment method-comparison --domain unicycle --quick");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "unknown domain 'unicycle' (registered: derby | double-integrator | panda-push)");
+  EXPECT_HAS(r.err, "unknown domain 'unicycle' (registered: derby | double-integrator | kitchen-cutting | panda-push)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
   EXPECT_HAS(v.err, "the derby domain has no ground truth");
@@ -539,6 +539,29 @@ TEST(CliTest, CheckLabelsSimulatesFromTheLabelledStates) {
   const Result bad = RunCli("demos check-labels --domain panda-push --max-states 0");
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_HAS(bad.err, "--max-states");
+}
+
+TEST(CliTest, KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck) {
+  // The kitchen-cutting plug-in through the generic driver (--quick: small data, short training):
+  // the three methods of Table 3 on its episodes, and its labels against physics.
+  const Result r = RunCli(
+      "experiment method-comparison --domain kitchen-cutting --quick --seeds 1 --episodes 3 "
+      "--json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["experiment"]["domain"], "kitchen-cutting");
+  EXPECT_EQ(j["experiment"]["kind"], "method-comparison");
+  for (const char* method : {"bc", "airl", "secure"}) {
+    ASSERT_TRUE(j["methods"].contains(method)) << method;
+    EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
+  }
+  const Result labels =
+      RunCli("demos check-labels --domain kitchen-cutting --quick --max-states 4 --json");
+  ASSERT_EQ(labels.exit_code, 0) << labels.err;
+  const auto l = nlohmann::json::parse(labels.out);
+  ASSERT_EQ(l["rows"].size(), 3u);
+  EXPECT_EQ(l["rows"][0]["label"], "safe");
+  EXPECT_EQ(l["rows"][1]["label"], "near-dangerous");
 }
 
 // ------------------------------------------------------------------------------------------
