@@ -60,7 +60,8 @@ PAPER_TABLE3 = {
     },
     # Section 7.1 (the real robot, 10 episodes, one run: no standard deviation).
     "kitchen-cutting": {
-        "title": "Kitchen Cutting (paper: real robot, 10 episodes)",
+        "title": "Kitchen Cutting",
+        "protocol": "the real robot (Section 7.1), one run of 10 episodes",
         "bc": ((70.0, None), (100.0, None)),
         "airl": ((80.0, None), (100.0, None)),
         "secure": ((90.0, None), (0.0, None)),
@@ -342,9 +343,11 @@ def table3(evaluation, domain):
         out.append("<tr>%s</tr>" % row)
     out.append("</table>")
     if paper:
-        out.append("<p>Paper: Table 3 of the SECURE paper (Section 6.1), %s domain, mean (std) "
-                   "over ten seeds, 100 episodes each; its tests: %s.</p>"
-                   % (paper["title"], html.escape(paper["tests"])))
+        out.append("<p>Paper: Table 3 of the SECURE paper (Section 6.1), %s domain, %s; its "
+                   "tests: %s.</p>"
+                   % (paper["title"], html.escape(paper.get(
+                       "protocol", "mean (std) over ten seeds, 100 episodes each")),
+                      html.escape(paper["tests"])))
     else:
         out.append('<p class="note">The paper reports no Table 3 numbers for the %s domain '
                    "(its Table 3 has Demolition Derby, Panda Arm Push and the real-robot "
