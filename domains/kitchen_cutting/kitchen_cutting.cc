@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "domains/franka/mujoco_model.h"
+#include "domains/franka/offscreen_renderer.h"
 #include "domains/franka/panda_arm.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
@@ -393,6 +394,8 @@ void KitchenCuttingSim::UpdateHuman() {
     mjtNum dir[3] = {to[k].x() - from[k].x(), to[k].y() - from[k].y(), to[k].z() - from[k].z()};
     mju_quatZ2Vec(d->mocap_quat + 4 * b, dir);
   }
+  // The capsules' frames follow (positions of the other bodies are recomputed unchanged).
+  mj_kinematics(impl_->model.get(), d);
 }
 
 void KitchenCuttingSim::UpdateProgress() {
@@ -573,8 +576,6 @@ KitchenCuttingEnv::KitchenCuttingEnv(const KitchenCuttingOptions& options,
                                      const KitchenShieldModelOptions& shield_model)
     : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {}
 
-KitchenCuttingEnv::~KitchenCuttingEnv() = default;
-
 std::vector<std::string> KitchenCuttingEnv::ObservationFeatures() const {
   return kitchen_cutting::ObservationFeatures();
 }
@@ -621,6 +622,39 @@ bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& ob
   action.setZero();
   action[2] = 1.0f;
   return true;
+}
+
+// The shared offscreen renderer, looking at the board from the robot's right (-y), a little
+// above: the arm at the left, the person's arm reaching in from the back.
+class KitchenCuttingRenderer {
+ public:
+  explicit KitchenCuttingRenderer(const KitchenCuttingSim& sim)
+      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "kitchen-cutting") {}
+  void Render(int width, int height, Frame* frame) {
+    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
+                     width, height, frame);
+  }
+
+ private:
+  static franka::CameraView View() {
+    franka::CameraView v;
+    v.lookat[0] = 0.15;
+    v.lookat[1] = 0.05;
+    v.lookat[2] = 0.15;
+    v.distance = 1.4;
+    v.azimuth = 60;
+    v.elevation = -25;
+    return v;
+  }
+  const KitchenCuttingSim& sim_;
+  franka::OffscreenRenderer renderer_;
+};
+
+KitchenCuttingEnv::~KitchenCuttingEnv() = default;
+
+void KitchenCuttingEnv::Render(int width, int height, Frame* frame) {
+  if (renderer_ == nullptr) renderer_ = std::make_unique<KitchenCuttingRenderer>(sim_);
+  renderer_->Render(width, height, frame);
 }
 
 std::unique_ptr<Environment> KitchenCuttingEnv::Clone() const {

@@ -212,6 +212,9 @@ class KitchenShieldModel final : public DynamicsModel {
   KitchenShieldModelOptions options_;
 };
 
+/// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
+class KitchenCuttingRenderer;
+
 class KitchenCuttingEnv final : public Environment {
  public:
   KitchenCuttingEnv(const KitchenCuttingOptions& options,
@@ -233,6 +236,10 @@ class KitchenCuttingEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
+  /// domains/franka/'s offscreen renderer (OSMesa), created on the first call; frames up to
+  /// 1280 x 720, seen from the robot's right, the person's arm at the back.
+  bool CanRender() const override { return true; }
+  void Render(int width, int height, Frame* frame) override;
 
   KitchenCuttingSim& sim() { return sim_; }
   const KitchenCuttingSim& sim() const { return sim_; }
@@ -242,6 +249,7 @@ class KitchenCuttingEnv final : public Environment {
   KitchenShieldModelOptions shield_model_options_;
   KitchenShieldModel shield_model_;
   bool dangerous_ = false;
+  std::unique_ptr<KitchenCuttingRenderer> renderer_;
 };
 
 }  // namespace secure::domains::kitchen_cutting

@@ -11,8 +11,8 @@
 #include <sstream>
 
 #include "domains/franka/mujoco_model.h"
+#include "domains/franka/offscreen_renderer.h"
 #include "domains/franka/panda_arm.h"
-#include "domains/panda_push/render.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
@@ -408,6 +408,32 @@ bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observa
   action.setZero();
   return true;
 }
+
+// The shared offscreen renderer, seen from the side (-y), slightly above the table: the arm at
+// the left, the block and the target at the right.
+class PandaPushRenderer {
+ public:
+  explicit PandaPushRenderer(const PandaPushSim& sim)
+      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "panda-push") {}
+  void Render(int width, int height, Frame* frame) {
+    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
+                     width, height, frame);
+  }
+
+ private:
+  static franka::CameraView View() {
+    franka::CameraView v;
+    v.lookat[0] = 0.12;
+    v.lookat[1] = 0.0;
+    v.lookat[2] = 0.3;
+    v.distance = 2.0;
+    v.azimuth = 75;
+    v.elevation = -15;
+    return v;
+  }
+  const PandaPushSim& sim_;
+  franka::OffscreenRenderer renderer_;
+};
 
 void PandaPushEnv::Render(int width, int height, Frame* frame) {
   if (renderer_ == nullptr) renderer_ = std::make_unique<PandaPushRenderer>(sim_);

@@ -231,6 +231,46 @@ TEST(KitchenCuttingData, LabelsHoldAgainstPhysics) {
   }
 }
 
+TEST(KitchenCuttingRender, FramesShowTheSceneAndFollowThePersonsArm) {
+  KitchenCuttingEnv env(KitchenCuttingOptions{}, KitchenShieldModelOptions{});
+  ASSERT_TRUE(env.CanRender());
+  Rng rng(1);
+  Eigen::VectorXf o(kObservationDim), before(kObservationDim), after(kObservationDim);
+  env.Reset(rng, o);
+  Frame first, again;
+  env.Render(160, 120, &first);
+  ASSERT_EQ(first.width, 160);
+  ASSERT_EQ(first.rgb.size(), 160u * 120u * 3u);
+  long differing = 0;  // not blank
+  for (size_t i = 3; i < first.rgb.size(); i += 3)
+    if (first.rgb[i] != first.rgb[0] || first.rgb[i + 1] != first.rgb[1]) ++differing;
+  EXPECT_GT(differing, 160 * 120 / 4);
+  // Rendering does not change the state; the same state gives the same frame.
+  env.sim().Observe(before);
+  env.Render(160, 120, &again);
+  env.sim().Observe(after);
+  EXPECT_EQ(before, after);
+  EXPECT_EQ(first.rgb, again.rgb);
+  // The same robot state with the person's arm elsewhere (reaching over the board): the frame
+  // changes, and comes back with the arm.
+  Frame here, there, back;
+  env.sim().SetObservation(before);
+  env.Render(160, 120, &here);
+  Eigen::VectorXf reaching = before;
+  const ArmPose p = ArmPoseForWrist(HumanArmOptions{}, Eigen::Vector3d(0.30, 0.0, 0.07));
+  for (int k = 0; k < 3; ++k) {
+    reaching[kWrist + k] = static_cast<float>(p.wrist[k]);
+    reaching[kElbow + k] = static_cast<float>(p.elbow[k]);
+    reaching[kHandTip + k] = static_cast<float>(p.tip[k]);
+  }
+  env.sim().SetObservation(reaching);
+  env.Render(160, 120, &there);
+  env.sim().SetObservation(before);
+  env.Render(160, 120, &back);
+  EXPECT_NE(there.rgb, here.rgb);
+  EXPECT_EQ(back.rgb, here.rgb);
+}
+
 TEST(KitchenCuttingDomain, OptionsRejectBadValuesAndUnknownKeys) {
   KitchenCuttingDomain domain(experiments::Profile::kQuick);
   EXPECT_NO_THROW(domain.Validate());
