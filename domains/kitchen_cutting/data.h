@@ -19,7 +19,8 @@
 // Near-dangerous states (`count`, Table 2: 450): demonstration states with the person's arm put
 // close to the blade so that continuing the motion reaches it:
 //   (a) stroke (p_stroke): the wrist under the blade's edge (x within the blade +- 0.07, y from
-//       0.08 on the person's side to the edge's plane, z between the board and the edge), the
+//       the edge's plane to 0.08 beyond it, away from the person, so that the forearm passes
+//       under the edge; z between the board and the edge), the
 //       edge clear of the arm by [contact_distance, near_distance] but the stroke's path (the
 //       edge lowered to the board) within contact_distance of it, the end-effector moving down
 //       at stroke_vz (the stroke continuing), the arm at rest;
