@@ -145,6 +145,16 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
   return rows;
 }
 
+std::optional<experiments::PaperTable3> KitchenCuttingDomain::PaperReference() const {
+  const double none = std::nan("");
+  experiments::PaperTable3 t;
+  t.source = "Table 3, the real robot with people, 10 episodes, no standard deviations";
+  t.rows = {
+      {"bc", 70, none, 100, none}, {"airl", 80, none, 100, none}, {"secure", 90, none, 0, none}};
+  t.comparison = "success +10%, dangerous -100% (no test on 10 episodes)";
+  return t;
+}
+
 void KitchenCuttingDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
   SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
                      "ExperimentOptions", "shield.dt", options.shield.dt,

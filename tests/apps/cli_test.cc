@@ -559,6 +559,20 @@ TEST(CliTest, KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck) {
     ASSERT_TRUE(j["methods"].contains(method)) << method;
     EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
   }
+  // The paper's kitchen row comes with it (Domain::PaperReference), and in the text the run is
+  // printed beside it in Table 3's form.
+  ASSERT_TRUE(j.contains("paper"));
+  ASSERT_EQ(j["paper"]["rows"].size(), 3u);
+  EXPECT_EQ(j["paper"]["rows"][2]["method"], "secure");
+  EXPECT_EQ(j["paper"]["rows"][2]["success"], 90.0);
+  EXPECT_TRUE(j["paper"]["rows"][2]["success_std"].is_null());
+  const Result text = RunCli(
+      "experiment method-comparison --domain kitchen-cutting --quick --seeds 1 --episodes 2");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_HAS(text.out, "| Kitchen Cutting | BC | AIRL | SECURE | SECURE vs AIRL |");
+  EXPECT_HAS(text.out, "| Success rate % (paper) | 70.0 | 80.0 | 90.0 | +10.0 points |");
+  EXPECT_HAS(text.out, "| Dangerous rate % (paper) | 100.0 | 100.0 | 0.0 | -100.0 points |");
+  EXPECT_HAS(text.out, "| Success rate % (this run) | ");
   const Result labels =
       RunCli("demos check-labels --domain kitchen-cutting --quick --max-states 4 --json");
   ASSERT_EQ(labels.exit_code, 0) << labels.err;
@@ -579,6 +593,7 @@ TEST(CliTest, DerbyExperimentQuickPrintsTheResultDocument) {
   EXPECT_EQ(j["command"], "experiment derby-table3");
   EXPECT_EQ(j["experiment"]["kind"], "method-comparison");
   EXPECT_EQ(j["experiment"]["domain"], "derby");
+  EXPECT_FALSE(j.contains("paper"));  // only a domain that gives its paper row prints one
   for (const char* method : {"bc", "airl", "secure"}) {
     ASSERT_TRUE(j["methods"].contains(method)) << method;
     EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
