@@ -10,6 +10,7 @@
 // `secure eval --json`); --quick is the domain's small profile, used by the tests.
 // --shard k/N (or, without it, a SLURM array element's or an mpirun rank's place) runs only the
 // seeds with index = k (mod N), writing their task files into --out; `merge` assembles them.
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <memory>
@@ -139,12 +140,94 @@ std::string SeedList(const std::vector<std::uint64_t>& seeds) {
   return out.str();
 }
 
+// The paper's Table 3 numbers of the result's domain, for a method comparison of a registered
+// domain that has them (Domain::PaperReference).
+std::optional<experiments::PaperTable3> PaperReferenceOf(
+    const experiments::ExperimentResult& result) {
+  if (result.kind != ExperimentKind::kMethodComparison) return std::nullopt;
+  const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+  if (!registry.Has(result.domain)) return std::nullopt;
+  return registry.Make(result.domain, experiments::Profile::kQuick)->PaperReference();
+}
+
+std::string Percent(double mean, double std) {
+  std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(1);
+  s << mean;
+  if (!std::isnan(std)) s << " (" << std << ")";
+  return s.str();
+}
+
+// The run beside the paper, in the paper's Table 3 form: a success and a dangerous row for this
+// run and for the paper, columns BC, AIRL, SECURE and SECURE's difference to AIRL.
+std::string PaperFormTable(const experiments::ExperimentResult& result,
+                           const experiments::PaperTable3& paper) {
+  const auto& methods = result.evaluations.front().second.methods();
+  auto ours = [&](eval::Method m, bool success) -> std::pair<double, double> {
+    const auto it = methods.find(m);
+    if (it == methods.end()) return {std::nan(""), std::nan("")};
+    const stats::SampleSummary& r = success ? it->second.success_rate : it->second.dangerous_rate;
+    return {100 * r.mean, 100 * r.std};
+  };
+  auto theirs = [&](const std::string& m, bool success) -> std::pair<double, double> {
+    for (const experiments::PaperTable3Row& row : paper.rows)
+      if (row.method == m)
+        return success ? std::pair{row.success, row.success_std}
+                       : std::pair{row.dangerous, row.dangerous_std};
+    return {std::nan(""), std::nan("")};
+  };
+  auto cell = [](std::pair<double, double> v) {
+    return std::isnan(v.first) ? std::string("-") : Percent(v.first, v.second);
+  };
+  auto diff = [](double a, double b) {
+    if (std::isnan(a) || std::isnan(b)) return std::string("-");
+    std::ostringstream s;
+    s.setf(std::ios::fixed | std::ios::showpos);
+    s.precision(1);
+    s << a - b << " points";
+    return s.str();
+  };
+  std::ostringstream out;
+  out << "Beside the paper (" << paper.source << "), Table 3's form:\n\n"
+      << "| " << result.domain_title << " | BC | AIRL | SECURE | SECURE vs AIRL |\n"
+      << "|---|---|---|---|---|\n";
+  for (const bool success : {true, false}) {
+    const char* rate = success ? "Success rate %" : "Dangerous rate %";
+    const auto s = ours(eval::Method::kSecure, success), a = ours(eval::Method::kAirl, success);
+    out << "| " << rate << " (this run) | " << cell(ours(eval::Method::kBc, success)) << " | "
+        << cell(a) << " | " << cell(s) << " | " << diff(s.first, a.first) << " |\n";
+    const auto ps = theirs("secure", success), pa = theirs("airl", success);
+    out << "| " << rate << " (paper) | " << cell(theirs("bc", success)) << " | " << cell(pa)
+        << " | " << cell(ps) << " | " << diff(ps.first, pa.first) << " |\n";
+  }
+  if (!paper.comparison.empty()) out << "\nThe paper's comparison: " << paper.comparison << "\n";
+  return out.str();
+}
+
+nlohmann::json PaperJson(const experiments::PaperTable3& paper) {
+  nlohmann::json rows = nlohmann::json::array();
+  auto number = [](double v) {
+    return std::isnan(v) ? nlohmann::json(nullptr) : nlohmann::json(v);
+  };
+  for (const experiments::PaperTable3Row& r : paper.rows) {
+    rows.push_back({{"method", r.method},
+                    {"success", number(r.success)},
+                    {"success_std", number(r.success_std)},
+                    {"dangerous", number(r.dangerous)},
+                    {"dangerous_std", number(r.dangerous_std)}});
+  }
+  return {{"source", paper.source}, {"rows", rows}, {"comparison", paper.comparison}};
+}
+
 // What an unsharded run prints on stdout (and merge prints).
 void PrintResult(const experiments::ExperimentResult& result, bool json,
                  const std::string& command_name) {
+  const std::optional<experiments::PaperTable3> paper = PaperReferenceOf(result);
   if (json) {
     nlohmann::json r = result.ToJson();
     r["command"] = command_name;
+    if (paper) r["paper"] = PaperJson(*paper);
     PrintJson(r);
   } else {
     std::cout << "\n"
@@ -152,6 +235,7 @@ void PrintResult(const experiments::ExperimentResult& result, bool json,
               << result.discarded_demonstrations << " discarded), " << result.safe_states
               << " safe + " << result.near_dangerous_states << " near-dangerous states. Total "
               << result.seconds << " s.\n";
+    if (paper) std::cout << "\n" << PaperFormTable(result, *paper);
   }
 }
 
@@ -230,9 +314,9 @@ struct ExperimentCommand {
     if (episodes_option->count() > 0) options.episodes = episodes;
     if (!methods.empty()) options.methods = eval::ParseMethods(methods);
     if (!barrier.empty()) {
-      options.barrier_kind =
-          barrier == "per-car" ? experiments::BarrierKind::kPerObstacle
-                               : FromString(experiments::kBarrierKindNames, barrier, "--barrier");
+      options.barrier_kind = barrier == "per-car"
+                                 ? experiments::BarrierKind::kPerObstacle
+                                 : FromString(experiments::kBarrierKindNames, barrier, "--barrier");
     }
     options.first_seed = first_seed;
     options.threads = threads;
@@ -247,7 +331,7 @@ struct ExperimentCommand {
       options.shard = where.index;
       options.shards = where.count;
     }
-    d->Validate();           // before the first line of progress
+    d->Validate();  // before the first line of progress
     options.Validate();
     d->CheckExperiment(options);
     CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
@@ -255,9 +339,8 @@ struct ExperimentCommand {
       std::cerr << "shard " << where.index << "/" << where.count << " (from " << where.source
                 << "): ";
     std::cerr << "secure " << command_name << " on " << d->name() << ": " << options.seeds
-              << " seeds x " << options.episodes << " episodes per method on "
-              << options.threads << " threads" << (out.empty() ? "" : ", writing to " + out)
-              << "\n";
+              << " seeds x " << options.episodes << " episodes per method on " << options.threads
+              << " threads" << (out.empty() ? "" : ", writing to " + out) << "\n";
     if (sharded) {
       const experiments::ShardReport report =
           experiments::RunExperimentShard(kind, *d, options, &std::cerr);
@@ -331,9 +414,9 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
                 "seeds) and its results table",
                 ExperimentKind::kMethodComparison, "double-integrator");
 
-  CLI::App* cmd = app.add_subcommand(
-      "experiment", "The paper's experiments (Section 6) on any domain: " +
-                        experiments::DomainRegistry::Global().NameList());
+  CLI::App* cmd =
+      app.add_subcommand("experiment", "The paper's experiments (Section 6) on any domain: " +
+                                           experiments::DomainRegistry::Global().NameList());
   cmd->require_subcommand(1);
   const struct {
     ExperimentKind kind;
@@ -356,8 +439,8 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
     kinds[i].Register(*cmd, config, ToString(experiments::kExperimentKindNames, table[i].kind),
                       table[i].description, table[i].kind, "");
     derby[i].Register(*cmd, config, table[i].alias,
-                      std::string(table[i].description) + " (on the derby domain)",
-                      table[i].kind, "derby");
+                      std::string(table[i].description) + " (on the derby domain)", table[i].kind,
+                      "derby");
   }
   merge.Register(*cmd);
 }

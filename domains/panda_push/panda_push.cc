@@ -1,8 +1,3 @@
-// GCC 12 reports false -Wmaybe-uninitialized inside Eigen's AVX-512 packet code for the small
-// double products below (Eigen 3.4); the whole translation unit is quiet about it.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
 #include "domains/panda_push/panda_push.h"
 
 #include <mujoco/mujoco.h>
@@ -15,47 +10,43 @@
 #include <mutex>
 #include <sstream>
 
-#include "domains/panda_push/mujoco_model.h"
-#include "domains/panda_push/render.h"
+#include "domains/franka/mujoco_model.h"
+#include "domains/franka/offscreen_renderer.h"
+#include "domains/franka/panda_arm.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
 
 namespace secure::domains::panda_push {
+// The model text (generated from panda_push.xml by CMake: panda_push_xml.cc).
+extern const char kPandaPushXml[];
+
 namespace {
 
 bool Finite(double x) { return std::isfinite(x); }
 
-// The tool frame's target orientation: z down, x along world x (rotation by pi about x; the
-// released IK target quaternion (x, y, z, w) = (1, 0, 0, 0)).
-const Eigen::Matrix3d& TargetRotation() {
-  static const Eigen::Matrix3d r = Eigen::Vector3d(1, -1, -1).asDiagonal();
-  return r;
+// The task's model: panda_push.xml with the Panda put in (franka::WithPandaArm), parsed once per
+// process.
+const mjModel* PandaPushModel() {
+  static const franka::MujocoModel model = franka::MujocoModel::FromXml(
+      franka::WithPandaArm(kPandaPushXml, "panda_push.xml"), "panda_push.xml");
+  return model.get();
 }
 
-// Damped least squares: dq = J^T (J J^T + lambda^2 I)^-1 e, plus a null-space pull towards the
-// neutral posture (so the redundant elbow does not drift over an episode).
-Eigen::Matrix<double, kArmJoints, 1> IkStep(const Eigen::Matrix<double, 6, kArmJoints>& j,
-                                            const Eigen::Matrix<double, 6, 1>& error,
-                                            const Eigen::Matrix<double, kArmJoints, 1>& posture,
-                                            double lambda) {
-  const Eigen::Matrix<double, 6, 6> jjt =
-      j * j.transpose() + lambda * lambda * Eigen::Matrix<double, 6, 6>::Identity();
-  const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> solver(jjt);
-  // J^T A^-1 = (A^-1 J)^T, A symmetric.
-  const Eigen::Matrix<double, kArmJoints, 6> pinv = solver.solve(j).transpose();
-  const Eigen::Matrix<double, kArmJoints, kArmJoints> null =
-      Eigen::Matrix<double, kArmJoints, kArmJoints>::Identity() - pinv * j;
-  return pinv * error + null * posture;
+constexpr bool SameNeutralPosture() {
+  for (int i = 0; i < kArmJoints; ++i)
+    if (kNeutralJoints[i] != franka::kNeutralJoints[i]) return false;
+  return kArmJoints == franka::kArmJoints;
 }
+static_assert(SameNeutralPosture(), "panda_push.h's neutral posture is the shared arm's");
 
 }  // namespace
 
 const std::vector<std::string>& ObservationFeatures() {
   static const std::vector<std::string> names{
-      "ee_x",       "ee_y",        "ee_z",      "ee_vx",    "ee_vy",    "ee_vz",
-      "block_x",    "block_y",     "block_z",   "block_roll", "block_pitch", "block_yaw",
-      "block_vx",   "block_vy",    "block_vz",  "block_wx", "block_wy", "block_wz"};
+      "ee_x",     "ee_y",     "ee_z",     "ee_vx",      "ee_vy",       "ee_vz",
+      "block_x",  "block_y",  "block_z",  "block_roll", "block_pitch", "block_yaw",
+      "block_vx", "block_vy", "block_vz", "block_wx",   "block_wy",    "block_wz"};
   return names;
 }
 
@@ -85,9 +76,9 @@ void PandaPushOptions::Validate() const {
                      "> 0 and < 0.5 / physics step (explicit integration stays stable)");
   SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
                      ik_damping, "in (0, 1)");
-  SECURE_CHECK_FIELD(Finite(initial_joint_noise) && initial_joint_noise >= 0 &&
-                         initial_joint_noise <= 0.2,
-                     o, "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
+  SECURE_CHECK_FIELD(
+      Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
+      "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
   for (int i = 0; i < 3; ++i) {
     SECURE_CHECK_FIELD(Finite(block_start[i]), o, "block_start", block_start[i], "finite");
     SECURE_CHECK_FIELD(Finite(target[i]), o, "target", target[i], "finite");
@@ -142,20 +133,29 @@ void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& sour
 // The simulation
 
 struct PandaPushSim::Impl {
-  MujocoModel model;  // this simulation's copy (options applied)
-  MujocoData data;
-  int tcp = -1, block_body = -1, block_qpos = -1, block_dof = -1;
-  int arm_qpos[kArmJoints], arm_dof[kArmJoints];
-  double lower[kArmJoints], upper[kArmJoints];
-  // Scratch (allocated once).
-  std::vector<mjtNum> jacp, jacr, force_in, force_out;
+  franka::MujocoModel model;  // this simulation's copy (options applied)
+  franka::MujocoData data;
+  franka::PandaArm arm;
+  int block_body = -1, block_qpos = -1, block_dof = -1;
 
-  explicit Impl(MujocoModel m) : model(std::move(m)), data(model) {}
+  explicit Impl(franka::MujocoModel m)
+      : model(std::move(m)), data(model), arm(model.get(), "panda-push") {}
 };
+
+namespace {
+franka::ArmTracking Tracking(const PandaPushOptions& o) {
+  franka::ArmTracking t;
+  t.control_period = o.control_period;
+  t.substeps = o.substeps;
+  t.tracking_omega = o.tracking_omega;
+  t.ik_damping = o.ik_damping;
+  return t;
+}
+}  // namespace
 
 PandaPushSim::PandaPushSim(const PandaPushOptions& options)
     : options_((options.Validate(), options)) {
-  MujocoModel m = MujocoModel::Copy(PandaPushModel());
+  franka::MujocoModel m = franka::MujocoModel::Copy(PandaPushModel());
   mjModel* raw = m.get();
   raw->opt.timestep = options_.control_period / options_.substeps;
   for (int p = 0; p < raw->npair; ++p) {
@@ -174,24 +174,10 @@ PandaPushSim::PandaPushSim(const PandaPushOptions& options)
     SECURE_CHECK(i >= 0, "the Panda model has no " << name);
     return i;
   };
-  s.tcp = id(mjOBJ_SITE, "tcp");
   s.block_body = id(mjOBJ_BODY, "block");
   const int block_joint = id(mjOBJ_JOINT, "block");
   s.block_qpos = mm->jnt_qposadr[block_joint];
   s.block_dof = mm->jnt_dofadr[block_joint];
-  for (int i = 0; i < kArmJoints; ++i) {
-    const std::string name = "joint" + std::to_string(i + 1);
-    const int j = id(mjOBJ_JOINT, name.c_str());
-    s.arm_qpos[i] = mm->jnt_qposadr[j];
-    s.arm_dof[i] = mm->jnt_dofadr[j];
-    s.lower[i] = mm->jnt_range[2 * j];
-    s.upper[i] = mm->jnt_range[2 * j + 1];
-    SECURE_CHECK(s.arm_dof[i] == i, "the Panda model's arm joints must come first");
-  }
-  s.jacp.assign(3 * mm->nv, 0.0);
-  s.jacr.assign(3 * mm->nv, 0.0);
-  s.force_in.assign(mm->nv, 0.0);
-  s.force_out.assign(mm->nv, 0.0);
   ResetTo(kNeutralJoints);
 }
 
@@ -201,25 +187,16 @@ const void* PandaPushSim::model() const { return impl_->model.get(); }
 void* PandaPushSim::data() const { return impl_->data.get(); }
 double PandaPushSim::time() const { return impl_->data.get()->time; }
 
-namespace {
-// Positions and velocities of every body and site from qpos, qvel (no collision, no forces).
-void UpdateKinematics(const mjModel* m, mjData* d) {
-  mj_kinematics(m, d);
-  mj_comPos(m, d);
-  mj_comVel(m, d);
-}
-}  // namespace
-
 void PandaPushSim::ResetTo(const std::array<double, kArmJoints>& joints) {
   Impl& s = *impl_;
   const mjModel* m = s.model.get();
   mjData* d = s.data.get();
   mj_resetData(m, d);
-  for (int i = 0; i < kArmJoints; ++i) d->qpos[s.arm_qpos[i]] = joints[i];
+  s.arm.SetJoints(d, joints);
   for (int k = 0; k < 3; ++k) d->qpos[s.block_qpos + k] = options_.block_start[k];
   d->qpos[s.block_qpos + 3] = 1.0;
   for (int k = 4; k < 7; ++k) d->qpos[s.block_qpos + k] = 0.0;
-  UpdateKinematics(m, d);
+  franka::UpdateKinematics(m, d);
 }
 
 void PandaPushSim::Reset(Rng& rng) {
@@ -227,40 +204,6 @@ void PandaPushSim::Reset(Rng& rng) {
   for (double& v : q) v += options_.initial_joint_noise * (2.0 * rng.Uniform() - 1.0);
   ResetTo(q);
 }
-
-namespace {
-// The tool site's Jacobian (6 x 7, arm columns) at the current kinematics.
-void ToolJacobian(const mjModel* m, mjData* d, int site, std::vector<mjtNum>& jacp,
-                  std::vector<mjtNum>& jacr, Eigen::Matrix<double, 6, kArmJoints>* j) {
-  mj_jacSite(m, d, jacp.data(), jacr.data(), site);
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < kArmJoints; ++c) {
-      (*j)(r, c) = jacp[r * m->nv + c];
-      (*j)(r + 3, c) = jacr[r * m->nv + c];
-    }
-  }
-}
-
-// Position and orientation error of the tool site towards `target` (orientation: TargetRotation).
-Eigen::Matrix<double, 6, 1> ToolError(const mjData* d, int site, const Eigen::Vector3d& target) {
-  Eigen::Matrix<double, 6, 1> e;
-  const Eigen::Map<const Eigen::Vector3d> p(d->site_xpos + 3 * site);
-  const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->site_xmat + 9 * site);
-  e.head<3>() = target - p;
-  // Small-angle rotation vector from r to the target: 0.5 sum_i r_i x t_i over the columns.
-  const Eigen::Matrix3d& t = TargetRotation();
-  e.tail<3>() =
-      0.5 * (r.col(0).cross(t.col(0)) + r.col(1).cross(t.col(1)) + r.col(2).cross(t.col(2)));
-  return e;
-}
-
-void CheckWarnings(const mjData* d, const char* where) {
-  for (int i = 0; i < mjNWARNING; ++i) {
-    SECURE_CHECK(d->warning[i].number == 0,
-                 "panda-push: MuJoCo warning during " << where << ": " << mju_warningText(i, d->warning[i].lastinfo));
-  }
-}
-}  // namespace
 
 void PandaPushSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
   Impl& s = *impl_;
@@ -272,46 +215,13 @@ void PandaPushSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
                  "panda-push: action[" << k << "] = " << action[k] << " is not finite");
     a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
   }
-  // The end-effector target, and one IK step towards it (kinematics are current: every public
-  // call leaves them so).
-  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * s.tcp);
+  // The end-effector target (kinematics are current: every public call leaves them so), tracked
+  // for one control period.
+  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * s.arm.tcp());
   Eigen::Vector3d target = ee + options_.action_scale * a;
   target.z() = std::max(target.z(), 0.0);
-  Eigen::Matrix<double, 6, kArmJoints> j;
-  ToolJacobian(m, d, s.tcp, s.jacp, s.jacr, &j);
-  Eigen::Matrix<double, kArmJoints, 1> q0, posture;
-  for (int i = 0; i < kArmJoints; ++i) {
-    q0[i] = d->qpos[s.arm_qpos[i]];
-    posture[i] = 0.1 * (kNeutralJoints[i] - q0[i]);
-  }
-  Eigen::Matrix<double, kArmJoints, 1> dq =
-      IkStep(j, ToolError(d, s.tcp, target), posture, options_.ik_damping);
-  for (int i = 0; i < kArmJoints; ++i) {
-    // Stay 0.01 rad inside the joint limits.
-    dq[i] = std::clamp(q0[i] + dq[i], s.lower[i] + 0.01, s.upper[i] - 0.01) - q0[i];
-  }
-  // Computed-torque tracking of the ramp q0 -> q0 + dq over the period.
-  const double kp = options_.tracking_omega * options_.tracking_omega;
-  const double kd = 2.0 * options_.tracking_omega;
-  const Eigen::Matrix<double, kArmJoints, 1> qd_ref = dq / options_.control_period;
-  for (int k = 1; k <= options_.substeps; ++k) {
-    mj_step1(m, d);
-    const double f = static_cast<double>(k) / options_.substeps;
-    std::fill(s.force_in.begin(), s.force_in.end(), 0.0);
-    for (int i = 0; i < kArmJoints; ++i) {
-      const double e = q0[i] + f * dq[i] - d->qpos[s.arm_qpos[i]];
-      const double ed = qd_ref[i] - d->qvel[s.arm_dof[i]];
-      s.force_in[s.arm_dof[i]] = kp * e + kd * ed;
-    }
-    mj_mulM(m, d, s.force_out.data(), s.force_in.data());
-    for (int i = 0; i < kArmJoints; ++i) {
-      const int dof = s.arm_dof[i];
-      d->ctrl[i] = s.force_out[dof] + d->qfrc_bias[dof] - d->qfrc_passive[dof];
-    }
-    mj_step2(m, d);
-  }
-  UpdateKinematics(m, d);
-  CheckWarnings(d, "a step");
+  s.arm.Track(m, d, target, Tracking(options_));
+  franka::CheckWarnings(d, "panda-push", "a step");
 }
 
 void PandaPushSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
@@ -320,9 +230,10 @@ void PandaPushSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
   const Impl& s = *impl_;
   const mjModel* m = s.model.get();
   mjData* d = s.data.get();
+  const int tcp = s.arm.tcp();
   mjtNum v[6];
-  for (int k = 0; k < 3; ++k) o[kEePos + k] = static_cast<float>(d->site_xpos[3 * s.tcp + k]);
-  mj_objectVelocity(m, d, mjOBJ_SITE, s.tcp, v, 0);
+  for (int k = 0; k < 3; ++k) o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
+  mj_objectVelocity(m, d, mjOBJ_SITE, tcp, v, 0);
   for (int k = 0; k < 3; ++k) o[kEeVel + k] = static_cast<float>(v[3 + k]);
   for (int k = 0; k < 3; ++k) o[kBlockPos + k] = static_cast<float>(d->xpos[3 * s.block_body + k]);
   const mjtNum* r = d->xmat + 9 * s.block_body;  // row-major
@@ -346,38 +257,16 @@ double PandaPushSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) 
   const mjModel* m = s.model.get();
   mjData* d = s.data.get();
   ResetTo(kNeutralJoints);
-  // The arm: IK from the neutral posture to the end-effector position, hand down.
-  const Eigen::Vector3d target(o[kEePos], o[kEePos + 1], o[kEePos + 2]);
-  Eigen::Matrix<double, 6, kArmJoints> j;
-  Eigen::Matrix<double, 6, 1> e;
-  for (int it = 0; it < 200; ++it) {
-    e = ToolError(d, s.tcp, target);
-    if (e.norm() < 1e-7) break;
-    ToolJacobian(m, d, s.tcp, s.jacp, s.jacr, &j);
-    Eigen::Matrix<double, kArmJoints, 1> posture;
-    for (int i = 0; i < kArmJoints; ++i)
-      posture[i] = 0.1 * (kNeutralJoints[i] - d->qpos[s.arm_qpos[i]]);
-    const Eigen::Matrix<double, kArmJoints, 1> dq = IkStep(j, e, posture, 1e-3);
-    for (int i = 0; i < kArmJoints; ++i) {
-      double& q = d->qpos[s.arm_qpos[i]];
-      q = std::clamp(q + dq[i], s.lower[i] + 0.01, s.upper[i] - 0.01);
-    }
-    UpdateKinematics(m, d);
-  }
-  e = ToolError(d, s.tcp, target);
-  // Joint velocities that give the end-effector velocity (no rotation).
-  ToolJacobian(m, d, s.tcp, s.jacp, s.jacr, &j);
-  Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();
-  twist.head<3>() << o[kEeVel], o[kEeVel + 1], o[kEeVel + 2];
-  const Eigen::Matrix<double, kArmJoints, 1> qd =
-      IkStep(j, twist, Eigen::Matrix<double, kArmJoints, 1>::Zero(), 1e-3);
-  for (int i = 0; i < kArmJoints; ++i) d->qvel[s.arm_dof[i]] = qd[i];
+  // The arm: IK from the neutral posture to the end-effector position, hand down, with the joint
+  // velocities that give the end-effector velocity (no rotation).
+  const double error =
+      s.arm.PlaceTool(m, d, Eigen::Vector3d(o[kEePos], o[kEePos + 1], o[kEePos + 2]));
+  s.arm.SetToolVelocity(m, d, Eigen::Vector3d(o[kEeVel], o[kEeVel + 1], o[kEeVel + 2]));
   // The block: R = Rz(yaw) Ry(pitch) Rx(roll).
   for (int k = 0; k < 3; ++k) d->qpos[s.block_qpos + k] = o[kBlockPos + k];
-  const Eigen::Quaterniond q =
-      Eigen::AngleAxisd(o[kBlockEuler + 2], Eigen::Vector3d::UnitZ()) *
-      Eigen::AngleAxisd(o[kBlockEuler + 1], Eigen::Vector3d::UnitY()) *
-      Eigen::AngleAxisd(o[kBlockEuler + 0], Eigen::Vector3d::UnitX());
+  const Eigen::Quaterniond q = Eigen::AngleAxisd(o[kBlockEuler + 2], Eigen::Vector3d::UnitZ()) *
+                               Eigen::AngleAxisd(o[kBlockEuler + 1], Eigen::Vector3d::UnitY()) *
+                               Eigen::AngleAxisd(o[kBlockEuler + 0], Eigen::Vector3d::UnitX());
   d->qpos[s.block_qpos + 3] = q.w();
   d->qpos[s.block_qpos + 4] = q.x();
   d->qpos[s.block_qpos + 5] = q.y();
@@ -389,8 +278,8 @@ double PandaPushSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) 
     d->qvel[s.block_dof + k] = o[kBlockVel + k];
     d->qvel[s.block_dof + 3 + k] = w_body[k];
   }
-  UpdateKinematics(m, d);
-  return e.head<3>().norm();
+  franka::UpdateKinematics(m, d);
+  return error;
 }
 
 double PandaPushSim::BlockTilt() const {
@@ -411,12 +300,12 @@ double PandaPushSim::TargetDistance() const {
 
 void PandaPushShieldModelOptions::Validate() const {
   const char* o = "PandaPushShieldModelOptions";
-  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain",
-                     position_gain, ">= 0");
-  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain",
-                     velocity_gain, ">= 0");
-  SECURE_CHECK_FIELD(Finite(contact_range) && contact_range >= 0, o, "contact_range",
-                     contact_range, ">= 0");
+  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
+                     ">= 0");
+  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
+                     ">= 0");
+  SECURE_CHECK_FIELD(Finite(contact_range) && contact_range >= 0, o, "contact_range", contact_range,
+                     ">= 0");
 }
 
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
@@ -519,6 +408,32 @@ bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observa
   action.setZero();
   return true;
 }
+
+// The shared offscreen renderer, seen from the side (-y), slightly above the table: the arm at
+// the left, the block and the target at the right.
+class PandaPushRenderer {
+ public:
+  explicit PandaPushRenderer(const PandaPushSim& sim)
+      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "panda-push") {}
+  void Render(int width, int height, Frame* frame) {
+    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
+                     width, height, frame);
+  }
+
+ private:
+  static franka::CameraView View() {
+    franka::CameraView v;
+    v.lookat[0] = 0.12;
+    v.lookat[1] = 0.0;
+    v.lookat[2] = 0.3;
+    v.distance = 2.0;
+    v.azimuth = 75;
+    v.elevation = -15;
+    return v;
+  }
+  const PandaPushSim& sim_;
+  franka::OffscreenRenderer renderer_;
+};
 
 void PandaPushEnv::Render(int width, int height, Frame* frame) {
   if (renderer_ == nullptr) renderer_ = std::make_unique<PandaPushRenderer>(sim_);

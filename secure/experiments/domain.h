@@ -19,7 +19,8 @@
 //   std::unique_ptr<experiments::Domain> d = registry.Make("derby", experiments::Profile::kQuick);
 //   experiments::ExperimentOptions o = d->Preset();
 //   experiments::ExperimentResult r =
-//       experiments::RunExperiment(experiments::ExperimentKind::kMethodComparison, *d, o, &std::cerr);
+//       experiments::RunExperiment(experiments::ExperimentKind::kMethodComparison, *d, o,
+//       &std::cerr);
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -56,14 +57,27 @@ struct DomainData {
   long discarded_demonstrations = 0;    // expert episodes dropped (collided, or missed the goal)
 };
 
+/// The paper's own numbers for a domain's Table 3 row (Domain::PaperTable3), printed by the CLI
+/// beside a method comparison in the paper's form. Rates in %; a std the paper does not give is
+/// NaN.
+struct PaperTable3Row {
+  std::string method;  // "bc" | "airl" | "secure"
+  double success = 0, success_std = 0, dangerous = 0, dangerous_std = 0;
+};
+struct PaperTable3 {
+  std::string source;  // where the numbers come from ("Table 3, real robot, 10 episodes")
+  std::vector<PaperTable3Row> rows;
+  std::string comparison;  // the paper's "SECURE comparison with AIRL" column, in words
+};
+
 /// One row of a label check (Domain::CheckLabels): a labelled set of states and how many of them
 /// lead to a dangerous event when the motion they show continues in the domain's physics.
 struct LabelCheckRow {
-  std::string set;          // "near-dangerous (upper part)"
-  std::string label;        // "safe" | "near-dangerous": what the data claims
-  long states = 0;          // checked
-  long dangerous = 0;       // ended in a dangerous event
-  long skipped = 0;         // could not be simulated (e.g. out of the robot's reach)
+  std::string set;     // "near-dangerous (upper part)"
+  std::string label;   // "safe" | "near-dangerous": what the data claims
+  long states = 0;     // checked
+  long dangerous = 0;  // ended in a dangerous event
+  long skipped = 0;    // could not be simulated (e.g. out of the robot's reach)
   double DangerousFraction() const {
     return states > skipped ? double(dangerous) / double(states - skipped) : 0.0;
   }
@@ -125,6 +139,9 @@ class Domain {
   /// What CheckLabels simulates, in one sentence (for reports).
   virtual std::string LabelCheckDescription() const { return ""; }
 
+  /// The paper's Table 3 numbers for this domain, if the paper has a row for it (printed beside
+  /// a method comparison by `secure experiment`; nothing by default).
+  virtual std::optional<PaperTable3> PaperReference() const { return std::nullopt; }
   /// An analytic ground-truth barrier, or null if the domain has none.
   virtual std::unique_ptr<cbf::Barrier> MakeGroundTruth() const { return nullptr; }
   /// The states to validate a barrier on against the ground truth (only with a ground truth);

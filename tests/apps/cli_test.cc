@@ -496,7 +496,9 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_HAS(r.err, "'foo'");
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "unknown domain 'panda' (registered: derby | double-integrator | panda-push)");
+  EXPECT_HAS(r.err,
+             "unknown domain 'panda' (registered: derby | double-integrator | kitchen-cutting | "
+             "panda-push)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
   EXPECT_EQ(r.exit_code, 1);
@@ -514,7 +516,9 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   }
   const Result r = RunCli("experiment method-comparison --domain unicycle --quick");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "unknown domain 'unicycle' (registered: derby | double-integrator | panda-push)");
+  EXPECT_HAS(r.err,
+             "unknown domain 'unicycle' (registered: derby | double-integrator | kitchen-cutting | "
+             "panda-push)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
   EXPECT_HAS(v.err, "the derby domain has no ground truth");
@@ -541,6 +545,43 @@ TEST(CliTest, CheckLabelsSimulatesFromTheLabelledStates) {
   EXPECT_HAS(bad.err, "--max-states");
 }
 
+TEST(CliTest, KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck) {
+  // The kitchen-cutting plug-in through the generic driver (--quick: small data, short training):
+  // the three methods of Table 3 on its episodes, and its labels against physics.
+  const Result r = RunCli(
+      "experiment method-comparison --domain kitchen-cutting --quick --seeds 1 --episodes 3 "
+      "--json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["experiment"]["domain"], "kitchen-cutting");
+  EXPECT_EQ(j["experiment"]["kind"], "method-comparison");
+  for (const char* method : {"bc", "airl", "secure"}) {
+    ASSERT_TRUE(j["methods"].contains(method)) << method;
+    EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
+  }
+  // The paper's kitchen row comes with it (Domain::PaperReference), and in the text the run is
+  // printed beside it in Table 3's form.
+  ASSERT_TRUE(j.contains("paper"));
+  ASSERT_EQ(j["paper"]["rows"].size(), 3u);
+  EXPECT_EQ(j["paper"]["rows"][2]["method"], "secure");
+  EXPECT_EQ(j["paper"]["rows"][2]["success"], 90.0);
+  EXPECT_TRUE(j["paper"]["rows"][2]["success_std"].is_null());
+  const Result text = RunCli(
+      "experiment method-comparison --domain kitchen-cutting --quick --seeds 1 --episodes 2");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_HAS(text.out, "| Kitchen Cutting | BC | AIRL | SECURE | SECURE vs AIRL |");
+  EXPECT_HAS(text.out, "| Success rate % (paper) | 70.0 | 80.0 | 90.0 | +10.0 points |");
+  EXPECT_HAS(text.out, "| Dangerous rate % (paper) | 100.0 | 100.0 | 0.0 | -100.0 points |");
+  EXPECT_HAS(text.out, "| Success rate % (this run) | ");
+  const Result labels =
+      RunCli("demos check-labels --domain kitchen-cutting --quick --max-states 4 --json");
+  ASSERT_EQ(labels.exit_code, 0) << labels.err;
+  const auto l = nlohmann::json::parse(labels.out);
+  ASSERT_EQ(l["rows"].size(), 3u);
+  EXPECT_EQ(l["rows"][0]["label"], "safe");
+  EXPECT_EQ(l["rows"][1]["label"], "near-dangerous");
+}
+
 // ------------------------------------------------------------------------------------------
 // The Demolition Derby experiments.
 
@@ -552,6 +593,7 @@ TEST(CliTest, DerbyExperimentQuickPrintsTheResultDocument) {
   EXPECT_EQ(j["command"], "experiment derby-table3");
   EXPECT_EQ(j["experiment"]["kind"], "method-comparison");
   EXPECT_EQ(j["experiment"]["domain"], "derby");
+  EXPECT_FALSE(j.contains("paper"));  // only a domain that gives its paper row prints one
   for (const char* method : {"bc", "airl", "secure"}) {
     ASSERT_TRUE(j["methods"].contains(method)) << method;
     EXPECT_EQ(j["methods"][method]["success_rate"]["per_seed"].size(), 1u);
@@ -782,9 +824,10 @@ TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
   const std::string base = "cbf train --domain double-integrator --out " +
                            (TempDir() / "never.model").string() + " --config ";
   Result r = RunCli(base + Write("typo.yaml", "trainr:\n  max_epochs: 3\n"));
-  ExpectOneErrorLine(r,
-                     "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, derby, "
-                     "double_integrator, panda_push, pipeline, trainer)");
+  ExpectOneErrorLine(
+      r,
+      "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, derby, "
+      "double_integrator, kitchen_cutting, panda_push, pipeline, trainer)");
   r = RunCli(base + Write("dup.yaml", "trainer:\n  max_epochs: 3\n  max_epochs: 4\n"));
   ExpectOneErrorLine(r, "dup.yaml:3: duplicate key 'max_epochs' (first at line 2)");
   r = RunCli(base + Write("dup_top.yaml", "trainer: {}\ndouble_integrator: {}\ntrainer: {}\n"));

@@ -58,6 +58,15 @@ PAPER_TABLE3 = {
         "tests": ("success +43.7% (Mann-Whitney U = 99.5, p < .001); "
                   "dangerous -31.3% (Mann-Whitney U = 0, p < .001)"),
     },
+    # Section 7.1 (the real robot, 10 episodes, one run: no standard deviation).
+    "kitchen-cutting": {
+        "title": "Kitchen Cutting",
+        "protocol": "the real robot (Section 7.1), one run of 10 episodes",
+        "bc": ((70.0, None), (100.0, None)),
+        "airl": ((80.0, None), (100.0, None)),
+        "secure": ((90.0, None), (0.0, None)),
+        "tests": "success +10%; dangerous -100% (10 episodes, no test)",
+    },
 }
 
 METHOD_LABELS = {
@@ -308,6 +317,10 @@ def tests_table(evaluation):
     return "".join(out)
 
 
+def paper_cell(mean, std):
+    return "%.1f" % mean if std is None else "%.1f (%.1f)" % (mean, std)
+
+
 def table3(evaluation, domain):
     methods = evaluation["methods"]
     paper = PAPER_TABLE3.get(domain)
@@ -324,15 +337,17 @@ def table3(evaluation, domain):
         if paper:
             if m in paper:
                 (ps, pss), (pd, pds) = paper[m]
-                row += "<td>%.1f (%.1f)</td><td>%.1f (%.1f)</td>" % (ps, pss, pd, pds)
+                row += "<td>%s</td><td>%s</td>" % (paper_cell(ps, pss), paper_cell(pd, pds))
             else:
                 row += "<td>&ndash;</td><td>&ndash;</td>"
         out.append("<tr>%s</tr>" % row)
     out.append("</table>")
     if paper:
-        out.append("<p>Paper: Table 3 of the SECURE paper (Section 6.1), %s domain, mean (std) "
-                   "over ten seeds, 100 episodes each; its tests: %s.</p>"
-                   % (paper["title"], html.escape(paper["tests"])))
+        out.append("<p>Paper: Table 3 of the SECURE paper (Section 6.1), %s domain, %s; its "
+                   "tests: %s.</p>"
+                   % (paper["title"], html.escape(paper.get(
+                       "protocol", "mean (std) over ten seeds, 100 episodes each")),
+                      html.escape(paper["tests"])))
     else:
         out.append('<p class="note">The paper reports no Table 3 numbers for the %s domain '
                    "(its Table 3 has Demolition Derby, Panda Arm Push and the real-robot "

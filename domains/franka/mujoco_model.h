@@ -1,13 +1,14 @@
 #pragma once
-// MuJoCo plumbing of the panda-push plug-in (internal: includes MuJoCo's headers, which the
-// plug-in's public headers do not): owning handles for mjModel and mjData, the embedded model
-// file, and MuJoCo's error and warning handlers turned into secure::Error.
+// MuJoCo plumbing shared by the Franka plug-ins (panda-push, kitchen-cutting): owning handles for
+// mjModel and mjData, MuJoCo's error and warning handlers turned into secure::Error, and the
+// per-step warning check. Internal to the plug-ins' sources: it includes MuJoCo's headers, which
+// the plug-ins' public headers do not.
 #include <mujoco/mujoco.h>
 
 #include <memory>
 #include <string>
 
-namespace secure::domains::panda_push {
+namespace secure::domains::franka {
 
 /// An owned mjModel (mj_deleteModel on destruction).
 class MujocoModel {
@@ -40,12 +41,13 @@ class MujocoData {
   std::unique_ptr<mjData, Delete> data_;
 };
 
-/// The task's model (panda_push.xml, embedded at build time), parsed once per process.
-const mjModel* PandaPushModel();
-
 /// Installs handlers (once per process) so that mju_error throws secure::Error instead of
 /// exiting (MuJoCo's default waits for Enter, then exits), and mju_warning is recorded: any
 /// warning MuJoCo prints while a model loads makes the load fail.
 void InstallMujocoHandlers();
 
-}  // namespace secure::domains::panda_push
+/// @throws secure::Error "<who>: MuJoCo warning during <where>: <MuJoCo's text>" if any of
+/// MuJoCo's warning counters in `d` is non-zero (e.g. the contact buffer overflowed).
+void CheckWarnings(const mjData* d, const char* who, const char* where);
+
+}  // namespace secure::domains::franka

@@ -1,4 +1,4 @@
-#include "domains/panda_push/mujoco_model.h"
+#include "domains/franka/mujoco_model.h"
 
 #include <cstring>
 #include <mutex>
@@ -6,10 +6,7 @@
 
 #include "secure/common/error.h"
 
-namespace secure::domains::panda_push {
-
-// The model text (generated from panda_push.xml by CMake: panda_push_xml.cc).
-extern const char kPandaPushXml[];
+namespace secure::domains::franka {
 
 namespace {
 
@@ -74,9 +71,11 @@ MujocoData::MujocoData(const MujocoModel& model) : data_(mj_makeData(model.get()
   SECURE_CHECK(data_ != nullptr, "MuJoCo cannot allocate data for a model");
 }
 
-const mjModel* PandaPushModel() {
-  static const MujocoModel model = MujocoModel::FromXml(kPandaPushXml, "panda_push.xml");
-  return model.get();
+void CheckWarnings(const mjData* d, const char* who, const char* where) {
+  for (int i = 0; i < mjNWARNING; ++i) {
+    SECURE_CHECK(d->warning[i].number == 0, who << ": MuJoCo warning during " << where << ": "
+                                                << mju_warningText(i, d->warning[i].lastinfo));
+  }
 }
 
-}  // namespace secure::domains::panda_push
+}  // namespace secure::domains::franka

@@ -1,0 +1,380 @@
+#include "domains/kitchen_cutting/data.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::kitchen_cutting {
+namespace {
+
+bool Finite(double x) { return std::isfinite(x); }
+double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
+
+void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
+                   double max) {
+  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
+                     owner, field, "[" << r[0] << ", " << r[1] << "]",
+                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
+}
+
+Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
+  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
+}
+
+// The person's arm as the observation shows it, `ahead` seconds later at its velocity.
+ArmPose ObservedArm(const HumanArmOptions& h, const Eigen::Ref<const Eigen::VectorXf>& o,
+                    double ahead) {
+  ArmPose p;
+  p.shoulder = Eigen::Vector3d(h.shoulder[0], h.shoulder[1], h.shoulder[2]);
+  p.wrist = At(o, kWrist) + ahead * At(o, kWristVel);
+  p.elbow = At(o, kElbow) + ahead * At(o, kElbowVel);
+  p.tip = At(o, kHandTip) + ahead * At(o, kWristVel);
+  return p;
+}
+
+void SetArm(Eigen::Ref<Eigen::VectorXf> o, const ArmPose& p, const Eigen::Vector3d& wrist_v,
+            const Eigen::Vector3d& elbow_v) {
+  for (int k = 0; k < 3; ++k) {
+    o[kWrist + k] = static_cast<float>(p.wrist[k]);
+    o[kElbow + k] = static_cast<float>(p.elbow[k]);
+    o[kHandTip + k] = static_cast<float>(p.tip[k]);
+    o[kWristVel + k] = static_cast<float>(wrist_v[k]);
+    o[kElbowVel + k] = static_cast<float>(elbow_v[k]);
+  }
+}
+
+// The clearance of the stroke's path: the edge lowered from where it is to the board (checked
+// at the board and halfway).
+double PathClearance(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge,
+                     const ArmPose& arm) {
+  Eigen::Vector3d low = edge, mid = edge;
+  low.z() = task.board_top;
+  mid.z() = 0.5 * (edge.z() + task.board_top);
+  return std::min(EdgeToArmDistance(task.human, low, arm), EdgeToArmDistance(task.human, mid, arm));
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+void KitchenDemonstrationOptions::Validate() const {
+  const char* o = "KitchenDemonstrationOptions";
+  SECURE_CHECK_FIELD(states >= 1 && states <= 10000000, o, "states", states, "in [1, 1e7]");
+  SECURE_CHECK_FIELD(max_attempts >= 1, o, "max_attempts", max_attempts, ">= 1");
+  CheckInterval(stroke_speed, o, "stroke_speed", 0.05, 1.0);
+  CheckInterval(travel_speed, o, "travel_speed", 0.05, 1.0);
+  SECURE_CHECK_FIELD(Finite(caution_distance) && caution_distance > 0 && caution_distance <= 0.5, o,
+                     "caution_distance", caution_distance, "in (0, 0.5] m");
+  SECURE_CHECK_FIELD(Finite(look_ahead) && look_ahead >= 0 && look_ahead <= 5, o, "look_ahead",
+                     look_ahead, "in [0, 5] s");
+  SECURE_CHECK_FIELD(Finite(hover_height) && hover_height > 0 && hover_height <= 0.4, o,
+                     "hover_height", hover_height, "in (0, 0.4] m");
+  SECURE_CHECK_FIELD(Finite(action_noise) && action_noise >= 0 && action_noise <= 1, o,
+                     "action_noise", action_noise, "in [0, 1]");
+}
+
+nlohmann::json KitchenDemonstrationOptions::ToJson() const {
+  return {{"states", states},
+          {"max_attempts", max_attempts},
+          {"stroke_speed", stroke_speed},
+          {"travel_speed", travel_speed},
+          {"caution_distance", caution_distance},
+          {"look_ahead", look_ahead},
+          {"hover_height", hover_height},
+          {"action_noise", action_noise}};
+}
+
+void KitchenDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("states", &states)
+      .Field("max_attempts", &max_attempts)
+      .Field("stroke_speed", &stroke_speed)
+      .Field("travel_speed", &travel_speed)
+      .Field("caution_distance", &caution_distance)
+      .Field("look_ahead", &look_ahead)
+      .Field("hover_height", &hover_height)
+      .Field("action_noise", &action_noise)
+      .Apply(node, source);
+}
+
+void KitchenSafeOptions::Validate() const {
+  SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "KitchenSafeOptions", "count", count,
+                     "in [1, 1e8]");
+}
+nlohmann::json KitchenSafeOptions::ToJson() const { return {{"count", count}}; }
+void KitchenSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields().Field("count", &count).Apply(node, source);
+}
+
+void KitchenNearDangerousOptions::Validate() const {
+  const char* o = "KitchenNearDangerousOptions";
+  SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, o, "count", count, "in [1, 1e8]");
+  SECURE_CHECK_FIELD(Finite(p_stroke) && p_stroke >= 0 && p_stroke <= 1, o, "p_stroke", p_stroke,
+                     "in [0, 1]");
+  SECURE_CHECK_FIELD(Finite(near_distance) && near_distance > 0 && near_distance <= 0.3, o,
+                     "near_distance", near_distance, "in (0, 0.3] m");
+  CheckInterval(stroke_vz, o, "stroke_vz", 0.0, 5.0);
+  CheckInterval(arm_speed, o, "arm_speed", 0.0, 5.0);
+  SECURE_CHECK_FIELD(Finite(look_ahead) && look_ahead > 0 && look_ahead <= 5, o, "look_ahead",
+                     look_ahead, "in (0, 5] s");
+}
+
+nlohmann::json KitchenNearDangerousOptions::ToJson() const {
+  return {{"count", count},         {"p_stroke", p_stroke},   {"near_distance", near_distance},
+          {"stroke_vz", stroke_vz}, {"arm_speed", arm_speed}, {"look_ahead", look_ahead}};
+}
+
+void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("count", &count)
+      .Field("p_stroke", &p_stroke)
+      .Field("near_distance", &near_distance)
+      .Field("stroke_vz", &stroke_vz)
+      .Field("arm_speed", &arm_speed)
+      .Field("look_ahead", &look_ahead)
+      .Apply(node, source);
+}
+
+const char* ScenarioName(NearDangerousScenario s) {
+  return s == NearDangerousScenario::kStroke ? "stroke into the arm" : "arm into the blade";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Demonstrations
+
+Eigen::Vector3f DemonstratorAction(const KitchenCuttingOptions& task,
+                                   const KitchenDemonstrationOptions& options,
+                                   const Eigen::Ref<const Eigen::VectorXf>& o, double stroke_speed,
+                                   double travel_speed) {
+  const Eigen::Vector3d edge = At(o, kBlade);
+  const ArmPose now = ObservedArm(task.human, o, 0.0);
+  const ArmPose ahead = ObservedArm(task.human, o, options.look_ahead);
+  const double clearance = std::min(EdgeToArmDistance(task.human, edge, now),
+                                    EdgeToArmDistance(task.human, edge, ahead));
+  const double path = std::min(PathClearance(task, edge, now), PathClearance(task, edge, ahead));
+  const double height = edge.z() - task.board_top;
+  Eigen::Vector3f a = Eigen::Vector3f::Zero();
+  if (clearance < options.caution_distance) {
+    a[2] = 1.0f;  // lift the knife away
+    return a;
+  }
+  const double ex = task.cut_line_x - edge.x(), ey = task.cut_line_y - edge.y();
+  a[0] = static_cast<float>(std::clamp(ex / 0.05, -travel_speed, travel_speed));
+  a[1] = static_cast<float>(std::clamp(ey / 0.05, -travel_speed, travel_speed));
+  const float hover =
+      static_cast<float>(std::clamp(0.5 * (options.hover_height - height) / 0.05, -1.0, 1.0));
+  if (path < options.caution_distance) {
+    a[2] = std::max(hover, 0.0f);  // wait above, never towards the arm
+  } else if (std::abs(ex) > 0.01 || std::abs(ey) > 0.01) {
+    a[2] = hover;
+  } else if (o[kLifted] > 0.5f) {
+    a[2] = static_cast<float>(-stroke_speed);
+  } else {
+    a[2] = static_cast<float>(stroke_speed);
+  }
+  return a;
+}
+
+KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions& task,
+                                                    const KitchenDemonstrationOptions& options) {
+  task.Validate();
+  options.Validate();
+  KitchenCuttingEnv env(task, KitchenShieldModelOptions{});
+  Rng rng(options.seed);
+  KitchenDemonstrations out;
+  out.trajectories.source =
+      "scripted kitchen-cutting demonstrations (seed " + std::to_string(options.seed) + ")";
+  out.trajectories.state_features = ObservationFeatures();
+  out.trajectories.action_features = ActionFeatures();
+  out.trajectories.episode_begin.push_back(0);
+  std::vector<Eigen::VectorXf> obs_rows, act_rows;
+  Eigen::VectorXf o(kObservationDim), next(kObservationDim), a(kActionDim);
+  int attempt = 0;
+  for (; attempt < options.max_attempts && static_cast<long>(obs_rows.size()) < options.states;
+       ++attempt) {
+    Rng episode_rng(rng.NextU64());
+    const double stroke = Draw(episode_rng, options.stroke_speed);
+    const double travel = Draw(episode_rng, options.travel_speed);
+    env.Reset(episode_rng, o);
+    std::vector<Eigen::VectorXf> eo, ea;
+    bool success = false, dangerous = false;
+    for (int t = 0; t < task.max_steps; ++t) {
+      const Eigen::Vector3f clean = DemonstratorAction(task, options, o, stroke, travel);
+      for (int k = 0; k < kActionDim; ++k)
+        a[k] =
+            std::clamp(clean[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
+                       -1.0f, 1.0f);
+      eo.push_back(o);
+      ea.push_back(a);
+      const StepOutcome r = env.Step(a, next);
+      o = next;
+      if (r.collided) {
+        dangerous = true;
+        break;
+      }
+      if (r.reached_goal) {
+        success = true;
+        break;
+      }
+    }
+    if (dangerous) {
+      ++out.discarded_dangerous;
+      continue;
+    }
+    if (!success) {
+      ++out.discarded_failed;
+      continue;
+    }
+    if (env.sim().path().into) ++out.into_episodes;
+    obs_rows.insert(obs_rows.end(), eo.begin(), eo.end());
+    act_rows.insert(act_rows.end(), ea.begin(), ea.end());
+    out.trajectories.episode_begin.push_back(static_cast<long>(obs_rows.size()));
+  }
+  SECURE_CHECK(static_cast<long>(obs_rows.size()) >= options.states,
+               "kitchen-cutting demonstrations: only "
+                   << obs_rows.size() << " of " << options.states << " states in " << attempt
+                   << " attempts (" << out.discarded_dangerous << " came dangerous, "
+                   << out.discarded_failed << " did not finish the cut)");
+  const long n = static_cast<long>(obs_rows.size());
+  out.trajectories.states.resize(kObservationDim, n);
+  out.trajectories.actions.resize(kActionDim, n);
+  for (long i = 0; i < n; ++i) {
+    out.trajectories.states.col(i) = obs_rows[i];
+    out.trajectories.actions.col(i) = act_rows[i];
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Safe and near-dangerous states
+
+data::StateSet KitchenSafeStates(const KitchenDemonstrations& demos,
+                                 const KitchenSafeOptions& options, Rng& rng) {
+  options.Validate();
+  const Eigen::MatrixXf& demo = demos.trajectories.states;
+  SECURE_CHECK(options.count <= demo.cols(),
+               "kitchen-cutting safe states: count = " << options.count << " but only "
+                                                       << demo.cols() << " demonstration states");
+  std::vector<long> order(static_cast<size_t>(demo.cols()));
+  std::iota(order.begin(), order.end(), 0L);
+  Shuffle(order.begin(), order.end(), rng);
+  data::StateSet s;
+  s.source = "kitchen-cutting demonstration states";
+  s.features = ObservationFeatures();
+  s.states.resize(kObservationDim, options.count);
+  for (long i = 0; i < options.count; ++i) s.states.col(i) = demo.col(order[i]);
+  return s;
+}
+
+data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
+                                          const KitchenDemonstrations& demos,
+                                          const KitchenNearDangerousOptions& options, Rng& rng,
+                                          std::vector<NearDangerousScenario>* scenarios) {
+  options.Validate();
+  const HumanArmOptions& h = task.human;
+  const Eigen::MatrixXf& demo = demos.trajectories.states;
+  SECURE_CHECK(demo.cols() > 0, "kitchen-cutting near-dangerous states: no demonstration states");
+  data::StateSet s;
+  s.source = "kitchen-cutting near-dangerous states (the arm put near the blade)";
+  s.features = ObservationFeatures();
+  s.states.resize(kObservationDim, options.count);
+  if (scenarios != nullptr) scenarios->clear();
+  long made = 0, visited = 0;
+  std::vector<long> order(static_cast<size_t>(demo.cols()));
+  std::iota(order.begin(), order.end(), 0L);
+  Shuffle(order.begin(), order.end(), rng);
+  const long max_visits = 20 * options.count + demo.cols();
+  while (made < options.count && visited < max_visits) {
+    Eigen::VectorXf o = demo.col(order[static_cast<size_t>(visited % demo.cols())]);
+    ++visited;
+    const Eigen::Vector3d edge = At(o, kBlade);
+    const bool stroke = rng.Uniform() < options.p_stroke;
+    bool accepted = false;
+    for (int attempt = 0; attempt < 200 && !accepted; ++attempt) {
+      if (stroke) {
+        // The wrist under the edge, from the person's side (+y) to the blade's plane.
+        const double top = edge.z() - task.contact_distance - 0.01;
+        if (top <= task.board_top + 0.03) break;  // no room under the blade
+        const Eigen::Vector3d wrist(edge.x() + rng.Uniform(-0.07, 0.07),
+                                    edge.y() + rng.Uniform(-0.08, 0.0),
+                                    rng.Uniform(task.board_top + 0.03, top));
+        const ArmPose p = ArmPoseForWrist(h, wrist);
+        const double d = EdgeToArmDistance(h, edge, p);
+        if (d < task.contact_distance || d > options.near_distance) continue;
+        if (PathClearance(task, edge, p) >= task.contact_distance) continue;
+        SetArm(o, p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero());
+        o[kEeVel] = o[kEeVel + 1] = 0.0f;
+        o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));
+        accepted = true;
+      } else {
+        Eigen::Vector3d dir(rng.Normal(), rng.Normal(), rng.Normal());
+        if (dir.norm() < 1e-6) continue;
+        dir.normalize();
+        const Eigen::Vector3d wrist =
+            edge + dir * rng.Uniform(0.0, options.near_distance + h.forearm_radius + 0.08);
+        if (wrist.z() < task.board_top + 0.02) continue;
+        const ArmPose p = ArmPoseForWrist(h, wrist);
+        const double d = EdgeToArmDistance(h, edge, p);
+        if (d < task.contact_distance || d > options.near_distance) continue;
+        const Eigen::Vector3d towards = (edge - p.wrist).normalized();
+        const double speed = Draw(rng, options.arm_speed);
+        const Eigen::Vector3d wv = speed * towards, ev = 0.5 * speed * towards;
+        ArmPose later = p;
+        later.wrist += options.look_ahead * wv;
+        later.tip += options.look_ahead * wv;
+        later.elbow += options.look_ahead * ev;
+        if (EdgeToArmDistance(h, edge, later) >= task.contact_distance) continue;
+        SetArm(o, p, wv, ev);
+        accepted = true;
+      }
+    }
+    if (!accepted) continue;
+    s.states.col(made++) = o;
+    if (scenarios != nullptr)
+      scenarios->push_back(stroke ? NearDangerousScenario::kStroke : NearDangerousScenario::kArm);
+  }
+  SECURE_CHECK(made == options.count, "kitchen-cutting near-dangerous states: only "
+                                          << made << " of " << options.count << " made");
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The label check
+
+KitchenLabelCheckResult CheckKitchenLabels(const KitchenCuttingOptions& task,
+                                           const data::StateSet& set,
+                                           const KitchenLabelCheckOptions& options) {
+  KitchenCuttingSim sim(task);
+  KitchenLabelCheckResult r;
+  const long n = std::min(set.size(), options.max_states);
+  const int continue_steps =
+      static_cast<int>(std::lround(options.continue_seconds / task.control_period));
+  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
+  for (long i = 0; i < n; ++i) {
+    ++r.states;
+    const Eigen::VectorXf o = set.states.col(i);
+    if (sim.SetObservation(o) > 0.01) {
+      ++r.unreachable;
+      continue;
+    }
+    bool dangerous = sim.Dangerous();
+    Eigen::Vector3f a;
+    for (int k = 0; k < 3; ++k)
+      a[k] = std::clamp(static_cast<float>(o[kEeVel + k] / options.velocity_gain), -1.0f, 1.0f);
+    for (int t = 0; t < continue_steps + hold_steps && !dangerous; ++t) {
+      sim.Step(t < continue_steps ? a : Eigen::Vector3f::Zero());
+      dangerous = sim.Dangerous();
+    }
+    if (dangerous) ++r.dangerous;
+  }
+  return r;
+}
+
+}  // namespace secure::domains::kitchen_cutting

@@ -1,0 +1,130 @@
+#pragma once
+// The kitchen-cutting data: the scripted demonstrator, the safe and near-dangerous states, and
+// the check of their labels against physics.
+//
+// Demonstrator (a careful person teaching the cut): from each observation, the blade's edge is
+// compared with the person's arm now and extrapolated look_ahead seconds at its velocity:
+//   - the arm within caution_distance of the edge: lift the knife straight up (a = (0, 0, 1));
+//   - else the arm within caution_distance of the stroke's path (the edge lowered to the board
+//     where it is): hold at hover_height above the board (rise to it, never descend);
+//   - else cut: move over the line (a_xy = (line - edge_xy) / 0.05, at most travel_speed), at
+//     hover_height until over it (within 1 cm), then down-strokes at stroke_speed (a_z < 0) until
+//     the stroke counts and up at stroke_speed until the blade is lifted;
+// each action component with N(0, action_noise^2) noise, clipped to [-1, 1]. An episode that
+// comes dangerous or does not finish the cut is discarded. Episodes are kept until there are at
+// least `states` demonstration states (Table 2: 2000).
+//
+// Safe states: `count` (Table 2: 450) demonstration states drawn without replacement.
+//
+// Near-dangerous states (`count`, Table 2: 450): demonstration states with the person's arm put
+// close to the blade so that continuing the motion reaches it:
+//   (a) stroke (p_stroke): the wrist under the blade's edge (x within the blade +- 0.07, y from
+//       the edge's plane to 0.08 beyond it, away from the person, so that the forearm passes
+//       under the edge; z between the board and the edge), the
+//       edge clear of the arm by [contact_distance, near_distance] but the stroke's path (the
+//       edge lowered to the board) within contact_distance of it, the end-effector moving down
+//       at stroke_vz (the stroke continuing), the arm at rest;
+//   (b) arm (the rest): the wrist within near_distance of the edge in a random direction, the
+//       edge clear of the arm by [contact_distance, near_distance], the wrist (and the elbow at
+//       half the speed) moving towards the edge's centre at arm_speed so that within look_ahead
+//       the arm reaches contact_distance (constant velocity); the end-effector as demonstrated.
+// Each draw is rejection-sampled (at most 200 tries per state; a state without an accepted draw
+// is skipped); the states are drawn in a random order of demonstration states.
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "domains/kitchen_cutting/kitchen_cutting.h"
+#include "secure/common/rng.h"
+#include "secure/data/data.h"
+
+namespace YAML {
+class Node;
+}
+
+namespace secure::domains::kitchen_cutting {
+
+struct KitchenDemonstrationOptions {
+  long states = 2000;                  // at least this many demonstration states (whole episodes)
+  int max_attempts = 2000;             // episodes tried before giving up
+  Interval stroke_speed = {0.3, 0.6};  // |a_z| of a stroke (down and up), per episode
+  Interval travel_speed = {0.6, 1.0};  // max |a_x|, |a_y| moving over the line, per episode
+  double caution_distance = 0.10;      // m (ASSUMPTION: how close a careful person lets it come)
+  double look_ahead = 0.3;             // s the arm is extrapolated
+  double hover_height = 0.08;          // m of the edge above the board while waiting
+  double action_noise = 0.02;
+  std::uint64_t seed = 0;
+
+  void Validate() const;
+  nlohmann::json ToJson() const;
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+struct KitchenDemonstrations {
+  data::TrajectorySet trajectories;
+  long discarded_dangerous = 0, discarded_failed = 0;
+  long into_episodes = 0;  // kept episodes whose reach went into the knife's workspace
+};
+
+/// @throws secure::Error if the states are not reached within max_attempts.
+KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions& task,
+                                                    const KitchenDemonstrationOptions& options);
+
+/// The demonstrator's action for an observation (deterministic part; the noise is added by
+/// GenerateKitchenDemonstrations). `stroke_speed`, `travel_speed` as drawn for the episode.
+Eigen::Vector3f DemonstratorAction(const KitchenCuttingOptions& task,
+                                   const KitchenDemonstrationOptions& options,
+                                   const Eigen::Ref<const Eigen::VectorXf>& observation,
+                                   double stroke_speed, double travel_speed);
+
+struct KitchenSafeOptions {
+  long count = 450;  // Table 2
+  void Validate() const;
+  nlohmann::json ToJson() const;
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+struct KitchenNearDangerousOptions {
+  long count = 450;  // Table 2
+  double p_stroke = 0.6;
+  double near_distance = 0.06;      // m, the edge's clearance from the arm at most
+  Interval stroke_vz = {0.3, 1.0};  // m/s downwards
+  Interval arm_speed = {0.2, 0.6};  // m/s
+  double look_ahead = 0.3;          // s
+  void Validate() const;
+  nlohmann::json ToJson() const;
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+enum class NearDangerousScenario { kStroke, kArm };
+const char* ScenarioName(NearDangerousScenario s);
+
+data::StateSet KitchenSafeStates(const KitchenDemonstrations& demos,
+                                 const KitchenSafeOptions& options, Rng& rng);
+/// @throws secure::Error if fewer than options.count states could be made.
+data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
+                                          const KitchenDemonstrations& demos,
+                                          const KitchenNearDangerousOptions& options, Rng& rng,
+                                          std::vector<NearDangerousScenario>* scenarios = nullptr);
+
+/// The labels against physics: the simulation is put in each state
+/// (KitchenCuttingSim::SetObservation: the arm by IK, the person's arm moving on at its observed
+/// velocity), the end-effector continues at its own velocity (a = v / velocity_gain, clipped) for
+/// continue_seconds, then holds still (a = 0) for hold_seconds; the state leads to danger if the
+/// edge comes within contact_distance of the arm at any step (or starts there). States the arm
+/// cannot reach (IK error > 0.01 m) are counted apart.
+struct KitchenLabelCheckOptions {
+  double continue_seconds = 0.3;
+  double hold_seconds = 0.2;
+  double velocity_gain = 1.25;
+  long max_states = 300;
+};
+struct KitchenLabelCheckResult {
+  long states = 0, dangerous = 0, unreachable = 0;
+};
+KitchenLabelCheckResult CheckKitchenLabels(const KitchenCuttingOptions& task,
+                                           const data::StateSet& set,
+                                           const KitchenLabelCheckOptions& options);
+
+}  // namespace secure::domains::kitchen_cutting

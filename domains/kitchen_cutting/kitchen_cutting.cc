@@ -1,0 +1,664 @@
+#include "domains/kitchen_cutting/kitchen_cutting.h"
+
+#include <mujoco/mujoco.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "domains/franka/mujoco_model.h"
+#include "domains/franka/offscreen_renderer.h"
+#include "domains/franka/panda_arm.h"
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::kitchen_cutting {
+// The model text (generated from kitchen_cutting.xml by CMake: kitchen_cutting_xml.cc).
+extern const char kKitchenCuttingXml[];
+
+namespace {
+
+bool Finite(double x) { return std::isfinite(x); }
+
+const mjModel* KitchenCuttingModel() {
+  static const franka::MujocoModel model = franka::MujocoModel::FromXml(
+      franka::WithPandaArm(kKitchenCuttingXml, "kitchen_cutting.xml"), "kitchen_cutting.xml");
+  return model.get();
+}
+
+Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
+
+void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
+                   double max) {
+  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
+                     owner, field, "[" << r[0] << ", " << r[1] << "]",
+                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
+}
+
+double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
+
+// The closest distance between segments p1-q1 and p2-q2 (Ericson, Real-Time Collision Detection
+// 5.1.9).
+double SegmentDistance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1,
+                       const Eigen::Vector3d& p2, const Eigen::Vector3d& q2) {
+  const Eigen::Vector3d d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
+  constexpr double kEps = 1e-12;
+  double s = 0, t = 0;
+  if (a <= kEps && e <= kEps) return r.norm();
+  if (a <= kEps) {
+    t = std::clamp(f / e, 0.0, 1.0);
+  } else {
+    const double c = d1.dot(r);
+    if (e <= kEps) {
+      s = std::clamp(-c / a, 0.0, 1.0);
+    } else {
+      const double b = d1.dot(d2), denom = a * e - b * b;
+      s = denom > kEps ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
+      t = (b * s + f) / e;
+      if (t < 0) {
+        t = 0;
+        s = std::clamp(-c / a, 0.0, 1.0);
+      } else if (t > 1) {
+        t = 1;
+        s = std::clamp((b - c) / a, 0.0, 1.0);
+      }
+    }
+  }
+  return ((p1 + s * d1) - (p2 + t * d2)).norm();
+}
+
+double EdgeDistance(const HumanArmOptions& h, const Eigen::Vector3d& centre,
+                    const Eigen::Vector3d& axis, const ArmPose& arm) {
+  const Eigen::Vector3d a = centre - kBladeHalfLength * axis, b = centre + kBladeHalfLength * axis;
+  return std::min({SegmentDistance(a, b, arm.shoulder, arm.elbow) - h.upper_arm_radius,
+                   SegmentDistance(a, b, arm.elbow, arm.wrist) - h.forearm_radius,
+                   SegmentDistance(a, b, arm.wrist, arm.tip) - h.hand_radius});
+}
+
+// Minimum jerk from 0 to 1 over tau in [0, 1].
+double MinJerk(double tau) {
+  tau = std::clamp(tau, 0.0, 1.0);
+  return tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau));
+}
+
+}  // namespace
+
+const std::vector<std::string>& ObservationFeatures() {
+  static const std::vector<std::string> names{
+      "ee_x",     "ee_y",     "ee_z",     "ee_vx",   "ee_vy",    "ee_vz",    "blade_x",
+      "blade_y",  "blade_z",  "wrist_x",  "wrist_y", "wrist_z",  "elbow_x",  "elbow_y",
+      "elbow_z",  "hand_x",   "hand_y",   "hand_z",  "wrist_vx", "wrist_vy", "wrist_vz",
+      "elbow_vx", "elbow_vy", "elbow_vz", "strokes", "lifted"};
+  return names;
+}
+
+const std::vector<std::string>& ActionFeatures() {
+  static const std::vector<std::string> names{"act_x", "act_y", "act_z"};
+  return names;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The person's arm
+
+ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist) {
+  ArmPose p;
+  p.shoulder = V(h.shoulder);
+  const double l1 = h.upper_arm, l2 = h.forearm;
+  const Eigen::Vector3d sw = wrist - p.shoulder;
+  double d = sw.norm();
+  const Eigen::Vector3d u = d > 1e-9 ? Eigen::Vector3d(sw / d) : Eigen::Vector3d(0, -1, 0);
+  d = std::clamp(d, std::abs(l1 - l2) + 1e-3, l1 + l2 - 1e-3);
+  p.wrist = p.shoulder + d * u;
+  const double along = (l1 * l1 - l2 * l2 + d * d) / (2 * d);
+  const double across = std::sqrt(std::max(0.0, l1 * l1 - along * along));
+  // The elbow points back towards the person (+y) and down, orthogonal to the shoulder-wrist line.
+  const Eigen::Vector3d out = Eigen::Vector3d(0, 1, -1).normalized();
+  Eigen::Vector3d n = out - out.dot(u) * u;
+  if (n.norm() < 1e-6) n = Eigen::Vector3d(1, 0, 0) - u.x() * u;
+  n.normalize();
+  p.elbow = p.shoulder + along * u + across * n;
+  const Eigen::Vector3d fore = (p.wrist - p.elbow).normalized();
+  p.tip = p.wrist + h.hand * fore;
+  return p;
+}
+
+double EdgeToArmDistance(const HumanArmOptions& h, const Eigen::Vector3d& edge_centre,
+                         const ArmPose& arm) {
+  return EdgeDistance(h, edge_centre, Eigen::Vector3d::UnitX(), arm);
+}
+
+Eigen::Vector3d ReachPath::Wrist(const HumanArmOptions& h, double t) const {
+  const Eigen::Vector3d rest = V(h.rest);
+  if (t <= start) return rest;
+  if (t <= start + travel) return rest + MinJerk((t - start) / travel) * (goal - rest);
+  if (t <= start + travel + dwell) return goal;
+  return goal + MinJerk((t - start - travel - dwell) / travel) * (rest - goal);
+}
+
+ReachPath DrawReachPath(const HumanArmOptions& h, Rng& rng) {
+  ReachPath p;
+  p.into = rng.Uniform() < h.into_probability;
+  const Interval& x = p.into ? h.into_x : h.away_x;
+  const Interval& y = p.into ? h.into_y : h.away_y;
+  const Interval& z = p.into ? h.into_z : h.away_z;
+  p.goal.x() = Draw(rng, x);
+  p.goal.y() = Draw(rng, y);
+  p.goal.z() = Draw(rng, z);
+  p.start = Draw(rng, h.start_time);
+  // Minimum jerk covers the distance at mean speed distance / travel.
+  p.travel = std::max(0.05, (p.goal - V(h.rest)).norm() / Draw(rng, h.speed));
+  p.dwell = Draw(rng, h.dwell);
+  return p;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+void HumanArmOptions::Validate() const {
+  const char* o = "HumanArmOptions";
+  for (int k = 0; k < 3; ++k) {
+    SECURE_CHECK_FIELD(Finite(shoulder[k]), o, "shoulder", shoulder[k], "finite");
+    SECURE_CHECK_FIELD(Finite(rest[k]), o, "rest", rest[k], "finite");
+  }
+  for (auto [name, v] : {std::pair{"upper_arm", upper_arm}, std::pair{"forearm", forearm},
+                         std::pair{"hand", hand}}) {
+    SECURE_CHECK_FIELD(Finite(v) && v > 0.01 && v <= 1.0, o, name, v, "in (0.01, 1] m");
+  }
+  for (auto [name, v] :
+       {std::pair{"upper_arm_radius", upper_arm_radius},
+        std::pair{"forearm_radius", forearm_radius}, std::pair{"hand_radius", hand_radius}}) {
+    SECURE_CHECK_FIELD(Finite(v) && v > 0 && v <= 0.2, o, name, v, "in (0, 0.2] m");
+  }
+  SECURE_CHECK_FIELD(Finite(into_probability) && into_probability >= 0 && into_probability <= 1, o,
+                     "into_probability", into_probability, "in [0, 1]");
+  CheckInterval(into_x, o, "into_x", -2, 2);
+  CheckInterval(into_y, o, "into_y", -2, 2);
+  CheckInterval(into_z, o, "into_z", 0, 2);
+  CheckInterval(away_x, o, "away_x", -2, 2);
+  CheckInterval(away_y, o, "away_y", -2, 2);
+  CheckInterval(away_z, o, "away_z", 0, 2);
+  CheckInterval(start_time, o, "start_time", 0, 100);
+  CheckInterval(speed, o, "speed", 0.01, 5);
+  CheckInterval(dwell, o, "dwell", 0, 100);
+}
+
+nlohmann::json HumanArmOptions::ToJson() const {
+  return {{"shoulder", shoulder},
+          {"upper_arm", upper_arm},
+          {"forearm", forearm},
+          {"hand", hand},
+          {"upper_arm_radius", upper_arm_radius},
+          {"forearm_radius", forearm_radius},
+          {"hand_radius", hand_radius},
+          {"rest", rest},
+          {"into_probability", into_probability},
+          {"into_x", into_x},
+          {"into_y", into_y},
+          {"into_z", into_z},
+          {"away_x", away_x},
+          {"away_y", away_y},
+          {"away_z", away_z},
+          {"start_time", start_time},
+          {"speed", speed},
+          {"dwell", dwell}};
+}
+
+void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("shoulder", &shoulder)
+      .Field("upper_arm", &upper_arm)
+      .Field("forearm", &forearm)
+      .Field("hand", &hand)
+      .Field("upper_arm_radius", &upper_arm_radius)
+      .Field("forearm_radius", &forearm_radius)
+      .Field("hand_radius", &hand_radius)
+      .Field("rest", &rest)
+      .Field("into_probability", &into_probability)
+      .Field("into_x", &into_x)
+      .Field("into_y", &into_y)
+      .Field("into_z", &into_z)
+      .Field("away_x", &away_x)
+      .Field("away_y", &away_y)
+      .Field("away_z", &away_z)
+      .Field("start_time", &start_time)
+      .Field("speed", &speed)
+      .Field("dwell", &dwell)
+      .Apply(node, source);
+}
+
+void KitchenCuttingOptions::Validate() const {
+  const char* o = "KitchenCuttingOptions";
+  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
+                     "in [1, 100000]");
+  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
+                     "control_period", control_period, "in (0, 1] s");
+  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
+  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
+                     "large enough for a physics step <= 5 ms (control_period / substeps)");
+  SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
+                     "action_scale", action_scale, "in (0, 0.2] m");
+  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
+                         tracking_omega * control_period / substeps < 0.5,
+                     o, "tracking_omega", tracking_omega,
+                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
+  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
+                     ik_damping, "in (0, 1)");
+  SECURE_CHECK_FIELD(
+      Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
+      "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
+  SECURE_CHECK_FIELD(board_top == 0.015, o, "board_top", board_top,
+                     "0.015 (the board in kitchen_cutting.xml)");
+  SECURE_CHECK_FIELD(Finite(cut_line_x) && Finite(cut_line_y), o, "cut_line_x", cut_line_x,
+                     "finite (and cut_line_y)");
+  SECURE_CHECK_FIELD(Finite(cut_line_half_length) && cut_line_half_length > 0, o,
+                     "cut_line_half_length", cut_line_half_length, "> 0");
+  SECURE_CHECK_FIELD(Finite(stroke_tolerance) && stroke_tolerance > 0 && stroke_tolerance < 0.05, o,
+                     "stroke_tolerance", stroke_tolerance, "in (0, 0.05) m");
+  SECURE_CHECK_FIELD(Finite(lift_height) && lift_height > stroke_tolerance && lift_height <= 0.3, o,
+                     "lift_height", lift_height, "in (stroke_tolerance, 0.3] m");
+  SECURE_CHECK_FIELD(strokes_required >= 1 && strokes_required <= 20, o, "strokes_required",
+                     strokes_required, "in [1, 20]");
+  SECURE_CHECK_FIELD(Finite(contact_distance) && contact_distance >= 0 && contact_distance < 0.2, o,
+                     "contact_distance", contact_distance, "in [0, 0.2) m");
+  human.Validate();
+}
+
+nlohmann::json KitchenCuttingOptions::ToJson() const {
+  return {{"max_steps", max_steps},
+          {"control_period", control_period},
+          {"substeps", substeps},
+          {"action_scale", action_scale},
+          {"tracking_omega", tracking_omega},
+          {"ik_damping", ik_damping},
+          {"initial_joint_noise", initial_joint_noise},
+          {"board_top", board_top},
+          {"cut_line_x", cut_line_x},
+          {"cut_line_y", cut_line_y},
+          {"cut_line_half_length", cut_line_half_length},
+          {"stroke_tolerance", stroke_tolerance},
+          {"lift_height", lift_height},
+          {"strokes_required", strokes_required},
+          {"contact_distance", contact_distance},
+          {"human", human.ToJson()}};
+}
+
+void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("max_steps", &max_steps)
+      .Field("control_period", &control_period)
+      .Field("substeps", &substeps)
+      .Field("action_scale", &action_scale)
+      .Field("tracking_omega", &tracking_omega)
+      .Field("ik_damping", &ik_damping)
+      .Field("initial_joint_noise", &initial_joint_noise)
+      .Field("board_top", &board_top)
+      .Field("cut_line_x", &cut_line_x)
+      .Field("cut_line_y", &cut_line_y)
+      .Field("cut_line_half_length", &cut_line_half_length)
+      .Field("stroke_tolerance", &stroke_tolerance)
+      .Field("lift_height", &lift_height)
+      .Field("strokes_required", &strokes_required)
+      .Field("contact_distance", &contact_distance)
+      .Section("human",
+               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); })
+      .Apply(node, source);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The simulation
+
+struct KitchenCuttingSim::Impl {
+  franka::MujocoModel model;
+  franka::MujocoData data;
+  franka::PandaArm arm;
+  int blade = -1, knife = -1;
+  int mocap[3] = {-1, -1, -1};  // upper arm, forearm, hand
+
+  explicit Impl(franka::MujocoModel m)
+      : model(std::move(m)), data(model), arm(model.get(), "kitchen-cutting") {}
+};
+
+KitchenCuttingSim::KitchenCuttingSim(const KitchenCuttingOptions& options)
+    : options_((options.Validate(), options)) {
+  franka::MujocoModel m = franka::MujocoModel::Copy(KitchenCuttingModel());
+  mjModel* raw = m.get();
+  raw->opt.timestep = options_.control_period / options_.substeps;
+  auto id = [&](mjtObj type, const char* name) {
+    const int i = mj_name2id(raw, type, name);
+    SECURE_CHECK(i >= 0, "the kitchen-cutting model has no " << name);
+    return i;
+  };
+  // The person's capsules take the options' sizes (each runs along its body's z from 0 to L).
+  const HumanArmOptions& h = options_.human;
+  const char* names[3] = {"upper_arm", "forearm", "person_hand"};
+  const double lengths[3] = {h.upper_arm, h.forearm, h.hand};
+  const double radii[3] = {h.upper_arm_radius, h.forearm_radius, h.hand_radius};
+  int mocap[3];
+  for (int k = 0; k < 3; ++k) {
+    const int g = id(mjOBJ_GEOM, names[k]);
+    raw->geom_size[3 * g] = radii[k];
+    raw->geom_size[3 * g + 1] = lengths[k] / 2;
+    raw->geom_pos[3 * g + 2] = lengths[k] / 2;
+    mocap[k] = raw->body_mocapid[id(mjOBJ_BODY, names[k])];
+    SECURE_CHECK(mocap[k] >= 0, "kitchen-cutting: body " << names[k] << " is not a mocap body");
+  }
+  impl_ = std::make_unique<Impl>(std::move(m));
+  const mjModel* mm = impl_->model.get();
+  impl_->blade = mj_name2id(mm, mjOBJ_SITE, "blade");
+  impl_->knife = mj_name2id(mm, mjOBJ_GEOM, "knife");
+  SECURE_CHECK(impl_->blade >= 0 && impl_->knife >= 0, "kitchen-cutting: no knife in the model");
+  for (int k = 0; k < 3; ++k) impl_->mocap[k] = mocap[k];
+  Rng rng(0);
+  Reset(rng);
+}
+
+KitchenCuttingSim::~KitchenCuttingSim() = default;
+
+const void* KitchenCuttingSim::model() const { return impl_->model.get(); }
+void* KitchenCuttingSim::data() const { return impl_->data.get(); }
+double KitchenCuttingSim::time() const { return impl_->data.get()->time; }
+
+void KitchenCuttingSim::UpdateHuman() {
+  const HumanArmOptions& h = options_.human;
+  const double t = impl_->data.get()->time;
+  constexpr double kH = 1e-3;  // s, central differences for the velocities
+  if (extrapolate_) {
+    const double s = t - t0_;
+    arm_.shoulder = V(h.shoulder);
+    arm_.wrist = wrist0_ + s * wrist_v_;
+    arm_.elbow = elbow0_ + s * elbow_v_;
+    const Eigen::Vector3d fore = arm_.wrist - arm_.elbow;
+    arm_.tip = arm_.wrist + h.hand * (fore.norm() > 1e-9 ? Eigen::Vector3d(fore.normalized())
+                                                         : Eigen::Vector3d(0, -1, 0));
+    wrist_vel_ = wrist_v_;
+    elbow_vel_ = elbow_v_;
+  } else {
+    arm_ = ArmPoseForWrist(h, path_.Wrist(h, t));
+    const ArmPose ahead = ArmPoseForWrist(h, path_.Wrist(h, t + kH));
+    const ArmPose behind = ArmPoseForWrist(h, path_.Wrist(h, std::max(0.0, t - kH)));
+    const double span = t + kH - std::max(0.0, t - kH);
+    wrist_vel_ = (ahead.wrist - behind.wrist) / span;
+    elbow_vel_ = (ahead.elbow - behind.elbow) / span;
+  }
+  // The capsules (for the picture; the dangerous test uses arm_).
+  mjData* d = impl_->data.get();
+  const Eigen::Vector3d from[3] = {arm_.shoulder, arm_.elbow, arm_.wrist};
+  const Eigen::Vector3d to[3] = {arm_.elbow, arm_.wrist, arm_.tip};
+  for (int k = 0; k < 3; ++k) {
+    const int b = impl_->mocap[k];
+    for (int i = 0; i < 3; ++i) d->mocap_pos[3 * b + i] = from[k][i];
+    mjtNum dir[3] = {to[k].x() - from[k].x(), to[k].y() - from[k].y(), to[k].z() - from[k].z()};
+    mju_quatZ2Vec(d->mocap_quat + 4 * b, dir);
+  }
+  // The capsules' frames follow (positions of the other bodies are recomputed unchanged).
+  mj_kinematics(impl_->model.get(), d);
+}
+
+void KitchenCuttingSim::UpdateProgress() {
+  const mjData* d = impl_->data.get();
+  const mjtNum* edge = d->site_xpos + 3 * impl_->blade;
+  const KitchenCuttingOptions& o = options_;
+  if (edge[2] >= o.board_top + o.lift_height) lifted_ = true;
+  if (lifted_ && edge[2] <= o.board_top + o.stroke_tolerance &&
+      std::abs(edge[1] - o.cut_line_y) <= o.stroke_tolerance &&
+      std::abs(edge[0] - o.cut_line_x) <= o.cut_line_half_length) {
+    ++strokes_;
+    lifted_ = false;
+  }
+}
+
+void KitchenCuttingSim::Reset(Rng& rng) {
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  mj_resetData(m, d);
+  std::array<double, franka::kArmJoints> q = franka::kNeutralJoints;
+  for (double& v : q) v += options_.initial_joint_noise * (2.0 * rng.Uniform() - 1.0);
+  impl_->arm.SetJoints(d, q);
+  franka::UpdateKinematics(m, d);
+  path_ = DrawReachPath(options_.human, rng);
+  extrapolate_ = false;
+  strokes_ = 0;
+  lifted_ = true;
+  UpdateHuman();
+}
+
+void KitchenCuttingSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  Eigen::Vector3d a;
+  for (int k = 0; k < 3; ++k) {
+    SECURE_CHECK(std::isfinite(action[k]),
+                 "kitchen-cutting: action[" << k << "] = " << action[k] << " is not finite");
+    a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
+  }
+  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
+  Eigen::Vector3d target = ee + options_.action_scale * a;
+  // The blade stops at the board.
+  target.z() = std::max(target.z(), options_.board_top + kBladeDrop);
+  franka::ArmTracking tracking;
+  tracking.control_period = options_.control_period;
+  tracking.substeps = options_.substeps;
+  tracking.tracking_omega = options_.tracking_omega;
+  tracking.ik_damping = options_.ik_damping;
+  impl_->arm.Track(m, d, target, tracking);
+  franka::CheckWarnings(d, "kitchen-cutting", "a step");
+  UpdateHuman();
+  UpdateProgress();
+}
+
+void KitchenCuttingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
+  SECURE_CHECK(o.size() == kObservationDim, "kitchen-cutting: observation has "
+                                                << o.size() << " entries, expected "
+                                                << kObservationDim);
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  const int tcp = impl_->arm.tcp();
+  mjtNum v[6];
+  mj_objectVelocity(m, d, mjOBJ_SITE, tcp, v, 0);
+  for (int k = 0; k < 3; ++k) {
+    o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
+    o[kEeVel + k] = static_cast<float>(v[3 + k]);
+    o[kBlade + k] = static_cast<float>(d->site_xpos[3 * impl_->blade + k]);
+    o[kWrist + k] = static_cast<float>(arm_.wrist[k]);
+    o[kElbow + k] = static_cast<float>(arm_.elbow[k]);
+    o[kHandTip + k] = static_cast<float>(arm_.tip[k]);
+    o[kWristVel + k] = static_cast<float>(wrist_vel_[k]);
+    o[kElbowVel + k] = static_cast<float>(elbow_vel_[k]);
+  }
+  o[kStrokes] = static_cast<float>(strokes_) / static_cast<float>(options_.strokes_required);
+  o[kLifted] = lifted_ ? 1.0f : 0.0f;
+}
+
+double KitchenCuttingSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) {
+  SECURE_CHECK(o.size() == kObservationDim, "kitchen-cutting: observation has "
+                                                << o.size() << " entries, expected "
+                                                << kObservationDim);
+  for (int k = 0; k < kObservationDim; ++k) {
+    SECURE_CHECK(std::isfinite(o[k]), "kitchen-cutting: observation " << ObservationFeatures()[k]
+                                                                      << " = " << o[k]
+                                                                      << " is not finite");
+  }
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  mj_resetData(m, d);
+  impl_->arm.SetJoints(d, franka::kNeutralJoints);
+  franka::UpdateKinematics(m, d);
+  const double error =
+      impl_->arm.PlaceTool(m, d, Eigen::Vector3d(o[kEePos], o[kEePos + 1], o[kEePos + 2]));
+  impl_->arm.SetToolVelocity(m, d, Eigen::Vector3d(o[kEeVel], o[kEeVel + 1], o[kEeVel + 2]));
+  franka::UpdateKinematics(m, d);
+  extrapolate_ = true;
+  t0_ = d->time;
+  for (int k = 0; k < 3; ++k) {
+    wrist0_[k] = o[kWrist + k];
+    elbow0_[k] = o[kElbow + k];
+    wrist_v_[k] = o[kWristVel + k];
+    elbow_v_[k] = o[kElbowVel + k];
+  }
+  strokes_ = static_cast<int>(std::lround(o[kStrokes] * options_.strokes_required));
+  lifted_ = o[kLifted] > 0.5f;
+  UpdateHuman();
+  return error;
+}
+
+double KitchenCuttingSim::Clearance() const {
+  const mjData* d = impl_->data.get();
+  const Eigen::Map<const Eigen::Vector3d> centre(d->site_xpos + 3 * impl_->blade);
+  // The blade's axis: the knife box's x axis (row-major xmat: column 0).
+  const mjtNum* r = d->geom_xmat + 9 * impl_->knife;
+  const Eigen::Vector3d axis(r[0], r[3], r[6]);
+  return EdgeDistance(options_.human, centre, axis, arm_);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The shield's model
+
+void KitchenShieldModelOptions::Validate() const {
+  const char* o = "KitchenShieldModelOptions";
+  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
+                     ">= 0");
+  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
+                     ">= 0");
+  SECURE_CHECK_FIELD(Finite(dt) && dt > 0, o, "dt", dt, "> 0 s");
+}
+
+nlohmann::json KitchenShieldModelOptions::ToJson() const {
+  return {{"position_gain", position_gain}, {"velocity_gain", velocity_gain}, {"dt", dt}};
+}
+
+void KitchenShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("position_gain", &position_gain)
+      .Field("velocity_gain", &velocity_gain)
+      .Field("dt", &dt)
+      .Apply(node, source);
+}
+
+KitchenShieldModel::KitchenShieldModel(const KitchenShieldModelOptions& options)
+    : options_((options.Validate(), options)) {}
+
+std::string KitchenShieldModel::Describe() const {
+  std::ostringstream s;
+  s << "kitchen-cutting approximate model (ee and blade += " << options_.position_gain
+    << " a, ee_vel = " << options_.velocity_gain << " a, the person's arm at constant velocity for "
+    << options_.dt << " s)";
+  return s.str();
+}
+
+void KitchenShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                                Eigen::Ref<Eigen::MatrixXf> next) const {
+  const float pg = static_cast<float>(options_.position_gain);
+  const float vg = static_cast<float>(options_.velocity_gain);
+  const float dt = static_cast<float>(options_.dt);
+  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
+    next.col(c) = state;
+    for (int k = 0; k < 3; ++k) {
+      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
+      next(kEePos + k, c) += pg * a;
+      next(kEeVel + k, c) = vg * a;
+      next(kBlade + k, c) += pg * a;
+      next(kWrist + k, c) += dt * state[kWristVel + k];
+      next(kHandTip + k, c) += dt * state[kWristVel + k];
+      next(kElbow + k, c) += dt * state[kElbowVel + k];
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The environment
+
+KitchenCuttingEnv::KitchenCuttingEnv(const KitchenCuttingOptions& options,
+                                     const KitchenShieldModelOptions& shield_model)
+    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {}
+
+std::vector<std::string> KitchenCuttingEnv::ObservationFeatures() const {
+  return kitchen_cutting::ObservationFeatures();
+}
+std::vector<std::string> KitchenCuttingEnv::ActionFeatures() const {
+  return kitchen_cutting::ActionFeatures();
+}
+
+std::string KitchenCuttingEnv::Describe() const {
+  const KitchenCuttingOptions& o = sim_.options();
+  std::ostringstream s;
+  s << "Kitchen cutting (MuJoCo " << mj_versionString() << "): the Panda cuts "
+    << o.strokes_required << " strokes through a line on a board while a simulated person's arm "
+    << "reaches (into the knife's workspace with p = " << o.human.into_probability
+    << "); dangerous: the blade's edge within " << o.contact_distance << " m of the arm; "
+    << o.max_steps << " steps of " << o.control_period << " s";
+  return s.str();
+}
+
+void KitchenCuttingEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
+  sim_.Reset(rng);
+  dangerous_ = false;
+  sim_.Observe(observation);
+}
+
+StepOutcome KitchenCuttingEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
+                                    Eigen::Ref<Eigen::VectorXf> observation) {
+  SECURE_CHECK(action.size() == kActionDim,
+               "kitchen-cutting: action has " << action.size() << " entries, expected 3");
+  SECURE_CHECK(observation.size() == kObservationDim,
+               "kitchen-cutting: observation has " << observation.size() << " entries, expected "
+                                                   << kObservationDim);
+  sim_.Step(Eigen::Vector3f(action[0], action[1], action[2]));
+  sim_.Observe(observation);
+  StepOutcome outcome;
+  outcome.reached_goal = sim_.Succeeded();
+  outcome.collided = sim_.Dangerous();
+  outcome.collisions = outcome.collided && !dangerous_ ? 1 : 0;
+  dangerous_ = outcome.collided;
+  return outcome;
+}
+
+bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
+                                     Eigen::Ref<Eigen::VectorXf> action) const {
+  action.setZero();
+  action[2] = 1.0f;
+  return true;
+}
+
+// The shared offscreen renderer, looking at the board from the robot's right (-y), a little
+// above: the arm at the left, the person's arm reaching in from the back.
+class KitchenCuttingRenderer {
+ public:
+  explicit KitchenCuttingRenderer(const KitchenCuttingSim& sim)
+      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "kitchen-cutting") {}
+  void Render(int width, int height, Frame* frame) {
+    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
+                     width, height, frame);
+  }
+
+ private:
+  static franka::CameraView View() {
+    franka::CameraView v;
+    v.lookat[0] = 0.15;
+    v.lookat[1] = 0.05;
+    v.lookat[2] = 0.15;
+    v.distance = 1.4;
+    v.azimuth = 60;
+    v.elevation = -25;
+    return v;
+  }
+  const KitchenCuttingSim& sim_;
+  franka::OffscreenRenderer renderer_;
+};
+
+KitchenCuttingEnv::~KitchenCuttingEnv() = default;
+
+void KitchenCuttingEnv::Render(int width, int height, Frame* frame) {
+  if (renderer_ == nullptr) renderer_ = std::make_unique<KitchenCuttingRenderer>(sim_);
+  renderer_->Render(width, height, frame);
+}
+
+std::unique_ptr<Environment> KitchenCuttingEnv::Clone() const {
+  return std::make_unique<KitchenCuttingEnv>(sim_.options(), shield_model_options_);
+}
+
+}  // namespace secure::domains::kitchen_cutting

@@ -1,0 +1,301 @@
+// The kitchen-cutting plug-in: the MuJoCo model (the shared Panda with a knife), the cut's
+// progress, the person's arm and the dangerous test, the demonstrator, the data generators, the
+// label check against physics, the shield's model and the domain's options.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "domains/kitchen_cutting/data.h"
+#include "domains/kitchen_cutting/domain.h"
+#include "domains/kitchen_cutting/kitchen_cutting.h"
+#include "secure/common/error.h"
+
+namespace secure::domains::kitchen_cutting {
+namespace {
+
+// A person who never reaches in: the goal beside the board, starting late.
+KitchenCuttingOptions AwayTask() {
+  KitchenCuttingOptions o;
+  o.human.into_probability = 0.0;
+  o.human.start_time = {100.0, 100.0};
+  return o;
+}
+
+TEST(KitchenCuttingModel, LoadsWithTheKnifeBelowTheHandAndHoldsStill) {
+  // The model loads without MuJoCo warnings (the loader fails on any); Step() checks them too.
+  KitchenCuttingSim sim(AwayTask());
+  Rng rng(1);
+  sim.Reset(rng);
+  Eigen::VectorXf o(kObservationDim), after(kObservationDim);
+  sim.Observe(o);
+  // The released neutral posture: tool centre point near (0.093, 0, 0.121); the blade's edge
+  // kBladeDrop below it.
+  EXPECT_NEAR(o[kEePos], 0.093, 0.01);
+  EXPECT_NEAR(o[kEePos + 2], 0.121, 0.01);
+  // (The joint noise at reset tilts the hand a little.)
+  for (int k = 0; k < 2; ++k) EXPECT_NEAR(o[kBlade + k], o[kEePos + k], 5e-3);
+  EXPECT_NEAR(o[kBlade + 2], o[kEePos + 2] - kBladeDrop, 5e-3);
+  EXPECT_EQ(o[kStrokes], 0.0f);
+  EXPECT_EQ(o[kLifted], 1.0f);
+  for (int t = 0; t < 25; ++t) sim.Step(Eigen::Vector3f::Zero());
+  sim.Observe(after);
+  EXPECT_LT((after.head<3>() - o.head<3>()).norm(), 0.005);
+  EXPECT_FALSE(sim.Dangerous());
+}
+
+TEST(KitchenCuttingTask, StrokesOverTheLineCountAndTheBladeStopsAtTheBoard) {
+  const KitchenCuttingOptions task = AwayTask();
+  KitchenCuttingSim sim(task);
+  Rng rng(2);
+  sim.Reset(rng);
+  Eigen::VectorXf o(kObservationDim);
+  sim.Observe(o);
+  double lowest = 1.0;
+  bool down = true;
+  for (int t = 0; t < task.max_steps && !sim.Succeeded(); ++t) {
+    Eigen::Vector3f a = Eigen::Vector3f::Zero();
+    a[0] = static_cast<float>(std::clamp((task.cut_line_x - o[kBlade]) / 0.05, -1.0, 1.0));
+    a[1] = static_cast<float>(std::clamp((task.cut_line_y - o[kBlade + 1]) / 0.05, -1.0, 1.0));
+    const bool over = std::abs(task.cut_line_x - o[kBlade]) < 0.01;
+    if (o[kLifted] > 0.5f) down = true;
+    if (o[kLifted] < 0.5f && down) down = false;
+    a[2] = over ? (down ? -0.6f : 0.6f) : 0.0f;
+    sim.Step(a);
+    sim.Observe(o);
+    lowest = std::min(lowest, static_cast<double>(o[kBlade + 2]));
+  }
+  EXPECT_TRUE(sim.Succeeded());
+  EXPECT_EQ(sim.strokes(), task.strokes_required);
+  EXPECT_FLOAT_EQ(o[kStrokes], 1.0f);
+  // The target never goes below the board: the edge stops within a centimetre of it (tracking
+  // overshoot; there is no contact force).
+  EXPECT_GT(lowest, task.board_top - 0.01);
+  EXPECT_LT(lowest, task.board_top + task.stroke_tolerance);
+}
+
+TEST(KitchenCuttingTask, StrokesAwayFromTheLineDoNotCount) {
+  KitchenCuttingSim sim(AwayTask());
+  Rng rng(3);
+  sim.Reset(rng);
+  // Straight down where the arm starts (x = 0.09, far from the line at 0.30 +- 0.04).
+  for (int t = 0; t < 20; ++t) sim.Step(Eigen::Vector3f(0, 0, -1));
+  for (int t = 0; t < 10; ++t) sim.Step(Eigen::Vector3f(0, 0, 1));
+  for (int t = 0; t < 20; ++t) sim.Step(Eigen::Vector3f(0, 0, -1));
+  EXPECT_EQ(sim.strokes(), 0);
+}
+
+TEST(KitchenCuttingHuman, ArmPoseKeepsItsSegmentLengthsAndPathsReturnToRest) {
+  const HumanArmOptions h;
+  const ArmPose p = ArmPoseForWrist(h, Eigen::Vector3d(0.30, 0.0, 0.06));
+  EXPECT_NEAR((p.elbow - p.shoulder).norm(), h.upper_arm, 1e-9);
+  EXPECT_NEAR((p.wrist - p.elbow).norm(), h.forearm, 1e-9);
+  EXPECT_NEAR((p.tip - p.wrist).norm(), h.hand, 1e-9);
+  EXPECT_LT(p.elbow.z(), p.shoulder.z());  // the elbow below the shoulder, above the table
+  EXPECT_GT(p.elbow.z(), 0.0);
+  EXPECT_GT(ArmPoseForWrist(h, Eigen::Vector3d(h.rest[0], h.rest[1], h.rest[2])).elbow.z(), 0.0);
+  Rng rng(4);
+  int into = 0;
+  for (int i = 0; i < 400; ++i) {
+    const ReachPath path = DrawReachPath(h, rng);
+    into += path.into ? 1 : 0;
+    const Eigen::Vector3d rest(h.rest[0], h.rest[1], h.rest[2]);
+    EXPECT_NEAR((path.Wrist(h, 0.0) - rest).norm(), 0.0, 1e-12);
+    EXPECT_NEAR((path.Wrist(h, path.start + path.travel) - path.goal).norm(), 0.0, 1e-9);
+    EXPECT_NEAR((path.Wrist(h, 1e3) - rest).norm(), 0.0, 1e-12);
+  }
+  EXPECT_NEAR(into / 400.0, h.into_probability, 0.08);
+}
+
+TEST(KitchenCuttingHuman, TheBladeOnTheArmIsDangerousAndFarFromItIsNot) {
+  const HumanArmOptions h;
+  const ArmPose p = ArmPoseForWrist(h, Eigen::Vector3d(0.30, 0.0, 0.06));
+  // The edge resting on the forearm's top (over the wrist): inside contact distance.
+  const Eigen::Vector3d on_wrist(0.30, 0.0, 0.06 + h.forearm_radius + 0.005);
+  EXPECT_LT(EdgeToArmDistance(h, on_wrist, p), 0.02);
+  EXPECT_NEAR(EdgeToArmDistance(h, Eigen::Vector3d(0.30, 0.0, 0.06 + h.forearm_radius + 0.1), p),
+              0.1, 0.01);
+  EXPECT_GT(EdgeToArmDistance(h, Eigen::Vector3d(0.0, -0.3, 0.3), p), 0.2);
+}
+
+TEST(KitchenCuttingEnv, AStrokeOntoTheReachingArmIsDangerousAndEpisodesReplay) {
+  KitchenCuttingOptions task;
+  task.human.into_probability = 1.0;
+  task.human.start_time = {0.0, 0.0};
+  task.human.dwell = {2.0, 2.0};
+  KitchenCuttingEnv env(task, KitchenShieldModelOptions{});
+  Rng rng(5);
+  Eigen::VectorXf o(kObservationDim), o2(kObservationDim);
+  env.Reset(rng, o);
+  // The knife goes over the line high up and waits while the arm reaches over the line, then
+  // comes down onto it.
+  bool dangerous = false;
+  for (int t = 0; t < task.max_steps && !dangerous; ++t) {
+    Eigen::VectorXf a(3);
+    const float hover = static_cast<float>(std::clamp((0.2 - o[kBlade + 2]) / 0.05, -1.0, 1.0));
+    a << static_cast<float>(std::clamp((task.cut_line_x - o[kBlade]) / 0.05, -1.0, 1.0)), 0.0f,
+        t < 30 ? hover : -0.3f;
+    dangerous = env.Step(a, o).collided;
+    if (t < 30) {
+      ASSERT_FALSE(dangerous) << t;
+    }
+  }
+  EXPECT_TRUE(dangerous);
+  // The same Rng state replays the same episode.
+  Rng a_rng(9), b_rng(9);
+  env.Reset(a_rng, o);
+  KitchenCuttingEnv other(task, KitchenShieldModelOptions{});
+  other.Reset(b_rng, o2);
+  for (int t = 0; t < 30; ++t) {
+    Eigen::VectorXf a = Eigen::VectorXf::Constant(3, 0.3f);
+    env.Step(a, o);
+    other.Step(a, o2);
+  }
+  EXPECT_EQ(o, o2);
+}
+
+TEST(KitchenCuttingShieldModel, MovesTheKnifeByTheActionAndTheArmAtItsVelocity) {
+  KitchenShieldModel model(KitchenShieldModelOptions{});
+  Eigen::VectorXf s = Eigen::VectorXf::LinSpaced(kObservationDim, 0.1f, 2.6f);
+  Eigen::MatrixXf a(3, 2), next(kObservationDim, 2);
+  a << 1.0f, 3.0f, -0.5f, 0.0f, 0.2f, -2.0f;  // the second column clips to (1, 0, -1)
+  model.Step(s, a, next);
+  for (int c = 0; c < 2; ++c) {
+    for (int k = 0; k < 3; ++k) {
+      const float ac = std::clamp(a(k, c), -1.0f, 1.0f);
+      EXPECT_FLOAT_EQ(next(kEePos + k, c), s[kEePos + k] + 0.05f * ac);
+      EXPECT_FLOAT_EQ(next(kBlade + k, c), s[kBlade + k] + 0.05f * ac);
+      EXPECT_FLOAT_EQ(next(kEeVel + k, c), 1.25f * ac);
+      EXPECT_FLOAT_EQ(next(kWrist + k, c), s[kWrist + k] + 0.04f * s[kWristVel + k]);
+      EXPECT_FLOAT_EQ(next(kHandTip + k, c), s[kHandTip + k] + 0.04f * s[kWristVel + k]);
+      EXPECT_FLOAT_EQ(next(kElbow + k, c), s[kElbow + k] + 0.04f * s[kElbowVel + k]);
+    }
+    EXPECT_EQ(next(kStrokes, c), s[kStrokes]);
+    EXPECT_EQ(next(kLifted, c), s[kLifted]);
+  }
+}
+
+TEST(KitchenCuttingData, DemonstrationsFinishSafelyAndSomeWaitForTheArm) {
+  const KitchenCuttingDomainOptions d =
+      KitchenCuttingDomainOptions::For(experiments::Profile::kQuick);
+  KitchenDemonstrationOptions demo = d.demonstrations;
+  demo.seed = 11;
+  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(d.task, demo);
+  ASSERT_GE(demos.trajectories.num_steps(), demo.states);
+  EXPECT_GT(demos.into_episodes, 0);  // some reaches went into the workspace, and were survived
+  // Every kept episode ends with the cut done (strokes = 1 is observed after the last step only,
+  // so the last state shows strokes_required - 1).
+  for (long e = 0; e < demos.trajectories.num_episodes(); ++e) {
+    const long last = demos.trajectories.episode_begin[e + 1] - 1;
+    EXPECT_NEAR(demos.trajectories.states(kStrokes, last),
+                float(d.task.strokes_required - 1) / float(d.task.strokes_required), 1e-6);
+  }
+  // Safe and near-dangerous states: the requested counts, finite; near-dangerous ones are close.
+  Rng rng(12);
+  const data::StateSet safe = KitchenSafeStates(demos, d.safe, rng);
+  std::vector<NearDangerousScenario> kinds;
+  const data::StateSet near =
+      KitchenNearDangerousStates(d.task, demos, d.near_dangerous, rng, &kinds);
+  EXPECT_EQ(safe.size(), d.safe.count);
+  EXPECT_EQ(near.size(), d.near_dangerous.count);
+  EXPECT_TRUE(near.states.allFinite());
+  ASSERT_EQ(static_cast<long>(kinds.size()), near.size());
+  for (long i = 0; i < near.size(); ++i) {
+    const Eigen::VectorXf o = near.states.col(i);
+    ArmPose p;
+    p.shoulder = Eigen::Vector3d(d.task.human.shoulder[0], d.task.human.shoulder[1],
+                                 d.task.human.shoulder[2]);
+    p.wrist = o.segment<3>(kWrist).cast<double>();
+    p.elbow = o.segment<3>(kElbow).cast<double>();
+    p.tip = o.segment<3>(kHandTip).cast<double>();
+    const double clearance =
+        EdgeToArmDistance(d.task.human, o.segment<3>(kBlade).cast<double>(), p);
+    EXPECT_GE(clearance, d.task.contact_distance - 1e-4);
+    EXPECT_LE(clearance, d.near_dangerous.near_distance + 1e-4);
+  }
+}
+
+TEST(KitchenCuttingData, LabelsHoldAgainstPhysics) {
+  // From the safe states the motion continues safely; from the near-dangerous ones it reaches
+  // the arm (docs/RESULTS.md has the full table: `secure demos check-labels`).
+  KitchenCuttingDomain domain(experiments::Profile::kQuick);
+  const std::vector<experiments::LabelCheckRow> rows = domain.CheckLabels(4000, 60);
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0].label, "safe");
+  EXPECT_LE(rows[0].DangerousFraction(), 0.05);
+  for (size_t r = 1; r < rows.size(); ++r) {
+    EXPECT_EQ(rows[r].label, "near-dangerous");
+    EXPECT_GE(rows[r].DangerousFraction(), 0.8) << rows[r].set;
+  }
+}
+
+TEST(KitchenCuttingRender, FramesShowTheSceneAndFollowThePersonsArm) {
+  KitchenCuttingEnv env(KitchenCuttingOptions{}, KitchenShieldModelOptions{});
+  ASSERT_TRUE(env.CanRender());
+  Rng rng(1);
+  Eigen::VectorXf o(kObservationDim), before(kObservationDim), after(kObservationDim);
+  env.Reset(rng, o);
+  Frame first, again;
+  env.Render(160, 120, &first);
+  ASSERT_EQ(first.width, 160);
+  ASSERT_EQ(first.rgb.size(), 160u * 120u * 3u);
+  long differing = 0;  // not blank
+  for (size_t i = 3; i < first.rgb.size(); i += 3)
+    if (first.rgb[i] != first.rgb[0] || first.rgb[i + 1] != first.rgb[1]) ++differing;
+  EXPECT_GT(differing, 160 * 120 / 4);
+  // Rendering does not change the state; the same state gives the same frame.
+  env.sim().Observe(before);
+  env.Render(160, 120, &again);
+  env.sim().Observe(after);
+  EXPECT_EQ(before, after);
+  EXPECT_EQ(first.rgb, again.rgb);
+  // The same robot state with the person's arm elsewhere (reaching over the board): the frame
+  // changes, and comes back with the arm.
+  Frame here, there, back;
+  env.sim().SetObservation(before);
+  env.Render(160, 120, &here);
+  Eigen::VectorXf reaching = before;
+  const ArmPose p = ArmPoseForWrist(HumanArmOptions{}, Eigen::Vector3d(0.30, 0.0, 0.07));
+  for (int k = 0; k < 3; ++k) {
+    reaching[kWrist + k] = static_cast<float>(p.wrist[k]);
+    reaching[kElbow + k] = static_cast<float>(p.elbow[k]);
+    reaching[kHandTip + k] = static_cast<float>(p.tip[k]);
+  }
+  env.sim().SetObservation(reaching);
+  env.Render(160, 120, &there);
+  env.sim().SetObservation(before);
+  env.Render(160, 120, &back);
+  EXPECT_NE(there.rgb, here.rgb);
+  EXPECT_EQ(back.rgb, here.rgb);
+}
+
+TEST(KitchenCuttingDomain, OptionsRejectBadValuesAndUnknownKeys) {
+  KitchenCuttingDomain domain(experiments::Profile::kQuick);
+  EXPECT_NO_THROW(domain.Validate());
+  EXPECT_THROW(domain.ApplyYaml(YAML::Load("{task: {bogus: 1}}"), "test.yaml"), Error);
+  KitchenCuttingDomain bad(experiments::Profile::kQuick);
+  bad.ApplyYaml(YAML::Load("{task: {human: {speed: [0.5, 0.1]}}}"), "test.yaml");
+  try {
+    bad.Validate();
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("speed"), std::string::npos) << e.what();
+  }
+  KitchenCuttingDomain contact(experiments::Profile::kQuick);
+  contact.ApplyYaml(YAML::Load("{task: {contact_distance: -1}}"), "test.yaml");
+  EXPECT_THROW(contact.Validate(), Error);
+  // The preset is Table 2's barrier and the shield looks one control period ahead.
+  const experiments::ExperimentOptions p = KitchenCuttingDomain().Preset();
+  EXPECT_EQ(p.flat_barrier.hidden,
+            (std::vector<int>{32, 128, 128, 256, 256, 256, 256, 128, 128, 32}));
+  EXPECT_EQ(p.flat_barrier.input_features, BarrierFeatures());
+  EXPECT_DOUBLE_EQ(p.shield.dt, 0.04);
+  EXPECT_EQ(KitchenCuttingDomain().options().demonstrations.states, 2000);
+  EXPECT_EQ(KitchenCuttingDomain().options().safe.count, 450);
+  EXPECT_EQ(KitchenCuttingDomain().options().near_dangerous.count, 450);
+}
+
+}  // namespace
+}  // namespace secure::domains::kitchen_cutting
