@@ -18,9 +18,9 @@
 //   experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
 //   std::unique_ptr<experiments::Domain> d = registry.Make("derby", experiments::Profile::kQuick);
 //   experiments::ExperimentOptions o = d->Preset();
+//   using experiments::ExperimentKind;
 //   experiments::ExperimentResult r =
-//       experiments::RunExperiment(experiments::ExperimentKind::kMethodComparison, *d, o,
-//       &std::cerr);
+//       experiments::RunExperiment(ExperimentKind::kMethodComparison, *d, o, &std::cerr);
 #include <cstdint>
 #include <functional>
 #include <memory>
