@@ -3,7 +3,8 @@
 # the unit tests and the libFuzzer targets under AddressSanitizer + UndefinedBehaviorSanitizer
 # (any finding aborts), with libFuzzer's coverage instrumentation in every library; then
 #  1. the unit tests run there (step `sanitizers`);
-#  2. the fuzzers' corpora replayed, then each fuzzer run for a bounded time (step `fuzz`).
+#  2. the fuzzers' corpora replayed, then each fuzzer run for a bounded time, as many at once as
+#     there are cores (step `fuzz`).
 # One build serves both steps: libFuzzer needs clang, and building the libraries twice (GCC for
 # the unit tests, clang for the fuzzers) was the largest share of CI's time.
 #
@@ -46,16 +47,41 @@ fi
 
 if [[ " $steps " == *" fuzz "* ]]; then
   (cd "$check_dir" && ctest --output-on-failure -L fuzz)
-  for fuzzer in "$check_dir"/tests/fuzz/*_fuzz; do
+  # The fuzzers run $jobs at a time (each is one process on one core), each for fuzz_seconds; a
+  # fuzzer's output goes to <build>/fuzz-logs/<target>.log and its last lines are printed.
+  logs="$check_dir/fuzz-logs"
+  mkdir -p "$logs"
+  fuzz_one() {
+    local fuzzer="$1" name corpus artifacts
     name="$(basename "$fuzzer")"
     corpus="$check_dir/fuzz-corpus/$name"
     artifacts="$check_dir/fuzz-artifacts/$name/"
     mkdir -p "$corpus" "$artifacts"
-    echo "check: fuzzing $name for ${fuzz_seconds} s"
     # New inputs go to the build's corpus; the seeds under tests/fuzz/ are only read.
     "$fuzzer" -seed=1 -max_total_time="$fuzz_seconds" -rss_limit_mb=4096 -print_final_stats=1 \
-      -artifact_prefix="$artifacts" "$corpus" "$root/tests/fuzz/corpus/$name" 2>&1 | tail -n 12
-    test "${PIPESTATUS[0]}" -eq 0
+      -artifact_prefix="$artifacts" "$corpus" "$root/tests/fuzz/corpus/$name" >"$logs/$name.log" 2>&1
+  }
+  fuzzers=("$check_dir"/tests/fuzz/*_fuzz)
+  failed=0
+  for ((i = 0; i < ${#fuzzers[@]}; i += jobs)); do
+    pids=()
+    for fuzzer in "${fuzzers[@]:i:jobs}"; do
+      echo "check: fuzzing $(basename "$fuzzer") for ${fuzz_seconds} s"
+      fuzz_one "$fuzzer" &
+      pids+=($!)
+    done
+    for ((k = 0; k < ${#pids[@]}; ++k)); do
+      fuzzer="${fuzzers[i + k]}"
+      status=0
+      wait "${pids[k]}" || status=$?
+      echo "check: $(basename "$fuzzer") exited with $status; its last lines:"
+      tail -n 12 "$logs/$(basename "$fuzzer").log"
+      if [[ $status -ne 0 ]]; then failed=1; fi
+    done
   done
+  if [[ $failed -ne 0 ]]; then
+    echo "check: a fuzzer failed (its input is in $check_dir/fuzz-artifacts/)" >&2
+    exit 1
+  fi
 fi
 echo "check: sanitizers and fuzzers passed"
