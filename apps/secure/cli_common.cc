@@ -104,6 +104,27 @@ void AddConfigFlag(CLI::App* cmd, const Config& /*config*/) {
   cmd->add_option("--config", "YAML file with option sections; command-line flags override it");
 }
 
+std::unique_ptr<experiments::Domain> MakeConfiguredDomain(const std::string& name, bool quick,
+                                                          const Config& config) {
+  config.Check();
+  std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
+      name, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
+  const std::string section = d->ConfigSection();
+  const YAML::Node yaml = config.Section(section);
+  if (!yaml.IsMap() || !yaml["domain"]) {
+    d->Validate();
+    return d;
+  }
+  const std::string where = config.path + " [" + section + "] [domain]";
+  d->ApplyYaml(yaml["domain"], where);
+  try {
+    d->Validate();
+  } catch (const Error& e) {
+    throw Error(where + ": " + e.what());  // the value came from this file
+  }
+  return d;
+}
+
 const CLI::Validator& NonNegativeSeed() {
   static const CLI::Validator validator(
       [](std::string& value) -> std::string {

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <utility>
 #include <exception>
 #include <nlohmann/json.hpp>
@@ -14,6 +15,10 @@
 #include "secure/common/limits.h"
 #include "domains/double_integrator/double_integrator.h"
 #include "secure/shield/shield.h"
+
+namespace secure::experiments {
+class Domain;
+}
 
 namespace secure::cli {
 
@@ -62,6 +67,12 @@ class DeferredError {
 
 /// Adds --config (for help; the file is read by PreScanConfig and checked by Config::Check).
 void AddConfigFlag(CLI::App* cmd, const Config& config);
+
+/// The registered domain `name` (profile quick or full) with its options from the config file's
+/// section for it, key `domain` (what `secure experiment` reads there too), validated. Throws
+/// the config's load error, an unknown domain's or a bad option's.
+std::unique_ptr<experiments::Domain> MakeConfiguredDomain(const std::string& name, bool quick,
+                                                          const Config& config);
 
 /// Rejects a negative value for an unsigned 64-bit seed (which CLI11 would wrap around to
 /// 2^64 - 1).

@@ -43,17 +43,10 @@ struct CheckLabelsCommand {
   void Run() {
     config->Check();
     CheckRange("--max-states", max_states, 1, 100000000);
-    const std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
-        domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
+    const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, quick, *config);
     SECURE_CHECK(d->HasLabelCheck(), "the " << domain
                                             << " domain has no label check (it cannot simulate "
                                                "forward from a labelled state)");
-    // The domain's own options from the config file's experiment section, key `domain`.
-    const std::string section = d->ConfigSection();
-    const YAML::Node yaml = config->Section(section);
-    if (yaml.IsMap() && yaml["domain"])
-      d->ApplyYaml(yaml["domain"], config->path + " [" + section + "] [domain]");
-    d->Validate();
     const std::uint64_t data_seed = seed_option->count() > 0 ? seed : d->Preset().data_seed;
     const std::vector<experiments::LabelCheckRow> rows = d->CheckLabels(data_seed, max_states);
     if (json) {

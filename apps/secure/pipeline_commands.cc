@@ -313,7 +313,10 @@ struct EvalCommand {
   double tost_bound = 0.10;
   bool json = false;
 
-  void Register(CLI::App& app) {
+  const Config* config = nullptr;
+
+  void Register(CLI::App& app, const Config& cfg) {
+    config = &cfg;
     CLI::App* cmd = app.add_subcommand(
         "eval",
         "Evaluate saved models on any domain: bc, airl, secure, the shield ablations, bc+shield, "
@@ -322,6 +325,7 @@ struct EvalCommand {
     cmd->add_option("--domain", domain,
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
+    AddConfigFlag(cmd, cfg);  // the domain's options: section <domain's>, key `domain`
     cmd->add_option("--run", run_dir,
                     "a `secure demo --out` or `secure experiment --out` directory: "
                     "seed-<k>/{bc,airl,joint,barrier}.model per training seed (the paper's "
@@ -349,8 +353,7 @@ struct EvalCommand {
   }
 
   void Run() {
-    const std::unique_ptr<experiments::Domain> d =
-        experiments::DomainRegistry::Global().Make(domain);
+    const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, false, *config);
     // The shield: the domain's experiment preset, with the flags given on top.
     const shield::ShieldOptions shield_options = DomainShieldOptions(*d, shield_flags, &shield);
     CheckRange("--seeds", seeds, 1, kMaxSeeds);
@@ -410,7 +413,7 @@ void RegisterPipelineCommands(CLI::App& app, const Config& config) {
   CLI::App* policy = app.add_subcommand("policy", "Learn policies from demonstrations");
   policy->require_subcommand(1);
   train.Register(*policy, config);
-  evaluate.Register(app);
+  evaluate.Register(app, config);
 }
 
 }  // namespace secure::cli

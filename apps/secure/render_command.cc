@@ -27,6 +27,7 @@ struct RenderCommand {
   eval::VideoOptions video;
   shield::ShieldOptions shield;
   ShieldFlags shield_flags;
+  const Config* config = nullptr;
   bool json = false;
 
   void Register(CLI::App& app) {
@@ -38,6 +39,7 @@ struct RenderCommand {
     cmd->add_option("--domain", domain,
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
+    AddConfigFlag(cmd, *config);  // the domain's options: section <domain's>, key `domain`
     cmd->add_option("--method", method,
                     "one method: bc, airl, secure, secure-random-safe, secure-no-resampling, "
                     "bc+shield, secure-myopic, joint")
@@ -70,8 +72,7 @@ struct RenderCommand {
   }
 
   void Run() {
-    const std::unique_ptr<experiments::Domain> d =
-        experiments::DomainRegistry::Global().Make(domain);
+    const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, false, *config);
     const std::unique_ptr<domains::Environment> env = d->MakeEnvironment();
     SECURE_CHECK(env->CanRender(),
                  "the " << domain << " domain cannot render (no offscreen renderer)");
@@ -146,8 +147,9 @@ struct RenderCommand {
 
 }  // namespace
 
-void RegisterRenderCommand(CLI::App& app, const Config& /*config*/) {
+void RegisterRenderCommand(CLI::App& app, const Config& config) {
   static RenderCommand render;
+  render.config = &config;
   render.Register(app);
 }
 

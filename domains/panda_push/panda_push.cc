@@ -282,6 +282,18 @@ double PandaPushSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) 
   return error;
 }
 
+void PandaPushSim::CopyStateFrom(const PandaPushSim& other) {
+  if (&other == this) return;
+  const mjModel* m = impl_->model.get();
+  const mjModel* o = other.impl_->model.get();
+  // mj_copyData needs the same sizes; the options' physical constants (friction, timestep)
+  // must agree too, which the constructor's callers ensure (one options struct).
+  SECURE_CHECK(m->nbuffer == o->nbuffer && m->nstack == o->nstack &&
+                   m->opt.timestep == o->opt.timestep,
+               "panda-push: CopyStateFrom needs two simulations of the same model and options");
+  mj_copyData(impl_->data.get(), m, other.impl_->data.get());
+}
+
 double PandaPushSim::BlockTilt() const {
   const mjData* d = impl_->data.get();
   return std::acos(std::clamp(d->xmat[9 * impl_->block_body + 8], -1.0, 1.0));
@@ -300,6 +312,8 @@ double PandaPushSim::TargetDistance() const {
 
 void PandaPushShieldModelOptions::Validate() const {
   const char* o = "PandaPushShieldModelOptions";
+  SECURE_CHECK_FIELD(kind == "approximate" || kind == "rollout", o, "kind", kind,
+                     "approximate or rollout");
   SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
                      ">= 0");
   SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
@@ -309,13 +323,15 @@ void PandaPushShieldModelOptions::Validate() const {
 }
 
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
-  return {{"position_gain", position_gain},
+  return {{"kind", kind},
+          {"position_gain", position_gain},
           {"velocity_gain", velocity_gain},
           {"contact_range", contact_range}};
 }
 
 void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   YamlFields()
+      .Field("kind", &kind)
       .Field("position_gain", &position_gain)
       .Field("velocity_gain", &velocity_gain)
       .Field("contact_range", &contact_range)
@@ -351,12 +367,49 @@ void PandaPushShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state
   }
 }
 
+PandaPushRolloutModel::PandaPushRolloutModel(const PandaPushSim& live)
+    : live_(live),
+      start_(std::make_unique<PandaPushSim>(live.options())),
+      work_(std::make_unique<PandaPushSim>(live.options())),
+      live_observation_(kObservationDim) {}
+
+PandaPushRolloutModel::~PandaPushRolloutModel() = default;
+
+std::string PandaPushRolloutModel::Describe() const {
+  return "panda-push rollout model (privileged: one simulated control period per action, from "
+         "the simulator's state)";
+}
+
+void PandaPushRolloutModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                   const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                                   Eigen::Ref<Eigen::MatrixXf> next) const {
+  live_.Observe(live_observation_);
+  const PandaPushSim* from = &live_;
+  if (!(state.array() == live_observation_.array()).all()) {
+    start_->SetObservation(state);
+    from = start_.get();
+    ++reconstructed_;
+  }
+  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
+    work_->CopyStateFrom(*from);
+    work_->Step(Eigen::Vector3f(actions(0, c), actions(1, c), actions(2, c)));
+    work_->Observe(next.col(c));
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // The environment
 
 PandaPushEnv::PandaPushEnv(const PandaPushOptions& options,
                            const PandaPushShieldModelOptions& shield_model)
-    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {}
+    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {
+  if (shield_model.kind == "rollout") rollout_model_ = std::make_unique<PandaPushRolloutModel>(sim_);
+}
+
+const DynamicsModel& PandaPushEnv::ShieldModel() const {
+  if (rollout_model_ != nullptr) return *rollout_model_;
+  return shield_model_;
+}
 
 PandaPushEnv::~PandaPushEnv() = default;
 

@@ -115,6 +115,12 @@ class PandaPushSim {
   /// position error (m; small unless the position is out of reach).
   double SetObservation(const Eigen::Ref<const Eigen::VectorXf>& observation);
 
+  /// Puts this simulation in `other`'s exact state: MuJoCo's whole mjData (positions,
+  /// velocities, warm starts, derived quantities); the controller keeps no state of its own.
+  /// Both must be built from the same options. @throws secure::Error if their models' sizes
+  /// or timesteps differ.
+  void CopyStateFrom(const PandaPushSim& other);
+
   /// The block's tilt from upright (rad).
   double BlockTilt() const;
   /// The block's distance to the target (m).
@@ -147,7 +153,12 @@ class PandaPushSim {
 /// one period, so the end-effector moves action_scale * a = 0.05 a per step and at 1.25 a m/s.
 /// The action is clipped to [-1, 1] first (the environment clips it too; the released model
 /// does not).
+///
+/// `kind: rollout` replaces it with PandaPushRolloutModel (below), privileged and exact: an upper
+/// bound on what a perfect model gives the shield, at the cost of one simulated control period
+/// per sampled action (the gains then play no part).
 struct PandaPushShieldModelOptions {
+  std::string kind = "approximate";  // approximate | rollout
   double position_gain = 0.05;
   double velocity_gain = 1.25;
   double contact_range = 0.15;
@@ -172,6 +183,39 @@ class PandaPushShieldModel final : public DynamicsModel {
   PandaPushShieldModelOptions options_;
 };
 
+/// The privileged one-step model: each sampled action is simulated in MuJoCo for one control
+/// period, and its next observation is the model's prediction. From the live simulation's own
+/// observation (the shield's case: it decides at the state the environment is in) the rollout
+/// starts from the live simulation's exact state, so the prediction is exactly the observation
+/// Step(a) will write. From any other observation it starts from the state SetObservation
+/// reconstructs (arm by IK, block placed; the arm's joint velocities and the contacts' warm
+/// starts are then approximations). Privileged: it reads the simulator's state, which a real
+/// robot's shield cannot; cost ~ one environment step per action. Not thread-safe (scratch
+/// simulations); each environment (one per thread) owns its own.
+class PandaPushRolloutModel final : public DynamicsModel {
+ public:
+  /// `live` must outlive the model.
+  explicit PandaPushRolloutModel(const PandaPushSim& live);
+  ~PandaPushRolloutModel() override;
+  int state_dim() const override { return kObservationDim; }
+  int action_dim() const override { return kActionDim; }
+  std::string Describe() const override;
+  /// How many predictions started from a reconstructed (not the live) state, since construction.
+  long reconstructed_states() const { return reconstructed_; }
+
+ protected:
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
+
+ private:
+  const PandaPushSim& live_;
+  std::unique_ptr<PandaPushSim> start_;  // a reconstructed start state
+  std::unique_ptr<PandaPushSim> work_;   // each action's rollout
+  mutable Eigen::VectorXf live_observation_;
+  mutable long reconstructed_ = 0;
+};
+
 /// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
 class PandaPushRenderer;
 
@@ -190,7 +234,10 @@ class PandaPushEnv final : public Environment {
   void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override;
   StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
                    Eigen::Ref<Eigen::VectorXf> observation) override;
-  const DynamicsModel& ShieldModel() const override { return shield_model_; }
+  /// The approximate model, or with shield_model.kind = rollout the privileged rollout model.
+  const DynamicsModel& ShieldModel() const override;
+  /// True with the rollout model (exact from every observation the environment is in).
+  bool ShieldModelIsExact() const override { return rollout_model_ != nullptr; }
   /// Holding still: a = 0 (the end-effector target stays where it is).
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
@@ -207,6 +254,7 @@ class PandaPushEnv final : public Environment {
   PandaPushSim sim_;
   PandaPushShieldModelOptions shield_model_options_;
   PandaPushShieldModel shield_model_;
+  std::unique_ptr<PandaPushRolloutModel> rollout_model_;  // kind = rollout
   bool toppled_ = false;
   std::unique_ptr<PandaPushRenderer> renderer_;
 };

@@ -545,6 +545,24 @@ TEST(CliTest, CheckLabelsSimulatesFromTheLabelledStates) {
   EXPECT_HAS(bad.err, "--max-states");
 }
 
+TEST(CliTest, EvalRenderAndCheckLabelsReadTheDomainsOptionsFromTheConfig) {
+  // The domain's options come from its config section, key `domain`, in every command that makes
+  // the domain (as `secure experiment` reads them): a bad value there stops each with one line
+  // naming the file, the field and the value, before any model is read.
+  const std::string cfg =
+      Write("panda_rollout_bad.yaml", "panda_push:\n  domain:\n    shield_model: {kind: perfect}\n");
+  for (const std::string& command :
+       {std::string("eval --domain panda-push --airl none.model"),
+        std::string("render --domain panda-push --method airl --policy none.model --frames-dir x"),
+        std::string("demos check-labels --domain panda-push --quick --max-states 1")}) {
+    const Result r = RunCli(command + " --config " + cfg);
+    EXPECT_EQ(r.exit_code, 1) << command;
+    EXPECT_HAS(r.err, "panda_rollout_bad.yaml");
+    EXPECT_HAS(r.err, "kind");
+    EXPECT_HAS(r.err, "perfect");
+  }
+}
+
 TEST(CliTest, KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck) {
   // The kitchen-cutting plug-in through the generic driver (--quick: small data, short training):
   // the three methods of Table 3 on its episodes, and its labels against physics.

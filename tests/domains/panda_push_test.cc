@@ -290,6 +290,44 @@ TEST(PandaPushData, LabelsHoldAgainstPhysics) {
   EXPECT_LT(rs.TopplingFraction(), 0.1) << rs.ToJson().dump();
 }
 
+TEST(PandaPushRolloutModel, PredictsTheEnvironmentsNextObservationExactly) {
+  // The privileged model (shield_model.kind = rollout): from the live state, each action's
+  // prediction is bit for bit the observation Step writes; the approximate model's is not.
+  PandaPushShieldModelOptions rollout;
+  rollout.kind = "rollout";
+  PandaPushEnv env(PandaPushOptions{}, rollout);
+  EXPECT_TRUE(env.ShieldModelIsExact());
+  EXPECT_FALSE(PandaPushEnv(PandaPushOptions{}, PandaPushShieldModelOptions{}).ShieldModelIsExact());
+  const auto& model = dynamic_cast<const PandaPushRolloutModel&>(env.ShieldModel());
+  Rng rng(3);
+  Eigen::VectorXf o(kObservationDim), after(kObservationDim);
+  env.Reset(rng, o);
+  Eigen::MatrixXf actions(3, 3);
+  actions << 0.8f, -0.3f, 0.0f,  //
+      0.1f, 0.5f, 0.0f,          //
+      -0.9f, 0.2f, 0.0f;
+  Eigen::MatrixXf next(kObservationDim, 3);
+  for (int t = 0; t < 5; ++t) {
+    model.Step(o, actions, next);
+    const int c = t % 3;
+    auto clone = env.Clone();  // a second environment must not disturb the first's model
+    env.Step(actions.col(c), after);
+    EXPECT_EQ(Eigen::VectorXf(next.col(c)), after) << "step " << t << " action " << c;
+    o = after;
+  }
+  EXPECT_EQ(model.reconstructed_states(), 0);
+  // Another observation: the rollout starts from the state SetObservation reconstructs.
+  Eigen::VectorXf s = o;
+  s[kEePos] += 0.02f;
+  model.Step(s, actions, next);
+  EXPECT_EQ(model.reconstructed_states(), 1);
+  EXPECT_NEAR(next(kEePos, 0), s[kEePos] + 0.05f * 0.8f, 0.02);  // roughly tracked in a period
+  // The live state was left alone.
+  Eigen::VectorXf live(kObservationDim);
+  env.sim().Observe(live);
+  EXPECT_EQ(live, o);
+}
+
 TEST(PandaPushDomain, OptionsRejectBadValuesAndUnknownKeys) {
   PandaPushDomain domain(experiments::Profile::kQuick);
   EXPECT_NO_THROW(domain.Validate());
@@ -300,6 +338,15 @@ TEST(PandaPushDomain, OptionsRejectBadValuesAndUnknownKeys) {
     FAIL() << "negative friction accepted";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("table_friction"), std::string::npos) << e.what();
+  }
+  PandaPushDomain model(experiments::Profile::kQuick);
+  model.ApplyYaml(YAML::Load("{shield_model: {kind: perfect}}"), "cfg.yaml");
+  try {
+    model.Validate();
+    FAIL() << "shield_model.kind perfect accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("kind"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("perfect"), std::string::npos) << e.what();
   }
   PandaPushDomain released(experiments::Profile::kQuick);
   released.ApplyYaml(YAML::Load("{barrier_data: released}"), "cfg.yaml");
