@@ -99,6 +99,9 @@ void PandaDemonstrationOptions::Validate() const {
                      "approach_gap", approach_gap, "in [0, 0.3] m");
   SECURE_CHECK_FIELD(Finite(action_noise) && action_noise >= 0 && action_noise <= 0.5, o,
                      "action_noise", action_noise, "in [0, 0.5]");
+  SECURE_CHECK_FIELD(Finite(pause_rate) && pause_rate >= 0 && pause_rate <= 0.5, o, "pause_rate",
+                     pause_rate, "in [0, 0.5]");
+  CheckRange(pause_steps, o, "pause_steps", 1.0, 50.0);
 }
 
 nlohmann::json PandaDemonstrationOptions::ToJson() const {
@@ -109,7 +112,9 @@ nlohmann::json PandaDemonstrationOptions::ToJson() const {
           {"approach_speed", RangeJson(approach_speed)},
           {"push_speed", RangeJson(push_speed)},
           {"approach_gap", approach_gap},
-          {"action_noise", action_noise}};
+          {"action_noise", action_noise},
+          {"pause_rate", pause_rate},
+          {"pause_steps", RangeJson(pause_steps)}};
 }
 
 void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -122,6 +127,8 @@ void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::str
       .Section("push_speed", RangeField(&push_speed))
       .Field("approach_gap", &approach_gap)
       .Field("action_noise", &action_noise)
+      .Field("pause_rate", &pause_rate)
+      .Section("pause_steps", RangeField(&pause_steps))
       .Apply(node, source);
 }
 
@@ -245,6 +252,9 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
     const double approach = Draw(episode_rng, options.approach_speed);
     const double push = Draw(episode_rng, options.push_speed);
     env.Reset(episode_rng, o);
+    // The pauses' own stream, drawn only when there are pauses (pause_rate 0 keeps the draws).
+    Rng pause_rng(options.pause_rate > 0 ? episode_rng.NextU64() : 0);
+    int paused = 0;  // steps of the current pause left
     std::vector<Eigen::VectorXf> eo, ea;
     long push_begin = -1;
     bool descended = false, success = false, toppled = false;
@@ -263,6 +273,12 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
         const double ease = std::clamp(gap / std::max(options.approach_gap, 1e-9), 0.0, 1.0);
         a[0] = static_cast<float>(push + (approach - push) * ease);
         if (gap <= 0.005 && push_begin < 0) push_begin = static_cast<long>(eo.size());
+        if (options.pause_rate > 0 && paused == 0 && pause_rng.Uniform() < options.pause_rate)
+          paused = static_cast<int>(std::floor(Draw(pause_rng, options.pause_steps) + 0.5));
+        if (paused > 0) {
+          a[0] = 0.0f;
+          --paused;
+        }
       }
       for (int k = 0; k < kActionDim; ++k)
         a[k] = std::clamp(a[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),

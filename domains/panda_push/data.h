@@ -60,6 +60,13 @@ struct PandaDemonstrationOptions {
   // (docs/RESULTS.md, Panda: 10 seeds x 100, dangerous 13.6 -> 5.7 %).
   double approach_gap = 0.2;
   double action_noise = 0.02;         // sd of the per-component action noise
+  // Pauses (a keyboard user letting go of the push key; not in the paper): after the descent,
+  // at each step with probability pause_rate a_x is 0 for U(pause_steps) steps (rounded), then the push
+  // resumes, from rest. Without them every demonstrated state in contact is moving, and a policy
+  // that learned a_x ~ the current velocity cannot start again once the shield has braked it to
+  // a stop (docs/RESULTS.md, Panda). 0: none (the draws are then those of a version without it).
+  double pause_rate = 0.0;
+  Range pause_steps = {2, 6};
   std::uint64_t seed = 0;
 
   void Validate() const;

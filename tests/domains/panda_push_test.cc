@@ -268,6 +268,39 @@ TEST(PandaPushData, HoveringSafeStatesLieBehindTheBlockAtAnyHeightAndVelocity) {
   EXPECT_HAS(test::ErrorOf([&] { PandaSafeStates(demos, so, rng); }), "hover_copies = -1");
 }
 
+TEST(PandaPushData, PausedDemonstrationsRestartThePushFromRest) {
+  // With pauses the demonstrator lets go of the push key (a_x = 0) for a few steps and then
+  // pushes again: states in contact at rest are followed by the push action. Without them
+  // (pause_rate 0, the draws of a version without pauses) no demonstrated action is a pause.
+  PandaDemonstrationOptions d;
+  d.episodes = 3;
+  d.action_noise = 0.0;
+  const PandaDemonstrations plain = GeneratePandaDemonstrations(PandaPushOptions{}, d);
+  d.pause_rate = 0.1;
+  const PandaDemonstrations paused = GeneratePandaDemonstrations(PandaPushOptions{}, d);
+  auto count_pauses = [](const PandaDemonstrations& demos) {
+    long pauses = 0, restarts = 0;
+    const Eigen::MatrixXf& s = demos.trajectories.states;
+    const Eigen::MatrixXf& a = demos.trajectories.actions;
+    for (long i = 0; i + 1 < a.cols(); ++i) {
+      if (a(0, i) == 0.0f && a(2, i) > -0.45f) ++pauses;  // not a descent step (a_z <= -0.5)
+      const double gap = s(kBlockPos, i + 1) - s(kEePos, i + 1) - 0.08;
+      if (a(0, i) == 0.0f && a(0, i + 1) >= 0.08f && gap < 0.01 &&
+          std::abs(s(kEeVel, i + 1)) < 0.05)
+        ++restarts;
+    }
+    return std::pair<long, long>(pauses, restarts);
+  };
+  EXPECT_EQ(count_pauses(plain).first, 0);
+  const auto [pauses, restarts] = count_pauses(paused);
+  EXPECT_GT(pauses, 5);
+  EXPECT_GE(restarts, 1);  // a push starting from rest, in contact
+  EXPECT_EQ(paused.trajectories.num_episodes(), 3);  // the paused demonstrations succeed
+  d.pause_rate = 0.9;
+  EXPECT_HAS(test::ErrorOf([&] { GeneratePandaDemonstrations(PandaPushOptions{}, d); }),
+             "pause_rate = 0.9");
+}
+
 TEST(PandaPushData, LabelsHoldAgainstPhysics) {
   // The label check on a small sample: near-dangerous states mostly topple when the push
   // continues, the pushing part of the demonstrations does not.
