@@ -497,7 +497,8 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
-             "unknown domain 'panda' (registered: derby | double-integrator | kitchen-cutting | "
+             "unknown domain 'panda' (registered: coffee-placing | derby | double-integrator | "
+             "kitchen-cutting | "
              "panda-push)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
@@ -517,7 +518,8 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   const Result r = RunCli("experiment method-comparison --domain unicycle --quick");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
-             "unknown domain 'unicycle' (registered: derby | double-integrator | kitchen-cutting | "
+             "unknown domain 'unicycle' (registered: coffee-placing | derby | double-integrator | "
+             "kitchen-cutting | "
              "panda-push)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
