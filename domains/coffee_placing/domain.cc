@@ -140,9 +140,9 @@ std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() co
   t.source =
       "Table 4, 12 people on the real robot: Likert-scale RATINGS summed over items (higher is "
       "better), not rates; no standard errors";
-  t.rows = {{"Task (rating)", {73.3, 77.1, 81.6, 73.6}},
-            {"Safety (rating)", {31.3, 33.3, 35.4, 35.3}},
-            {"Perceived safety (rating)", {33.2, 35.4, 36.4, 35.8}}};
+  t.rows = {{"Task", {73.3, 77.1, 81.6, 73.6}},
+            {"Safety", {31.3, 33.3, 35.4, 35.3}},
+            {"Perceived safety", {33.2, 35.4, 36.4, 35.8}}};
   return t;
 }
 

@@ -120,6 +120,9 @@ class Population {
   virtual bool HeldWithMargin(int p, const Eigen::Ref<const Eigen::VectorXf>& observation) const = 0;
   /// What a violation and "with margin" are, in one sentence (for reports).
   virtual std::string Describe() const = 0;
+  /// The length of an environment step in seconds (task times are reported in seconds), or 0
+  /// (in steps).
+  virtual double StepSeconds() const { return 0.0; }
   /// The paper's numbers for this study, if it has them.
   virtual std::optional<PaperUserStudy> PaperReference() const { return std::nullopt; }
 };
