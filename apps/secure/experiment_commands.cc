@@ -6,6 +6,9 @@
 //                                          integrator with every method (BC, AIRL, SECURE, the
 //                                          two shield ablations, BC + shield)
 //   secure experiment merge RUN_DIR...    the result of a sharded run (docs/CLUSTER.md)
+//   secure experiment user-study           the 2 x 2 user study of Section 7.2 with simulated
+//                                          participants, on a domain that has them
+//                                          (experiments/user_study.h)
 // Each prints a Markdown table (or, with --json, the result document in the format of
 // `secure eval --json`); --quick is the domain's small profile, used by the tests.
 // --shard k/N (or, without it, a SLURM array element's or an mpirun rank's place) runs only the
@@ -27,6 +30,7 @@
 #include "secure/common/progress.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/user_study.h"
 
 namespace secure::cli {
 namespace {
@@ -400,6 +404,122 @@ struct MergeCommand {
   }
 };
 
+// secure experiment user-study [--domain NAME] [--participants N] [--episodes N] [--seed S]
+//   [--spread LIST] [--quick] [--json] [--out DIR] [--threads N]
+struct UserStudyCommand {
+  std::string domain;  // default: the first registered domain with participants
+  bool quick = false, json = false, grouped_matched = false;
+  int participants = 0, threads = 2;
+  long episodes = 0;
+  std::uint64_t seed = 0;
+  std::string spread, out;
+  const Config* config = nullptr;
+  CLI::Option *participants_option = nullptr, *episodes_option = nullptr;
+
+  void Register(CLI::App& parent, const Config& cfg) {
+    config = &cfg;
+    CLI::App* cmd = parent.add_subcommand(
+        "user-study",
+        "The user study of Section 7.2 (Table 4) with simulated participants: policy data "
+        "individual vs grouped x barrier data individual vs grouped, per participant on their own "
+        "episodes; Friedman and Holm-corrected Wilcoxon tests across participants");
+    AddConfigFlag(cmd, cfg);
+    cmd->add_option("--domain", domain,
+                    "a domain with participants (default: the first registered one): " +
+                        experiments::DomainRegistry::Global().NameList());
+    cmd->add_flag("--quick", quick, "the small profile (3 participants x 3 episodes, small data)");
+    participants_option = cmd->add_option("--participants", participants,
+                                          "participants, 2 to 1000 (default 12)");
+    episodes_option = cmd->add_option(
+        "--episodes", episodes, "episodes per participant and condition (default 20)");
+    AddSeedOption(cmd, "--seed", &seed, "the participants, their data, training and episodes");
+    cmd->add_option("--spread", spread,
+                    "threshold spreads, comma-separated values in [0, 1] (the participants' "
+                    "comfort distances and maximum tilts about their mean scaled by it; several "
+                    "values: the sweep), default 1");
+    cmd->add_flag("--grouped-matched", grouped_matched,
+                  "subsample the grouped data to one participant's size (default: all "
+                  "participants' data pooled, as the paper)");
+    cmd->add_option("--threads", threads, "parallel jobs")->capture_default_str();
+    cmd->add_option("--out", out, "directory for result.json");
+    cmd->add_flag("--json", json, "print the result document");
+    cmd->callback([this] { Run(); });
+  }
+
+  static std::vector<double> ParseSpreads(const std::string& text) {
+    std::vector<double> values;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+      std::size_t used = 0;
+      double v = std::nan("");
+      try {
+        v = std::stod(item, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      SECURE_CHECK(used == item.size() && !item.empty() && std::isfinite(v) && v >= 0 && v <= 1,
+                   "--spread '" << text << "': '" << item
+                                << "' is not a number in [0, 1] (expected e.g. 0,0.5,1)");
+      values.push_back(v);
+    }
+    SECURE_CHECK(!values.empty() && text.back() != ',',
+                 "--spread '" << text << "': expected comma-separated numbers in [0, 1]");
+    return values;
+  }
+
+  void Run() {
+    config->Check();
+    if (participants_option->count() > 0) CheckRange("--participants", participants, 2, 1000);
+    if (episodes_option->count() > 0) CheckRange("--episodes", episodes, 1, 100000);
+    CheckRange("--threads", threads, 1, 1024);
+    const std::vector<double> spreads =
+        spread.empty() ? std::vector<double>{1.0} : ParseSpreads(spread);
+    const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+    const experiments::Profile profile =
+        quick ? experiments::Profile::kQuick : experiments::Profile::kFull;
+    if (domain.empty()) {
+      for (const std::string& name : registry.Names())
+        if (registry.Make(name, profile)->HasPopulation()) {
+          domain = name;
+          break;
+        }
+      SECURE_CHECK(!domain.empty(), "no registered domain has participants for a user study");
+    }
+    const std::unique_ptr<experiments::Domain> d = registry.Make(domain, profile);
+    SECURE_CHECK(d->HasPopulation(), "--domain " << domain
+                                                 << ": the domain has no participants for a "
+                                                    "user study (Domain::HasPopulation)");
+    experiments::ExperimentOptions preset = d->Preset();
+    const std::string section = d->ConfigSection();
+    const YAML::Node yaml = config->Section(section);
+    if (yaml.IsMap()) preset.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
+    experiments::UserStudyOptions options = experiments::UserStudyOptions::From(preset, profile);
+    if (participants_option->count() > 0) options.participants = participants;
+    if (episodes_option->count() > 0) options.episodes = episodes;
+    options.seed = seed;
+    options.spreads = spreads;
+    options.grouped_matched = grouped_matched;
+    options.threads = threads;
+    options.output_dir = out;
+    d->Validate();
+    options.Validate();
+    CreateDirectories(out);
+    std::cerr << "secure experiment user-study on " << d->name() << ": " << options.participants
+              << " participants x " << options.episodes << " episodes x 4 conditions, "
+              << spreads.size() << " spread(s), on " << options.threads << " threads"
+              << (out.empty() ? "" : ", writing to " + out) << "\n";
+    const experiments::UserStudyResult result = experiments::RunUserStudy(*d, options, &std::cerr);
+    if (json) {
+      nlohmann::json j = result.ToJson();
+      j["command"] = "experiment user-study";
+      PrintJson(j);
+    } else {
+      std::cout << "\n" << result.Table() << "\nTotal " << result.seconds << " s.\n";
+    }
+  }
+};
+
 }  // namespace
 
 void RegisterExperimentCommands(CLI::App& app, const Config& config) {
@@ -407,6 +527,7 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
   static ExperimentCommand kinds[4];
   static ExperimentCommand derby[4];
   static MergeCommand merge;
+  static UserStudyCommand user_study;
   demo.all_methods = true;
   demo.Register(app, config, "demo",
                 "The main job: the complete SECURE pipeline on the double-integrator reach-avoid "
@@ -443,6 +564,7 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
                       "derby");
   }
   merge.Register(*cmd);
+  user_study.Register(*cmd, config);
 }
 
 }  // namespace secure::cli

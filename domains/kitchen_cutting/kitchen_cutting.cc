@@ -8,6 +8,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "domains/franka/human_arm.h"
 #include "domains/franka/mujoco_model.h"
 #include "domains/franka/offscreen_renderer.h"
 #include "domains/franka/panda_arm.h"
@@ -40,49 +41,26 @@ void CheckInterval(const Interval& r, const char* owner, const char* field, doub
 
 double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
 
-// The closest distance between segments p1-q1 and p2-q2 (Ericson, Real-Time Collision Detection
-// 5.1.9).
-double SegmentDistance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1,
-                       const Eigen::Vector3d& p2, const Eigen::Vector3d& q2) {
-  const Eigen::Vector3d d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
-  const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
-  constexpr double kEps = 1e-12;
-  double s = 0, t = 0;
-  if (a <= kEps && e <= kEps) return r.norm();
-  if (a <= kEps) {
-    t = std::clamp(f / e, 0.0, 1.0);
-  } else {
-    const double c = d1.dot(r);
-    if (e <= kEps) {
-      s = std::clamp(-c / a, 0.0, 1.0);
-    } else {
-      const double b = d1.dot(d2), denom = a * e - b * b;
-      s = denom > kEps ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
-      t = (b * s + f) / e;
-      if (t < 0) {
-        t = 0;
-        s = std::clamp(-c / a, 0.0, 1.0);
-      } else if (t > 1) {
-        t = 1;
-        s = std::clamp((b - c) / a, 0.0, 1.0);
-      }
-    }
-  }
-  return ((p1 + s * d1) - (p2 + t * d2)).norm();
+// The person's arm as the shared helper (domains/franka/human_arm.h) sees it.
+franka::HumanArmGeometry Geometry(const HumanArmOptions& h) {
+  franka::HumanArmGeometry g;
+  g.shoulder = V(h.shoulder);
+  g.upper_arm = h.upper_arm;
+  g.forearm = h.forearm;
+  g.hand = h.hand;
+  g.upper_arm_radius = h.upper_arm_radius;
+  g.forearm_radius = h.forearm_radius;
+  g.hand_radius = h.hand_radius;
+  g.elbow_out = Eigen::Vector3d(0, 1, -1);  // towards the person (+y) and down
+  return g;
 }
+
+franka::HumanArmPose Pose(const ArmPose& a) { return {a.shoulder, a.elbow, a.wrist, a.tip}; }
 
 double EdgeDistance(const HumanArmOptions& h, const Eigen::Vector3d& centre,
                     const Eigen::Vector3d& axis, const ArmPose& arm) {
   const Eigen::Vector3d a = centre - kBladeHalfLength * axis, b = centre + kBladeHalfLength * axis;
-  return std::min({SegmentDistance(a, b, arm.shoulder, arm.elbow) - h.upper_arm_radius,
-                   SegmentDistance(a, b, arm.elbow, arm.wrist) - h.forearm_radius,
-                   SegmentDistance(a, b, arm.wrist, arm.tip) - h.hand_radius});
-}
-
-// Minimum jerk from 0 to 1 over tau in [0, 1].
-double MinJerk(double tau) {
-  tau = std::clamp(tau, 0.0, 1.0);
-  return tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau));
+  return franka::SegmentToArmDistance(Geometry(h), a, b, Pose(arm));
 }
 
 }  // namespace
@@ -105,25 +83,8 @@ const std::vector<std::string>& ActionFeatures() {
 // The person's arm
 
 ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist) {
-  ArmPose p;
-  p.shoulder = V(h.shoulder);
-  const double l1 = h.upper_arm, l2 = h.forearm;
-  const Eigen::Vector3d sw = wrist - p.shoulder;
-  double d = sw.norm();
-  const Eigen::Vector3d u = d > 1e-9 ? Eigen::Vector3d(sw / d) : Eigen::Vector3d(0, -1, 0);
-  d = std::clamp(d, std::abs(l1 - l2) + 1e-3, l1 + l2 - 1e-3);
-  p.wrist = p.shoulder + d * u;
-  const double along = (l1 * l1 - l2 * l2 + d * d) / (2 * d);
-  const double across = std::sqrt(std::max(0.0, l1 * l1 - along * along));
-  // The elbow points back towards the person (+y) and down, orthogonal to the shoulder-wrist line.
-  const Eigen::Vector3d out = Eigen::Vector3d(0, 1, -1).normalized();
-  Eigen::Vector3d n = out - out.dot(u) * u;
-  if (n.norm() < 1e-6) n = Eigen::Vector3d(1, 0, 0) - u.x() * u;
-  n.normalize();
-  p.elbow = p.shoulder + along * u + across * n;
-  const Eigen::Vector3d fore = (p.wrist - p.elbow).normalized();
-  p.tip = p.wrist + h.hand * fore;
-  return p;
+  const franka::HumanArmPose p = franka::HumanArmPoseForWrist(Geometry(h), wrist);
+  return {p.shoulder, p.elbow, p.wrist, p.tip};
 }
 
 double EdgeToArmDistance(const HumanArmOptions& h, const Eigen::Vector3d& edge_centre,
@@ -134,9 +95,9 @@ double EdgeToArmDistance(const HumanArmOptions& h, const Eigen::Vector3d& edge_c
 Eigen::Vector3d ReachPath::Wrist(const HumanArmOptions& h, double t) const {
   const Eigen::Vector3d rest = V(h.rest);
   if (t <= start) return rest;
-  if (t <= start + travel) return rest + MinJerk((t - start) / travel) * (goal - rest);
+  if (t <= start + travel) return rest + franka::MinJerk((t - start) / travel) * (goal - rest);
   if (t <= start + travel + dwell) return goal;
-  return goal + MinJerk((t - start - travel - dwell) / travel) * (rest - goal);
+  return goal + franka::MinJerk((t - start - travel - dwell) / travel) * (rest - goal);
 }
 
 ReachPath DrawReachPath(const HumanArmOptions& h, Rng& rng) {
@@ -315,11 +276,11 @@ struct KitchenCuttingSim::Impl {
   franka::MujocoModel model;
   franka::MujocoData data;
   franka::PandaArm arm;
+  franka::HumanArmCapsules capsules;  // the person's arm (upper arm, forearm, hand)
   int blade = -1, knife = -1;
-  int mocap[3] = {-1, -1, -1};  // upper arm, forearm, hand
 
-  explicit Impl(franka::MujocoModel m)
-      : model(std::move(m)), data(model), arm(model.get(), "kitchen-cutting") {}
+  Impl(franka::MujocoModel m, const franka::HumanArmCapsules& c)
+      : model(std::move(m)), data(model), arm(model.get(), "kitchen-cutting"), capsules(c) {}
 };
 
 KitchenCuttingSim::KitchenCuttingSim(const KitchenCuttingOptions& options)
@@ -327,31 +288,13 @@ KitchenCuttingSim::KitchenCuttingSim(const KitchenCuttingOptions& options)
   franka::MujocoModel m = franka::MujocoModel::Copy(KitchenCuttingModel());
   mjModel* raw = m.get();
   raw->opt.timestep = options_.control_period / options_.substeps;
-  auto id = [&](mjtObj type, const char* name) {
-    const int i = mj_name2id(raw, type, name);
-    SECURE_CHECK(i >= 0, "the kitchen-cutting model has no " << name);
-    return i;
-  };
   // The person's capsules take the options' sizes (each runs along its body's z from 0 to L).
-  const HumanArmOptions& h = options_.human;
-  const char* names[3] = {"upper_arm", "forearm", "person_hand"};
-  const double lengths[3] = {h.upper_arm, h.forearm, h.hand};
-  const double radii[3] = {h.upper_arm_radius, h.forearm_radius, h.hand_radius};
-  int mocap[3];
-  for (int k = 0; k < 3; ++k) {
-    const int g = id(mjOBJ_GEOM, names[k]);
-    raw->geom_size[3 * g] = radii[k];
-    raw->geom_size[3 * g + 1] = lengths[k] / 2;
-    raw->geom_pos[3 * g + 2] = lengths[k] / 2;
-    mocap[k] = raw->body_mocapid[id(mjOBJ_BODY, names[k])];
-    SECURE_CHECK(mocap[k] >= 0, "kitchen-cutting: body " << names[k] << " is not a mocap body");
-  }
-  impl_ = std::make_unique<Impl>(std::move(m));
+  const franka::HumanArmCapsules capsules(raw, Geometry(options_.human), "kitchen-cutting");
+  impl_ = std::make_unique<Impl>(std::move(m), capsules);
   const mjModel* mm = impl_->model.get();
   impl_->blade = mj_name2id(mm, mjOBJ_SITE, "blade");
   impl_->knife = mj_name2id(mm, mjOBJ_GEOM, "knife");
   SECURE_CHECK(impl_->blade >= 0 && impl_->knife >= 0, "kitchen-cutting: no knife in the model");
-  for (int k = 0; k < 3; ++k) impl_->mocap[k] = mocap[k];
   Rng rng(0);
   Reset(rng);
 }
@@ -385,17 +328,7 @@ void KitchenCuttingSim::UpdateHuman() {
     elbow_vel_ = (ahead.elbow - behind.elbow) / span;
   }
   // The capsules (for the picture; the dangerous test uses arm_).
-  mjData* d = impl_->data.get();
-  const Eigen::Vector3d from[3] = {arm_.shoulder, arm_.elbow, arm_.wrist};
-  const Eigen::Vector3d to[3] = {arm_.elbow, arm_.wrist, arm_.tip};
-  for (int k = 0; k < 3; ++k) {
-    const int b = impl_->mocap[k];
-    for (int i = 0; i < 3; ++i) d->mocap_pos[3 * b + i] = from[k][i];
-    mjtNum dir[3] = {to[k].x() - from[k].x(), to[k].y() - from[k].y(), to[k].z() - from[k].z()};
-    mju_quatZ2Vec(d->mocap_quat + 4 * b, dir);
-  }
-  // The capsules' frames follow (positions of the other bodies are recomputed unchanged).
-  mj_kinematics(impl_->model.get(), d);
+  impl_->capsules.Pose(impl_->model.get(), impl_->data.get(), Pose(arm_));
 }
 
 void KitchenCuttingSim::UpdateProgress() {

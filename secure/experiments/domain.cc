@@ -12,6 +12,11 @@ std::vector<LabelCheckRow> Domain::CheckLabels(std::uint64_t, long) const {
                          "a labelled state)");
 }
 
+std::unique_ptr<Population> Domain::MakePopulation(const PopulationOptions&) const {
+  SECURE_THROW("the " << name() << " domain has no participants for a user study (domains with "
+                         "one: those whose Domain::HasPopulation() is true)");
+}
+
 void Domain::CheckHeldOut(std::uint64_t, long, data::StateSet*, data::StateSet*) const {
   SECURE_THROW("the " << name() << " domain has no barrier check");
 }

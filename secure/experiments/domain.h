@@ -27,6 +27,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "secure/cbf/barrier.h"
@@ -81,6 +82,49 @@ struct LabelCheckRow {
   double DangerousFraction() const {
     return states > skipped ? double(dangerous) / double(states - skipped) : 0.0;
   }
+};
+
+/// The participants of a user study (experiments/user_study.h): simulated people who each
+/// demonstrate the task, label states by their own thresholds, and judge the robot by them. A
+/// domain offers one through Domain::MakePopulation; its methods are const and thread-safe.
+struct PopulationOptions {
+  int participants = 12;
+  std::uint64_t seed = 0;         // the participants' constants (deterministic)
+  double threshold_spread = 1.0;  // scales the spread of the personal thresholds about their mean
+                                  // (0: every participant has the mean thresholds)
+};
+
+/// The paper's own numbers of a user study (Table 4), per condition in the user study's order
+/// ((policy, barrier) = (individual, individual), (individual, grouped), (grouped, individual),
+/// (grouped, grouped)).
+struct PaperUserStudy {
+  std::string source;  // "Table 4, 12 participants, Likert ratings (not rates)"
+  std::vector<std::pair<std::string, std::vector<double>>> rows;  // (what, 4 values)
+};
+
+class Population {
+ public:
+  virtual ~Population() = default;
+  /// The number of participants.
+  virtual int size() const = 0;
+  /// Participant p's constants, for the report.
+  virtual nlohmann::json Participant(int p) const = 0;
+  /// Participant p's data from `data_seed` (deterministic): their task demonstrations, and the
+  /// states they label safe (`safe`) and unsafe (`near_dangerous`) by their own thresholds.
+  virtual DomainData GenerateData(int p, std::uint64_t data_seed) const = 0;
+  /// The task environment as participant p judges it: StepOutcome::collided is a violation of
+  /// p's thresholds; success is the task's.
+  virtual std::unique_ptr<domains::Environment> MakeEnvironment(int p) const = 0;
+  /// Whether p's thresholds hold with margin at `observation` (so that a shield changing the
+  /// action there is over-conservative).
+  virtual bool HeldWithMargin(int p, const Eigen::Ref<const Eigen::VectorXf>& observation) const = 0;
+  /// What a violation and "with margin" are, in one sentence (for reports).
+  virtual std::string Describe() const = 0;
+  /// The length of an environment step in seconds (task times are reported in seconds), or 0
+  /// (in steps).
+  virtual double StepSeconds() const { return 0.0; }
+  /// The paper's numbers for this study, if it has them.
+  virtual std::optional<PaperUserStudy> PaperReference() const { return std::nullopt; }
 };
 
 class Domain {
@@ -138,6 +182,12 @@ class Domain {
   virtual std::vector<LabelCheckRow> CheckLabels(std::uint64_t data_seed, long max_states) const;
   /// What CheckLabels simulates, in one sentence (for reports).
   virtual std::string LabelCheckDescription() const { return ""; }
+
+  /// Whether the domain has participants for a user study (MakePopulation).
+  virtual bool HasPopulation() const { return false; }
+  /// The participants drawn with `options` (only if HasPopulation()). @throws secure::Error
+  /// otherwise, or on invalid options.
+  virtual std::unique_ptr<Population> MakePopulation(const PopulationOptions& options) const;
 
   /// The paper's Table 3 numbers for this domain, if the paper has a row for it (printed beside
   /// a method comparison by `secure experiment`; nothing by default).

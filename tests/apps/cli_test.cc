@@ -497,8 +497,8 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
-             "unknown domain 'panda' (registered: derby | double-integrator | kitchen-cutting | "
-             "panda-push)");
+             "unknown domain 'panda' (registered: coffee-placing | derby | double-integrator | "
+             "kitchen-cutting | panda-push)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
   EXPECT_EQ(r.exit_code, 1);
@@ -517,8 +517,8 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   const Result r = RunCli("experiment method-comparison --domain unicycle --quick");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
-             "unknown domain 'unicycle' (registered: derby | double-integrator | kitchen-cutting | "
-             "panda-push)");
+             "unknown domain 'unicycle' (registered: coffee-placing | derby | double-integrator | "
+             "kitchen-cutting | panda-push)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
   EXPECT_HAS(v.err, "the derby domain has no ground truth");
@@ -601,6 +601,44 @@ TEST(CliTest, KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck) {
   ASSERT_EQ(l["rows"].size(), 3u);
   EXPECT_EQ(l["rows"][0]["label"], "safe");
   EXPECT_EQ(l["rows"][1]["label"], "near-dangerous");
+}
+
+TEST(CliTest, UserStudyQuickPrintsTheConditionsBesideThePapersRatings) {
+  // The user study of Section 7.2 on the simulated participants (the default domain: the first
+  // one with participants, coffee-placing), quick profile: 3 participants x 3 episodes.
+  const Result r = RunCli("experiment user-study --quick --json --spread 0,1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.err, "[spread 1.00] participant 2:");
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["command"], "experiment user-study");
+  EXPECT_EQ(j["experiment"]["kind"], "user-study");
+  EXPECT_EQ(j["experiment"]["domain"], "coffee-placing");
+  ASSERT_EQ(j["spreads"].size(), 2u);
+  for (const char* metric : {"success", "violations", "over_conservative", "time"}) {
+    const auto& m = j["spreads"][1]["metrics"][metric];
+    ASSERT_EQ(m["conditions"].size(), 4u) << metric;
+    EXPECT_EQ(m["conditions"][0]["per_participant"].size(), 3u);
+    EXPECT_EQ(m["posthoc"]["pairs"].size(), 6u);
+  }
+  EXPECT_EQ(j["paper"]["rows"][1]["values"][2], 35.4);
+  const Result text = RunCli("experiment user-study --quick --participants 2 --episodes 1");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_HAS(text.out, "| (policy, CBF) | (ind, ind) | (ind, grp) | (grp, ind) | (grp, grp) |");
+  EXPECT_HAS(text.out, "| Task (paper, Likert rating) | 73.3 | 77.1 | 81.6 | 73.6 |");
+  EXPECT_HAS(text.out, "Likert ratings, not rates");
+  // Bad options: one line naming the option and the value, exit 1.
+  Result bad = RunCli("experiment user-study --quick --spread 0,x");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_HAS(bad.err, "--spread '0,x': 'x' is not a number in [0, 1]");
+  bad = RunCli("experiment user-study --quick --spread 1.5");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_HAS(bad.err, "'1.5' is not a number in [0, 1]");
+  bad = RunCli("experiment user-study --quick --participants 1");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_HAS(bad.err, "--participants = 1, must be in [2, 1000]");
+  bad = RunCli("experiment user-study --quick --domain derby");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_HAS(bad.err, "--domain derby: the domain has no participants");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -847,8 +885,8 @@ TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
   Result r = RunCli(base + Write("typo.yaml", "trainr:\n  max_epochs: 3\n"));
   ExpectOneErrorLine(
       r,
-      "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, derby, "
-      "double_integrator, kitchen_cutting, panda_push, pipeline, trainer)");
+      "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, coffee_placing, "
+      "derby, double_integrator, kitchen_cutting, panda_push, pipeline, trainer)");
   r = RunCli(base + Write("dup.yaml", "trainer:\n  max_epochs: 3\n  max_epochs: 4\n"));
   ExpectOneErrorLine(r, "dup.yaml:3: duplicate key 'max_epochs' (first at line 2)");
   r = RunCli(base + Write("dup_top.yaml", "trainer: {}\ndouble_integrator: {}\ntrainer: {}\n"));

@@ -1,0 +1,572 @@
+#include "domains/coffee_placing/coffee_placing.h"
+
+#include <mujoco/mujoco.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "domains/franka/human_arm.h"
+#include "domains/franka/mujoco_model.h"
+#include "domains/franka/offscreen_renderer.h"
+#include "domains/franka/panda_arm.h"
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::coffee_placing {
+// The model text (generated from coffee_placing.xml by CMake: coffee_placing_xml.cc).
+extern const char kCoffeePlacingXml[];
+
+namespace {
+
+bool Finite(double x) { return std::isfinite(x); }
+
+const mjModel* CoffeePlacingModel() {
+  static const franka::MujocoModel model = franka::MujocoModel::FromXml(
+      franka::WithPandaArm(kCoffeePlacingXml, "coffee_placing.xml"), "coffee_placing.xml");
+  return model.get();
+}
+
+Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
+Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
+  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
+}
+
+void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
+                   double max) {
+  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
+                     owner, field, "[" << r[0] << ", " << r[1] << "]",
+                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
+}
+
+double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
+
+franka::HumanArmGeometry Geometry(const PersonOptions& p) {
+  franka::HumanArmGeometry g;
+  g.shoulder = V(p.shoulder);
+  g.upper_arm = p.upper_arm;
+  g.forearm = p.forearm;
+  g.hand = p.hand;
+  g.upper_arm_radius = p.upper_arm_radius;
+  g.forearm_radius = p.forearm_radius;
+  g.hand_radius = p.hand_radius;
+  g.elbow_out = Eigen::Vector3d(0, 1, -1);  // towards the person (+y) and down
+  return g;
+}
+
+franka::HumanArmPose Pose(const ArmPose& a) { return {a.shoulder, a.elbow, a.wrist, a.tip}; }
+
+}  // namespace
+
+bool Thresholds::Violated(double clearance, double tilt) const {
+  return clearance < comfort_distance || std::abs(tilt) > max_tilt;
+}
+
+const std::vector<std::string>& ObservationFeatures() {
+  static const std::vector<std::string> names{
+      "ee_x",     "ee_y",     "ee_z",     "ee_vx",    "ee_vy",    "ee_vz",    "tilt",     "wrist_x",
+      "wrist_y",  "wrist_z",  "elbow_x",  "elbow_y",  "elbow_z",  "hand_x",   "hand_y",   "hand_z",
+      "wrist_vx", "wrist_vy", "wrist_vz", "elbow_vx", "elbow_vy", "elbow_vz", "clearance"};
+  return names;
+}
+
+const std::vector<std::string>& ActionFeatures() {
+  static const std::vector<std::string> names{"act_x", "act_y", "act_z", "act_tilt"};
+  return names;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The person's arm, the cup
+
+ArmPose ArmPoseForWrist(const PersonOptions& p, const Eigen::Vector3d& wrist) {
+  const franka::HumanArmPose a = franka::HumanArmPoseForWrist(Geometry(p), wrist);
+  return {a.shoulder, a.elbow, a.wrist, a.tip};
+}
+
+Eigen::Vector3d CupBottom(const Eigen::Vector3d& ee, double tilt) {
+  return ee + Eigen::Vector3d(-kCupDrop * std::sin(tilt), 0.0, -kCupDrop * std::cos(tilt));
+}
+
+double Clearance(const PersonOptions& p, const Eigen::Vector3d& ee, double tilt,
+                 const ArmPose& arm) {
+  return franka::SegmentToArmDistance(Geometry(p), ee, CupBottom(ee, tilt), Pose(arm));
+}
+
+double ObservedClearance(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o) {
+  ArmPose arm;
+  arm.shoulder = V(p.shoulder);
+  arm.wrist = At(o, kWrist);
+  arm.elbow = At(o, kElbow);
+  arm.tip = At(o, kHandTip);
+  return Clearance(p, At(o, kEePos), o[kTilt], arm);
+}
+
+Eigen::Vector3d BookReach::Wrist(const PersonOptions& p, double t) const {
+  const Eigen::Vector3d rest = V(p.rest);
+  if (t <= start) return rest;
+  if (t <= start + travel) return rest + franka::MinJerk((t - start) / travel) * (goal - rest);
+  if (t <= start + travel + dwell) return goal;
+  return goal + franka::MinJerk((t - start - travel - dwell) / travel) * (rest - goal);
+}
+
+BookReach DrawBookReach(const PersonOptions& p, Rng& rng) {
+  BookReach r;
+  r.book = static_cast<int>(rng.UniformIndex(p.book_x.size()));
+  r.goal = Eigen::Vector3d(p.book_x[static_cast<std::size_t>(r.book)],
+                           p.book_y + Draw(rng, p.goal_dy), p.goal_z);
+  r.start = Draw(rng, p.start_time);
+  r.travel = std::max(0.05, (r.goal - V(p.rest)).norm() / Draw(rng, p.speed));
+  r.dwell = Draw(rng, p.dwell);
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+void PersonOptions::Validate() const {
+  const char* o = "PersonOptions";
+  for (int k = 0; k < 3; ++k) {
+    SECURE_CHECK_FIELD(Finite(shoulder[k]), o, "shoulder", shoulder[k], "finite");
+    SECURE_CHECK_FIELD(Finite(rest[k]), o, "rest", rest[k], "finite");
+  }
+  for (auto [name, v] : {std::pair{"upper_arm", upper_arm}, std::pair{"forearm", forearm},
+                         std::pair{"hand", hand}}) {
+    SECURE_CHECK_FIELD(Finite(v) && v > 0.01 && v <= 1.0, o, name, v, "in (0.01, 1] m");
+  }
+  for (auto [name, v] :
+       {std::pair{"upper_arm_radius", upper_arm_radius},
+        std::pair{"forearm_radius", forearm_radius}, std::pair{"hand_radius", hand_radius}}) {
+    SECURE_CHECK_FIELD(Finite(v) && v > 0 && v <= 0.2, o, name, v, "in (0, 0.2] m");
+  }
+  SECURE_CHECK_FIELD(!book_x.empty() && book_x.size() <= 16, o, "book_x", book_x.size() << " books",
+                     "1 to 16 books");
+  for (double x : book_x)
+    SECURE_CHECK_FIELD(Finite(x) && std::abs(x) <= 2, o, "book_x[]", x, "in [-2, 2] m");
+  SECURE_CHECK_FIELD(Finite(book_y) && std::abs(book_y) <= 2, o, "book_y", book_y, "in [-2, 2] m");
+  CheckInterval(goal_dy, o, "goal_dy", -0.5, 0.5);
+  SECURE_CHECK_FIELD(Finite(goal_z) && goal_z > 0 && goal_z <= 1, o, "goal_z", goal_z,
+                     "in (0, 1] m");
+  CheckInterval(start_time, o, "start_time", 0, 100);
+  CheckInterval(speed, o, "speed", 0.01, 5);
+  CheckInterval(dwell, o, "dwell", 0, 100);
+}
+
+nlohmann::json PersonOptions::ToJson() const {
+  return {{"shoulder", shoulder},
+          {"upper_arm", upper_arm},
+          {"forearm", forearm},
+          {"hand", hand},
+          {"upper_arm_radius", upper_arm_radius},
+          {"forearm_radius", forearm_radius},
+          {"hand_radius", hand_radius},
+          {"rest", rest},
+          {"book_x", book_x},
+          {"book_y", book_y},
+          {"goal_dy", goal_dy},
+          {"goal_z", goal_z},
+          {"start_time", start_time},
+          {"speed", speed},
+          {"dwell", dwell}};
+}
+
+void PersonOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("shoulder", &shoulder)
+      .Field("upper_arm", &upper_arm)
+      .Field("forearm", &forearm)
+      .Field("hand", &hand)
+      .Field("upper_arm_radius", &upper_arm_radius)
+      .Field("forearm_radius", &forearm_radius)
+      .Field("hand_radius", &hand_radius)
+      .Field("rest", &rest)
+      .Field("book_x", &book_x)
+      .Field("book_y", &book_y)
+      .Field("goal_dy", &goal_dy)
+      .Field("goal_z", &goal_z)
+      .Field("start_time", &start_time)
+      .Field("speed", &speed)
+      .Field("dwell", &dwell)
+      .Apply(node, source);
+}
+
+void CoffeePlacingOptions::Validate() const {
+  const char* o = "CoffeePlacingOptions";
+  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
+                     "in [1, 100000]");
+  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
+                     "control_period", control_period, "in (0, 1] s");
+  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
+  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
+                     "large enough for a physics step <= 5 ms (control_period / substeps)");
+  SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
+                     "action_scale", action_scale, "in (0, 0.2] m");
+  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
+                         tracking_omega * control_period / substeps < 0.5,
+                     o, "tracking_omega", tracking_omega,
+                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
+  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
+                     ik_damping, "in (0, 1)");
+  for (int k = 0; k < 3; ++k) {
+    SECURE_CHECK_FIELD(Finite(start[k]) && std::abs(start[k]) <= 1, o, "start", start[k],
+                       "within 1 m of the origin");
+    SECURE_CHECK_FIELD(Finite(target[k]) && std::abs(target[k]) <= 1, o, "target", target[k],
+                       "within 1 m of the origin");
+  }
+  SECURE_CHECK_FIELD(start[2] >= kCupDrop, o, "start", start[2],
+                     "high enough for the cup (z >= " << kCupDrop << " m)");
+  SECURE_CHECK_FIELD(target[2] == 0.0, o, "target", target[2], "on the table (z = 0)");
+  SECURE_CHECK_FIELD(Finite(start_noise) && start_noise >= 0 && start_noise <= 0.1, o,
+                     "start_noise", start_noise, "in [0, 0.1] m");
+  SECURE_CHECK_FIELD(Finite(target_half_size) && target_half_size > 0 && target_half_size <= 0.2, o,
+                     "target_half_size", target_half_size, "in (0, 0.2] m");
+  SECURE_CHECK_FIELD(Finite(place_tolerance) && place_tolerance > 0 && place_tolerance <= 0.1, o,
+                     "place_tolerance", place_tolerance, "in (0, 0.1] m");
+  SECURE_CHECK_FIELD(Finite(upright_tilt) && upright_tilt > 0 && upright_tilt < kMaxTilt, o,
+                     "upright_tilt", upright_tilt, "in (0, " << kMaxTilt << ") rad");
+  SECURE_CHECK_FIELD(Finite(tilt_scale) && tilt_scale > 0 && tilt_scale <= 0.5, o, "tilt_scale",
+                     tilt_scale, "in (0, 0.5] rad");
+  SECURE_CHECK_FIELD(Finite(tilt_coupling) && tilt_coupling >= 0 && tilt_coupling <= 5, o,
+                     "tilt_coupling", tilt_coupling, "in [0, 5] rad per m/s");
+  person.Validate();
+}
+
+nlohmann::json CoffeePlacingOptions::ToJson() const {
+  return {{"max_steps", max_steps},
+          {"control_period", control_period},
+          {"substeps", substeps},
+          {"action_scale", action_scale},
+          {"tracking_omega", tracking_omega},
+          {"ik_damping", ik_damping},
+          {"start", start},
+          {"start_noise", start_noise},
+          {"target", target},
+          {"target_half_size", target_half_size},
+          {"place_tolerance", place_tolerance},
+          {"upright_tilt", upright_tilt},
+          {"tilt_scale", tilt_scale},
+          {"tilt_coupling", tilt_coupling},
+          {"person", person.ToJson()}};
+}
+
+void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("max_steps", &max_steps)
+      .Field("control_period", &control_period)
+      .Field("substeps", &substeps)
+      .Field("action_scale", &action_scale)
+      .Field("tracking_omega", &tracking_omega)
+      .Field("ik_damping", &ik_damping)
+      .Field("start", &start)
+      .Field("start_noise", &start_noise)
+      .Field("target", &target)
+      .Field("target_half_size", &target_half_size)
+      .Field("place_tolerance", &place_tolerance)
+      .Field("upright_tilt", &upright_tilt)
+      .Field("tilt_scale", &tilt_scale)
+      .Field("tilt_coupling", &tilt_coupling)
+      .Section("person",
+               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); })
+      .Apply(node, source);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The simulation
+
+struct CoffeePlacingSim::Impl {
+  franka::MujocoModel model;
+  franka::MujocoData data;
+  franka::PandaArm arm;
+  franka::HumanArmCapsules capsules;
+  int cup = -1;  // the cup's mocap index
+
+  Impl(franka::MujocoModel m, const franka::HumanArmCapsules& c)
+      : model(std::move(m)), data(model), arm(model.get(), "coffee-placing"), capsules(c) {}
+};
+
+CoffeePlacingSim::CoffeePlacingSim(const CoffeePlacingOptions& options)
+    : options_((options.Validate(), options)) {
+  franka::MujocoModel m = franka::MujocoModel::Copy(CoffeePlacingModel());
+  mjModel* raw = m.get();
+  raw->opt.timestep = options_.control_period / options_.substeps;
+  const franka::HumanArmCapsules capsules(raw, Geometry(options_.person), "coffee-placing");
+  const int cup_body = mj_name2id(raw, mjOBJ_BODY, "cup");
+  SECURE_CHECK(cup_body >= 0 && raw->body_mocapid[cup_body] >= 0,
+               "coffee-placing: no cup mocap body in the model");
+  const int cup = raw->body_mocapid[cup_body];
+  impl_ = std::make_unique<Impl>(std::move(m), capsules);
+  impl_->cup = cup;
+  Rng rng(0);
+  Reset(rng);
+}
+
+CoffeePlacingSim::~CoffeePlacingSim() = default;
+
+const void* CoffeePlacingSim::model() const { return impl_->model.get(); }
+void* CoffeePlacingSim::data() const { return impl_->data.get(); }
+
+void CoffeePlacingSim::UpdateScene() {
+  const PersonOptions& p = options_.person;
+  mjData* d = impl_->data.get();
+  const double t = d->time;
+  constexpr double kH = 1e-3;  // s, central differences for the velocities
+  arm_ = ArmPoseForWrist(p, reach_.Wrist(p, t));
+  const ArmPose ahead = ArmPoseForWrist(p, reach_.Wrist(p, t + kH));
+  const ArmPose behind = ArmPoseForWrist(p, reach_.Wrist(p, std::max(0.0, t - kH)));
+  const double span = t + kH - std::max(0.0, t - kH);
+  wrist_vel_ = (ahead.wrist - behind.wrist) / span;
+  elbow_vel_ = (ahead.elbow - behind.elbow) / span;
+  // The cup: its top at the tool centre point, tilted about y.
+  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
+  const Eigen::Vector3d centre = 0.5 * (ee + CupBottom(ee, tilt_));
+  const int c = impl_->cup;
+  for (int i = 0; i < 3; ++i) d->mocap_pos[3 * c + i] = centre[i];
+  d->mocap_quat[4 * c] = std::cos(0.5 * tilt_);
+  d->mocap_quat[4 * c + 1] = 0;
+  d->mocap_quat[4 * c + 2] = std::sin(0.5 * tilt_);
+  d->mocap_quat[4 * c + 3] = 0;
+  clearance_ = Clearance(p, ee, tilt_, arm_);
+  impl_->capsules.Pose(impl_->model.get(), d, Pose(arm_));  // (mj_kinematics: the cup too)
+}
+
+void CoffeePlacingSim::Reset(Rng& rng) {
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  mj_resetData(m, d);
+  impl_->arm.SetJoints(d, franka::kNeutralJoints);
+  franka::UpdateKinematics(m, d);
+  Eigen::Vector3d start = V(options_.start);
+  for (int k = 0; k < 3; ++k) start[k] += options_.start_noise * (2.0 * rng.Uniform() - 1.0);
+  impl_->arm.PlaceTool(m, d, start);
+  franka::UpdateKinematics(m, d);
+  tilt_ = 0;
+  reach_ = DrawBookReach(options_.person, rng);
+  UpdateScene();
+}
+
+void CoffeePlacingSim::Step(const Eigen::Ref<const Eigen::Vector4f>& action) {
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  Eigen::Vector4d a;
+  for (int k = 0; k < 4; ++k) {
+    SECURE_CHECK(std::isfinite(action[k]),
+                 "coffee-placing: action[" << k << "] = " << action[k] << " is not finite");
+    a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
+  }
+  mjtNum v[6];
+  mj_objectVelocity(m, d, mjOBJ_SITE, impl_->arm.tcp(), v, 0);
+  const double vx_before = v[3];
+  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
+  Eigen::Vector3d target = ee + options_.action_scale * a.head<3>();
+  // The cup stops at the table.
+  target.z() = std::max(target.z(), options_.target[2] + kCupDrop);
+  franka::ArmTracking tracking;
+  tracking.control_period = options_.control_period;
+  tracking.substeps = options_.substeps;
+  tracking.tracking_omega = options_.tracking_omega;
+  tracking.ik_damping = options_.ik_damping;
+  impl_->arm.Track(m, d, target, tracking);
+  franka::CheckWarnings(d, "coffee-placing", "a step");
+  mj_objectVelocity(m, d, mjOBJ_SITE, impl_->arm.tcp(), v, 0);
+  tilt_ =
+      std::clamp(tilt_ + options_.tilt_scale * a[3] + options_.tilt_coupling * (v[3] - vx_before),
+                 -kMaxTilt, kMaxTilt);
+  UpdateScene();
+}
+
+bool CoffeePlacingSim::Placed() const {
+  const mjData* d = impl_->data.get();
+  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
+  const Eigen::Vector3d bottom = CupBottom(ee, tilt_);
+  const CoffeePlacingOptions& o = options_;
+  return std::abs(bottom.x() - o.target[0]) <= o.target_half_size &&
+         std::abs(bottom.y() - o.target[1]) <= o.target_half_size &&
+         bottom.z() - o.target[2] <= o.place_tolerance && std::abs(tilt_) <= o.upright_tilt;
+}
+
+void CoffeePlacingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
+  SECURE_CHECK(o.size() == kObservationDim, "coffee-placing: observation has "
+                                                << o.size() << " entries, expected "
+                                                << kObservationDim);
+  const mjModel* m = impl_->model.get();
+  mjData* d = impl_->data.get();
+  const int tcp = impl_->arm.tcp();
+  mjtNum v[6];
+  mj_objectVelocity(m, d, mjOBJ_SITE, tcp, v, 0);
+  for (int k = 0; k < 3; ++k) {
+    o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
+    o[kEeVel + k] = static_cast<float>(v[3 + k]);
+    o[kWrist + k] = static_cast<float>(arm_.wrist[k]);
+    o[kElbow + k] = static_cast<float>(arm_.elbow[k]);
+    o[kHandTip + k] = static_cast<float>(arm_.tip[k]);
+    o[kWristVel + k] = static_cast<float>(wrist_vel_[k]);
+    o[kElbowVel + k] = static_cast<float>(elbow_vel_[k]);
+  }
+  o[kTilt] = static_cast<float>(tilt_);
+  o[kClearance] = static_cast<float>(clearance_);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The shield's model
+
+void CoffeeShieldModelOptions::Validate() const {
+  const char* o = "CoffeeShieldModelOptions";
+  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
+                     ">= 0");
+  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
+                     ">= 0");
+  SECURE_CHECK_FIELD(Finite(dt) && dt > 0, o, "dt", dt, "> 0 s");
+}
+
+nlohmann::json CoffeeShieldModelOptions::ToJson() const {
+  return {{"position_gain", position_gain}, {"velocity_gain", velocity_gain}, {"dt", dt}};
+}
+
+void CoffeeShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Field("position_gain", &position_gain)
+      .Field("velocity_gain", &velocity_gain)
+      .Field("dt", &dt)
+      .Apply(node, source);
+}
+
+CoffeeShieldModel::CoffeeShieldModel(const CoffeeShieldModelOptions& options,
+                                     const CoffeePlacingOptions& task)
+    : options_((options.Validate(), options)), task_(task) {}
+
+std::string CoffeeShieldModel::Describe() const {
+  std::ostringstream s;
+  s << "coffee-placing approximate model (ee += " << options_.position_gain
+    << " a, ee_vel = " << options_.velocity_gain << " a, tilt += " << task_.tilt_scale
+    << " a_tilt + " << task_.tilt_coupling << " dvx, the person's arm at constant velocity for "
+    << options_.dt << " s, clearance recomputed)";
+  return s.str();
+}
+
+void CoffeeShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+                               const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                               Eigen::Ref<Eigen::MatrixXf> next) const {
+  const float pg = static_cast<float>(options_.position_gain);
+  const float vg = static_cast<float>(options_.velocity_gain);
+  const float dt = static_cast<float>(options_.dt);
+  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
+    next.col(c) = state;
+    for (int k = 0; k < 3; ++k) {
+      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
+      next(kEePos + k, c) += pg * a;
+      next(kEeVel + k, c) = vg * a;
+      next(kWrist + k, c) += dt * state[kWristVel + k];
+      next(kHandTip + k, c) += dt * state[kWristVel + k];
+      next(kElbow + k, c) += dt * state[kElbowVel + k];
+    }
+    const float at = std::clamp(actions(3, c), -1.0f, 1.0f);
+    const float tilt = state[kTilt] + static_cast<float>(task_.tilt_scale) * at +
+                       static_cast<float>(task_.tilt_coupling) * (next(kEeVel, c) - state[kEeVel]);
+    next(kTilt, c) = std::clamp(tilt, static_cast<float>(-kMaxTilt), static_cast<float>(kMaxTilt));
+    next(kClearance, c) = static_cast<float>(ObservedClearance(task_.person, next.col(c)));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The environment
+
+CoffeePlacingEnv::CoffeePlacingEnv(const CoffeePlacingOptions& options,
+                                   const CoffeeShieldModelOptions& shield_model,
+                                   const Thresholds& thresholds)
+    : sim_(options),
+      shield_model_options_(shield_model),
+      shield_model_(shield_model, options),
+      thresholds_(thresholds) {}
+
+std::vector<std::string> CoffeePlacingEnv::ObservationFeatures() const {
+  return coffee_placing::ObservationFeatures();
+}
+std::vector<std::string> CoffeePlacingEnv::ActionFeatures() const {
+  return coffee_placing::ActionFeatures();
+}
+
+std::string CoffeePlacingEnv::Describe() const {
+  const CoffeePlacingOptions& o = sim_.options();
+  std::ostringstream s;
+  s << "Coffee placing (MuJoCo " << mj_versionString()
+    << "): the Panda carries a cup to a target square and puts it down upright while a simulated "
+       "person reaches for one of "
+    << o.person.book_x.size() << " books beside its path; a violation: the hand-and-cup within "
+    << thresholds_.comfort_distance << " m of the arm or the cup tilted beyond "
+    << thresholds_.max_tilt << " rad; " << o.max_steps << " steps of " << o.control_period << " s";
+  return s.str();
+}
+
+void CoffeePlacingEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
+  sim_.Reset(rng);
+  violated_ = false;
+  sim_.Observe(observation);
+}
+
+StepOutcome CoffeePlacingEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
+                                   Eigen::Ref<Eigen::VectorXf> observation) {
+  SECURE_CHECK(action.size() == kActionDim,
+               "coffee-placing: action has " << action.size() << " entries, expected 4");
+  SECURE_CHECK(observation.size() == kObservationDim,
+               "coffee-placing: observation has " << observation.size() << " entries, expected "
+                                                  << kObservationDim);
+  sim_.Step(Eigen::Vector4f(action[0], action[1], action[2], action[3]));
+  sim_.Observe(observation);
+  StepOutcome outcome;
+  outcome.reached_goal = sim_.Placed();
+  outcome.collided = thresholds_.Violated(sim_.clearance(), sim_.tilt());
+  outcome.collisions = outcome.collided && !violated_ ? 1 : 0;
+  violated_ = outcome.collided;
+  return outcome;
+}
+
+bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
+                                    Eigen::Ref<Eigen::VectorXf> action) const {
+  const CoffeePlacingOptions& t = sim_.options();
+  action.setZero();
+  // Stopping changes the x velocity by -vx: turn the tilt and that back.
+  const double tilt = o[kTilt] - t.tilt_coupling * o[kEeVel];
+  action[3] = static_cast<float>(std::clamp(-tilt / t.tilt_scale, -1.0, 1.0));
+  return true;
+}
+
+// The shared offscreen renderer, from the robot's right (-y), a little above: the person's arm
+// reaching in from the back.
+class CoffeePlacingRenderer {
+ public:
+  explicit CoffeePlacingRenderer(const CoffeePlacingSim& sim)
+      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "coffee-placing") {}
+  void Render(int width, int height, Frame* frame) {
+    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
+                     width, height, frame);
+  }
+
+ private:
+  static franka::CameraView View() {
+    franka::CameraView v;
+    v.lookat[0] = 0.25;
+    v.lookat[1] = 0.0;
+    v.lookat[2] = 0.12;
+    v.distance = 1.5;
+    v.azimuth = 60;
+    v.elevation = -30;
+    return v;
+  }
+  const CoffeePlacingSim& sim_;
+  franka::OffscreenRenderer renderer_;
+};
+
+CoffeePlacingEnv::~CoffeePlacingEnv() = default;
+
+void CoffeePlacingEnv::Render(int width, int height, Frame* frame) {
+  if (renderer_ == nullptr) renderer_ = std::make_unique<CoffeePlacingRenderer>(sim_);
+  renderer_->Render(width, height, frame);
+}
+
+std::unique_ptr<Environment> CoffeePlacingEnv::Clone() const {
+  return std::make_unique<CoffeePlacingEnv>(sim_.options(), shield_model_options_, thresholds_);
+}
+
+}  // namespace secure::domains::coffee_placing

@@ -1,0 +1,235 @@
+#include "domains/coffee_placing/domain.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <sstream>
+
+#include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/common/rng.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::coffee_placing {
+
+const std::vector<std::string>& BarrierFeatures() {
+  static const std::vector<std::string> names{
+      "ee_x",   "ee_y",     "ee_z",     "ee_vx",    "ee_vy",    "ee_vz",
+      "tilt",   "wrist_x",  "wrist_y",  "wrist_z",  "hand_x",   "hand_y",
+      "hand_z", "wrist_vx", "wrist_vy", "wrist_vz", "clearance"};
+  return names;
+}
+
+CoffeePlacingDomainOptions CoffeePlacingDomainOptions::For(experiments::Profile profile) {
+  CoffeePlacingDomainOptions o;
+  if (profile == experiments::Profile::kQuick) {
+    o.demonstrations.states = 300;
+    o.labels.safe = 200;
+    o.labels.unsafe = 200;
+  }
+  return o;
+}
+
+void CoffeePlacingDomainOptions::Validate() const {
+  task.Validate();
+  shield_model.Validate();
+  population.Validate();
+  demonstrations.Validate();
+  labels.Validate();
+  const char* o = "CoffeePlacingDomainOptions";
+  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.control_period) < 1e-12, o, "shield_model.dt",
+                     shield_model.dt, "the control period (" << task.control_period << " s)");
+  SECURE_CHECK_FIELD(
+      std::isfinite(margin_distance) && margin_distance >= 0 && margin_distance <= 0.5, o,
+      "margin_distance", margin_distance, "in [0, 0.5] m");
+  SECURE_CHECK_FIELD(std::isfinite(margin_tilt) && margin_tilt >= 0 && margin_tilt <= 0.5, o,
+                     "margin_tilt", margin_tilt, "in [0, 0.5] rad");
+}
+
+void CoffeePlacingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields()
+      .Section("task", [this](const YAML::Node& n, const std::string& w) { task.ApplyYaml(n, w); })
+      .Section("shield_model",
+               [this](const YAML::Node& n, const std::string& w) { shield_model.ApplyYaml(n, w); })
+      .Section("population",
+               [this](const YAML::Node& n, const std::string& w) { population.ApplyYaml(n, w); })
+      .Section("demonstrations", [this](const YAML::Node& n,
+                                        const std::string& w) { demonstrations.ApplyYaml(n, w); })
+      .Section("labels",
+               [this](const YAML::Node& n, const std::string& w) { labels.ApplyYaml(n, w); })
+      .Field("margin_distance", &margin_distance)
+      .Field("margin_tilt", &margin_tilt)
+      .Apply(node, source);
+}
+
+nlohmann::json CoffeePlacingDomainOptions::ToJson() const {
+  return {{"task", task.ToJson()},
+          {"shield_model", shield_model.ToJson()},
+          {"population", population.ToJson()},
+          {"demonstrations", demonstrations.ToJson()},
+          {"labels", labels.ToJson()},
+          {"margin_distance", margin_distance},
+          {"margin_tilt", margin_tilt}};
+}
+
+experiments::DomainData ParticipantData(const CoffeePlacingDomainOptions& options,
+                                        const coffee_placing::Participant& participant,
+                                        std::uint64_t data_seed) {
+  options.Validate();
+  const CoffeeDemonstrations demos =
+      GenerateCoffeeDemonstrations(options.task, options.demonstrations, participant, data_seed);
+  Rng rng(data_seed + 1);
+  experiments::DomainData d;
+  d.demonstrations = demos.trajectories;
+  d.discarded_demonstrations = demos.discarded_violating + demos.discarded_failed;
+  CoffeeLabelledStates(options.task, options.labels, participant, demos.trajectories, rng, &d.safe,
+                       &d.near_dangerous);
+  return d;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The population
+
+CoffeePopulation::CoffeePopulation(const CoffeePlacingDomainOptions& options,
+                                   const experiments::PopulationOptions& population)
+    : options_(options) {
+  options_.Validate();
+  SECURE_CHECK_FIELD(population.participants >= 1 && population.participants <= 1000,
+                     "PopulationOptions", "participants", population.participants, "in [1, 1000]");
+  SECURE_CHECK_FIELD(std::isfinite(population.threshold_spread) &&
+                         population.threshold_spread >= 0 && population.threshold_spread <= 1,
+                     "PopulationOptions", "threshold_spread", population.threshold_spread,
+                     "in [0, 1]");
+  for (int p = 0; p < population.participants; ++p)
+    participants_.push_back(
+        DrawParticipant(options_.population, population.seed, p, population.threshold_spread));
+}
+
+const coffee_placing::Participant& CoffeePopulation::participant(int p) const {
+  SECURE_CHECK(p >= 0 && p < size(), "participant " << p << " of " << size());
+  return participants_[static_cast<std::size_t>(p)];
+}
+
+nlohmann::json CoffeePopulation::Participant(int p) const { return participant(p).ToJson(); }
+
+experiments::DomainData CoffeePopulation::GenerateData(int p, std::uint64_t data_seed) const {
+  return ParticipantData(options_, participant(p), data_seed);
+}
+
+std::unique_ptr<domains::Environment> CoffeePopulation::MakeEnvironment(int p) const {
+  return std::make_unique<CoffeePlacingEnv>(options_.task, options_.shield_model,
+                                            participant(p).thresholds);
+}
+
+bool CoffeePopulation::HeldWithMargin(int p, const Eigen::Ref<const Eigen::VectorXf>& o) const {
+  const Thresholds& t = participant(p).thresholds;
+  return o[kClearance] >= t.comfort_distance + options_.margin_distance &&
+         std::abs(o[kTilt]) <= t.max_tilt - options_.margin_tilt;
+}
+
+std::string CoffeePopulation::Describe() const {
+  std::ostringstream s;
+  s << "a violation: the robot's hand-and-cup closer to the participant's arm than their comfort "
+       "distance, or the cup tilted beyond their maximum tilt; with margin: clearance >= comfort + "
+    << options_.margin_distance << " m and |tilt| <= max tilt - " << options_.margin_tilt << " rad";
+  return s.str();
+}
+
+std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() const {
+  experiments::PaperUserStudy t;
+  t.source =
+      "Table 4, 12 people on the real robot: Likert-scale RATINGS summed over items (higher is "
+      "better), not rates; no standard errors";
+  t.rows = {{"Task", {73.3, 77.1, 81.6, 73.6}},
+            {"Safety", {31.3, 33.3, 35.4, 35.3}},
+            {"Perceived safety", {33.2, 35.4, 36.4, 35.8}}};
+  return t;
+}
+
+// ---------------------------------------------------------------------------------------------
+CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile)
+    : profile_(profile), options_(CoffeePlacingDomainOptions::For(profile)) {}
+
+std::string CoffeePlacingDomain::Describe() const {
+  return CoffeePlacingEnv(options_.task, options_.shield_model,
+                          MeanParticipant(options_.population).thresholds)
+      .Describe();
+}
+
+void CoffeePlacingDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  options_.ApplyYaml(node, source);
+}
+
+std::unique_ptr<Environment> CoffeePlacingDomain::MakeEnvironment() const {
+  return std::make_unique<CoffeePlacingEnv>(options_.task, options_.shield_model,
+                                            MeanParticipant(options_.population).thresholds);
+}
+
+experiments::DomainData CoffeePlacingDomain::GenerateData(std::uint64_t data_seed) const {
+  return ParticipantData(options_, MeanParticipant(options_.population), data_seed);
+}
+
+std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(
+    const experiments::PopulationOptions& options) const {
+  return std::make_unique<CoffeePopulation>(options_, options);
+}
+
+void CoffeePlacingDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
+  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
+                     "ExperimentOptions", "shield.dt", options.shield.dt,
+                     "the control period (" << options_.task.control_period
+                                            << " s): the shield's model looks one step ahead");
+}
+
+experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
+  experiments::ExperimentOptions o;
+  o.data_seed = 5000;
+  o.barrier_kind = experiments::BarrierKind::kFlat;
+  // Table 2's coffee-placing barrier: FC(64, 64), tanh, on BarrierFeatures().
+  o.flat_barrier.hidden = {64, 64};
+  o.flat_barrier.activation = nn::Activation::kTanh;
+  o.flat_barrier.input_features = BarrierFeatures();
+  o.flat_barrier.learning_rate = 1e-3;
+  o.flat_barrier.final_learning_rate = 1e-5;
+  o.flat_barrier.max_epochs = 100;
+  // AIRL as for the other Panda domains (fixed-horizon episodes, the BC regulariser).
+  o.airl.iterations = 10;
+  o.airl.steps_per_iteration = 3000;
+  o.airl.bc_weight = 1.0;
+  // The shield: M = 128, rho0 = 0.1, one control period ahead, alpha dt = 0.2.
+  o.shield.num_samples = 128;
+  o.shield.safe_ratio = 0.1;
+  o.shield.dt = options_.task.control_period;
+  o.shield.class_k_gain = 5.0;
+  o.shield.probe_extent = 1.0;
+  o.check_enabled = false;  // no barrier check problem for this domain
+  o.seeds = 10;
+  o.episodes = 100;
+  if (profile_ == experiments::Profile::kQuick) {
+    o.seeds = 2;
+    o.episodes = 5;
+    o.bc.epochs = 10;
+    o.airl.iterations = 2;
+    o.airl.steps_per_iteration = 600;
+    o.flat_barrier.max_epochs = 5;
+    o.data_fractions = {1.0, 0.1};
+    o.imbalance_ratios = {1, 4};
+    o.label_noise = {0.0, 0.3};
+  }
+  return o;
+}
+
+}  // namespace secure::domains::coffee_placing
+
+namespace secure::plugins {
+void Register_coffee_placing(experiments::DomainRegistry& registry) {
+  registry.Add("coffee-placing",
+               "Coffee placing: a Franka arm carries a cup to a target square while a simulated "
+               "person reaches for a book beside it; twelve simulated participants with their own "
+               "comfort distance and cup tilt for the user study (MuJoCo; paper Section 7.2 in "
+               "simulation)",
+               [](experiments::Profile p) {
+                 return std::make_unique<domains::coffee_placing::CoffeePlacingDomain>(p);
+               });
+}
+}  // namespace secure::plugins

@@ -1,0 +1,100 @@
+#pragma once
+// Coffee placing as an experiments::Domain (the plug-in's face to the generic driver and the
+// CLI), with the participants of the user study (experiments::Population).
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "domains/coffee_placing/coffee_placing.h"
+#include "domains/coffee_placing/participants.h"
+#include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
+
+namespace secure::domains::coffee_placing {
+
+/// The domain's own options (config section "coffee_placing").
+struct CoffeePlacingDomainOptions {
+  CoffeePlacingOptions task;
+  CoffeeShieldModelOptions shield_model;
+  PopulationRanges population;
+  CoffeeDemonstrationOptions demonstrations;
+  CoffeeLabelOptions labels;
+  // Over-conservativeness: a participant's thresholds hold "with margin" when the clearance is
+  // at least comfort_distance + margin_distance and |tilt| at most max_tilt - margin_tilt.
+  double margin_distance = 0.05;  // m
+  double margin_tilt = 0.05;      // rad
+
+  /// The paper's data sizes (Table 2), or the small profile.
+  static CoffeePlacingDomainOptions For(experiments::Profile profile);
+  void Validate() const;
+  /// Keys: task, shield_model, population, demonstrations, labels (their fields),
+  /// margin_distance, margin_tilt.
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+  nlohmann::json ToJson() const;
+};
+
+/// The participants drawn from the domain's ranges (participants.h).
+class CoffeePopulation final : public experiments::Population {
+ public:
+  CoffeePopulation(const CoffeePlacingDomainOptions& options,
+                   const experiments::PopulationOptions& population);
+  int size() const override { return static_cast<int>(participants_.size()); }
+  nlohmann::json Participant(int p) const override;
+  experiments::DomainData GenerateData(int p, std::uint64_t data_seed) const override;
+  std::unique_ptr<domains::Environment> MakeEnvironment(int p) const override;
+  bool HeldWithMargin(int p, const Eigen::Ref<const Eigen::VectorXf>& observation) const override;
+  std::string Describe() const override;
+  double StepSeconds() const override { return options_.task.control_period; }
+  /// Table 4 (Likert ratings, not rates).
+  std::optional<experiments::PaperUserStudy> PaperReference() const override;
+
+  const coffee_placing::Participant& participant(int p) const;
+
+ private:
+  CoffeePlacingDomainOptions options_;
+  std::vector<coffee_placing::Participant> participants_;
+};
+
+class CoffeePlacingDomain final : public experiments::Domain {
+ public:
+  explicit CoffeePlacingDomain(experiments::Profile profile = experiments::Profile::kFull);
+
+  std::string name() const override { return "coffee-placing"; }
+  std::string Describe() const override;
+  std::string Title() const override { return "Coffee Placing"; }
+  std::string ConfigSection() const override { return "coffee_placing"; }
+  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
+  void Validate() const override { options_.Validate(); }
+  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
+
+  /// The environment judged by the mean participant (MeanParticipant: every constant at the
+  /// middle of its range).
+  std::unique_ptr<Environment> MakeEnvironment() const override;
+  /// The mean participant's data.
+  experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
+  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
+  experiments::ExperimentOptions Preset() const override;
+
+  bool HasPopulation() const override { return true; }
+  std::unique_ptr<experiments::Population> MakePopulation(
+      const experiments::PopulationOptions& options) const override;
+
+  const CoffeePlacingDomainOptions& options() const { return options_; }
+  CoffeePlacingDomainOptions& mutable_options() { return options_; }
+
+ private:
+  experiments::Profile profile_;
+  CoffeePlacingDomainOptions options_;
+};
+
+/// The barrier's input: the end-effector position and velocity, the cup's tilt, the person's
+/// wrist and hand tip, the wrist velocity and the clearance (17 features).
+const std::vector<std::string>& BarrierFeatures();
+
+/// A participant's data (GenerateData of the population and of the domain): demonstrations from
+/// `data_seed`, labelled states from data_seed + 1.
+experiments::DomainData ParticipantData(const CoffeePlacingDomainOptions& options,
+                                        const coffee_placing::Participant& participant,
+                                        std::uint64_t data_seed);
+
+}  // namespace secure::domains::coffee_placing
