@@ -5,7 +5,6 @@
 #include <cstring>
 #include <iostream>
 
-#include "secure/common/yaml_value.h"
 #include "secure/common/build_info.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
@@ -14,6 +13,7 @@
 #include "secure/common/progress.h"
 #include "secure/common/strings.h"
 #include "secure/common/yaml_keys.h"
+#include "secure/common/yaml_value.h"
 #include "secure/experiments/domain.h"
 
 namespace secure::cli {
@@ -187,7 +187,8 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   track(cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(class_k_gain));
-  track(cmd->add_option("--aggregation", aggregation, "mean | random-safe | policy-draw")->capture_default_str(),
+  track(cmd->add_option("--aggregation", aggregation, "mean | random-safe | policy-draw")
+            ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(aggregation));
   track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(resampling));
@@ -205,10 +206,10 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   track(cmd->add_option("--probes", so->num_probes, "N: probe actions per adaptive step")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(num_probes));
-  track(cmd->add_option("--probe-extent", so->probe_extent,
-                        "R: probes are uniform in mu + [-R, R]^n")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(probe_extent));
+  track(
+      cmd->add_option("--probe-extent", so->probe_extent, "R: probes are uniform in mu + [-R, R]^n")
+          ->capture_default_str(),
+      SECURE_SHIELD_FIELD_COPY(probe_extent));
   track(cmd->add_option("--sigma-step", so->sigma_step, "alpha_sigma: sigma widening step")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(sigma_step));

@@ -4,16 +4,16 @@
 #include <yaml-cpp/yaml.h>
 #include <CLI/CLI.hpp>
 #include <cstdint>
+#include <exception>
 #include <functional>
 #include <memory>
-#include <utility>
-#include <exception>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
-#include "secure/common/limits.h"
 #include "domains/double_integrator/double_integrator.h"
+#include "secure/common/limits.h"
 #include "secure/shield/shield.h"
 
 namespace secure::experiments {
@@ -122,8 +122,8 @@ struct ShieldFlags {
   void OverlayGiven(const shield::ShieldOptions& parsed, shield::ShieldOptions* base) const;
 
  private:
-  std::vector<std::pair<CLI::Option*, std::function<void(const shield::ShieldOptions&,
-                                                         shield::ShieldOptions*)>>>
+  std::vector<std::pair<CLI::Option*,
+                        std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>>>
       given_;
 };
 

@@ -35,13 +35,6 @@ Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
   return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
 }
 
-void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
-                   double max) {
-  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
-                     owner, field, "[" << r[0] << ", " << r[1] << "]",
-                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
-}
-
 double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
 
 franka::HumanArmGeometry Geometry(const PersonOptions& p) {
@@ -56,8 +49,6 @@ franka::HumanArmGeometry Geometry(const PersonOptions& p) {
   g.elbow_out = Eigen::Vector3d(0, 1, -1);  // towards the person (+y) and down
   return g;
 }
-
-franka::HumanArmPose Pose(const ArmPose& a) { return {a.shoulder, a.elbow, a.wrist, a.tip}; }
 
 }  // namespace
 
@@ -82,8 +73,7 @@ const std::vector<std::string>& ActionFeatures() {
 // The person's arm, the cup
 
 ArmPose ArmPoseForWrist(const PersonOptions& p, const Eigen::Vector3d& wrist) {
-  const franka::HumanArmPose a = franka::HumanArmPoseForWrist(Geometry(p), wrist);
-  return {a.shoulder, a.elbow, a.wrist, a.tip};
+  return franka::HumanArmPoseForWrist(Geometry(p), wrist);
 }
 
 Eigen::Vector3d CupBottom(const Eigen::Vector3d& ee, double tilt) {
@@ -92,16 +82,11 @@ Eigen::Vector3d CupBottom(const Eigen::Vector3d& ee, double tilt) {
 
 double Clearance(const PersonOptions& p, const Eigen::Vector3d& ee, double tilt,
                  const ArmPose& arm) {
-  return franka::SegmentToArmDistance(Geometry(p), ee, CupBottom(ee, tilt), Pose(arm));
+  return franka::SegmentToArmDistance(Geometry(p), ee, CupBottom(ee, tilt), arm);
 }
 
 double ObservedClearance(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o) {
-  ArmPose arm;
-  arm.shoulder = V(p.shoulder);
-  arm.wrist = At(o, kWrist);
-  arm.elbow = At(o, kElbow);
-  arm.tip = At(o, kHandTip);
-  return Clearance(p, At(o, kEePos), o[kTilt], arm);
+  return Clearance(p, At(o, kEePos), o[kTilt], franka::ReadHumanArm(o, kWrist, V(p.shoulder)));
 }
 
 Eigen::Vector3d BookReach::Wrist(const PersonOptions& p, double t) const {
@@ -146,12 +131,12 @@ void PersonOptions::Validate() const {
   for (double x : book_x)
     SECURE_CHECK_FIELD(Finite(x) && std::abs(x) <= 2, o, "book_x[]", x, "in [-2, 2] m");
   SECURE_CHECK_FIELD(Finite(book_y) && std::abs(book_y) <= 2, o, "book_y", book_y, "in [-2, 2] m");
-  CheckInterval(goal_dy, o, "goal_dy", -0.5, 0.5);
+  CheckIntervalField(goal_dy, o, "goal_dy", -0.5, 0.5);
   SECURE_CHECK_FIELD(Finite(goal_z) && goal_z > 0 && goal_z <= 1, o, "goal_z", goal_z,
                      "in (0, 1] m");
-  CheckInterval(start_time, o, "start_time", 0, 100);
-  CheckInterval(speed, o, "speed", 0.01, 5);
-  CheckInterval(dwell, o, "dwell", 0, 100);
+  CheckIntervalField(start_time, o, "start_time", 0, 100);
+  CheckIntervalField(speed, o, "speed", 0.01, 5);
+  CheckIntervalField(dwell, o, "dwell", 0, 100);
 }
 
 nlohmann::json PersonOptions::ToJson() const {
@@ -328,7 +313,7 @@ void CoffeePlacingSim::UpdateScene() {
   d->mocap_quat[4 * c + 2] = std::sin(0.5 * tilt_);
   d->mocap_quat[4 * c + 3] = 0;
   clearance_ = Clearance(p, ee, tilt_, arm_);
-  impl_->capsules.Pose(impl_->model.get(), d, Pose(arm_));  // (mj_kinematics: the cup too)
+  impl_->capsules.Pose(impl_->model.get(), d, arm_);  // (mj_kinematics: the cup too)
 }
 
 void CoffeePlacingSim::Reset(Rng& rng) {
@@ -398,12 +383,8 @@ void CoffeePlacingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
   for (int k = 0; k < 3; ++k) {
     o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
     o[kEeVel + k] = static_cast<float>(v[3 + k]);
-    o[kWrist + k] = static_cast<float>(arm_.wrist[k]);
-    o[kElbow + k] = static_cast<float>(arm_.elbow[k]);
-    o[kHandTip + k] = static_cast<float>(arm_.tip[k]);
-    o[kWristVel + k] = static_cast<float>(wrist_vel_[k]);
-    o[kElbowVel + k] = static_cast<float>(elbow_vel_[k]);
   }
+  franka::WriteHumanArm(arm_, wrist_vel_, elbow_vel_, kWrist, o);
   o[kTilt] = static_cast<float>(tilt_);
   o[kClearance] = static_cast<float>(clearance_);
 }
@@ -457,10 +438,8 @@ void CoffeeShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
       const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
       next(kEePos + k, c) += pg * a;
       next(kEeVel + k, c) = vg * a;
-      next(kWrist + k, c) += dt * state[kWristVel + k];
-      next(kHandTip + k, c) += dt * state[kWristVel + k];
-      next(kElbow + k, c) += dt * state[kElbowVel + k];
     }
+    franka::ExtrapolateHumanArm(state, kWrist, dt, next.col(c));
     const float at = std::clamp(actions(3, c), -1.0f, 1.0f);
     const float tilt = state[kTilt] + static_cast<float>(task_.tilt_scale) * at +
                        static_cast<float>(task_.tilt_coupling) * (next(kEeVel, c) - state[kEeVel]);

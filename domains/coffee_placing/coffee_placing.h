@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/human_arm.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
@@ -115,9 +116,7 @@ struct CoffeePlacingOptions {
 };
 
 /// The person's arm at one instant: shoulder, elbow, wrist, hand tip (m).
-struct ArmPose {
-  Eigen::Vector3d shoulder, elbow, wrist, tip;
-};
+using ArmPose = franka::HumanArmPose;
 /// The elbow and hand tip for a wrist position.
 ArmPose ArmPoseForWrist(const PersonOptions& p, const Eigen::Vector3d& wrist);
 /// The cup's bottom for a tool centre point and tilt.

@@ -17,13 +17,6 @@ bool Finite(double x) { return std::isfinite(x); }
 double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
 double Mid(const Interval& r) { return 0.5 * (r[0] + r[1]); }
 
-void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
-                   double max) {
-  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
-                     owner, field, "[" << r[0] << ", " << r[1] << "]",
-                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
-}
-
 Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
   return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
 }
@@ -31,12 +24,8 @@ Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
 // The arm as the observation shows it, `ahead` seconds later at its velocity.
 ArmPose ObservedArm(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o,
                     double ahead) {
-  ArmPose a;
-  a.shoulder = Eigen::Vector3d(p.shoulder[0], p.shoulder[1], p.shoulder[2]);
-  a.wrist = At(o, kWrist) + ahead * At(o, kWristVel);
-  a.elbow = At(o, kElbow) + ahead * At(o, kElbowVel);
-  a.tip = At(o, kHandTip) + ahead * At(o, kWristVel);
-  return a;
+  return franka::ReadHumanArm(o, kWrist,
+                              Eigen::Vector3d(p.shoulder[0], p.shoulder[1], p.shoulder[2]), ahead);
 }
 
 }  // namespace
@@ -66,11 +55,11 @@ void PopulationRanges::Validate() const {
                      tilt_mean, "in (0, " << kMaxTilt << ") rad");
   SECURE_CHECK_FIELD(Finite(tilt_half_range) && tilt_half_range >= 0 && tilt_half_range < tilt_mean,
                      o, "tilt_half_range", tilt_half_range, "in [0, tilt_mean)");
-  CheckInterval(caution, o, "caution", 0, 0.3);
-  CheckInterval(travel_speed, o, "travel_speed", 0.05, 1);
-  CheckInterval(ramp, o, "ramp", 0.01, 10);
-  CheckInterval(action_noise, o, "action_noise", 0, 1);
-  CheckInterval(label_noise, o, "label_noise", 0, 0.5);
+  CheckIntervalField(caution, o, "caution", 0, 0.3);
+  CheckIntervalField(travel_speed, o, "travel_speed", 0.05, 1);
+  CheckIntervalField(ramp, o, "ramp", 0.01, 10);
+  CheckIntervalField(action_noise, o, "action_noise", 0, 1);
+  CheckIntervalField(label_noise, o, "label_noise", 0, 0.5);
 }
 
 nlohmann::json PopulationRanges::ToJson() const {

@@ -1,5 +1,7 @@
 #include "domains/franka/human_arm.h"
 
+#include <mujoco/mujoco.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -27,6 +29,45 @@ HumanArmPose HumanArmPoseForWrist(const HumanArmGeometry& g, const Eigen::Vector
   const Eigen::Vector3d fore = (p.wrist - p.elbow).normalized();
   p.tip = p.wrist + g.hand * fore;
   return p;
+}
+
+namespace {
+Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
+  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
+}
+// Offsets within the arm's block.
+constexpr int kWrist = 0, kElbow = 3, kTip = 6, kWristVel = 9, kElbowVel = 12;
+}  // namespace
+
+void WriteHumanArm(const HumanArmPose& pose, const Eigen::Vector3d& wrist_velocity,
+                   const Eigen::Vector3d& elbow_velocity, int offset,
+                   Eigen::Ref<Eigen::VectorXf> o) {
+  for (int k = 0; k < 3; ++k) {
+    o[offset + kWrist + k] = static_cast<float>(pose.wrist[k]);
+    o[offset + kElbow + k] = static_cast<float>(pose.elbow[k]);
+    o[offset + kTip + k] = static_cast<float>(pose.tip[k]);
+    o[offset + kWristVel + k] = static_cast<float>(wrist_velocity[k]);
+    o[offset + kElbowVel + k] = static_cast<float>(elbow_velocity[k]);
+  }
+}
+
+HumanArmPose ReadHumanArm(const Eigen::Ref<const Eigen::VectorXf>& o, int offset,
+                          const Eigen::Vector3d& shoulder, double ahead) {
+  HumanArmPose p;
+  p.shoulder = shoulder;
+  p.wrist = At(o, offset + kWrist) + ahead * At(o, offset + kWristVel);
+  p.elbow = At(o, offset + kElbow) + ahead * At(o, offset + kElbowVel);
+  p.tip = At(o, offset + kTip) + ahead * At(o, offset + kWristVel);
+  return p;
+}
+
+void ExtrapolateHumanArm(const Eigen::Ref<const Eigen::VectorXf>& state, int offset, float dt,
+                         Eigen::Ref<Eigen::VectorXf> next) {
+  for (int k = 0; k < 3; ++k) {
+    next[offset + kWrist + k] += dt * state[offset + kWristVel + k];
+    next[offset + kTip + k] += dt * state[offset + kWristVel + k];
+    next[offset + kElbow + k] += dt * state[offset + kElbowVel + k];
+  }
 }
 
 double SegmentDistance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1,

@@ -4,12 +4,15 @@
 // two-link arm's inverse kinematics for a wrist position; distances from a segment (a blade, a
 // hand holding a cup) to the capsules' surfaces; the minimum-jerk profile of a reach; and the
 // capsules as three mocap bodies of a MuJoCo model (for the pictures). Every constant is the
-// plug-in's (an assumption standing in for a person, documented in its README). Internal to the
-// plug-ins' sources (it includes MuJoCo's headers).
-#include <mujoco/mujoco.h>
-
+// plug-in's (an assumption standing in for a person, documented in its README). It declares
+// MuJoCo's model and data types only, so the plug-ins' headers may include it.
 #include <Eigen/Core>
 #include <array>
+
+struct mjModel_;
+struct mjData_;
+typedef struct mjModel_ mjModel;  // as MuJoCo's headers declare them
+typedef struct mjData_ mjData;
 
 namespace secure::domains::franka {
 
@@ -39,6 +42,24 @@ double SegmentDistance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1,
 /// hand capsules of the axis distance minus the radius (< 0 inside).
 double SegmentToArmDistance(const HumanArmGeometry& g, const Eigen::Vector3d& a,
                             const Eigen::Vector3d& b, const HumanArmPose& arm);
+
+/// The arm in an observation: kHumanArmFeatures features from an offset, the wrist, elbow and
+/// hand tip (m), then the wrist's and the elbow's velocity (m/s), 3 each (the layout
+/// kitchen-cutting and coffee-placing share).
+inline constexpr int kHumanArmFeatures = 15;
+/// Writes `pose` (not its shoulder) and the velocities into o[offset, offset + 15).
+void WriteHumanArm(const HumanArmPose& pose, const Eigen::Vector3d& wrist_velocity,
+                   const Eigen::Vector3d& elbow_velocity, int offset,
+                   Eigen::Ref<Eigen::VectorXf> o);
+/// The arm an observation shows, moved `ahead` seconds at its velocities (the hand tip with the
+/// wrist); the shoulder is fixed and not observed.
+HumanArmPose ReadHumanArm(const Eigen::Ref<const Eigen::VectorXf>& o, int offset,
+                          const Eigen::Vector3d& shoulder, double ahead = 0.0);
+/// The shield models' guess of the arm one step later: next's wrist, elbow and hand tip = the
+/// state's moved dt at the state's velocities (the hand tip with the wrist); the velocities and
+/// every other feature of `next` are left as they are.
+void ExtrapolateHumanArm(const Eigen::Ref<const Eigen::VectorXf>& state, int offset, float dt,
+                         Eigen::Ref<Eigen::VectorXf> next);
 
 /// Minimum jerk from 0 to 1 over tau in [0, 1] (clamped).
 double MinJerk(double tau);

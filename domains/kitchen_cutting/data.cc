@@ -16,13 +16,6 @@ namespace {
 bool Finite(double x) { return std::isfinite(x); }
 double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
 
-void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
-                   double max) {
-  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
-                     owner, field, "[" << r[0] << ", " << r[1] << "]",
-                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
-}
-
 Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
   return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
 }
@@ -30,23 +23,8 @@ Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
 // The person's arm as the observation shows it, `ahead` seconds later at its velocity.
 ArmPose ObservedArm(const HumanArmOptions& h, const Eigen::Ref<const Eigen::VectorXf>& o,
                     double ahead) {
-  ArmPose p;
-  p.shoulder = Eigen::Vector3d(h.shoulder[0], h.shoulder[1], h.shoulder[2]);
-  p.wrist = At(o, kWrist) + ahead * At(o, kWristVel);
-  p.elbow = At(o, kElbow) + ahead * At(o, kElbowVel);
-  p.tip = At(o, kHandTip) + ahead * At(o, kWristVel);
-  return p;
-}
-
-void SetArm(Eigen::Ref<Eigen::VectorXf> o, const ArmPose& p, const Eigen::Vector3d& wrist_v,
-            const Eigen::Vector3d& elbow_v) {
-  for (int k = 0; k < 3; ++k) {
-    o[kWrist + k] = static_cast<float>(p.wrist[k]);
-    o[kElbow + k] = static_cast<float>(p.elbow[k]);
-    o[kHandTip + k] = static_cast<float>(p.tip[k]);
-    o[kWristVel + k] = static_cast<float>(wrist_v[k]);
-    o[kElbowVel + k] = static_cast<float>(elbow_v[k]);
-  }
+  return franka::ReadHumanArm(o, kWrist,
+                              Eigen::Vector3d(h.shoulder[0], h.shoulder[1], h.shoulder[2]), ahead);
 }
 
 // The clearance of the stroke's path: the edge lowered from where it is to the board (checked
@@ -68,8 +46,8 @@ void KitchenDemonstrationOptions::Validate() const {
   const char* o = "KitchenDemonstrationOptions";
   SECURE_CHECK_FIELD(states >= 1 && states <= 10000000, o, "states", states, "in [1, 1e7]");
   SECURE_CHECK_FIELD(max_attempts >= 1, o, "max_attempts", max_attempts, ">= 1");
-  CheckInterval(stroke_speed, o, "stroke_speed", 0.05, 1.0);
-  CheckInterval(travel_speed, o, "travel_speed", 0.05, 1.0);
+  CheckIntervalField(stroke_speed, o, "stroke_speed", 0.05, 1.0);
+  CheckIntervalField(travel_speed, o, "travel_speed", 0.05, 1.0);
   SECURE_CHECK_FIELD(Finite(caution_distance) && caution_distance > 0 && caution_distance <= 0.5, o,
                      "caution_distance", caution_distance, "in (0, 0.5] m");
   SECURE_CHECK_FIELD(Finite(look_ahead) && look_ahead >= 0 && look_ahead <= 5, o, "look_ahead",
@@ -120,8 +98,8 @@ void KitchenNearDangerousOptions::Validate() const {
                      "in [0, 1]");
   SECURE_CHECK_FIELD(Finite(near_distance) && near_distance > 0 && near_distance <= 0.3, o,
                      "near_distance", near_distance, "in (0, 0.3] m");
-  CheckInterval(stroke_vz, o, "stroke_vz", 0.0, 5.0);
-  CheckInterval(arm_speed, o, "arm_speed", 0.0, 5.0);
+  CheckIntervalField(stroke_vz, o, "stroke_vz", 0.0, 5.0);
+  CheckIntervalField(arm_speed, o, "arm_speed", 0.0, 5.0);
   SECURE_CHECK_FIELD(Finite(look_ahead) && look_ahead > 0 && look_ahead <= 5, o, "look_ahead",
                      look_ahead, "in (0, 5] s");
 }
@@ -309,7 +287,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         const double d = EdgeToArmDistance(h, edge, p);
         if (d < task.contact_distance || d > options.near_distance) continue;
         if (PathClearance(task, edge, p) >= task.contact_distance) continue;
-        SetArm(o, p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero());
+        franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
         o[kEeVel] = o[kEeVel + 1] = 0.0f;
         o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));
         accepted = true;
@@ -331,7 +309,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         later.tip += options.look_ahead * wv;
         later.elbow += options.look_ahead * ev;
         if (EdgeToArmDistance(h, edge, later) >= task.contact_distance) continue;
-        SetArm(o, p, wv, ev);
+        franka::WriteHumanArm(p, wv, ev, kWrist, o);
         accepted = true;
       }
     }

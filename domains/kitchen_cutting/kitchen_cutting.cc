@@ -32,13 +32,6 @@ const mjModel* KitchenCuttingModel() {
 
 Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
 
-void CheckInterval(const Interval& r, const char* owner, const char* field, double min,
-                   double max) {
-  SECURE_CHECK_FIELD(Finite(r[0]) && Finite(r[1]) && r[0] <= r[1] && r[0] >= min && r[1] <= max,
-                     owner, field, "[" << r[0] << ", " << r[1] << "]",
-                     "an interval [lo, hi] with lo <= hi within [" << min << ", " << max << "]");
-}
-
 double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
 
 // The person's arm as the shared helper (domains/franka/human_arm.h) sees it.
@@ -55,12 +48,10 @@ franka::HumanArmGeometry Geometry(const HumanArmOptions& h) {
   return g;
 }
 
-franka::HumanArmPose Pose(const ArmPose& a) { return {a.shoulder, a.elbow, a.wrist, a.tip}; }
-
 double EdgeDistance(const HumanArmOptions& h, const Eigen::Vector3d& centre,
                     const Eigen::Vector3d& axis, const ArmPose& arm) {
   const Eigen::Vector3d a = centre - kBladeHalfLength * axis, b = centre + kBladeHalfLength * axis;
-  return franka::SegmentToArmDistance(Geometry(h), a, b, Pose(arm));
+  return franka::SegmentToArmDistance(Geometry(h), a, b, arm);
 }
 
 }  // namespace
@@ -83,8 +74,7 @@ const std::vector<std::string>& ActionFeatures() {
 // The person's arm
 
 ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist) {
-  const franka::HumanArmPose p = franka::HumanArmPoseForWrist(Geometry(h), wrist);
-  return {p.shoulder, p.elbow, p.wrist, p.tip};
+  return franka::HumanArmPoseForWrist(Geometry(h), wrist);
 }
 
 double EdgeToArmDistance(const HumanArmOptions& h, const Eigen::Vector3d& edge_centre,
@@ -136,15 +126,15 @@ void HumanArmOptions::Validate() const {
   }
   SECURE_CHECK_FIELD(Finite(into_probability) && into_probability >= 0 && into_probability <= 1, o,
                      "into_probability", into_probability, "in [0, 1]");
-  CheckInterval(into_x, o, "into_x", -2, 2);
-  CheckInterval(into_y, o, "into_y", -2, 2);
-  CheckInterval(into_z, o, "into_z", 0, 2);
-  CheckInterval(away_x, o, "away_x", -2, 2);
-  CheckInterval(away_y, o, "away_y", -2, 2);
-  CheckInterval(away_z, o, "away_z", 0, 2);
-  CheckInterval(start_time, o, "start_time", 0, 100);
-  CheckInterval(speed, o, "speed", 0.01, 5);
-  CheckInterval(dwell, o, "dwell", 0, 100);
+  CheckIntervalField(into_x, o, "into_x", -2, 2);
+  CheckIntervalField(into_y, o, "into_y", -2, 2);
+  CheckIntervalField(into_z, o, "into_z", 0, 2);
+  CheckIntervalField(away_x, o, "away_x", -2, 2);
+  CheckIntervalField(away_y, o, "away_y", -2, 2);
+  CheckIntervalField(away_z, o, "away_z", 0, 2);
+  CheckIntervalField(start_time, o, "start_time", 0, 100);
+  CheckIntervalField(speed, o, "speed", 0.01, 5);
+  CheckIntervalField(dwell, o, "dwell", 0, 100);
 }
 
 nlohmann::json HumanArmOptions::ToJson() const {
@@ -328,7 +318,7 @@ void KitchenCuttingSim::UpdateHuman() {
     elbow_vel_ = (ahead.elbow - behind.elbow) / span;
   }
   // The capsules (for the picture; the dangerous test uses arm_).
-  impl_->capsules.Pose(impl_->model.get(), impl_->data.get(), Pose(arm_));
+  impl_->capsules.Pose(impl_->model.get(), impl_->data.get(), arm_);
 }
 
 void KitchenCuttingSim::UpdateProgress() {
@@ -396,12 +386,8 @@ void KitchenCuttingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
     o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
     o[kEeVel + k] = static_cast<float>(v[3 + k]);
     o[kBlade + k] = static_cast<float>(d->site_xpos[3 * impl_->blade + k]);
-    o[kWrist + k] = static_cast<float>(arm_.wrist[k]);
-    o[kElbow + k] = static_cast<float>(arm_.elbow[k]);
-    o[kHandTip + k] = static_cast<float>(arm_.tip[k]);
-    o[kWristVel + k] = static_cast<float>(wrist_vel_[k]);
-    o[kElbowVel + k] = static_cast<float>(elbow_vel_[k]);
   }
+  franka::WriteHumanArm(arm_, wrist_vel_, elbow_vel_, kWrist, o);
   o[kStrokes] = static_cast<float>(strokes_) / static_cast<float>(options_.strokes_required);
   o[kLifted] = lifted_ ? 1.0f : 0.0f;
 }
@@ -495,10 +481,8 @@ void KitchenShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
       next(kEePos + k, c) += pg * a;
       next(kEeVel + k, c) = vg * a;
       next(kBlade + k, c) += pg * a;
-      next(kWrist + k, c) += dt * state[kWristVel + k];
-      next(kHandTip + k, c) += dt * state[kWristVel + k];
-      next(kElbow + k, c) += dt * state[kElbowVel + k];
     }
+    franka::ExtrapolateHumanArm(state, kWrist, dt, next.col(c));
   }
 }
 

@@ -38,6 +38,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/human_arm.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
@@ -111,9 +112,7 @@ struct KitchenCuttingOptions {
 constexpr double kBladeDrop = 0.055, kBladeHalfLength = 0.08;
 
 /// The person's arm at one instant: shoulder, elbow, wrist, hand tip (m).
-struct ArmPose {
-  Eigen::Vector3d shoulder, elbow, wrist, tip;
-};
+using ArmPose = franka::HumanArmPose;
 
 /// The elbow and hand tip for a wrist position (the wrist pulled into reach if needed).
 ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist);

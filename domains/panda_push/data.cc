@@ -84,8 +84,7 @@ Eigen::MatrixXf WithNoisyCopies(const Eigen::MatrixXf& states, int copies, Rng& 
 
 void PandaDemonstrationOptions::Validate() const {
   const char* o = "PandaDemonstrationOptions";
-  SECURE_CHECK_FIELD(episodes >= 1 && episodes <= 10000, o, "episodes", episodes,
-                     "in [1, 10000]");
+  SECURE_CHECK_FIELD(episodes >= 1 && episodes <= 10000, o, "episodes", episodes, "in [1, 10000]");
   SECURE_CHECK_FIELD(max_attempts >= episodes, o, "max_attempts", max_attempts,
                      ">= episodes (" << episodes << ")");
   CheckRange(push_height, o, "push_height", 0.0, 0.4);
@@ -135,10 +134,10 @@ void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::str
 void PandaSafeOptions::Validate() const {
   SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "PandaSafeOptions", "count", count,
                      "in [1, 1e8]");
-  SECURE_CHECK_FIELD(noisy_copies >= 0 && noisy_copies <= 1000, "PandaSafeOptions",
-                     "noisy_copies", noisy_copies, "in [0, 1000]");
-  SECURE_CHECK_FIELD(hover_copies >= 0 && hover_copies <= 1000, "PandaSafeOptions",
-                     "hover_copies", hover_copies, "in [0, 1000]");
+  SECURE_CHECK_FIELD(noisy_copies >= 0 && noisy_copies <= 1000, "PandaSafeOptions", "noisy_copies",
+                     noisy_copies, "in [0, 1000]");
+  SECURE_CHECK_FIELD(hover_copies >= 0 && hover_copies <= 1000, "PandaSafeOptions", "hover_copies",
+                     hover_copies, "in [0, 1000]");
   CheckRange(hover_gap, "PandaSafeOptions", "hover_gap", 0.0, 1.0);
   CheckRange(hover_z, "PandaSafeOptions", "hover_z", 0.0, 1.0);
   SECURE_CHECK_FIELD(Finite(hover_speed) && hover_speed >= 0 && hover_speed <= 1,
@@ -180,8 +179,8 @@ void PandaNearDangerousOptions::Validate() const {
                      low_z_max, "in [0, 0.4] m");
   CheckRange(fast_vx, o, "fast_vx", 0.0, 10.0);
   CheckRange(fast_vz, o, "fast_vz", 0.0, 10.0);
-  SECURE_CHECK_FIELD(Finite(back_off) && back_off >= 0 && back_off <= 0.1, o, "back_off",
-                     back_off, "in [0, 0.1] m");
+  SECURE_CHECK_FIELD(Finite(back_off) && back_off >= 0 && back_off <= 0.1, o, "back_off", back_off,
+                     "in [0, 0.1] m");
 }
 
 nlohmann::json PandaNearDangerousOptions::ToJson() const {
@@ -237,8 +236,8 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
   Rng rng(options.seed);
   PandaDemonstrations out;
   std::vector<Eigen::VectorXf> obs_rows, act_rows;
-  out.trajectories.source = "scripted panda-push demonstrations (seed " +
-                            std::to_string(options.seed) + ")";
+  out.trajectories.source =
+      "scripted panda-push demonstrations (seed " + std::to_string(options.seed) + ")";
   out.trajectories.state_features = ObservationFeatures();
   out.trajectories.action_features = ActionFeatures();
   out.trajectories.episode_begin.push_back(0);
@@ -266,8 +265,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
       } else {
         descended = true;
         a[2] = static_cast<float>(std::clamp(0.5 * (h - o[kEePos + 2]) / 0.05, -1.0, 1.0));
-        a[1] = static_cast<float>(std::clamp(-5.0 * (o[kEePos + 1] - o[kBlockPos + 1]), -0.2,
-                                             0.2));
+        a[1] = static_cast<float>(std::clamp(-5.0 * (o[kEePos + 1] - o[kBlockPos + 1]), -0.2, 0.2));
         // Fast while far, slowing down in proportion to the gap over the last approach_gap
         // metres (a keyboard user easing off), the push speed once in contact.
         const double ease = std::clamp(gap / std::max(options.approach_gap, 1e-9), 0.0, 1.0);
@@ -311,11 +309,10 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
     ++kept;
   }
   SECURE_CHECK(kept == options.episodes,
-               "panda-push demonstrations: only " << kept << " of " << options.episodes
-                                                  << " succeeded in " << options.max_attempts
-                                                  << " attempts (" << out.discarded_toppled
-                                                  << " toppled the block, "
-                                                  << out.discarded_failed << " missed the target)");
+               "panda-push demonstrations: only "
+                   << kept << " of " << options.episodes << " succeeded in " << options.max_attempts
+                   << " attempts (" << out.discarded_toppled << " toppled the block, "
+                   << out.discarded_failed << " missed the target)");
   const long n = static_cast<long>(obs_rows.size());
   out.trajectories.states.resize(kObservationDim, n);
   out.trajectories.actions.resize(kActionDim, n);
@@ -348,8 +345,8 @@ data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafe
         s[kEeVel + k] = static_cast<float>(rng.Uniform(-options.hover_speed, options.hover_speed));
     }
   }
-  return Subset("panda-push safe states (demonstrations, " +
-                    std::to_string(options.noisy_copies) + " noisy " +
+  return Subset("panda-push safe states (demonstrations, " + std::to_string(options.noisy_copies) +
+                    " noisy " +
                     (options.hover_copies > 0
                          ? "and " + std::to_string(options.hover_copies) + " hovering copies each)"
                          : std::string("copies each)")),
@@ -420,16 +417,16 @@ ReleasedPandaFiles ReadReleasedPandaFiles(const std::string& dir) {
   std::vector<long> keep;
   for (long i = 0; i < nd.states.cols(); ++i)
     if (!nd.states.col(i).isZero(0.0f)) keep.push_back(i);
-  f.near_dangerous = Subset("released panda-push near-dangerous states (" + nd.source + ")",
-                            nd.states, keep);
+  f.near_dangerous =
+      Subset("released panda-push near-dangerous states (" + nd.source + ")", nd.states, keep);
   return f;
 }
 
 ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeOptions& safe,
                                         long near_count, Rng& rng) {
   safe.Validate();
-  SECURE_CHECK(near_count >= 1, "released panda-push data: near_count = " << near_count
-                                                                           << ", must be >= 1");
+  SECURE_CHECK(near_count >= 1,
+               "released panda-push data: near_count = " << near_count << ", must be >= 1");
   ReleasedPandaFiles files = ReadReleasedPandaFiles(dir);
   ReleasedPandaData r;
   const Eigen::MatrixXf safe_all =
@@ -438,10 +435,9 @@ ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeO
                       std::to_string(safe.noisy_copies) + " noisy copies each)",
                   safe_all,
                   DrawIndices(safe_all.cols(), safe.count, rng, "released safe states (count)"));
-  r.near_dangerous =
-      Subset(files.near_dangerous.source, files.near_dangerous.states,
-             DrawIndices(files.near_dangerous.size(), near_count, rng,
-                         "released near-dangerous states (count)"));
+  r.near_dangerous = Subset(files.near_dangerous.source, files.near_dangerous.states,
+                            DrawIndices(files.near_dangerous.size(), near_count, rng,
+                                        "released near-dangerous states (count)"));
   r.demonstrations = std::move(files.demonstrations);
   return r;
 }
@@ -458,9 +454,9 @@ nlohmann::json LabelCheckResult::ToJson() const {
 
 LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet& set,
                              const LabelCheckOptions& options) {
-  SECURE_CHECK(set.dim() == kObservationDim,
-               "panda-push label check: " << set.source << " has " << set.dim()
-                                          << " features, expected 18");
+  SECURE_CHECK(
+      set.dim() == kObservationDim,
+      "panda-push label check: " << set.source << " has " << set.dim() << " features, expected 18");
   PandaPushSim sim(task);
   const int push_steps = static_cast<int>(std::lround(options.push_seconds / task.control_period));
   const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
@@ -485,8 +481,9 @@ LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet&
     int stop_begin = push_steps;  // the step the ramp down starts
     for (int t = 0; t < stop_begin + stop_steps + hold_steps && !toppled; ++t) {
       const float scale =
-          t < stop_begin ? 1.0f
-                         : std::max(0.0f, 1.0f - static_cast<float>(t - stop_begin + 1) / stop_steps);
+          t < stop_begin
+              ? 1.0f
+              : std::max(0.0f, 1.0f - static_cast<float>(t - stop_begin + 1) / stop_steps);
       sim.Step(scale * a);
       sim.Observe(o);
       if (t < stop_begin && (o.segment<3>(kEePos) - start).norm() >= options.push_distance)

@@ -288,9 +288,9 @@ void PandaPushSim::CopyStateFrom(const PandaPushSim& other) {
   const mjModel* o = other.impl_->model.get();
   // mj_copyData needs the same sizes; the options' physical constants (friction, timestep)
   // must agree too, which the constructor's callers ensure (one options struct).
-  SECURE_CHECK(m->nbuffer == o->nbuffer && m->nstack == o->nstack &&
-                   m->opt.timestep == o->opt.timestep,
-               "panda-push: CopyStateFrom needs two simulations of the same model and options");
+  SECURE_CHECK(
+      m->nbuffer == o->nbuffer && m->nstack == o->nstack && m->opt.timestep == o->opt.timestep,
+      "panda-push: CopyStateFrom needs two simulations of the same model and options");
   mj_copyData(impl_->data.get(), m, other.impl_->data.get());
 }
 
@@ -403,7 +403,8 @@ void PandaPushRolloutModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& stat
 PandaPushEnv::PandaPushEnv(const PandaPushOptions& options,
                            const PandaPushShieldModelOptions& shield_model)
     : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {
-  if (shield_model.kind == "rollout") rollout_model_ = std::make_unique<PandaPushRolloutModel>(sim_);
+  if (shield_model.kind == "rollout")
+    rollout_model_ = std::make_unique<PandaPushRolloutModel>(sim_);
 }
 
 const DynamicsModel& PandaPushEnv::ShieldModel() const {

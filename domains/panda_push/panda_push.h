@@ -62,23 +62,23 @@ const std::vector<std::string>& ObservationFeatures();
 const std::vector<std::string>& ActionFeatures();
 
 /// The released neutral posture of the arm (rad).
-inline constexpr std::array<double, kArmJoints> kNeutralJoints = {0.0,  0.11, 0.0, -2.55,
-                                                                  0.0,  2.6,  0.79};
+inline constexpr std::array<double, kArmJoints> kNeutralJoints = {0.0, 0.11, 0.0, -2.55,
+                                                                  0.0, 2.6,  0.79};
 
 struct PandaPushOptions {
   int max_steps = 150;
-  double control_period = 0.04;  // s per Step()
-  int substeps = 20;             // physics steps per control period (timestep 2 ms)
-  double action_scale = 0.05;    // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;  // rad/s, the joint controller's natural frequency
-  double ik_damping = 0.02;      // damped least squares lambda (m / rad)
+  double control_period = 0.04;       // s per Step()
+  int substeps = 20;                  // physics steps per control period (timestep 2 ms)
+  double action_scale = 0.05;         // m of end-effector target offset per unit action
+  double tracking_omega = 40.0;       // rad/s, the joint controller's natural frequency
+  double ik_damping = 0.02;           // damped least squares lambda (m / rad)
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   std::array<double, 3> block_start = {0.40, 0.0, 0.20};
   std::array<double, 3> target = {0.55, 0.0, 0.20};
   double success_radius = 0.03;
-  double topple_angle = 0.4;        // rad of tilt from upright
-  double table_friction = 0.6;      // block-table sliding friction
-  double pusher_friction = 0.1;     // block-hand and block-finger sliding friction
+  double topple_angle = 0.4;     // rad of tilt from upright
+  double table_friction = 0.6;   // block-table sliding friction
+  double pusher_friction = 0.1;  // block-hand and block-finger sliding friction
 
   /// @throws secure::Error naming the field, value and rule.
   void Validate() const;
