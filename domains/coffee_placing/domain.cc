@@ -1,4 +1,5 @@
 #include "domains/coffee_placing/domain.h"
+#include "domains/franka/arm_preset.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -182,40 +183,12 @@ void CoffeePlacingDomain::CheckExperiment(const experiments::ExperimentOptions& 
 }
 
 experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
-  experiments::ExperimentOptions o;
+  experiments::ExperimentOptions o =
+      franka::ArmExperimentPreset(profile_, options_.task.control_period);
   o.data_seed = 5000;
-  o.barrier_kind = experiments::BarrierKind::kFlat;
   // Table 2's coffee-placing barrier: FC(64, 64), tanh, on BarrierFeatures().
   o.flat_barrier.hidden = {64, 64};
-  o.flat_barrier.activation = nn::Activation::kTanh;
   o.flat_barrier.input_features = BarrierFeatures();
-  o.flat_barrier.learning_rate = 1e-3;
-  o.flat_barrier.final_learning_rate = 1e-5;
-  o.flat_barrier.max_epochs = 100;
-  // AIRL as for the other Panda domains (fixed-horizon episodes, the BC regulariser).
-  o.airl.iterations = 10;
-  o.airl.steps_per_iteration = 3000;
-  o.airl.bc_weight = 1.0;
-  // The shield: M = 128, rho0 = 0.1, one control period ahead, alpha dt = 0.2.
-  o.shield.num_samples = 128;
-  o.shield.safe_ratio = 0.1;
-  o.shield.dt = options_.task.control_period;
-  o.shield.class_k_gain = 5.0;
-  o.shield.probe_extent = 1.0;
-  o.check_enabled = false;  // no barrier check problem for this domain
-  o.seeds = 10;
-  o.episodes = 100;
-  if (profile_ == experiments::Profile::kQuick) {
-    o.seeds = 2;
-    o.episodes = 5;
-    o.bc.epochs = 10;
-    o.airl.iterations = 2;
-    o.airl.steps_per_iteration = 600;
-    o.flat_barrier.max_epochs = 5;
-    o.data_fractions = {1.0, 0.1};
-    o.imbalance_ratios = {1, 4};
-    o.label_noise = {0.0, 0.3};
-  }
   return o;
 }
 

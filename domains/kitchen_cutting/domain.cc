@@ -1,4 +1,5 @@
 #include "domains/kitchen_cutting/domain.h"
+#include "domains/franka/arm_preset.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -163,43 +164,13 @@ void KitchenCuttingDomain::CheckExperiment(const experiments::ExperimentOptions&
 }
 
 experiments::ExperimentOptions KitchenCuttingDomain::Preset() const {
-  experiments::ExperimentOptions o;
+  // 10 seeds x 100 episodes (the paper's own protocol, 10 episodes, is --seeds 1 --episodes 10).
+  experiments::ExperimentOptions o =
+      franka::ArmExperimentPreset(profile_, options_.task.control_period);
   o.data_seed = 4000;
-  o.barrier_kind = experiments::BarrierKind::kFlat;
-  // Table 2's knife-cutting barrier: 32-128-128-256-256-256-256-128-128-32, tanh; the training
-  // settings of panda-push's (the same net).
+  // Table 2's knife-cutting barrier: 32-128-128-256-256-256-256-128-128-32, tanh.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
-  o.flat_barrier.activation = nn::Activation::kTanh;
   o.flat_barrier.input_features = BarrierFeatures();
-  o.flat_barrier.learning_rate = 1e-3;
-  o.flat_barrier.final_learning_rate = 1e-5;
-  o.flat_barrier.max_epochs = 100;
-  // AIRL as for panda-push (fixed-horizon episodes, the BC regulariser).
-  o.airl.iterations = 10;
-  o.airl.steps_per_iteration = 3000;
-  o.airl.bc_weight = 1.0;
-  // The shield as for panda-push: M = 128, rho0 = 0.1, one control period ahead, alpha dt = 0.2.
-  o.shield.num_samples = 128;
-  o.shield.safe_ratio = 0.1;
-  o.shield.dt = options_.task.control_period;
-  o.shield.class_k_gain = 5.0;
-  o.shield.probe_extent = 1.0;
-  o.check_enabled = false;  // no barrier check problem for this domain
-  // Statistics: 10 seeds x 100 episodes (the paper's own protocol, 10 episodes, is
-  // --seeds 1 --episodes 10).
-  o.seeds = 10;
-  o.episodes = 100;
-  if (profile_ == experiments::Profile::kQuick) {
-    o.seeds = 2;
-    o.episodes = 5;
-    o.bc.epochs = 10;
-    o.airl.iterations = 2;
-    o.airl.steps_per_iteration = 600;
-    o.flat_barrier.max_epochs = 5;
-    o.data_fractions = {1.0, 0.1};
-    o.imbalance_ratios = {1, 4};
-    o.label_noise = {0.0, 0.3};
-  }
   return o;
 }
 

@@ -1,4 +1,5 @@
 #include "domains/panda_push/domain.h"
+#include "domains/franka/arm_preset.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -56,8 +57,7 @@ void PandaPushDomainOptions::ApplyYaml(const YAML::Node& node, const std::string
                [this](const YAML::Node& n, const std::string& w) {
                  const std::string v = YamlValue<std::string>(n, "barrier_data", w);
                  SECURE_CHECK(v == "generated" || v == "released",
-                              w << ": barrier_data = '" << v
-                                << "', must be generated or released");
+                              w << ": barrier_data = '" << v << "', must be generated or released");
                  barrier_data = v == "released" ? BarrierData::kReleased : BarrierData::kGenerated;
                })
       .Field("released_data_dir", &released_data_dir)
@@ -122,7 +122,7 @@ std::string PandaPushDomain::LabelCheckDescription() const {
 }
 
 std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64_t data_seed,
-                                                                    long max_states) const {
+                                                                     long max_states) const {
   options_.Validate();
   SECURE_CHECK(max_states >= 1, "label check: max_states = " << max_states << ", must be >= 1");
   PandaDemonstrationOptions demo_options = options_.demonstrations;
@@ -132,8 +132,7 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   // The same draws as GenerateData (safe, then near-dangerous).
   const data::StateSet safe = PandaSafeStates(demos, options_.safe, rng);
   std::vector<NearDangerousScenario> kinds;
-  const data::StateSet near =
-      PandaNearDangerousStates(demos, options_.near_dangerous, rng, &kinds);
+  const data::StateSet near = PandaNearDangerousStates(demos, options_.near_dangerous, rng, &kinds);
   LabelCheckOptions check;
   check.max_states = max_states;
   check.velocity_gain = options_.shield_model.velocity_gain;
@@ -192,42 +191,13 @@ void PandaPushDomain::CheckExperiment(const experiments::ExperimentOptions& opti
 }
 
 experiments::ExperimentOptions PandaPushDomain::Preset() const {
-  experiments::ExperimentOptions o;
+  experiments::ExperimentOptions o =
+      franka::ArmExperimentPreset(profile_, options_.task.control_period);
   o.data_seed = 3000;
-  o.barrier_kind = experiments::BarrierKind::kFlat;
   // The paper's Table 2 barrier: 32-128-128-256-256-256-256-128-128-32, tanh, on the first 9
   // observation features.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
-  o.flat_barrier.activation = nn::Activation::kTanh;
   o.flat_barrier.input_features = BarrierFeatures();
-  // A 10-layer net: a lower step size than the small nets' 3e-3 (at 3e-3 the best validation
-  // epoch was the first).
-  o.flat_barrier.learning_rate = 1e-3;
-  o.flat_barrier.final_learning_rate = 1e-5;
-  o.flat_barrier.max_epochs = 100;
-  // AIRL on 150-step episodes (fixed horizon), with the BC regulariser as in Derby.
-  o.airl.iterations = 10;
-  o.airl.steps_per_iteration = 3000;
-  o.airl.bc_weight = 1.0;
-  // The shield: M = 128 (Section 6.3's Panda setting in the paper's Figure 9 runs), rho0 = 0.1,
-  // one control period ahead; alpha dt = 0.2 < 1 (requirement R3).
-  o.shield.num_samples = 128;
-  o.shield.safe_ratio = 0.1;
-  o.shield.dt = options_.task.control_period;
-  o.shield.class_k_gain = 5.0;
-  o.shield.probe_extent = 1.0;
-  o.check_enabled = false;  // no barrier check problem for this domain yet
-  if (profile_ == experiments::Profile::kQuick) {
-    o.seeds = 2;
-    o.episodes = 5;
-    o.bc.epochs = 10;
-    o.airl.iterations = 2;
-    o.airl.steps_per_iteration = 600;
-    o.flat_barrier.max_epochs = 5;
-    o.data_fractions = {1.0, 0.1};
-    o.imbalance_ratios = {1, 4};
-    o.label_noise = {0.0, 0.3};
-  }
   return o;
 }
 
