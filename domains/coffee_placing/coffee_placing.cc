@@ -511,37 +511,29 @@ bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
   return true;
 }
 
+namespace {
 // The shared offscreen renderer, from the robot's right (-y), a little above: the person's arm
 // reaching in from the back.
-class CoffeePlacingRenderer {
- public:
-  explicit CoffeePlacingRenderer(const CoffeePlacingSim& sim)
-      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "coffee-placing") {}
-  void Render(int width, int height, Frame* frame) {
-    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
-                     width, height, frame);
-  }
-
- private:
-  static franka::CameraView View() {
-    franka::CameraView v;
-    v.lookat[0] = 0.25;
-    v.lookat[1] = 0.0;
-    v.lookat[2] = 0.12;
-    v.distance = 1.5;
-    v.azimuth = 60;
-    v.elevation = -30;
-    return v;
-  }
-  const CoffeePlacingSim& sim_;
-  franka::OffscreenRenderer renderer_;
-};
+franka::CameraView CoffeePlacingView() {
+  franka::CameraView v;
+  v.lookat[0] = 0.25;
+  v.lookat[1] = 0.0;
+  v.lookat[2] = 0.12;
+  v.distance = 1.5;
+  v.azimuth = 60;
+  v.elevation = -30;
+  return v;
+}
+}  // namespace
 
 CoffeePlacingEnv::~CoffeePlacingEnv() = default;
 
 void CoffeePlacingEnv::Render(int width, int height, Frame* frame) {
-  if (renderer_ == nullptr) renderer_ = std::make_unique<CoffeePlacingRenderer>(sim_);
-  renderer_->Render(width, height, frame);
+  const auto* model = static_cast<const mjModel*>(sim_.model());
+  if (renderer_ == nullptr)
+    renderer_ =
+        std::make_unique<franka::OffscreenRenderer>(model, CoffeePlacingView(), "coffee-placing");
+  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 
 std::unique_ptr<Environment> CoffeePlacingEnv::Clone() const {

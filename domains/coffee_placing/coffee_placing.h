@@ -45,6 +45,10 @@ namespace YAML {
 class Node;
 }
 
+namespace secure::domains::franka {
+class OffscreenRenderer;
+}
+
 namespace secure::domains::coffee_placing {
 
 constexpr int kObservationDim = 23;
@@ -201,8 +205,6 @@ class CoffeeShieldModel final : public DynamicsModel {
   CoffeePlacingOptions task_;
 };
 
-class CoffeePlacingRenderer;
-
 /// The task as an Environment, judged by `thresholds` (collided = a violation of them).
 class CoffeePlacingEnv final : public Environment {
  public:
@@ -237,7 +239,7 @@ class CoffeePlacingEnv final : public Environment {
   CoffeeShieldModel shield_model_;
   Thresholds thresholds_;
   bool violated_ = false;
-  std::unique_ptr<CoffeePlacingRenderer> renderer_;
+  std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };
 
 }  // namespace secure::domains::coffee_placing

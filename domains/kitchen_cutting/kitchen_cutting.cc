@@ -541,37 +541,29 @@ bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& ob
   return true;
 }
 
+namespace {
 // The shared offscreen renderer, looking at the board from the robot's right (-y), a little
 // above: the arm at the left, the person's arm reaching in from the back.
-class KitchenCuttingRenderer {
- public:
-  explicit KitchenCuttingRenderer(const KitchenCuttingSim& sim)
-      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "kitchen-cutting") {}
-  void Render(int width, int height, Frame* frame) {
-    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
-                     width, height, frame);
-  }
-
- private:
-  static franka::CameraView View() {
-    franka::CameraView v;
-    v.lookat[0] = 0.15;
-    v.lookat[1] = 0.05;
-    v.lookat[2] = 0.15;
-    v.distance = 1.4;
-    v.azimuth = 60;
-    v.elevation = -25;
-    return v;
-  }
-  const KitchenCuttingSim& sim_;
-  franka::OffscreenRenderer renderer_;
-};
+franka::CameraView KitchenCuttingView() {
+  franka::CameraView v;
+  v.lookat[0] = 0.15;
+  v.lookat[1] = 0.05;
+  v.lookat[2] = 0.15;
+  v.distance = 1.4;
+  v.azimuth = 60;
+  v.elevation = -25;
+  return v;
+}
+}  // namespace
 
 KitchenCuttingEnv::~KitchenCuttingEnv() = default;
 
 void KitchenCuttingEnv::Render(int width, int height, Frame* frame) {
-  if (renderer_ == nullptr) renderer_ = std::make_unique<KitchenCuttingRenderer>(sim_);
-  renderer_->Render(width, height, frame);
+  const auto* model = static_cast<const mjModel*>(sim_.model());
+  if (renderer_ == nullptr)
+    renderer_ =
+        std::make_unique<franka::OffscreenRenderer>(model, KitchenCuttingView(), "kitchen-cutting");
+  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 
 std::unique_ptr<Environment> KitchenCuttingEnv::Clone() const {

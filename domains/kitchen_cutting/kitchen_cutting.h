@@ -47,6 +47,10 @@ namespace YAML {
 class Node;
 }
 
+namespace secure::domains::franka {
+class OffscreenRenderer;
+}
+
 namespace secure::domains::kitchen_cutting {
 
 constexpr int kObservationDim = 26;
@@ -212,7 +216,6 @@ class KitchenShieldModel final : public DynamicsModel {
 };
 
 /// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
-class KitchenCuttingRenderer;
 
 class KitchenCuttingEnv final : public Environment {
  public:
@@ -248,7 +251,7 @@ class KitchenCuttingEnv final : public Environment {
   KitchenShieldModelOptions shield_model_options_;
   KitchenShieldModel shield_model_;
   bool dangerous_ = false;
-  std::unique_ptr<KitchenCuttingRenderer> renderer_;
+  std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };
 
 }  // namespace secure::domains::kitchen_cutting

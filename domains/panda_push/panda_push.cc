@@ -463,35 +463,26 @@ bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observa
   return true;
 }
 
+namespace {
 // The shared offscreen renderer, seen from the side (-y), slightly above the table: the arm at
 // the left, the block and the target at the right.
-class PandaPushRenderer {
- public:
-  explicit PandaPushRenderer(const PandaPushSim& sim)
-      : sim_(sim), renderer_(static_cast<const mjModel*>(sim.model()), View(), "panda-push") {}
-  void Render(int width, int height, Frame* frame) {
-    renderer_.Render(static_cast<const mjModel*>(sim_.model()), static_cast<mjData*>(sim_.data()),
-                     width, height, frame);
-  }
-
- private:
-  static franka::CameraView View() {
-    franka::CameraView v;
-    v.lookat[0] = 0.12;
-    v.lookat[1] = 0.0;
-    v.lookat[2] = 0.3;
-    v.distance = 2.0;
-    v.azimuth = 75;
-    v.elevation = -15;
-    return v;
-  }
-  const PandaPushSim& sim_;
-  franka::OffscreenRenderer renderer_;
-};
+franka::CameraView PandaPushView() {
+  franka::CameraView v;
+  v.lookat[0] = 0.12;
+  v.lookat[1] = 0.0;
+  v.lookat[2] = 0.3;
+  v.distance = 2.0;
+  v.azimuth = 75;
+  v.elevation = -15;
+  return v;
+}
+}  // namespace
 
 void PandaPushEnv::Render(int width, int height, Frame* frame) {
-  if (renderer_ == nullptr) renderer_ = std::make_unique<PandaPushRenderer>(sim_);
-  renderer_->Render(width, height, frame);
+  const auto* model = static_cast<const mjModel*>(sim_.model());
+  if (renderer_ == nullptr)
+    renderer_ = std::make_unique<franka::OffscreenRenderer>(model, PandaPushView(), "panda-push");
+  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 
 std::unique_ptr<Environment> PandaPushEnv::Clone() const {

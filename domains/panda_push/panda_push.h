@@ -47,6 +47,10 @@ namespace YAML {
 class Node;
 }
 
+namespace secure::domains::franka {
+class OffscreenRenderer;
+}
+
 namespace secure::domains::panda_push {
 
 constexpr int kObservationDim = 18;
@@ -217,7 +221,6 @@ class PandaPushRolloutModel final : public DynamicsModel {
 };
 
 /// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
-class PandaPushRenderer;
 
 class PandaPushEnv final : public Environment {
  public:
@@ -256,7 +259,7 @@ class PandaPushEnv final : public Environment {
   PandaPushShieldModel shield_model_;
   std::unique_ptr<PandaPushRolloutModel> rollout_model_;  // kind = rollout
   bool toppled_ = false;
-  std::unique_ptr<PandaPushRenderer> renderer_;
+  std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };
 
 }  // namespace secure::domains::panda_push
