@@ -512,7 +512,7 @@ bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
 }
 
 namespace {
-// The shared offscreen renderer, from the robot's right (-y), a little above: the person's arm
+// The camera of `secure render`, from the robot's right (-y), a little above: the person's arm
 // reaching in from the back.
 franka::CameraView CoffeePlacingView() {
   franka::CameraView v;

@@ -542,7 +542,7 @@ bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& ob
 }
 
 namespace {
-// The shared offscreen renderer, looking at the board from the robot's right (-y), a little
+// The camera of `secure render`, looking at the board from the robot's right (-y), a little
 // above: the arm at the left, the person's arm reaching in from the back.
 franka::CameraView KitchenCuttingView() {
   franka::CameraView v;

@@ -464,7 +464,7 @@ bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observa
 }
 
 namespace {
-// The shared offscreen renderer, seen from the side (-y), slightly above the table: the arm at
+// The camera of `secure render`, seen from the side (-y), slightly above the table: the arm at
 // the left, the block and the target at the right.
 franka::CameraView PandaPushView() {
   franka::CameraView v;
