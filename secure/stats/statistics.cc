@@ -256,20 +256,16 @@ nlohmann::json TostResult::ToJson() const {
           {"p_value", p_value}};
 }
 
-TostResult TostWelch(const std::vector<double>& a, const std::vector<double>& b, double bound) {
-  SECURE_CHECK(std::isfinite(bound) && bound > 0,
-               "TostWelch: bound = " << bound << ", must be > 0 and finite");
-  CheckSample("TostWelch", "sample 'a'", a, 2);
-  CheckSample("TostWelch", "sample 'b'", b, 2);
-  const SampleSummary sa = Summarize(a), sb = Summarize(b);
-  const double va = sa.std * sa.std / static_cast<double>(sa.n);  // squared standard errors
-  const double vb = sb.std * sb.std / static_cast<double>(sb.n);
+namespace {
 
+// The two one-sided t-tests of a difference with standard error `se` on `df` degrees of freedom.
+// se = 0 means the difference is exact (see TostWelch's comment).
+TostResult TostOf(double difference, double se, double df, double bound) {
   TostResult r;
-  r.difference = sa.mean - sb.mean;
+  r.difference = difference;
   r.bound = bound;
-  r.se = std::sqrt(va + vb);
-  if (r.se == 0) {  // both samples constant: the difference is exact
+  r.se = se;
+  if (r.se == 0) {
     r.df = kInf;
     const bool above_lower = r.difference > -bound, below_upper = r.difference < bound;
     r.t_lower = above_lower ? kInf : -kInf;
@@ -277,8 +273,7 @@ TostResult TostWelch(const std::vector<double>& a, const std::vector<double>& b,
     r.t_upper = below_upper ? -kInf : kInf;
     r.p_upper = below_upper ? 0.0 : 1.0;
   } else {
-    r.df = (va + vb) * (va + vb) /
-           (va * va / static_cast<double>(sa.n - 1) + vb * vb / static_cast<double>(sb.n - 1));
+    r.df = df;
     const boost::math::students_t_distribution<double> t(r.df);
     r.t_lower = (r.difference + bound) / r.se;
     r.p_lower = boost::math::cdf(boost::math::complement(t, r.t_lower));
@@ -287,6 +282,41 @@ TostResult TostWelch(const std::vector<double>& a, const std::vector<double>& b,
   }
   r.p_value = std::max(r.p_lower, r.p_upper);
   return r;
+}
+
+}  // namespace
+
+TostResult TostWelch(const std::vector<double>& a, const std::vector<double>& b, double bound) {
+  SECURE_CHECK(std::isfinite(bound) && bound > 0,
+               "TostWelch: bound = " << bound << ", must be > 0 and finite");
+  CheckSample("TostWelch", "sample 'a'", a, 2);
+  CheckSample("TostWelch", "sample 'b'", b, 2);
+  const SampleSummary sa = Summarize(a), sb = Summarize(b);
+  const double va = sa.std * sa.std / static_cast<double>(sa.n);  // squared standard errors
+  const double vb = sb.std * sb.std / static_cast<double>(sb.n);
+  const double se = std::sqrt(va + vb);
+  const double df =
+      se == 0
+          ? kInf
+          : (va + vb) * (va + vb) /
+                (va * va / static_cast<double>(sa.n - 1) + vb * vb / static_cast<double>(sb.n - 1));
+  return TostOf(sa.mean - sb.mean, se, df, bound);
+}
+
+TostResult TostPaired(const std::vector<double>& a, const std::vector<double>& b, double bound) {
+  SECURE_CHECK(std::isfinite(bound) && bound > 0,
+               "TostPaired: bound = " << bound << ", must be > 0 and finite");
+  CheckSample("TostPaired", "sample 'a'", a, 2);
+  CheckSample("TostPaired", "sample 'b'", b, 2);
+  SECURE_CHECK(a.size() == b.size(), "TostPaired: samples 'a' and 'b' have " << a.size() << " and "
+                                                                             << b.size()
+                                                                             << " values, must be "
+                                                                                "paired");
+  std::vector<double> d(a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) d[i] = a[i] - b[i];
+  const SampleSummary sd = Summarize(d);
+  const double n = static_cast<double>(sd.n);
+  return TostOf(sd.mean, sd.std / std::sqrt(n), n - 1, bound);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -104,13 +104,15 @@ MannWhitneyResult MannWhitneyU(const std::vector<double>& a, const std::vector<d
                                MannWhitneyMethod method = MannWhitneyMethod::kAuto);
 
 // ---------------------------------------------------------------------------------------------
-// TOST equivalence test with Welch's t
+// TOST equivalence tests: Welch's t (independent samples) and paired t
 
 struct TostResult {
   double difference = 0;  // mean(a) - mean(b)
   double bound = 0;       // equivalence margin: H1 is -bound < difference < bound
-  double se = 0;          // standard error of the difference, sqrt(var_a / n_a + var_b / n_b)
-  double df = 0;          // Welch–Satterthwaite degrees of freedom (+inf if se = 0)
+  double se = 0;          // standard error of the difference: sqrt(var_a / n_a + var_b / n_b)
+                          // (Welch), std(a - b) / sqrt(n) (paired)
+  double df = 0;          // Welch–Satterthwaite degrees of freedom, n - 1 if paired (+inf if
+                          // se = 0)
   double t_lower = 0;     // (difference + bound) / se, tests H0: difference <= -bound
   double p_lower = 1;     // P(T >= t_lower)
   double t_upper = 0;     // (difference - bound) / se, tests H0: difference >= +bound
@@ -129,6 +131,12 @@ struct TostResult {
 /// t statistics are +inf or -inf accordingly (so p_value = 0 iff |difference| < bound).
 /// If only one sample has zero variance, Welch's formulas hold as they are.
 TostResult TostWelch(const std::vector<double>& a, const std::vector<double>& b, double bound);
+
+/// Paired TOST: two one-sided t-tests on the differences d_i = a_i - b_i of paired values (the
+/// same seeds and episodes under two settings), df = n - 1, se = std(d) / sqrt(n). Both samples
+/// need the same number of values, at least 2, all finite. If every difference is the same, it is
+/// exact: the zero-variance rule of TostWelch applies.
+TostResult TostPaired(const std::vector<double>& a, const std::vector<double>& b, double bound);
 
 // ---------------------------------------------------------------------------------------------
 // Kruskal–Wallis H test and Dunn's post-hoc test

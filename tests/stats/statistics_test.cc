@@ -333,6 +333,55 @@ TEST(TostWelchTest, OneConstantSampleUsesTheOthersVariance) {
   EXPECT_DOUBLE_EQ(r.p_lower, r.p_upper);  // symmetric about 0
 }
 
+TEST(TostPairedTest, IsTheOneSampleTestOfTheDifferences) {
+  // Paired values with a large shared per-seed effect (the seeds' models) and a small,
+  // consistent difference: Welch sees the seed spread, the paired test only the differences.
+  const std::vector<double> seed_effect = {0.2, 0.9, 0.5, 0.05, 0.7, 0.35, 0.8, 0.6, 0.1, 0.45};
+  const std::vector<double> shift = {0.01, -0.02, 0.0,    0.015, -0.01,
+                                     0.02, 0.005, -0.005, 0.0,   0.01};
+  std::vector<double> a, b, d;
+  for (std::size_t i = 0; i < seed_effect.size(); ++i) {
+    a.push_back(seed_effect[i] + shift[i]);
+    b.push_back(seed_effect[i]);
+    d.push_back(a.back() - b.back());
+  }
+  const TostResult paired = TostPaired(a, b, 0.02);
+  // The one-sample test of d against 0 is TostWelch with a constant second sample.
+  const TostResult one_sample = TostWelch(d, std::vector<double>(d.size(), 0.0), 0.02);
+  EXPECT_NEAR(paired.difference, 0.0025, 1e-15);
+  EXPECT_DOUBLE_EQ(paired.df, 9.0);
+  EXPECT_NEAR(paired.se, one_sample.se, 1e-15);
+  EXPECT_NEAR(paired.p_lower, one_sample.p_lower, 1e-12);
+  EXPECT_NEAR(paired.p_upper, one_sample.p_upper, 1e-12);
+  EXPECT_TRUE(paired.equivalent());
+  EXPECT_FALSE(TostWelch(a, b, 0.02).equivalent());  // the seed spread hides the equivalence
+}
+
+TEST(TostPairedTest, MatchesTheStudentTQuantile) {
+  // d = {-1, 1} * c + m with n = 2 has std = c * sqrt(2), se = c, df = 1. With bound - m = c *
+  // 6.313751514675 (t_{0.95, 1}) the upper test sits at p = 0.05.
+  const double c = 0.01, m = 0.003, bound = m + c * 6.313751514675043;
+  const TostResult r = TostPaired({m - c, m + c}, {0.0, 0.0}, bound);
+  EXPECT_DOUBLE_EQ(r.df, 1.0);
+  EXPECT_NEAR(r.se, c, 1e-15);
+  EXPECT_NEAR(r.p_upper, 0.05, 1e-9);
+  EXPECT_LT(r.p_lower, 0.05);
+  EXPECT_NEAR(r.p_value, 0.05, 1e-9);
+}
+
+TEST(TostPairedTest, EqualDifferencesAreExactAndBadInputIsNamed) {
+  const TostResult same = TostPaired({0.5, 0.7, 0.9}, {0.49, 0.69, 0.89}, 0.02);
+  EXPECT_EQ(same.se, 0.0);
+  EXPECT_EQ(same.p_value, 0.0);
+  EXPECT_FALSE(TostPaired({0.5, 0.7}, {0.4, 0.6}, 0.02).equivalent());
+  EXPECT_HAS(ErrorOf([] {
+               TostPaired({1, 2, 3}, {1, 2}, 0.1);
+             }),
+             "TostPaired: samples 'a' and 'b' have 3 and 2 values, must be paired");
+  EXPECT_HAS(ErrorOf([] { TostPaired({1, 2}, {1, 2}, 0.0); }), "TostPaired: bound = 0");
+  EXPECT_HAS(ErrorOf([] { TostPaired({1}, {1}, 0.1); }), "TostPaired: sample 'a'");
+}
+
 TEST(TostWelchTest, ToJsonHasEveryField) {
   const nlohmann::json j = TostWelch(kA, kB, 0.1).ToJson();
   for (const char* key :
