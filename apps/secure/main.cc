@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterRenderCommand(app, config);
     secure::cli::RegisterExperimentCommands(app, config);
     secure::cli::RegisterReportCommand(app);
+    secure::cli::RegisterCompareCommand(app);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // --help and --version end parsing with exit code 0: CLI11 prints them. Every other parse

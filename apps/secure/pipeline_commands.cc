@@ -392,6 +392,16 @@ struct EvalCommand {
       nlohmann::json r = evaluation.ToJson();
       r["command"] = "eval";
       r["domain"] = domain;
+      // What makes two results comparable episode for episode (`secure compare`): the same
+      // models, seeds and episodes.
+      r["run"] = run_dir;
+      r["config"] = config->path;
+      r["models"] = {{"airl", airl_path}, {"bc", bc_path}, {"joint", joint_path},
+                     {"barrier", barrier_path}};
+      r["first_seed"] = first_seed;
+      r["seeds_evaluated"] = seeds;
+      r["episodes"] = episodes;
+      r["shield"] = shield_options.ToJson();
       PrintJson(r);
     } else {
       std::cout << evaluation.Table();

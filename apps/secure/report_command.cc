@@ -15,13 +15,12 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "commands.h"
+#include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 
 extern char** environ;
@@ -58,13 +57,10 @@ void CheckRunDirectory(const std::string& run_dir) {
                path << ": missing: " << run_dir
                     << " is not a run directory (written by `secure demo --out` or `secure "
                        "experiment --out`)");
-  std::ifstream in(path, std::ios::binary);
-  SECURE_CHECK(in, path << ": cannot read: " << std::strerror(errno));
-  std::ostringstream text;
-  text << in.rdbuf();
+  const std::string text = ReadFile(path);
   nlohmann::json result;
   try {
-    result = nlohmann::json::parse(text.str());
+    result = nlohmann::json::parse(text);
   } catch (const nlohmann::json::parse_error& e) {
     SECURE_THROW(path << ": malformed JSON: " << e.what());
   }

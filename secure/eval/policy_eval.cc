@@ -72,6 +72,7 @@ nlohmann::json SeedResult::ToJson() const {
           {"invalid_input_decisions", invalid_input_decisions},
           {"mean_iterations", mean_iterations},
           {"latency_us", latency_us.ToJson()},
+          {"reference_forward_latency_us", reference_forward_latency_us},
           {"seconds", seconds}};
 }
 
@@ -198,6 +199,50 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
   return result;
 }
 
+namespace {
+
+// Times SeedResult::reference_forward_latency_us on the first episode's start observation (after
+// its Reset, before its first decision: outside every decision's latency, and no extra Reset),
+// and passes every call on to `next` (if any).
+class ReferenceForwardTimer final : public StepObserver {
+ public:
+  ReferenceForwardTimer(cbf::Barrier& barrier, StepObserver* next)
+      : barrier_(barrier), next_(next) {}
+
+  void OnEpisodeStart(long episode, const Eigen::VectorXf& observation) override {
+    if (us_ == 0.0) Time(observation);
+    if (next_ != nullptr) next_->OnEpisodeStart(episode, observation);
+  }
+  void OnStep(const StepView& step) override {
+    if (next_ != nullptr) next_->OnStep(step);
+  }
+  void OnEpisodeEnd(long episode) override {
+    if (next_ != nullptr) next_->OnEpisodeEnd(episode);
+  }
+  double microseconds() const { return us_; }
+
+ private:
+  void Time(const Eigen::VectorXf& observation) {
+    const Eigen::MatrixXf states = observation.replicate(1, SeedResult::kReferenceBatch);
+    Eigen::VectorXf h(SeedResult::kReferenceBatch);
+    barrier_.Evaluate(states, h);  // warm: first-call allocations and kernel dispatch
+    std::vector<double> us;
+    for (int k = 0; k < SeedResult::kReferenceRepeats; ++k) {
+      const Stopwatch clock;
+      barrier_.Evaluate(states, h);
+      us.push_back(clock.Microseconds());
+    }
+    std::nth_element(us.begin(), us.begin() + us.size() / 2, us.end());
+    us_ = std::max(us[us.size() / 2], 1e-3);  // never 0: 0 means "not timed"
+  }
+
+  cbf::Barrier& barrier_;
+  StepObserver* next_;
+  double us_ = 0.0;
+};
+
+}  // namespace
+
 SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& models,
                      const shield::ShieldOptions& shield_options, long episodes,
                      std::uint64_t seed, StepObserver* observer) {
@@ -217,7 +262,10 @@ SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& mod
   std::unique_ptr<cbf::Barrier> barrier = models.make_barrier();
   shield::Shield shield(ShieldOptionsFor(method, shield_options), *barrier,
                         runner.environment().ShieldModel());
-  return runner.Run(evaluator, &shield, episodes, seed, observer);
+  ReferenceForwardTimer timer(*barrier, observer);
+  SeedResult result = runner.Run(evaluator, &shield, episodes, seed, &timer);
+  result.reference_forward_latency_us = timer.microseconds();
+  return result;
 }
 
 std::map<Method, SeedResult> EvaluateMethods(const domains::Environment& env,
@@ -381,7 +429,7 @@ std::string Evaluation::Table() const {
   out << "Success and dangerous rate, % mean (std) over " << seeds << " seeds x " << episodes
       << " episodes\n\n";
   out << "| method | success % | dangerous % | interventions / episode | sampling rounds / "
-         "decision | no-safe-action | decision p50 / p99 (us) |\n";
+         "decision | no-safe-action | decision p50 / p99 (us) [in forwards of 128] |\n";
   out << "|---|---|---|---|---|---|---|\n";
   for (const auto& [method, s] : methods_) {
     long no_safe = 0, decisions = 0;
@@ -397,12 +445,24 @@ std::string Evaluation::Table() const {
     std::sort(p50.begin(), p50.end());
     std::sort(p99.begin(), p99.end());
     const bool shielded = IsShielded(method);
+    // A shielded method's latency also in units of its seeds' reference forward (SeedResult).
+    std::vector<double> p50_ref, p99_ref;
+    for (const SeedResult& r : s.per_seed) {
+      if (!shielded || r.reference_forward_latency_us <= 0) continue;
+      p50_ref.push_back(r.latency_us.p50 / r.reference_forward_latency_us);
+      p99_ref.push_back(r.latency_us.p99 / r.reference_forward_latency_us);
+    }
+    std::sort(p50_ref.begin(), p50_ref.end());
+    std::sort(p99_ref.begin(), p99_ref.end());
     out << "| " << ToString(kMethodNames, method) << " | " << MeanStd(s.success_rate) << " | "
         << MeanStd(s.dangerous_rate) << " | "
         << (shielded ? Number(s.interventions_per_episode.mean, "%.2f") : "-") << " | "
         << (shielded && decisions > 0 ? Number(rounds / double(decisions), "%.2f") : "-") << " | "
         << (shielded ? std::to_string(no_safe) : "-") << " | "
         << Number(p50[p50.size() / 2], "%.1f") << " / " << Number(p99[p99.size() / 2], "%.1f")
+        << (p50_ref.empty() ? std::string()
+                            : " [" + Number(p50_ref[p50_ref.size() / 2], "%.2f") + " / " +
+                                  Number(p99_ref[p99_ref.size() / 2], "%.2f") + "]")
         << " |\n";
   }
   if (comparisons_.contains("secure_vs_airl")) {

@@ -103,6 +103,14 @@ struct SeedResult {
   long invalid_input_decisions = 0;
   double mean_iterations = 0.0;      // sampling rounds per decision
   LatencySummary latency_us;         // decision latency (shielded) or policy query (unshielded)
+  // Shielded methods: one forward of kReferenceBatch states through this seed's barrier, the
+  // median of kReferenceRepeats timed in this process at the start of the first episode, before
+  // its first decision (the states: that episode's start observation, repeated). The yardstick of the decision latency (docs/PERFORMANCE.md):
+  // latency_us.p50 / reference_forward_latency_us is comparable across machines and loads.
+  // Tables print the latency also in these units ("[0.52 / 0.71]").
+  double reference_forward_latency_us = 0.0;
+  static constexpr int kReferenceBatch = 128;
+  static constexpr int kReferenceRepeats = 15;
   double seconds = 0.0;
 
   double success_rate() const { return episodes ? double(successes) / double(episodes) : 0.0; }

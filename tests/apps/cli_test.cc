@@ -839,6 +839,76 @@ std::string Slurp(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
+// `secure compare`: two `secure eval --json` results of the same episodes, paired by seed.
+TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
+  const std::string dir = (TempDir() / "compare").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 12 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("policy train --algo bc --demos " + dir + "/demos.csv --out " + dir +
+             "/bc.model --epochs 3");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto eval = [&](const std::string& name, const std::string& flags) {
+    const Result e = RunCli("eval --domain double-integrator --bc " + dir +
+                            "/bc.model --barrier ground-truth --methods bc,bc+shield --seeds 3 "
+                            "--json " +
+                            flags);
+    EXPECT_EQ(e.exit_code, 0) << e.err;
+    return Write(name, e.out);
+  };
+  const std::string iid = eval("iid.json", "--episodes 4 --samples 32");
+  const std::string qmc = eval("qmc.json", "--episodes 4 --samples 16 --sampler qmc");
+  const std::string longer = eval("longer.json", "--episodes 5 --samples 32");
+
+  r = RunCli("compare " + qmc + " " + iid + " --tost-bound 0.5 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["seeds"], 3);
+  EXPECT_EQ(j["episodes"], 4);
+  const std::vector<std::string> differences = j["differences"];
+  EXPECT_EQ(differences, (std::vector<std::string>{"shield.num_samples: 16 vs 32",
+                                                   "shield.sampler: \"qmc\" vs \"iid\""}));
+  for (const char* method : {"bc", "bc+shield"}) {
+    const auto& m = j["methods"][method]["success_rate"];
+    EXPECT_NEAR(m["difference"].get<double>(),
+                m["a_mean"].get<double>() - m["b_mean"].get<double>(), 1e-12);
+    if (m["tost"]["se"] == 0.0) {  // equal differences on every seed: exact
+      EXPECT_TRUE(m["tost"]["df"].is_null()) << method;
+    } else {
+      EXPECT_EQ(m["tost"]["df"], 2.0) << method;  // paired: seeds - 1
+    }
+  }
+  // The unshielded policy plays the same episodes: its rates are identical, exactly equivalent.
+  EXPECT_EQ(j["methods"]["bc"]["success_rate"]["difference"], 0.0);
+  EXPECT_EQ(j["methods"]["bc"]["success_rate"]["equivalent"], true);
+  for (const char* method : {"bc", "bc+shield"})  // the policy query, or the whole decision
+    for (const char* key : {"a_p50", "b_p50", "a_p99", "b_p99"})
+      EXPECT_GT(j["methods"][method]["latency_us"][key].get<double>(), 0.0) << method << key;
+  // The table names both files and the settings that differ.
+  r = RunCli("compare " + qmc + " " + iid);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.out, "A = " + qmc);
+  EXPECT_HAS(r.out, "shield.sampler: \"qmc\" vs \"iid\"");
+  EXPECT_HAS(r.out, "| bc+shield | dangerous |");
+
+  // Not the same episodes, not an eval result, not a file: one line each.
+  ExpectOneErrorLine(RunCli("compare " + longer + " " + iid),
+                     "are not of the same episodes: field 'episodes' is 5 and 4");
+  ExpectOneErrorLine(RunCli("compare " + dir + " " + iid), dir + ": not a regular file");
+  ExpectOneErrorLine(RunCli("compare " + Write("broken.json", "{\"command\": ") + " " + iid),
+                     "broken.json: malformed JSON");
+  ExpectOneErrorLine(
+      RunCli("compare " + Write("other.json", "{\"command\": \"demo\"}") + " " + iid),
+      "other.json: not a `secure eval --json` result");
+  ExpectOneErrorLine(RunCli("compare " +
+                            Write("old.json",
+                                  "{\"command\": \"eval\", \"domain\": "
+                                  "\"derby\"}") +
+                            " " + iid),
+                     "old.json: no field 'first_seed'");
+  ExpectOneErrorLine(RunCli("compare " + qmc + " " + iid + " --tost-bound 0"),
+                     "--tost-bound = 0, must be in (0, 1)");
+}
+
 TEST(CliHardeningTest, AnOutputDirectoryThatIsAFileIsAnErrorNotACrash) {
   const std::string file = Write("not_a_dir", "keep me\n");
   Result r = RunCli("demos generate --domain double-integrator --episodes 2 --out " + file);
