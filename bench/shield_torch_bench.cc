@@ -34,11 +34,14 @@
 //   h_max_abs_diff      set-up check: max |h_torch - h_ours| over T(s, a) for 64 actions
 //                       (same dynamics and weights; float rounding only).
 // Google Benchmark's Time column is the mean of one torch plus one shield decision.
+// BM_TorchM128VsShieldQmc_*: torch at M = 128 i.i.d. against ours at M = 32 or 64 QMC samples
+// (fewer samples for the same closed-loop decision quality: docs/RESULTS.md, issue 16).
 
 #include <dlfcn.h>
 #include <torch/torch.h>
 
 #include <limits>
+#include <optional>
 
 #include "secure/nn/torch_mlp.h"
 
@@ -196,19 +199,25 @@ double MaxAbsDifference(TorchShield& torch_shield, Case& c) {
   return worst;
 }
 
+// torch_m = 0: torch decides with our M (st.range(0)); else with torch_m samples, i.i.d., while
+// ours draws st.range(0) with `sampler`.
 template <typename GuardType>
-void RunTorchVsOurs(benchmark::State& st, Net net) {
+void RunTorchVsOurs(benchmark::State& st, Net net, int torch_m = 0,
+                    shield::Sampler sampler = shield::Sampler::kIid) {
   torch::set_num_threads(1);
   Eigen::setNbThreads(1);
   const bool openblas = SingleThreadOpenBlas();
   GuardType guard;
   const int m = static_cast<int>(st.range(0));
   Case c = MakeCase(net, Regime::kNoResampling, m);
+  c.options.sampler = sampler;
   shield::Shield shield(c.options, *c.barrier, *c.dynamics);
-  TorchShield torch_shield(c);
+  std::optional<Case> torch_case;
+  if (torch_m > 0) torch_case = MakeCase(net, Regime::kNoResampling, torch_m);
+  TorchShield torch_shield(torch_case ? *torch_case : c);
   torch::manual_seed(0);
 
-  const double h_diff = MaxAbsDifference(torch_shield, c);
+  const double h_diff = MaxAbsDifference(torch_shield, torch_case ? *torch_case : c);
   if (!(h_diff < 1e-3)) {
     st.SkipWithError(
         ("torch and Eigen barriers disagree: max |dh| = " + std::to_string(h_diff)).c_str());
@@ -261,6 +270,12 @@ void BM_TorchVsShield_NoGrad(benchmark::State& st, Net net) {
 void BM_TorchVsShield_InferenceMode(benchmark::State& st, Net net) {
   RunTorchVsOurs<c10::InferenceMode>(st, net);
 }
+// Issue 16's comparison: torch's decision at the reference setting (M = 128, i.i.d.) against
+// ours at fewer QMC samples, the setting docs/RESULTS.md compares with M = 128 i.i.d. in closed
+// loop (the decision quality is measured there, not here).
+void BM_TorchM128VsShieldQmc_NoGrad(benchmark::State& st, Net net) {
+  RunTorchVsOurs<torch::NoGradGuard>(st, net, 128, shield::Sampler::kQmc);
+}
 
 // Arg: M (samples per round).
 #define SECURE_TORCH_CASE(fn, name, net) \
@@ -272,6 +287,22 @@ SECURE_TORCH_CASE(BM_TorchVsShield_NoGrad, Panda, Net::kPanda);
 SECURE_TORCH_CASE(BM_TorchVsShield_InferenceMode, DI, Net::kDoubleIntegrator);
 SECURE_TORCH_CASE(BM_TorchVsShield_InferenceMode, Derby, Net::kDerby);
 SECURE_TORCH_CASE(BM_TorchVsShield_InferenceMode, Panda, Net::kPanda);
+
+BENCHMARK_CAPTURE(BM_TorchM128VsShieldQmc_NoGrad, DI, Net::kDoubleIntegrator)
+    ->ArgName("M")
+    ->Arg(32)
+    ->Arg(64)
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_TorchM128VsShieldQmc_NoGrad, Derby, Net::kDerby)
+    ->ArgName("M")
+    ->Arg(32)
+    ->Arg(64)
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_TorchM128VsShieldQmc_NoGrad, Panda, Net::kPanda)
+    ->ArgName("M")
+    ->Arg(32)
+    ->Arg(64)
+    ->Unit(benchmark::kMicrosecond);
 
 #undef SECURE_TORCH_CASE
 
