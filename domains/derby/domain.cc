@@ -130,9 +130,17 @@ experiments::ExperimentOptions DerbyDomain::Preset() const {
   // of safe samples is the mean. Measured on 10 seeds, on episodes other than the reported ones
   // (docs/RESULTS.md): SECURE 81.3 -> 88.3 % success, AIRL 91.1 -> 91.5 %.
   o.airl.bc_weight = 1.0;
-  // The shield (the released code's M = 64, rho0 = 0.1); alpha dt = 0.2 < 1 (requirement R3;
-  // the ablation's secure-myopic shows alpha dt = 1).
-  o.shield.num_samples = 64;
+  // The shield: rho0 = 0.1 (the released code's); alpha dt = 0.2 < 1 (requirement R3; the
+  // ablation's secure-myopic shows alpha dt = 1). Cheaper rounds than the released code's
+  // M = 64 i.i.d. with N = 64 probes and a sigma step of 0.5 (issue 16, docs/RESULTS.md "The
+  // shield's work per decision"): 32 QMC samples, 8 probes and a step of 4 reach the safe
+  // actions in fewer and cheaper rounds; on the same models and 10 seeds x 1000 episodes the
+  // dangerous rate is equivalent (paired TOST, 2 points; 0.1 against 0.4 %), success higher
+  // (89.3 against 86.7 %), and the decision's p99 about a sixth.
+  o.shield.num_samples = 32;
+  o.shield.sampler = shield::Sampler::kQmc;
+  o.shield.num_probes = 8;
+  o.shield.sigma_step = 4.0;
   o.shield.safe_ratio = 0.1;
   o.shield.dt = options_.task.dt;
   o.shield.class_k_gain = 2.0;
