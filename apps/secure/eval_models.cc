@@ -1,5 +1,7 @@
 #include "eval_models.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include "secure/common/error.h"
 #include "secure/nn/model_file.h"
 
@@ -64,10 +66,14 @@ SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domai
   }
 }
 
-shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain,
+shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain, const Config& config,
                                           const ShieldFlags& flags, shield::ShieldOptions* parsed) {
   flags.ApplyTo(parsed);
   shield::ShieldOptions options = domain.Preset().shield;
+  const std::string section = domain.ConfigSection();
+  const YAML::Node yaml = config.Section(section);
+  if (yaml.IsMap() && yaml["shield"])
+    options.ApplyYaml(yaml["shield"], config.path + " [" + section + "] [shield]");
   flags.OverlayGiven(*parsed, &options);
   return options;
 }

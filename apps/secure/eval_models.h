@@ -54,10 +54,11 @@ class SeedModelSet {
   eval::SeedModels models_;
 };
 
-/// The shield of an evaluation: the domain's experiment preset with the fields whose flags were
-/// given overlaid from `parsed` (the options `flags` are bound to); flags.ApplyTo(parsed) is
+/// The shield of an evaluation: the domain's experiment preset, then the `shield:` key of the
+/// domain's section of `config` (as `secure experiment` reads it), then the fields whose flags were
+/// given, overlaid from `parsed` (the options `flags` are bound to); flags.ApplyTo(parsed) is
 /// called first. Not validated (the caller calls Validate()).
-shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain,
+shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain, const Config& config,
                                           const ShieldFlags& flags, shield::ShieldOptions* parsed);
 
 }  // namespace secure::cli

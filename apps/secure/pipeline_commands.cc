@@ -354,8 +354,9 @@ struct EvalCommand {
 
   void Run() {
     const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, false, *config);
-    // The shield: the domain's experiment preset, with the flags given on top.
-    const shield::ShieldOptions shield_options = DomainShieldOptions(*d, shield_flags, &shield);
+    // The shield: the domain's experiment preset, the config's `shield:` key, then the flags.
+    const shield::ShieldOptions shield_options =
+        DomainShieldOptions(*d, *config, shield_flags, &shield);
     CheckRange("--seeds", seeds, 1, kMaxSeeds);
     CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     SECURE_CHECK(std::isfinite(tost_bound) && tost_bound > 0,

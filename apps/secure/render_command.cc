@@ -81,7 +81,8 @@ struct RenderCommand {
                  "--method = '" << method << "': give one method (`secure render` draws one "
                                 << "episode)");
     const eval::Method m = methods.front();
-    const shield::ShieldOptions shield_options = DomainShieldOptions(*d, shield_flags, &shield);
+    const shield::ShieldOptions shield_options =
+        DomainShieldOptions(*d, *config, shield_flags, &shield);
     shield_options.Validate();
     CheckRange("--episode", episode, 0, kMaxEpisodes - 1);
     video.Validate();

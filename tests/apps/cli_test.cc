@@ -294,6 +294,14 @@ TEST(CliTest, ShippedConfigsLoadAndTheDoubleIntegratorOneIsThePreset) {
   ASSERT_EQ(panda.exit_code, 0) << panda.err;
   EXPECT_DOUBLE_EQ(nlohmann::json::parse(panda.out)["options"]["validation_fraction"].get<double>(),
                    0.25);
+
+  // The Panda 1 kHz shield: read by eval before its models (a missing model is the next error).
+  const Result khz = RunCli("eval --domain panda-push --airl " + (TempDir() / "none.model").string() +
+                            " --methods airl --config " + std::string(SECURE_SOURCE_DIR) +
+                            "/configs/panda_push_1khz.yaml");
+  EXPECT_EQ(khz.exit_code, 1);
+  EXPECT_HAS(khz.err, "none.model");
+  EXPECT_EQ(khz.err.find("panda_push_1khz.yaml"), std::string::npos) << khz.err;
 }
 
 TEST(CliTest, ShieldRunKeepsTheDoubleIntegratorOutOfTheObstacle) {
@@ -907,6 +915,21 @@ TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
                      "old.json: no field 'first_seed'");
   ExpectOneErrorLine(RunCli("compare " + qmc + " " + iid + " --tost-bound 0"),
                      "--tost-bound = 0, must be in (0, 1)");
+
+  // eval's shield: the domain's preset, then the config's `shield:` key, then the flags.
+  const std::string cfg = Write("compare_shield.yaml", "pipeline:\n  shield: {num_samples: 24}\n");
+  const std::string base = "eval --domain double-integrator --bc " + dir +
+                           "/bc.model --barrier ground-truth --methods bc+shield --seeds 1 "
+                           "--episodes 1 --json --config " + cfg;
+  r = RunCli(base);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["shield"]["num_samples"], 24);
+  r = RunCli(base + " --samples 12");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["shield"]["num_samples"], 12);
+  const std::string bad = Write("compare_bad.yaml", "pipeline:\n  shield: {sampler: sobol}\n");
+  ExpectOneErrorLine(RunCli("eval --domain double-integrator --bc x.model --config " + bad),
+                     "compare_bad.yaml [pipeline] [shield]");
 }
 
 TEST(CliHardeningTest, AnOutputDirectoryThatIsAFileIsAnErrorNotACrash) {
