@@ -514,16 +514,7 @@ bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
 namespace {
 // The camera of `secure render`, from the robot's right (-y), a little above: the person's arm
 // reaching in from the back.
-franka::CameraView CoffeePlacingView() {
-  franka::CameraView v;
-  v.lookat[0] = 0.25;
-  v.lookat[1] = 0.0;
-  v.lookat[2] = 0.12;
-  v.distance = 1.5;
-  v.azimuth = 60;
-  v.elevation = -30;
-  return v;
-}
+constexpr franka::CameraView kCoffeePlacingView{{0.25, 0.0, 0.12}, 1.5, 60, -30};
 }  // namespace
 
 CoffeePlacingEnv::~CoffeePlacingEnv() = default;
@@ -532,7 +523,7 @@ void CoffeePlacingEnv::Render(int width, int height, Frame* frame) {
   const auto* model = static_cast<const mjModel*>(sim_.model());
   if (renderer_ == nullptr)
     renderer_ =
-        std::make_unique<franka::OffscreenRenderer>(model, CoffeePlacingView(), "coffee-placing");
+        std::make_unique<franka::OffscreenRenderer>(model, kCoffeePlacingView, "coffee-placing");
   renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 

@@ -13,12 +13,12 @@ namespace secure::domains::franka {
 
 constexpr int kMaxRenderWidth = 1280, kMaxRenderHeight = 720;
 
-/// Where the free camera looks from.
+/// Where the free camera looks from: {lookat, distance, azimuth, elevation}.
 struct CameraView {
-  double lookat[3] = {0.12, 0.0, 0.3};
-  double distance = 2.0;
-  double azimuth = 75;
-  double elevation = -15;
+  double lookat[3];  // m
+  double distance;   // m
+  double azimuth;    // degrees
+  double elevation;  // degrees
 };
 
 /// One OSMesa context and MuJoCo render context for one model; frames up to kMaxRenderWidth x

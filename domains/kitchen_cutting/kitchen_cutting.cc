@@ -544,16 +544,7 @@ bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& ob
 namespace {
 // The camera of `secure render`, looking at the board from the robot's right (-y), a little
 // above: the arm at the left, the person's arm reaching in from the back.
-franka::CameraView KitchenCuttingView() {
-  franka::CameraView v;
-  v.lookat[0] = 0.15;
-  v.lookat[1] = 0.05;
-  v.lookat[2] = 0.15;
-  v.distance = 1.4;
-  v.azimuth = 60;
-  v.elevation = -25;
-  return v;
-}
+constexpr franka::CameraView kKitchenCuttingView{{0.15, 0.05, 0.15}, 1.4, 60, -25};
 }  // namespace
 
 KitchenCuttingEnv::~KitchenCuttingEnv() = default;
@@ -562,7 +553,7 @@ void KitchenCuttingEnv::Render(int width, int height, Frame* frame) {
   const auto* model = static_cast<const mjModel*>(sim_.model());
   if (renderer_ == nullptr)
     renderer_ =
-        std::make_unique<franka::OffscreenRenderer>(model, KitchenCuttingView(), "kitchen-cutting");
+        std::make_unique<franka::OffscreenRenderer>(model, kKitchenCuttingView, "kitchen-cutting");
   renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 

@@ -466,22 +466,13 @@ bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observa
 namespace {
 // The camera of `secure render`, seen from the side (-y), slightly above the table: the arm at
 // the left, the block and the target at the right.
-franka::CameraView PandaPushView() {
-  franka::CameraView v;
-  v.lookat[0] = 0.12;
-  v.lookat[1] = 0.0;
-  v.lookat[2] = 0.3;
-  v.distance = 2.0;
-  v.azimuth = 75;
-  v.elevation = -15;
-  return v;
-}
+constexpr franka::CameraView kPandaPushView{{0.12, 0.0, 0.3}, 2.0, 75, -15};
 }  // namespace
 
 void PandaPushEnv::Render(int width, int height, Frame* frame) {
   const auto* model = static_cast<const mjModel*>(sim_.model());
   if (renderer_ == nullptr)
-    renderer_ = std::make_unique<franka::OffscreenRenderer>(model, PandaPushView(), "panda-push");
+    renderer_ = std::make_unique<franka::OffscreenRenderer>(model, kPandaPushView, "panda-push");
   renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 
