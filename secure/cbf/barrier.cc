@@ -8,14 +8,25 @@
 
 namespace secure::cbf {
 
-void Barrier::Evaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                       Eigen::Ref<Eigen::VectorXf> h) {
+void Barrier::CheckShapes(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          const Eigen::Ref<Eigen::VectorXf>& h) const {
   SECURE_CHECK(states.rows() == state_dim(), Describe() << ": states have " << states.rows()
                                                         << " rows, expected " << state_dim());
   SECURE_CHECK(h.size() == states.cols(), Describe()
                                               << ": output has " << h.size() << " entries for "
                                               << states.cols() << " states");
+}
+
+void Barrier::Evaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                       Eigen::Ref<Eigen::VectorXf> h) {
+  CheckShapes(states, h);
   DoEvaluate(states, h);
+}
+
+void Barrier::EvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                            Eigen::Ref<Eigen::VectorXf> h) {
+  CheckShapes(states, h);
+  DoEvaluateDense(states, h);
 }
 
 std::vector<int> FeatureRows(const std::vector<std::string>& wanted,
@@ -57,6 +68,16 @@ std::string SelectRows::Describe() const {
 
 void SelectRows::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                             Eigen::Ref<Eigen::VectorXf> h) {
+  Gathered(states, h, /*dense=*/false);
+}
+
+void SelectRows::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                 Eigen::Ref<Eigen::VectorXf> h) {
+  Gathered(states, h, /*dense=*/true);
+}
+
+void SelectRows::Gathered(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   const Eigen::Index n = states.cols();
   const Eigen::Index chunk = buffer_.cols();
   const Eigen::Index d = static_cast<Eigen::Index>(rows_.size());
@@ -65,7 +86,11 @@ void SelectRows::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
     for (Eigen::Index j = 0; j < m; ++j)
       for (Eigen::Index k = 0; k < d; ++k)
         buffer_(k, j) = states(rows_[static_cast<std::size_t>(k)], first + j);
-    inner_->Evaluate(buffer_.leftCols(m), h.segment(first, m));
+    if (dense) {
+      inner_->EvaluateDense(buffer_.leftCols(m), h.segment(first, m));
+    } else {
+      inner_->Evaluate(buffer_.leftCols(m), h.segment(first, m));
+    }
   }
 }
 

@@ -28,10 +28,29 @@ class Barrier {
   /// @throws secure::Error if states.rows() != state_dim() or h.size() != N.
   void Evaluate(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h);
 
+  /// The same h as Evaluate, computed without skipping any of the network's work: a barrier
+  /// that skips work by state (the per-obstacle barrier skips the obstacles out of range, which
+  /// its mask would zero) evaluates everything here and applies the mask afterwards, as the
+  /// authors' masked network does. The cost of a forward that owes nothing to the states, for
+  /// timing references (`secure eval`'s reference forward); for every barrier that skips
+  /// nothing it is Evaluate.
+  /// @throws secure::Error as Evaluate.
+  void EvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                     Eigen::Ref<Eigen::VectorXf> h);
+
  protected:
   /// Called with checked dimensions.
   virtual void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h) = 0;
+  /// Called with checked dimensions; override only if DoEvaluate skips work by state.
+  virtual void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                               Eigen::Ref<Eigen::VectorXf> h) {
+    DoEvaluate(states, h);
+  }
+
+ private:
+  void CheckShapes(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                   const Eigen::Ref<Eigen::VectorXf>& h) const;
 };
 
 /// The row of each of `wanted` (names, in order) among `available` (the first row of that name).
@@ -61,8 +80,12 @@ class SelectRows final : public Barrier {
  protected:
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                   Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                       Eigen::Ref<Eigen::VectorXf> h) override;
 
  private:
+  void Gathered(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
+                bool dense);
   std::unique_ptr<Barrier> inner_;
   int state_dim_;
   std::vector<int> rows_;

@@ -329,16 +329,27 @@ CarBarrierEvaluator::CarBarrierEvaluator(const CarBarrierNet& net, int max_state
   features_.resize(net.input.feature_dim(), entries);
   entry_h_.resize(entries);
   count_.resize(static_cast<std::size_t>(max_states));
+  in_range_.resize(static_cast<std::size_t>(entries));
   description_ = net.Describe();
 }
 
 void CarBarrierEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                                      Eigen::Ref<Eigen::VectorXf> h) {
+  EvaluateChunks(states, h, /*dense=*/false);
+}
+
+void CarBarrierEvaluator::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                          Eigen::Ref<Eigen::VectorXf> h) {
+  EvaluateChunks(states, h, /*dense=*/true);
+}
+
+void CarBarrierEvaluator::EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                         Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   const Eigen::Index n = states.cols();
   const int k = layout_.num_obstacles;
   for (Eigen::Index first = 0; first < n; first += max_states_) {
     const Eigen::Index m = std::min<Eigen::Index>(max_states_, n - first);
-    // Gather the in-range cars of every state of the chunk.
+    // Gather the in-range cars of every state of the chunk (dense: every car).
     Eigen::Index c = 0;
     for (Eigen::Index i = 0; i < m; ++i) {
       const float* s = states.col(first + i).data();
@@ -347,7 +358,8 @@ void CarBarrierEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& st
         const float* p = s + layout_.PositionIndex(j);
         const float dx = p[0], dy = p[1];
         const float d = std::sqrt(dx * dx + dy * dy + eps_);
-        if (d > big_r_) continue;  // NaN stays in: it must not read as "no car"
+        const bool in_range = !(d > big_r_);  // NaN stays in: it must not read as "no car"
+        if (!in_range && !dense) continue;
         float* f = features_.col(c).data();
         f[0] = dx;
         f[1] = dy;
@@ -357,6 +369,7 @@ void CarBarrierEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& st
           f[3] = v[0];
           f[4] = v[1];
         }
+        in_range_[static_cast<std::size_t>(c)] = in_range ? 1 : 0;
         ++c;
         ++count;
       }
@@ -368,11 +381,12 @@ void CarBarrierEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& st
       Eigen::Map<Eigen::RowVectorXf> out(entry_h_.data(), c);
       mlp_.Forward(features_.leftCols(c), workspace_, out);
     }
-    // Min-reduce per state, capped; NaN propagates.
+    // Min-reduce the in-range entries per state, capped; NaN propagates.
     Eigen::Index e = 0;
     for (Eigen::Index i = 0; i < m; ++i) {
       float v = cap_;
       for (int q = 0; q < count_[static_cast<std::size_t>(i)]; ++q, ++e) {
+        if (!in_range_[static_cast<std::size_t>(e)]) continue;
         const float x = entry_h_[e];
         if (x < v || std::isnan(x)) v = std::isnan(v) ? v : x;
       }

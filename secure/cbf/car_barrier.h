@@ -153,6 +153,8 @@ struct CarBarrierNet {
 /// The evaluator behind CarBarrierNet::MakeEvaluator, exposed for the shield's hot path: per
 /// chunk it gathers the features of every in-range car of every state into one matrix, runs one
 /// InferenceMlp forward over them, and min-reduces per state. No allocation after construction.
+/// EvaluateDense gathers every car, in range or not, and masks afterwards (the authors' masked
+/// network's work, the same values).
 class CarBarrierEvaluator final : public Barrier {
  public:
   CarBarrierEvaluator(const CarBarrierNet& net, int max_states);
@@ -165,8 +167,12 @@ class CarBarrierEvaluator final : public Barrier {
  protected:
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                   Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                       Eigen::Ref<Eigen::VectorXf> h) override;
 
  private:
+  void EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                      Eigen::Ref<Eigen::VectorXf> h, bool dense);
   ObstacleLayout layout_;
   bool use_velocity_;
   float r_, big_r_, eps_, cap_;
@@ -175,7 +181,8 @@ class CarBarrierEvaluator final : public Barrier {
   nn::InferenceMlp::Workspace workspace_;
   Eigen::MatrixXf features_;  // feature_dim x (max_states * num_obstacles)
   Eigen::VectorXf entry_h_;   // max_states * num_obstacles
-  std::vector<int> count_;    // in-range cars per state of the chunk
+  std::vector<int> count_;    // in-range cars per state of the chunk (every car if dense)
+  std::vector<char> in_range_;  // per gathered entry (dense: out-of-range ones are gathered too)
   long last_entries_ = 0;
   std::string description_;
 };

@@ -225,11 +225,11 @@ class ReferenceForwardTimer final : public StepObserver {
   void Time(const Eigen::VectorXf& observation) {
     const Eigen::MatrixXf states = observation.replicate(1, SeedResult::kReferenceBatch);
     Eigen::VectorXf h(SeedResult::kReferenceBatch);
-    barrier_.Evaluate(states, h);  // warm: first-call allocations and kernel dispatch
+    barrier_.EvaluateDense(states, h);  // warm: first-call allocations and kernel dispatch
     std::vector<double> us;
     for (int k = 0; k < SeedResult::kReferenceRepeats; ++k) {
       const Stopwatch clock;
-      barrier_.Evaluate(states, h);
+      barrier_.EvaluateDense(states, h);
       us.push_back(clock.Microseconds());
     }
     std::nth_element(us.begin(), us.begin() + us.size() / 2, us.end());

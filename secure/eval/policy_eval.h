@@ -103,9 +103,11 @@ struct SeedResult {
   long invalid_input_decisions = 0;
   double mean_iterations = 0.0;      // sampling rounds per decision
   LatencySummary latency_us;         // decision latency (shielded) or policy query (unshielded)
-  // Shielded methods: one forward of kReferenceBatch states through this seed's barrier, the
-  // median of kReferenceRepeats timed in this process at the start of the first episode, before
-  // its first decision (the states: that episode's start observation, repeated). The yardstick of the decision latency (docs/PERFORMANCE.md):
+  // Shielded methods: one forward of kReferenceBatch states through this seed's barrier with
+  // nothing skipped (cbf::Barrier::EvaluateDense: the per-obstacle barrier evaluates every
+  // obstacle, in range or not), the median of kReferenceRepeats timed in this process at the
+  // start of the first episode, before its first decision (the states: that episode's start
+  // observation, repeated). The yardstick of the decision latency (docs/PERFORMANCE.md):
   // latency_us.p50 / reference_forward_latency_us is comparable across machines and loads.
   // Tables print the latency also in these units ("[0.52 / 0.71]").
   double reference_forward_latency_us = 0.0;

@@ -10,8 +10,10 @@
 #include <fstream>
 #include <limits>
 #include <numeric>
+#include <vector>
 
 #include "domains/derby/domain.h"
+#include "secure/cbf/barrier.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/nn/model_file.h"
@@ -210,6 +212,44 @@ TEST(CarBarrierTest, BatchChunkedAndSingleEvaluationAgree) {
   // Wrong dimensions are rejected by the Barrier interface.
   Eigen::VectorXf h(3);
   EXPECT_THROW(net.MakeEvaluator()->Evaluate(Eigen::MatrixXf::Zero(51, 3), h), Error);
+}
+
+// EvaluateDense (the timing reference of `secure eval`) runs the network on every car, in range
+// or not, and masks afterwards: the same h as Evaluate, including NaN and the all-far cap, with
+// every entry evaluated.
+TEST(CarBarrierTest, DenseEvaluationGivesTheSameValuesAndEvaluatesEveryCar) {
+  const CarBarrierNet net = RandomNet(true, 8, /*cap=*/0.3);
+  Eigen::MatrixXf obs = RandomObservations(40, 0.2, 2.5, 9);             // some cars in range
+  obs.col(3) = RandomObservations(1, 1.2, 3.0, 10);                       // every car far: cap
+  obs(4 + 4 * 5, 7) = std::numeric_limits<float>::quiet_NaN();            // NaN propagates
+  auto evaluator = net.MakeEvaluator(16);  // chunks of 16 states, a partial last chunk
+  auto* cars = dynamic_cast<CarBarrierEvaluator*>(evaluator.get());
+  ASSERT_NE(cars, nullptr);
+  Eigen::VectorXf sparse(obs.cols()), dense(obs.cols());
+  evaluator->Evaluate(obs, sparse);
+  const long sparse_entries = cars->last_entries();
+  evaluator->EvaluateDense(obs, dense);
+  EXPECT_EQ(cars->last_entries(), 8L * kCars);  // the last chunk: 40 = 16 + 16 + 8 states
+  EXPECT_LT(sparse_entries, 8L * kCars);
+  EXPECT_FLOAT_EQ(dense(3), 0.3f);
+  EXPECT_TRUE(std::isnan(sparse(7)) && std::isnan(dense(7)));
+  for (int i = 0; i < obs.cols(); ++i) {
+    if (i == 7) continue;
+    EXPECT_NEAR(dense(i), sparse(i), 1e-6f) << "state " << i;
+  }
+  // Wrong dimensions are rejected as by Evaluate.
+  Eigen::VectorXf h(3);
+  EXPECT_THROW(evaluator->EvaluateDense(Eigen::MatrixXf::Zero(51, 3), h), Error);
+
+  // A row selection passes the dense evaluation on to the barrier it wraps.
+  std::vector<int> rows(kObs);
+  for (int r = 0; r < kObs; ++r) rows[static_cast<std::size_t>(r)] = r;
+  SelectRows selected(std::move(evaluator), kObs, rows);
+  Eigen::VectorXf through(obs.cols());
+  selected.EvaluateDense(obs, through);
+  EXPECT_EQ(cars->last_entries(), 8L * kCars);
+  selected.Evaluate(obs, through);
+  EXPECT_EQ(cars->last_entries(), sparse_entries);
 }
 
 TEST(CarBarrierTest, NonDefaultLayout) {

@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
+#include <string>
 
 #include "secure/cbf/barrier.h"
 #include "domains/double_integrator/reach_avoid.h"
@@ -41,6 +43,60 @@ TEST(PolicyEvalTest, ShieldWithGroundTruthPreventsTheCollisionsOfTheUnshieldedPo
   EXPECT_EQ(shielded.decisions, shielded.steps);
   EXPECT_EQ(shielded.latency_us.count, shielded.decisions);
   EXPECT_GT(shielded.interventions_per_episode(), 0.0);
+}
+
+// A ground truth that counts how it is evaluated: the shield's Evaluate calls, and the dense
+// forwards (of how many states) that time the reference.
+struct EvaluationCounts {
+  long sparse_calls = 0, dense_calls = 0, dense_states = 0;
+};
+class CountingBarrier final : public cbf::Barrier {
+ public:
+  CountingBarrier(const di::ReachAvoidOptions& task, EvaluationCounts& counts)
+      : inner_(task.truth), counts_(counts) {}
+  int state_dim() const override { return inner_.state_dim(); }
+  std::string Describe() const override { return "counting " + inner_.Describe(); }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
+    ++counts_.sparse_calls;
+    inner_.Evaluate(states, h);
+  }
+  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                       Eigen::Ref<Eigen::VectorXf> h) override {
+    ++counts_.dense_calls;
+    counts_.dense_states += states.cols();
+    inner_.EvaluateDense(states, h);
+  }
+
+ private:
+  di::GroundTruthBarrier inner_;
+  EvaluationCounts& counts_;
+};
+
+// The reference forward is timed once per seed with the dense evaluation (nothing skipped) on
+// kReferenceBatch states, a warm-up and kReferenceRepeats timed; the decisions never use it.
+TEST(PolicyEvalTest, TheReferenceForwardIsADenseForwardOfTheReferenceBatch) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  SeedModels models;
+  models.airl = &pd;
+  EvaluationCounts counts;
+  models.make_barrier = [&] { return std::make_unique<CountingBarrier>(task, counts); };
+  EpisodeRunner runner(env);
+  const SeedResult r = RunMethod(runner, Method::kSecure, models, shield::ShieldOptions{}, 3, 7);
+  EXPECT_GT(r.reference_forward_latency_us, 0.0);
+  EXPECT_EQ(counts.dense_calls, 1 + SeedResult::kReferenceRepeats);
+  EXPECT_EQ(counts.dense_states, counts.dense_calls * SeedResult::kReferenceBatch);
+  EXPECT_GT(r.decisions, 0);
+  EXPECT_GE(counts.sparse_calls, r.decisions);  // h(s) of every decision, at least
+  // Unshielded methods time no reference.
+  EpisodeRunner plain_runner(env);
+  EXPECT_EQ(RunMethod(plain_runner, Method::kAirl, models, shield::ShieldOptions{}, 3, 7)
+                .reference_forward_latency_us,
+            0.0);
 }
 
 TEST(PolicyEvalTest, SameSeedGivesTheSameEpisodes) {
