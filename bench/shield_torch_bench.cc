@@ -279,7 +279,7 @@ void BM_TorchM128VsShieldQmc_NoGrad(benchmark::State& st, Net net) {
 
 // Arg: M (samples per round). M = 32 is the sample count of the QMC settings (Derby's default,
 // Panda's 1 kHz setting, and 32 QMC on the double integrator, equivalent there to the default):
-// both sides draw i.i.d. normals, which cost about what ours' QMC points do (docs/SHIELD.md,
+// both sides draw i.i.d. normals, which cost about what our QMC points do (docs/SHIELD.md,
 // "Samplers"), so the ratio holds for ours at M = 32 QMC too.
 #define SECURE_TORCH_CASE(fn, name, net)                                              \
   BENCHMARK_CAPTURE(fn, name, net)->ArgName("M")->Arg(32)->Arg(64)->Arg(128)->Unit( \
