@@ -161,7 +161,8 @@ class CarBarrierEvaluator final : public Barrier {
   int state_dim() const override { return layout_.obs_dim; }
   std::string Describe() const override { return description_; }
   int max_states() const { return max_states_; }
-  /// In-range cars in the last chunk evaluated (diagnostics, benchmarks).
+  /// Cars run through the network in the last chunk evaluated: those in range, or every car
+  /// after EvaluateDense (diagnostics, benchmarks).
   long last_entries() const { return last_entries_; }
 
  protected:
