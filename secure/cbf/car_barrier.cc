@@ -369,7 +369,7 @@ void CarBarrierEvaluator::EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>
           f[3] = v[0];
           f[4] = v[1];
         }
-        in_range_[static_cast<std::size_t>(c)] = in_range ? 1 : 0;
+        if (dense) in_range_[static_cast<std::size_t>(c)] = in_range ? 1 : 0;
         ++c;
         ++count;
       }
@@ -381,12 +381,13 @@ void CarBarrierEvaluator::EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>
       Eigen::Map<Eigen::RowVectorXf> out(entry_h_.data(), c);
       mlp_.Forward(features_.leftCols(c), workspace_, out);
     }
-    // Min-reduce the in-range entries per state, capped; NaN propagates.
+    // Min-reduce the in-range entries per state, capped; NaN propagates. Only a dense chunk
+    // holds entries out of range.
     Eigen::Index e = 0;
     for (Eigen::Index i = 0; i < m; ++i) {
       float v = cap_;
       for (int q = 0; q < count_[static_cast<std::size_t>(i)]; ++q, ++e) {
-        if (!in_range_[static_cast<std::size_t>(e)]) continue;
+        if (dense && !in_range_[static_cast<std::size_t>(e)]) continue;
         const float x = entry_h_[e];
         if (x < v || std::isnan(x)) v = std::isnan(v) ? v : x;
       }

@@ -183,7 +183,7 @@ class CarBarrierEvaluator final : public Barrier {
   Eigen::MatrixXf features_;  // feature_dim x (max_states * num_obstacles)
   Eigen::VectorXf entry_h_;   // max_states * num_obstacles
   std::vector<int> count_;    // in-range cars per state of the chunk (every car if dense)
-  std::vector<char> in_range_;  // per gathered entry (dense: out-of-range ones are gathered too)
+  std::vector<char> in_range_;  // per gathered entry of a dense chunk (unused otherwise)
   long last_entries_ = 0;
   std::string description_;
 };
