@@ -164,6 +164,12 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
       .def_property_readonly("action_dim", [](const Policy& p) { return p.model().action_dim(); })
       .def_property_readonly("observation_features",
                              [](const Policy& p) { return p.model().observation_features; })
+      .def_property_readonly("input_features",
+                             [](const Policy& p) {
+                               const policy::GaussianPolicy& m = p.model();
+                               return m.input_features.empty() ? m.observation_features
+                                                               : m.input_features;
+                             })
       .def_property_readonly("action_features",
                              [](const Policy& p) { return p.model().action_features; })
       .def_property_readonly("provenance",

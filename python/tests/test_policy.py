@@ -44,6 +44,19 @@ def test_bc_round_trip_and_sampling(demos, tmp_path):
         secure.train_bc(demos, epoch=3)
 
 
+def test_bc_on_some_input_features_ignores_the_others(demos):
+    # The double integrator's states are (x, y, vx, vy): a policy on the positions alone.
+    policy, _ = secure.train_bc(demos, hidden=[16], epochs=3, seed=2, input_features=["x", "y"])
+    assert policy.observation_features == demos.state_features
+    assert policy.input_features == ["x", "y"]
+    obs = demos.states[:10].copy()
+    other = obs.copy()
+    other[:, 2:] += 5.0
+    np.testing.assert_array_equal(policy.mean(obs), policy.mean(other))
+    with pytest.raises(ValueError, match="input_features = 'speed'"):
+        secure.train_bc(demos, epochs=1, input_features=["speed"])
+
+
 def test_bc_equals_cli_policy_train(cli, demos, tmp_path):
     demos_csv = str(tmp_path / "demos.csv")
     demos.save(demos_csv)

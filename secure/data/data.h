@@ -195,6 +195,10 @@ std::pair<StateSet, StateSet> SplitStateSet(const StateSet& set, double second_f
 Eigen::MatrixXf SelectColumns(const Eigen::Ref<const Eigen::MatrixXf>& states,
                               const std::vector<long>& indices);
 
+/// The rows `indices` of `states`, in that order.
+Eigen::MatrixXf SelectRows(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                           const std::vector<int>& indices);
+
 /// Splits "a,b,c" at commas, trimming spaces; empty input gives an empty list.
 std::vector<std::string> SplitList(const std::string& text);
 

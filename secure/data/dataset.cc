@@ -277,6 +277,19 @@ Eigen::MatrixXf SelectColumns(const Eigen::Ref<const Eigen::MatrixXf>& states,
   return out;
 }
 
+Eigen::MatrixXf SelectRows(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                           const std::vector<int>& indices) {
+  Eigen::MatrixXf out(static_cast<Eigen::Index>(indices.size()), states.cols());
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    const int index = indices[k];
+    SECURE_CHECK(index >= 0 && index < states.rows(),
+                 "select rows: index " << index << " (entry " << k << ") is outside [0, "
+                                       << states.rows() << ")");
+    out.row(static_cast<Eigen::Index>(k)) = states.row(index);
+  }
+  return out;
+}
+
 std::vector<std::string> SplitList(const std::string& text) {
   const auto is_blank = [](char c) { return c == ' ' || c == '\t'; };
   std::vector<std::string> items;

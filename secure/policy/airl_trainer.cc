@@ -121,6 +121,8 @@ class AirlRun {
       warm_start->CheckFeatures(env.ObservationFeatures(), env.ActionFeatures(),
                                 "the environment (" + env_description_ + ")");
       normalizer_ = warm_start->input;
+      input_features_ = warm_start->input_features;
+      input_rows_ = warm_start->InputRows();
       mean_params = warm_start->mean;
       log_std = warm_start->log_std.cwiseMax(static_cast<float>(o_.min_log_std));
       warm_started_ = true;
@@ -133,14 +135,15 @@ class AirlRun {
       log_std = Eigen::VectorXf::Constant(act_dim_, static_cast<float>(o_.init_log_std));
     }
     policy_spec_ = mean_params.spec;
+    const int in_dim = mean_params.spec.input_dim;  // the networks read the policy's inputs
     policy_ = internal::TorchGaussian(mean_params, log_std, o_.min_log_std);
-    value_ = nn::TorchMlp(SpecOf(obs_dim_, o_.value_hidden, 1, nn::Activation::kTanh));
+    value_ = nn::TorchMlp(SpecOf(in_dim, o_.value_hidden, 1, nn::Activation::kTanh));
     value_->LoadParams(
         internal::InitialParams(value_->spec(), internal::DeriveSeed(o_.seed, kValueInit)));
     disc_ = internal::AirlDiscriminator(
-        internal::InitialParams(SpecOf(obs_dim_, o_.reward_hidden, 1, nn::Activation::kRelu),
+        internal::InitialParams(SpecOf(in_dim, o_.reward_hidden, 1, nn::Activation::kRelu),
                                 internal::DeriveSeed(o_.seed, kRewardInit)),
-        internal::InitialParams(SpecOf(obs_dim_, o_.shaping_hidden, 1, nn::Activation::kRelu),
+        internal::InitialParams(SpecOf(in_dim, o_.shaping_hidden, 1, nn::Activation::kRelu),
                                 internal::DeriveSeed(o_.seed, kShapingInit)),
         o_.discriminator_discount);
     policy_opt_ = std::make_unique<torch::optim::Adam>(policy_->parameters(),
@@ -150,7 +153,7 @@ class AirlRun {
     disc_opt_ = std::make_unique<torch::optim::Adam>(
         disc_->parameters(), torch::optim::AdamOptions(o_.discriminator_lr));
 
-    expert_.Build(normalizer_, internal::DeriveSeed(o_.seed, kExpertSubset));
+    expert_.Build(normalizer_, input_rows_, internal::DeriveSeed(o_.seed, kExpertSubset));
     rollout_.Resize(obs_dim_, act_dim_, static_cast<long>(episodes_) * horizon_);
   }
 
@@ -169,6 +172,7 @@ class AirlRun {
   GaussianPolicy Policy() {
     GaussianPolicy p = policy_->Export(normalizer_);
     p.observation_features = observation_features_;
+    p.input_features = input_features_;
     p.action_features = action_features_;
     return p;
   }
@@ -187,8 +191,8 @@ class AirlRun {
     timing.rollout_seconds += watch.Seconds();
 
     watch.Restart();
-    const torch::Tensor x = nn::ToTensor(normalizer_.Apply(rollout_.obs));
-    const torch::Tensor x_next = nn::ToTensor(normalizer_.Apply(rollout_.next_obs));
+    const torch::Tensor x = nn::ToTensor(normalizer_.Apply(Inputs(rollout_.obs)));
+    const torch::Tensor x_next = nn::ToTensor(normalizer_.Apply(Inputs(rollout_.next_obs)));
     const torch::Tensor a = nn::ToTensor(rollout_.actions);
     internal::UpdateDiscriminator(o_, disc_, *disc_opt_, policy_, expert_, x, x_next, a, disc_rng,
                                   stats);
@@ -223,7 +227,7 @@ class AirlRun {
             {"environment", env_description_},
             {"horizon", horizon_},
             {"episodes_per_iteration", episodes_},
-            {"policy_spec", SpecJson(policy_spec_)},
+            {"policy_spec", PolicySpecJson()},
             {"warm_started", warm_started_},
             {"joint", joint_ != nullptr ? joint_->options().ToJson() : nlohmann::json(nullptr)},
             {"reward_stat", {reward_stat_.count, reward_stat_.mean, reward_stat_.m2}},
@@ -240,7 +244,7 @@ class AirlRun {
   void LoadCheckpoint(const std::string& path) {
     const nlohmann::json meta = internal::LoadCheckpoint(path, Modules(), Meta());
     // The expert tensors depend on the normaliser (the same unless a different warm start).
-    expert_.Build(normalizer_, internal::DeriveSeed(o_.seed, kExpertSubset));
+    expert_.Build(normalizer_, input_rows_, internal::DeriveSeed(o_.seed, kExpertSubset));
     completed_ = meta.at("completed_iterations").get<int>();
     env_steps_ = meta.at("env_steps").get<long>();
     const auto& rs = meta.at("reward_stat");
@@ -251,6 +255,17 @@ class AirlRun {
   }
 
  private:
+  // The observation rows the networks read (all when input_rows_ is empty).
+  Eigen::MatrixXf Inputs(const Eigen::MatrixXf& obs) const {
+    return input_rows_.empty() ? obs : data::SelectRows(obs, input_rows_);
+  }
+  // The input features only when they are a subset, so that older checkpoints still resume.
+  nlohmann::json PolicySpecJson() const {
+    nlohmann::json spec = SpecJson(policy_spec_);
+    if (!input_features_.empty()) spec["input_features"] = input_features_;
+    return spec;
+  }
+
   internal::CheckpointModules Modules() {
     return {policy_, value_, disc_, *policy_opt_, *value_opt_, *disc_opt_, normalizer_};
   }
@@ -260,6 +275,8 @@ class AirlRun {
   int horizon_ = 0, episodes_ = 0, obs_dim_ = 0, act_dim_ = 0;
   std::string env_description_;
   std::vector<std::string> observation_features_, action_features_;
+  std::vector<std::string> input_features_;  // the warm start's; empty: all
+  std::vector<int> input_rows_;
   std::vector<std::unique_ptr<domains::Environment>> envs_;
   internal::ExpertTransitions expert_;
   bool warm_started_ = false;

@@ -39,15 +39,23 @@ void BcOptions::Validate() const {
       std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
       "BcOptions", "validation_fraction", validation_fraction, "in [0, 1)");
   SECURE_CHECK_FIELD(std::isfinite(min_log_std), "BcOptions", "min_log_std", min_log_std, "finite");
+  for (std::size_t i = 0; i < input_features.size(); ++i) {
+    SECURE_CHECK_FIELD(!input_features[i].empty(), "BcOptions", "input_features[" << i << "]",
+                       "''", "a feature name");
+    for (std::size_t j = 0; j < i; ++j)
+      SECURE_CHECK_FIELD(input_features[j] != input_features[i], "BcOptions",
+                         "input_features[" << i << "]", "'" << input_features[i] << "'",
+                         "distinct from the other input features");
+  }
 }
 
 void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   using internal::YamlValue;
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of behaviour cloning options");
   static const std::set<std::string> known = {
-      "hidden",      "activation", "learning_rate", "final_learning_rate",
-      "epochs",      "batch_size", "weight_decay",  "validation_fraction",
-      "min_log_std", "seed",       "verbose",       "curve_path"};
+      "hidden",      "activation", "input_features", "learning_rate", "final_learning_rate",
+      "epochs",      "batch_size", "weight_decay",   "validation_fraction",
+      "min_log_std", "seed",       "verbose",        "curve_path"};
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
@@ -58,6 +66,8 @@ void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
     } else if (key == "activation") {
       activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
                               source + ": activation");
+    } else if (key == "input_features") {
+      input_features = internal::YamlStrings(v, key, source);
     } else if (key == "learning_rate") {
       learning_rate = YamlValue<double>(v, key, source);
     } else if (key == "final_learning_rate") {
@@ -85,6 +95,7 @@ void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
 nlohmann::json BcOptions::ToJson() const {
   return {{"hidden", hidden},
           {"activation", ToString(nn::kActivationNames, activation)},
+          {"input_features", input_features},
           {"learning_rate", learning_rate},
           {"final_learning_rate", final_learning_rate},
           {"epochs", epochs},

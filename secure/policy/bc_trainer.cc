@@ -11,7 +11,9 @@
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
+#include "secure/common/option_check.h"
 #include "secure/common/rng.h"
+#include "secure/common/strings.h"
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
 #include "secure/nn/training_loop.h"
@@ -52,10 +54,31 @@ struct Pairs {
   long size() const { return x.defined() ? x.size(0) : 0; }
 };
 
+// The rows of options.input_features in the demonstration states, ascending; empty when the
+// options name none or every feature.
+std::vector<int> InputRows(const BcOptions& options, const data::TrajectorySet& demos) {
+  std::vector<int> rows;
+  for (const std::string& name : options.input_features) {
+    const auto& f = demos.state_features;
+    const auto it = std::find(f.begin(), f.end(), name);
+    SECURE_CHECK_FIELD(it != f.end(), "BcOptions", "input_features", "'" << name << "'",
+                       "a state feature of the demonstrations (" << Join(f) << ")");
+    rows.push_back(static_cast<int>(it - f.begin()));
+  }
+  std::sort(rows.begin(), rows.end());
+  if (rows.size() == demos.state_features.size()) rows.clear();
+  return rows;
+}
+
+// The network's inputs: the input rows of the states (all rows when `rows` is empty).
+Eigen::MatrixXf Inputs(const Eigen::MatrixXf& states, const std::vector<int>& rows) {
+  return rows.empty() ? states : data::SelectRows(states, rows);
+}
+
 Pairs MakePairs(const data::TrajectorySet& demos, const std::vector<long>& columns,
-                const nn::Normalizer& normalizer) {
+                const std::vector<int>& rows, const nn::Normalizer& normalizer) {
   if (columns.empty()) return {};
-  return {nn::ToTensor(normalizer.Apply(data::SelectColumns(demos.states, columns))),
+  return {nn::ToTensor(normalizer.Apply(Inputs(data::SelectColumns(demos.states, columns), rows))),
           nn::ToTensor(data::SelectColumns(demos.actions, columns))};
 }
 
@@ -104,13 +127,15 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
 
   const Split split = SplitEpisodes(demos, options.validation_fraction, rng);
   const bool has_validation = !split.validation_columns.empty();
+  const std::vector<int> rows = InputRows(options, demos);
   const nn::Normalizer normalizer =
-      nn::Normalizer::Fit(data::SelectColumns(demos.states, split.train_columns));
-  const Pairs train = MakePairs(demos, split.train_columns, normalizer);
-  const Pairs val = MakePairs(demos, split.validation_columns, normalizer);
+      nn::Normalizer::Fit(Inputs(data::SelectColumns(demos.states, split.train_columns), rows));
+  const Pairs train = MakePairs(demos, split.train_columns, rows, normalizer);
+  const Pairs val = MakePairs(demos, split.validation_columns, rows, normalizer);
 
   // Initial weights from secure::Rng; log sigma starts at the spread of the demo actions.
-  const int obs_dim = static_cast<int>(demos.state_features.size());
+  const int obs_dim =
+      static_cast<int>(rows.empty() ? demos.state_features.size() : rows.size());
   const int act_dim = static_cast<int>(demos.action_features.size());
   const nn::MlpSpec spec{obs_dim, options.hidden, act_dim, options.activation};
   const Eigen::MatrixXf train_actions = data::SelectColumns(demos.actions, split.train_columns);
@@ -213,6 +238,7 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   }
 
   best.observation_features = demos.state_features;
+  for (const int row : rows) best.input_features.push_back(demos.state_features[row]);
   best.action_features = demos.action_features;
   // The summary without its wall-clock time: same seed and data, same model file bytes.
   best.provenance = {{"trainer", "secure::policy::TrainBc (Gaussian maximum likelihood)"},

@@ -41,6 +41,11 @@ struct BcOptions {
   // Architecture of the mean network.
   std::vector<int> hidden = {64, 64};
   nn::Activation activation = nn::Activation::kTanh;
+  // The demonstration state features the mean network reads (any order; they are read in the
+  // states' order); empty: all. Leaving out the velocities keeps a policy from copying the
+  // current velocity into its action (GaussianPolicy::input_features). AIRL keeps its warm
+  // start's.
+  std::vector<std::string> input_features;
 
   // Optimisation.
   double learning_rate = 1e-3;        // Adam step size at epoch 1

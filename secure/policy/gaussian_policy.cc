@@ -37,12 +37,42 @@ void GaussianPolicy::Validate(const std::string& what) const {
   for (Eigen::Index i = 0; i < log_std.size(); ++i)
     SECURE_CHECK(std::isfinite(log_std[i]),
                  what << ": log_std[" << i << "] = " << log_std[i] << ", must be finite");
-  SECURE_CHECK(static_cast<int>(observation_features.size()) == mean.spec.input_dim,
-               what << ": " << observation_features.size()
-                    << " observation feature names for a network input of " << mean.spec.input_dim);
+  if (input_features.empty()) {
+    SECURE_CHECK(static_cast<int>(observation_features.size()) == mean.spec.input_dim,
+                 what << ": " << observation_features.size()
+                      << " observation feature names for a network input of "
+                      << mean.spec.input_dim);
+  } else {
+    SECURE_CHECK(static_cast<int>(input_features.size()) == mean.spec.input_dim,
+                 what << ": " << input_features.size()
+                      << " input feature names for a network input of " << mean.spec.input_dim);
+    int previous = -1;
+    for (const std::string& name : input_features) {
+      const auto it = std::find(observation_features.begin(), observation_features.end(), name);
+      SECURE_CHECK(it != observation_features.end(),
+                   what << ": input feature '" << name << "' is not an observation feature ("
+                        << Join(observation_features) << ")");
+      const int row = static_cast<int>(it - observation_features.begin());
+      SECURE_CHECK(row > previous, what << ": input feature '" << name
+                                        << "' is repeated or out of the observation's order ("
+                                        << Join(observation_features) << ")");
+      previous = row;
+    }
+  }
   SECURE_CHECK(static_cast<int>(action_features.size()) == mean.spec.output_dim,
                what << ": " << action_features.size() << " action feature names for "
                     << mean.spec.output_dim << " network outputs");
+}
+
+std::vector<int> GaussianPolicy::InputRows() const {
+  std::vector<int> rows;
+  for (const std::string& name : input_features) {
+    const auto it = std::find(observation_features.begin(), observation_features.end(), name);
+    SECURE_CHECK(it != observation_features.end(),
+                 "Gaussian policy: input feature '" << name << "' is not an observation feature");
+    rows.push_back(static_cast<int>(it - observation_features.begin()));
+  }
+  return rows;
 }
 
 void GaussianPolicy::CheckFeatures(const std::vector<std::string>& observation_names,
@@ -61,6 +91,8 @@ void GaussianPolicy::Save(const std::string& path) const {
   nn::ModelFile file;
   file.kind = kGaussianPolicyKind;
   file.metadata["observation_features"] = observation_features;
+  // Only when it differs from the observation, so that other policies' files keep their bytes.
+  if (!input_features.empty()) file.metadata["input_features"] = input_features;
   file.metadata["action_features"] = action_features;
   file.metadata["provenance"] = provenance;
   nn::AddMlp("mean", mean, &file);
@@ -79,6 +111,8 @@ GaussianPolicy GaussianPolicy::Load(const std::string& path) {
   GaussianPolicy policy;
   policy.observation_features = StringList(file.metadata, "observation_features", path);
   policy.action_features = StringList(file.metadata, "action_features", path);
+  if (file.metadata.contains("input_features"))
+    policy.input_features = StringList(file.metadata, "input_features", path);
   if (file.metadata.contains("provenance")) policy.provenance = file.metadata["provenance"];
   policy.mean = nn::GetMlp("mean", file, path);
   policy.input = nn::GetNormalizer("input", file, path);
@@ -109,11 +143,23 @@ double GaussianLogDensity(const Eigen::Ref<const Eigen::VectorXf>& action,
 PolicyEvaluator::PolicyEvaluator(const GaussianPolicy& policy, int chunk)
     : net_((policy.Validate(), policy.mean), policy.input),
       workspace_(net_.MakeWorkspace(chunk)),
+      observation_dim_(policy.observation_dim()),
+      input_rows_(policy.InputRows()),
       sigma_(policy.log_std.array().exp().matrix()),
       log_std_(policy.log_std),
-      mu_(policy.action_dim()) {}
+      mu_(policy.action_dim()) {
+  if (!input_rows_.empty()) gathered_.resize(net_.input_dim(), workspace_.max_batch());
+}
 
-int PolicyEvaluator::observation_dim() const { return net_.input_dim(); }
+int PolicyEvaluator::observation_dim() const { return observation_dim_; }
+
+const Eigen::MatrixXf& PolicyEvaluator::Gather(
+    const Eigen::Ref<const Eigen::MatrixXf>& observations) {
+  const Eigen::Index n = observations.cols();
+  for (std::size_t k = 0; k < input_rows_.size(); ++k)
+    gathered_.row(static_cast<Eigen::Index>(k)).head(n) = observations.row(input_rows_[k]);
+  return gathered_;
+}
 int PolicyEvaluator::action_dim() const { return net_.output_dim(); }
 
 void PolicyEvaluator::Mean(const Eigen::Ref<const Eigen::VectorXf>& observation,
@@ -126,7 +172,11 @@ void PolicyEvaluator::Mean(const Eigen::Ref<const Eigen::VectorXf>& observation,
   // Vectors are contiguous: map them as one-column matrices (no temporary).
   const Eigen::Map<const Eigen::MatrixXf> in(observation.data(), observation.size(), 1);
   Eigen::Map<Eigen::MatrixXf> out(mu.data(), mu.size(), 1);
-  net_.Forward(in, workspace_, out);
+  if (input_rows_.empty()) {
+    net_.Forward(in, workspace_, out);
+  } else {
+    net_.Forward(Gather(in).leftCols(1), workspace_, out);
+  }
 }
 
 void PolicyEvaluator::Means(const Eigen::Ref<const Eigen::MatrixXf>& observations,
@@ -142,7 +192,12 @@ void PolicyEvaluator::Means(const Eigen::Ref<const Eigen::MatrixXf>& observation
   const Eigen::Index chunk = workspace_.max_batch();
   for (Eigen::Index first = 0; first < n; first += chunk) {
     const Eigen::Index m = std::min(chunk, n - first);
-    net_.Forward(observations.middleCols(first, m), workspace_, mus.middleCols(first, m));
+    if (input_rows_.empty()) {
+      net_.Forward(observations.middleCols(first, m), workspace_, mus.middleCols(first, m));
+    } else {
+      net_.Forward(Gather(observations.middleCols(first, m)).leftCols(m), workspace_,
+                   mus.middleCols(first, m));
+    }
   }
 }
 

@@ -12,7 +12,14 @@
 //
 // Model file (kind "gaussian_policy", nn/model_file.h): tensors "mean.layer<i>.weight/.bias"
 // (nn::AddMlp("mean")), "input.mean" / "input.scale" (the observation normaliser) and "log_std"
-// [action_dim]; metadata "observation_features", "action_features", "provenance".
+// [action_dim]; metadata "observation_features", "action_features", "provenance", and
+// "input_features" when the mean network reads only some of the observation's features.
+//
+// Input features: a policy maps whole observations, but its mean network may read a subset of
+// them (BcOptions::input_features), e.g. positions without velocities, so that it cannot copy
+// the current velocity into the action (the "copycat" problem of behaviour cloning from
+// observation histories; docs/RESULTS.md, Panda). The evaluator picks those rows itself: callers
+// always pass whole observations.
 //
 // Training lives in secure::policy_train (bc_trainer.h, airl_trainer.h).
 #include <Eigen/Core>
@@ -33,13 +40,19 @@ struct GaussianPolicy {
   nn::Normalizer input;     // applied to the observation before `mean`
   Eigen::VectorXf log_std;  // (action_dim)
   std::vector<std::string> observation_features;
+  // The features the mean network reads, in observation order; empty: all of them.
+  std::vector<std::string> input_features;
   std::vector<std::string> action_features;
   nlohmann::json provenance = nlohmann::json::object();  // training options, data, summary
 
-  int observation_dim() const { return mean.spec.input_dim; }
+  int observation_dim() const { return static_cast<int>(observation_features.size()); }
+  int input_dim() const { return mean.spec.input_dim; }
   int action_dim() const { return mean.spec.output_dim; }
+  /// The observation row of each input feature (ascending); empty when it reads them all.
+  std::vector<int> InputRows() const;
 
-  /// Checks shapes, feature counts and finiteness; `what` prefixes the message.
+  /// Checks shapes, feature counts (input features: known, distinct, in observation order)
+  /// and finiteness; `what` prefixes the message.
   void Validate(const std::string& what = "Gaussian policy") const;
   /// Atomic write / checked read (kind "gaussian_policy"); errors name the file.
   void Save(const std::string& path) const;
@@ -84,8 +97,14 @@ class PolicyEvaluator {
                  const Eigen::Ref<const Eigen::VectorXf>& action);
 
  private:
+  // The input features' rows of one chunk of observations (empty when all are read).
+  const Eigen::MatrixXf& Gather(const Eigen::Ref<const Eigen::MatrixXf>& observations);
+
   nn::InferenceMlp net_;
   nn::InferenceMlp::Workspace workspace_;
+  int observation_dim_ = 0;
+  std::vector<int> input_rows_;  // empty: every row, in order
+  Eigen::MatrixXf gathered_;     // input_dim x chunk
   Eigen::VectorXf sigma_;
   Eigen::VectorXf log_std_;
   Eigen::VectorXf mu_;  // scratch for Sample / LogProb

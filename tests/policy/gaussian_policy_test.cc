@@ -10,6 +10,7 @@
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
+#include "secure/data/data.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::policy {
@@ -197,6 +198,76 @@ TEST(PolicyEvaluatorTest, MeanMatchesReferenceForward) {
   EXPECT_EQ(ev.observation_dim(), 3);
   EXPECT_EQ(ev.action_dim(), 2);
   EXPECT_FLOAT_EQ(ev.sigma()[0], std::exp(-1.0f));
+}
+
+// A policy whose network reads three of four observation features: the evaluator takes whole
+// observations and reads the input rows itself.
+GaussianPolicy MakeSubsetPolicy() {
+  GaussianPolicy p = MakePolicy();
+  p.observation_features = {"a", "z", "b", "c"};
+  p.input_features = {"a", "b", "c"};
+  return p;
+}
+
+TEST(PolicyEvaluatorTest, APolicyOnSomeFeaturesReadsThemFromTheWholeObservation) {
+  const GaussianPolicy p = MakeSubsetPolicy();
+  EXPECT_EQ(p.observation_dim(), 4);
+  EXPECT_EQ(p.input_dim(), 3);
+  EXPECT_EQ(p.InputRows(), (std::vector<int>{0, 2, 3}));
+  PolicyEvaluator ev(p, /*chunk=*/4);
+  EXPECT_EQ(ev.observation_dim(), 4);
+  Rng rng(5);
+  Eigen::MatrixXf x(4, 11);
+  for (int c = 0; c < x.cols(); ++c)
+    for (int r = 0; r < 4; ++r) x(r, c) = static_cast<float>(rng.Uniform(-3, 3));
+  const Eigen::MatrixXf inputs = data::SelectRows(x, {0, 2, 3});
+  const Eigen::MatrixXd expected = nn::ReferenceForward(p.mean, p.input, inputs);
+  Eigen::VectorXf mu(2), mu_other_z(2);
+  for (int c = 0; c < x.cols(); ++c) {
+    ev.Mean(x.col(c), mu);
+    EXPECT_NEAR(mu[0], expected(0, c), 1e-5);
+    EXPECT_NEAR(mu[1], expected(1, c), 1e-5);
+    // The feature it does not read changes nothing, bit for bit.
+    Eigen::VectorXf other = x.col(c);
+    other[1] += 100.0f;
+    ev.Mean(other, mu_other_z);
+    EXPECT_EQ(mu, mu_other_z);
+  }
+  // Batched, in chunks of 4.
+  Eigen::MatrixXf mus(2, x.cols());
+  ev.Means(x, mus);
+  EXPECT_LT((mus.cast<double>() - expected).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_HAS(ErrorOf([&] { ev.Mean(Eigen::VectorXf::Zero(3), mu); }), "expected 4");
+}
+
+TEST(GaussianPolicyTest, InputFeaturesMustBeKnownDistinctAndInObservationOrder) {
+  EXPECT_NO_THROW(MakeSubsetPolicy().Validate("pi"));
+  GaussianPolicy p = MakeSubsetPolicy();
+  p.input_features = {"a", "q", "c"};
+  EXPECT_HAS(ErrorOf([&] { p.Validate("pi"); }), "input feature 'q' is not an observation");
+  p.input_features = {"b", "a", "c"};
+  EXPECT_HAS(ErrorOf([&] { p.Validate("pi"); }), "'a' is repeated or out of the observation's");
+  p.input_features = {"a", "a", "c"};
+  EXPECT_HAS(ErrorOf([&] { p.Validate("pi"); }), "'a' is repeated");
+  p.input_features = {"a", "b"};
+  EXPECT_HAS(ErrorOf([&] { p.Validate("pi"); }), "2 input feature names for a network input of 3");
+  p.input_features.clear();  // all four features: the network reads three
+  EXPECT_HAS(ErrorOf([&] { p.Validate("pi"); }), "4 observation feature names");
+}
+
+TEST_F(GaussianPolicyFileTest, InputFeaturesRoundTripAndOnlyASubsetIsWritten) {
+  const GaussianPolicy p = MakeSubsetPolicy();
+  const std::string path = PathOf("subset.model");
+  p.Save(path);
+  const GaussianPolicy q = GaussianPolicy::Load(path);
+  EXPECT_TRUE(BitEqual(p, q));
+  EXPECT_EQ(q.input_features, p.input_features);
+  EXPECT_EQ(nn::ReadModelFile(path).metadata["input_features"],
+            nlohmann::json({"a", "b", "c"}));
+  // A policy that reads every feature writes no such field, as before.
+  MakePolicy().Save(PathOf("all.model"));
+  EXPECT_FALSE(nn::ReadModelFile(PathOf("all.model")).metadata.contains("input_features"));
+  EXPECT_TRUE(GaussianPolicy::Load(PathOf("all.model")).input_features.empty());
 }
 
 TEST(PolicyEvaluatorTest, WrongDimensionsThrow) {

@@ -248,6 +248,56 @@ TEST(BcTest, InvalidOptionsAreRejectedNamingTheField) {
              "BcOptions::learning_rate = nan");
 }
 
+// The linear expert's action depends on x and y; a policy that reads x alone learns the best
+// it can from x, E[a | x] = K[:, 0] x + b (y is uniform with mean 0), and ignores y.
+TEST(BcTest, APolicyOnSomeFeaturesLearnsFromThemAndIgnoresTheOthers) {
+  const data::TrajectorySet demos = LinearDemos(40, 100, 1);
+  BcOptions o = FastBc();
+  o.epochs = 150;
+  o.input_features = {"x"};
+  const GaussianPolicy pi = TrainBc(o, demos);
+  EXPECT_EQ(pi.observation_features, demos.state_features);
+  EXPECT_EQ(pi.input_features, (std::vector<std::string>{"x"}));
+  EXPECT_EQ(pi.input_dim(), 1);
+  EXPECT_EQ(pi.provenance["options"]["input_features"], nlohmann::json({"x"}));
+  PolicyEvaluator ev(pi);
+  Rng rng(99);
+  double mse = 0.0;
+  const int n = 1000;
+  Eigen::VectorXf st(2), mu(2), mu_other_y(2);
+  for (int i = 0; i < n; ++i) {
+    st << static_cast<float>(rng.Uniform(-1.8, 1.8)), static_cast<float>(rng.Uniform(-1.8, 1.8));
+    ev.Mean(st, mu);
+    mse += (mu - (kGain.col(0) * st[0] + kOffset)).squaredNorm() / 2.0;
+    st[1] = -st[1];
+    ev.Mean(st, mu_other_y);
+    EXPECT_EQ(mu, mu_other_y);
+  }
+  EXPECT_LT(mse / n, 0.003);
+  // Listing every feature, in any order, is the default: the same model, bit for bit.
+  o.input_features = {"y", "x"};
+  const GaussianPolicy all = TrainBc(o, demos);
+  o.input_features.clear();
+  EXPECT_TRUE(BitEqual(all, TrainBc(o, demos)));
+  EXPECT_TRUE(all.input_features.empty());
+}
+
+TEST(BcTest, UnknownOrRepeatedInputFeaturesAreRejected) {
+  const data::TrajectorySet demos = LinearDemos(4, 10, 5);
+  BcOptions o = FastBc();
+  o.input_features = {"x", "speed"};
+  EXPECT_HAS(ErrorOf([&] { TrainBc(o, demos); }),
+             "BcOptions::input_features = 'speed', must be a state feature of the demonstrations "
+             "(x, y)");
+  o.input_features = {"x", "x"};
+  EXPECT_HAS(ErrorOf([&] { TrainBc(o, demos); }), "BcOptions::input_features[1] = 'x'");
+  BcOptions y;
+  y.ApplyYaml(YAML::Load("{input_features: [x]}"), "bc.yaml");
+  EXPECT_EQ(y.input_features, (std::vector<std::string>{"x"}));
+  EXPECT_HAS(ErrorOf([&] { y.ApplyYaml(YAML::Load("{input_features: x}"), "bc.yaml"); }),
+             "bc.yaml: field 'input_features' must be a list of names");
+}
+
 TEST(BcTest, InvalidDataIsRejected) {
   data::TrajectorySet d = LinearDemos(3, 10, 6);
   d.states(1, 17) = std::nanf("");
@@ -672,6 +722,30 @@ TEST(AirlTest, WarmStartKeepsTheArchitectureAndNormalizer) {
   GaussianPolicy wrong = bc;
   wrong.observation_features = {"p", "q"};
   EXPECT_HAS(ErrorOf([&] { TrainAirl(o, demos, PointMassEnv(), &wrong, nullptr); }), "p, q");
+}
+
+// AIRL keeps the warm start's input features: its policy, value and discriminator read the same
+// rows, and the policy it returns ignores the others.
+TEST(AirlTest, AWarmStartOnSomeFeaturesKeepsThem) {
+  const data::TrajectorySet demos = ExpertDemos(20, 2);
+  BcOptions bc_options = FastBc();
+  bc_options.hidden = {24};
+  bc_options.epochs = 20;
+  bc_options.input_features = {"x"};
+  const GaussianPolicy bc = TrainBc(bc_options, demos);
+  AirlOptions o = SmallAirl();
+  o.iterations = 2;
+  const GaussianPolicy pi = TrainAirl(o, demos, PointMassEnv(), &bc, nullptr);
+  EXPECT_EQ(pi.input_features, (std::vector<std::string>{"x"}));
+  EXPECT_EQ(pi.mean.spec, bc.mean.spec);
+  EXPECT_FALSE(BitEqual(pi, bc));  // trained
+  PolicyEvaluator ev(pi);
+  Eigen::VectorXf o1(2), o2(2), mu1(2), mu2(2);
+  o1 << 0.3f, -0.5f;
+  o2 << 0.3f, 0.9f;
+  ev.Mean(o1, mu1);
+  ev.Mean(o2, mu2);
+  EXPECT_EQ(mu1, mu2);
 }
 
 // The bc_weight term pulls the policy's mean toward the expert's actions: from the same random

@@ -22,9 +22,11 @@ class ExpertTransitions {
  public:
   explicit ExpertTransitions(const data::TrajectorySet& demos);
 
-  /// (Re)builds the tensors with `normalizer` (x, next normalised; a raw) and the fixed random
-  /// subset of up to 2048 transitions of the D-on-expert statistic, shuffled with `subset_seed`.
-  void Build(const nn::Normalizer& normalizer, std::uint64_t subset_seed);
+  /// (Re)builds the tensors with `normalizer` (x, next: the state rows `rows`, all if empty,
+  /// normalised; a raw) and the fixed random subset of up to 2048 transitions of the D-on-expert
+  /// statistic, shuffled with `subset_seed`.
+  void Build(const nn::Normalizer& normalizer, const std::vector<int>& rows,
+             std::uint64_t subset_seed);
 
   long count() const { return count_; }
   const torch::Tensor& x() const { return x_; }        // (count x obs), normalised s_t

@@ -14,7 +14,6 @@ namespace secure::policy::internal {
 
 using secure::YamlValue;
 
-
 inline std::vector<int> YamlWidths(const YAML::Node& node, const std::string& key,
                                    const std::string& source) {
   SECURE_CHECK(node.IsSequence(),
@@ -22,6 +21,14 @@ inline std::vector<int> YamlWidths(const YAML::Node& node, const std::string& ke
   std::vector<int> widths;
   for (const auto& w : node) widths.push_back(YamlValue<int>(w, key, source));
   return widths;
+}
+
+inline std::vector<std::string> YamlStrings(const YAML::Node& node, const std::string& key,
+                                            const std::string& source) {
+  SECURE_CHECK(node.IsSequence(), source << ": field '" << key << "' must be a list of names");
+  std::vector<std::string> names;
+  for (const auto& n : node) names.push_back(YamlValue<std::string>(n, key, source));
+  return names;
 }
 
 inline std::string WidthsString(const std::vector<int>& widths) {
