@@ -17,11 +17,14 @@ experiments::ExperimentOptions ArmExperimentPreset(experiments::Profile profile,
   o.airl.steps_per_iteration = 3000;
   o.airl.bc_weight = 1.0;
   // The shield: M = 128 (the paper's Panda setting in its Figure 9 runs), rho0 = 0.1, one control
-  // period ahead; alpha dt = 0.2 < 1 (requirement R3).
+  // period ahead; alpha dt = 0.8 < 1 (requirement R3; the authors' scripts use alpha dt = 1, the
+  // myopic test). alpha dt = 0.2 (k = 5, until 2026-12-01) stalled the knife above the board in
+  // kitchen-cutting (success 56.6 -> 91.6 % with k = 20 on the same models, dangerous 5.1 -> 5.3 %)
+  // and let more blocks topple in panda-push (20 seeds: 7.5 -> 3.5 %; docs/RESULTS.md).
   o.shield.num_samples = 128;
   o.shield.safe_ratio = 0.1;
   o.shield.dt = control_period;
-  o.shield.class_k_gain = 5.0;
+  o.shield.class_k_gain = 20.0;
   o.shield.probe_extent = 1.0;
   o.check_enabled = false;  // no barrier check problem for these domains
   // Statistics: 10 seeds x 100 episodes.
