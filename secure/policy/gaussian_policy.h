@@ -37,7 +37,7 @@ inline constexpr const char* kGaussianPolicyKind = "gaussian_policy";
 
 struct GaussianPolicy {
   nn::MlpParams mean;       // observation_dim -> ... -> action_dim, linear output
-  nn::Normalizer input;     // applied to the observation before `mean`
+  nn::Normalizer input;     // applied to the input features before `mean`
   Eigen::VectorXf log_std;  // (action_dim)
   std::vector<std::string> observation_features;
   // The features the mean network reads, in observation order; empty: all of them.
