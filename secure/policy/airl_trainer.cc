@@ -191,8 +191,10 @@ class AirlRun {
     timing.rollout_seconds += watch.Seconds();
 
     watch.Restart();
-    const torch::Tensor x = nn::ToTensor(normalizer_.Apply(Inputs(rollout_.obs)));
-    const torch::Tensor x_next = nn::ToTensor(normalizer_.Apply(Inputs(rollout_.next_obs)));
+    const torch::Tensor x =
+        nn::ToTensor(normalizer_.Apply(PolicyInputs(rollout_.obs, input_rows_)));
+    const torch::Tensor x_next =
+        nn::ToTensor(normalizer_.Apply(PolicyInputs(rollout_.next_obs, input_rows_)));
     const torch::Tensor a = nn::ToTensor(rollout_.actions);
     internal::UpdateDiscriminator(o_, disc_, *disc_opt_, policy_, expert_, x, x_next, a, disc_rng,
                                   stats);
@@ -255,10 +257,6 @@ class AirlRun {
   }
 
  private:
-  // The observation rows the networks read (all when input_rows_ is empty).
-  Eigen::MatrixXf Inputs(const Eigen::MatrixXf& obs) const {
-    return input_rows_.empty() ? obs : data::SelectRows(obs, input_rows_);
-  }
   // The input features only when they are a subset, so that older checkpoints still resume.
   nlohmann::json PolicySpecJson() const {
     nlohmann::json spec = SpecJson(policy_spec_);

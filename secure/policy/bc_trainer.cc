@@ -70,15 +70,11 @@ std::vector<int> InputRows(const BcOptions& options, const data::TrajectorySet& 
   return rows;
 }
 
-// The network's inputs: the input rows of the states (all rows when `rows` is empty).
-Eigen::MatrixXf Inputs(const Eigen::MatrixXf& states, const std::vector<int>& rows) {
-  return rows.empty() ? states : data::SelectRows(states, rows);
-}
-
 Pairs MakePairs(const data::TrajectorySet& demos, const std::vector<long>& columns,
                 const std::vector<int>& rows, const nn::Normalizer& normalizer) {
   if (columns.empty()) return {};
-  return {nn::ToTensor(normalizer.Apply(Inputs(data::SelectColumns(demos.states, columns), rows))),
+  return {nn::ToTensor(
+              normalizer.Apply(PolicyInputs(data::SelectColumns(demos.states, columns), rows))),
           nn::ToTensor(data::SelectColumns(demos.actions, columns))};
 }
 
@@ -128,14 +124,13 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   const Split split = SplitEpisodes(demos, options.validation_fraction, rng);
   const bool has_validation = !split.validation_columns.empty();
   const std::vector<int> rows = InputRows(options, demos);
-  const nn::Normalizer normalizer =
-      nn::Normalizer::Fit(Inputs(data::SelectColumns(demos.states, split.train_columns), rows));
+  const nn::Normalizer normalizer = nn::Normalizer::Fit(
+      PolicyInputs(data::SelectColumns(demos.states, split.train_columns), rows));
   const Pairs train = MakePairs(demos, split.train_columns, rows, normalizer);
   const Pairs val = MakePairs(demos, split.validation_columns, rows, normalizer);
 
   // Initial weights from secure::Rng; log sigma starts at the spread of the demo actions.
-  const int obs_dim =
-      static_cast<int>(rows.empty() ? demos.state_features.size() : rows.size());
+  const int obs_dim = static_cast<int>(rows.empty() ? demos.state_features.size() : rows.size());
   const int act_dim = static_cast<int>(demos.action_features.size());
   const nn::MlpSpec spec{obs_dim, options.hidden, act_dim, options.activation};
   const Eigen::MatrixXf train_actions = data::SelectColumns(demos.actions, split.train_columns);

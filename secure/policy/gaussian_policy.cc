@@ -5,6 +5,7 @@
 
 #include "secure/common/error.h"
 #include "secure/common/strings.h"
+#include "secure/data/data.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::policy {
@@ -21,6 +22,12 @@ std::vector<std::string> StringList(const nlohmann::json& metadata, const std::s
     out.push_back(item.get<std::string>());
   }
   return out;
+}
+
+// The row of `name` in `features`, or -1.
+int RowOf(const std::vector<std::string>& features, const std::string& name) {
+  const auto it = std::find(features.begin(), features.end(), name);
+  return it == features.end() ? -1 : static_cast<int>(it - features.begin());
 }
 
 }  // namespace
@@ -48,11 +55,10 @@ void GaussianPolicy::Validate(const std::string& what) const {
                       << " input feature names for a network input of " << mean.spec.input_dim);
     int previous = -1;
     for (const std::string& name : input_features) {
-      const auto it = std::find(observation_features.begin(), observation_features.end(), name);
-      SECURE_CHECK(it != observation_features.end(),
-                   what << ": input feature '" << name << "' is not an observation feature ("
-                        << Join(observation_features) << ")");
-      const int row = static_cast<int>(it - observation_features.begin());
+      const int row = RowOf(observation_features, name);
+      SECURE_CHECK(row >= 0, what << ": input feature '" << name
+                                  << "' is not an observation feature ("
+                                  << Join(observation_features) << ")");
       SECURE_CHECK(row > previous, what << ": input feature '" << name
                                         << "' is repeated or out of the observation's order ("
                                         << Join(observation_features) << ")");
@@ -67,12 +73,17 @@ void GaussianPolicy::Validate(const std::string& what) const {
 std::vector<int> GaussianPolicy::InputRows() const {
   std::vector<int> rows;
   for (const std::string& name : input_features) {
-    const auto it = std::find(observation_features.begin(), observation_features.end(), name);
-    SECURE_CHECK(it != observation_features.end(),
+    const int row = RowOf(observation_features, name);
+    SECURE_CHECK(row >= 0,
                  "Gaussian policy: input feature '" << name << "' is not an observation feature");
-    rows.push_back(static_cast<int>(it - observation_features.begin()));
+    rows.push_back(row);
   }
   return rows;
+}
+
+Eigen::MatrixXf PolicyInputs(const Eigen::Ref<const Eigen::MatrixXf>& observations,
+                             const std::vector<int>& rows) {
+  return rows.empty() ? Eigen::MatrixXf(observations) : data::SelectRows(observations, rows);
 }
 
 void GaussianPolicy::CheckFeatures(const std::vector<std::string>& observation_names,

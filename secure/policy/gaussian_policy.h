@@ -65,6 +65,11 @@ struct GaussianPolicy {
                      const std::string& source) const;
 };
 
+/// What the mean network reads of `observations` (features x N): the rows `rows`, in that order,
+/// or every row when `rows` is empty (GaussianPolicy::InputRows() of a policy that reads all).
+Eigen::MatrixXf PolicyInputs(const Eigen::Ref<const Eigen::MatrixXf>& observations,
+                             const std::vector<int>& rows);
+
 /// log N(action; mu, diag(exp(log_std)^2)) summed over the action dimensions, in double.
 double GaussianLogDensity(const Eigen::Ref<const Eigen::VectorXf>& action,
                           const Eigen::Ref<const Eigen::VectorXf>& mu,

@@ -25,11 +25,10 @@ ExpertTransitions::ExpertTransitions(const data::TrajectorySet& demos) : demos_(
 
 void ExpertTransitions::Build(const nn::Normalizer& normalizer, const std::vector<int>& rows,
                               std::uint64_t subset_seed) {
-  const auto inputs = [&rows](const Eigen::MatrixXf& states) {
-    return rows.empty() ? states : data::SelectRows(states, rows);
-  };
-  x_ = nn::ToTensor(normalizer.Apply(inputs(data::SelectColumns(demos_.states, cols_))));
-  next_ = nn::ToTensor(normalizer.Apply(inputs(data::SelectColumns(demos_.states, next_cols_))));
+  x_ =
+      nn::ToTensor(normalizer.Apply(PolicyInputs(data::SelectColumns(demos_.states, cols_), rows)));
+  next_ = nn::ToTensor(
+      normalizer.Apply(PolicyInputs(data::SelectColumns(demos_.states, next_cols_), rows)));
   a_ = nn::ToTensor(data::SelectColumns(demos_.actions, cols_));
   // A fixed random subset for the D-on-expert statistic.
   std::vector<std::int64_t> all(count_);
