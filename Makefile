@@ -3,11 +3,12 @@
 #   make demo   the main job: the SECURE pipeline on the default domain, printing its table,
 #               then its HTML report (secure report; the run directory is $(BUILD)/demo-run,
 #               made anew by each `make demo`: a run directory's finished seeds are otherwise reused)
-#   make test   every unit test (ctest)
+#   make test   every fast unit test of every module, the Python and report tests included
+#               (ctest without the labels slow, long, dispatch and property-random; tests/README.md)
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: demo test build bench check clean
+.PHONY: demo test test-slow test-ci build bench check clean
 
 build:
 	SECURE_BUILD_DIR=$(BUILD) scripts/setup.sh
@@ -17,9 +18,19 @@ demo: build
 	$(BUILD)/apps/secure/secure demo --out $(BUILD)/demo-run
 	$(BUILD)/apps/secure/secure report $(BUILD)/demo-run
 
-# Every test but the `long` label (ctest -L long: the shield's properties at 10^6 cases).
+# The labels `make test` leaves out (tests/README.md): slow (tests that train whole quick
+# experiments), dispatch (the inference and shield tests again on each forced kernel path),
+# property-random (the shield's properties with a fresh RapidCheck seed) and long (10^6 cases).
 test: build
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -LE long
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -LE 'slow|long|dispatch|property-random'
+
+# Only the slow tests.
+test-slow: build
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -L slow
+
+# What CI runs after `make test` (.ci/run): the slow, dispatch and fresh-seed tests.
+test-ci: build
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -L 'slow|dispatch|property-random'
 
 bench: build
 	cmake --build $(BUILD) --target bench

@@ -12,6 +12,7 @@ set -euo pipefail
 
 # Why each package is here:
 #   build-essential cmake       compiler and build system
+#   ccache                      compiler cache: a rebuild (and CI on the same machine) recompiles only what changed
 #   libtorch-dev                training (Adam, autograd); inference does not use it
 #   libopenblas0-pthread        BLAS behind LibTorch: the reference BLAS is ~30x slower
 #   libopenblas-pthread-dev     cblas.h for the sgemm peak benchmark (bench/peak_bench.cc)
@@ -35,7 +36,7 @@ set -euo pipefail
 #   python3-matplotlib          `secure report`: the run's figures (tools/report/report.py, Agg backend)
 #   chromium                    the report's test renders the page headless (ctest -L report)
 PACKAGES=(
-  build-essential cmake git
+  build-essential cmake git ccache
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
   libeigen3-dev libxsmm-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
   libhdf5-dev pkgconf

@@ -3,6 +3,7 @@
 #include <libxsmm.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <mutex>
 #include <type_traits>
 
@@ -52,6 +53,7 @@ InferenceMlp::InferenceMlp(const MlpParams& params, const Normalizer& normalizer
   for (int width : spec_.hidden) max_width_ = std::max(max_width_, width);
   max_width_ = std::max(max_width_, spec_.output_dim);
 
+  if (backend == MatmulBackend::kAuto) backend = ForcedBackend();
   if (backend == MatmulBackend::kEigen) {
     backend_ = MatmulBackend::kEigen;
     return;
@@ -69,9 +71,24 @@ InferenceMlp::InferenceMlp(const MlpParams& params, const Normalizer& normalizer
   backend_ = MatmulBackend::kEigen;
 }
 
-void InferenceMlp::BuildKernels() {
+MatmulBackend InferenceMlp::ForcedBackend() {
+  const char* value = std::getenv("SECURE_MATMUL_BACKEND");
+  if (value == nullptr || *value == '\0') return MatmulBackend::kAuto;
+  return FromString(kMatmulBackendNames, value, "environment variable SECURE_MATMUL_BACKEND");
+}
+
+const char* InferenceMlp::LibxsmmTarget() {
+  InitLibxsmm();
+  return libxsmm_get_target_arch();
+}
+
+void InferenceMlp::InitLibxsmm() {
   static std::once_flag init;
   std::call_once(init, [] { libxsmm_init(); });
+}
+
+void InferenceMlp::BuildKernels() {
+  InitLibxsmm();
   static_assert(std::is_same_v<SmmKernel, libxsmm_smmfunction>,
                 "InferenceMlp::SmmKernel must match libxsmm_smmfunction");
   std::vector<LayerKernels> all;

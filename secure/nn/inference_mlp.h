@@ -19,6 +19,13 @@
 // says which one a model uses. Both compute the same function; results differ by float rounding
 // (~1e-6 relative).
 //
+// Forcing a path (tests, A/B runs): the environment variable SECURE_MATMUL_BACKEND=eigen|libxsmm
+// replaces kAuto in every constructor of the process (an explicit kEigen or kLibxsmm is kept), and
+// LIBXSMM's own LIBXSMM_TARGET (e.g. hsw = AVX2, skx = AVX-512) picks the instruction set its
+// kernels are generated for. `ctest -L dispatch` runs the inference and shield tests under each
+// path the CPU supports (tests/dispatch/), so a result that holds on one path only is found on
+// any machine.
+//
 // Eigen's GEMM packing buffers come from the stack (EIGEN_STACK_ALLOCATION_LIMIT is raised to
 // 1 MiB project-wide, see CMakeLists.txt): the calling thread needs about 1 MiB of stack for the
 // widest layers on the Eigen path.
@@ -68,6 +75,12 @@ class InferenceMlp {
   /// The backend in use: kLibxsmm or kEigen (never kAuto).
   MatmulBackend backend() const { return backend_; }
 
+  /// What kAuto means in this process: kAuto, or the backend SECURE_MATMUL_BACKEND forces.
+  /// @throws secure::Error naming the variable if its value is not auto, eigen or libxsmm.
+  static MatmulBackend ForcedBackend();
+  /// The instruction set LIBXSMM generates kernels for (its target name, e.g. "hsw", "skx").
+  static const char* LibxsmmTarget();
+
   /// A workspace for batches of up to `max_batch` samples.
   Workspace MakeWorkspace(int max_batch) const;
 
@@ -93,6 +106,7 @@ class InferenceMlp {
     int row_rest = 0;      // rows of kernels[.][1]
   };
 
+  static void InitLibxsmm();  // libxsmm_init(), once per process
   void BuildKernels();
   void ForwardEigen(const Eigen::Ref<const Eigen::MatrixXf>& inputs, Workspace& workspace,
                     Eigen::Ref<Eigen::MatrixXf> outputs) const;

@@ -168,7 +168,9 @@ TEST(CarBarrierTest, FarCarsAreIgnoredAndAllFarGivesTheCap) {
   for (int i = 0; i < one.cols(); ++i) {
     for (int j = 0; j < kCars; ++j) {
       const float dx = one(4 + 4 * j, i), dy = one(5 + 4 * j, i);
-      if (std::sqrt(dx * dx + dy * dy + 2e-4f) > 1.0f) {
+      // Clearly out of range only: the evaluator's distance is its own expression (-march=native
+      // may fuse it differently), so a car within rounding of R is left alone.
+      if (std::sqrt(dx * dx + dy * dy + 2e-4f) > 1.0f + 1e-5f) {
         moved(4 + 4 * j, i) = 5.0f * dx;  // still out of range
         moved(6 + 4 * j, i) += 1.0f;
         ++changed;

@@ -140,7 +140,11 @@ TEST(InferenceMlpTest, BothBackendsMatchTheReference) {
 #if defined(__x86_64__)
 TEST(InferenceMlpTest, DefaultBackendIsLibxsmmOnX86) {
   const MlpParams params = RandomMlpParams(Spec(4, {64, 64}, 1, Activation::kTanh), 3);
-  EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4)).backend(), MatmulBackend::kLibxsmm);
+  // A forced run (tests/dispatch: SECURE_MATMUL_BACKEND) replaces the default.
+  const MatmulBackend expected = InferenceMlp::ForcedBackend() == MatmulBackend::kEigen
+                                     ? MatmulBackend::kEigen
+                                     : MatmulBackend::kLibxsmm;
+  EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4)).backend(), expected);
   EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4), MatmulBackend::kLibxsmm).backend(),
             MatmulBackend::kLibxsmm);
   EXPECT_EQ(InferenceMlp(params, Normalizer::Identity(4), MatmulBackend::kEigen).backend(),

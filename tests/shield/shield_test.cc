@@ -642,7 +642,9 @@ TEST(ShieldTest, RandomSafeAggregationReturnsOneOfTheSafeSamples) {
     ASSERT_GE(column, 0) << "the action " << d.action.transpose() << " is not a sample";
     const double g = IndependentG(sys.independent, sys.dynamics, options, state, d.action);
     EXPECT_GE(g, 0.0);
-    EXPECT_EQ(d.g, g);
+    // IndependentG re-derives g with its own single-column evaluation and formula (not the
+    // shield's batched EvaluateG loop): -march=native may contract it into FMAs differently.
+    EXPECT_NEAR(d.g, g, 1e-9 * std::max(1.0, std::abs(g)));
     EXPECT_NEAR(d.distance_to_mean, (samples.col(column) - mu).norm(), 1e-6);
     if (d.safe_ratio < 1.0) ++partially_safe;
     chosen.insert({d.action[0], d.action[1]});
