@@ -256,6 +256,8 @@ struct ExperimentCommand {
   int threads = 2;
   std::string barrier, methods, out, shard;
   std::string progress = "auto";
+  int closed_loop_candidates = 0;  // --closed-loop N (absent: the config's closed_loop section)
+  CLI::Option* closed_loop_option = nullptr;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
   CLI::Option* episodes_option = nullptr;
@@ -296,6 +298,10 @@ struct ExperimentCommand {
                     "k/N: run only the seeds with index k mod N (0-based; needs --out), then "
                     "`secure experiment merge`; default: a SLURM array element's or an mpirun "
                     "rank's place (docs/CLUSTER.md)");
+    closed_loop_option = cmd->add_option("--closed-loop", closed_loop_candidates,
+                    "N: the closed-loop check before deployment, trying up to N training "
+                    "initialisations per seed (kinds method-comparison, ablation; thresholds "
+                    "in the config's closed_loop section; docs/RESULTS.md)");
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     AddProgressOption(cmd, &progress);
     cmd->callback([this] { Run(); });
@@ -317,6 +323,11 @@ struct ExperimentCommand {
     if (seeds_option->count() > 0) options.seeds = seeds;
     if (episodes_option->count() > 0) options.episodes = episodes;
     if (!methods.empty()) options.methods = eval::ParseMethods(methods);
+    if (closed_loop_option->count() > 0) {
+      CheckRange("--closed-loop", closed_loop_candidates, 1, 64);
+      options.closed_loop.enabled = true;
+      options.closed_loop.max_candidates = closed_loop_candidates;
+    }
     if (!barrier.empty()) {
       options.barrier_kind = barrier == "per-car"
                                  ? experiments::BarrierKind::kPerObstacle

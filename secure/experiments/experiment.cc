@@ -139,6 +139,108 @@ std::string CheckBrief(const cbf::CheckReport& r) {
   return line;
 }
 
+// The closed-loop check with model selection (ClosedLoopCheckOptions): trains candidates (BC and
+// AIRL through `train_policies`, the barrier on the baseline data) until one passes its held-out
+// shielded episodes, leaves the selected candidate's policies in `bc` and `airl`, records every
+// candidate in summary["closed_loop"] and returns the selected barrier. Files: candidate k's
+// curves and models in <dir>/candidate-k/, the selected one's policies and curves also under the
+// usual names in <dir> (its barrier is saved by the caller).
+using TrainPolicies = std::function<void(std::uint64_t, const std::string&, nlohmann::json&)>;
+SeedBarrier SelectCandidate(const Domain& domain, const ExperimentOptions& o, std::uint64_t seed,
+                            const std::string& tag, const std::string& dir,
+                            const SharedData& shared, const domains::Environment& env,
+                            const TrainPolicies& train_policies,
+                            std::optional<policy::GaussianPolicy>& bc,
+                            std::optional<policy::GaussianPolicy>& airl, long candidate_units,
+                            Progress& progress, nlohmann::json& summary) {
+  const ClosedLoopCheckOptions& c = o.closed_loop;
+  struct Kept {
+    int index = 0;
+    std::optional<policy::GaussianPolicy> bc, airl;
+    std::optional<SeedBarrier> barrier;
+    nlohmann::json record;
+    int failed = 0;
+    double score = 0.0;
+  };
+  std::optional<Kept> best;
+  nlohmann::json candidates = nlohmann::json::array();
+  for (int k = 0; k < c.max_candidates; ++k) {
+    // Candidate 0's units are in SeedUnits (its barrier is the variant loop's unit).
+    if (k > 0) progress.AddTotal(candidate_units);
+    const std::uint64_t training_seed = CandidateSeed(seed, k);
+    const std::string files = dir.empty() ? "" : dir + "/candidate-" + std::to_string(k);
+    CreateDirectories(files);
+    nlohmann::json record = {{"candidate", k}, {"training_seed", training_seed}};
+    train_policies(training_seed, files, record);
+    SECURE_INTERNAL_CHECK(airl.has_value(), "the closed-loop check needs the AIRL policy");
+    std::string brief;
+    SeedBarrier barrier =
+        TrainSeedBarrier(o, training_seed, shared.data.safe, shared.data.near_dangerous, &brief);
+    record["barrier"] = barrier.summary;
+    if (!files.empty()) barrier.Save(files + "/barrier.model");
+    if (k > 0) progress.Advance();
+
+    const Stopwatch clock;
+    eval::SeedModels models;
+    models.airl = &*airl;
+    models.make_barrier = barrier.Factory(domain, env);
+    const eval::SeedResult result =
+        eval::EvaluateMethods(env, {eval::Method::kSecure}, models, o.shield, c.episodes,
+                              ClosedLoopCheckSeed(seed))
+            .at(eval::Method::kSecure);
+    progress.Advance();
+    const double success = result.success_rate(), dangerous = result.dangerous_rate();
+    nlohmann::json failed = nlohmann::json::array();
+    if (success < c.min_success) failed.push_back("success");
+    if (dangerous > c.max_dangerous) failed.push_back("dangerous");
+    record["episodes"] = c.episodes;
+    record["success_rate"] = success;
+    record["dangerous_rate"] = dangerous;
+    record["passed"] = failed.empty();
+    record["failed_criteria"] = failed;
+    record["seconds"] = clock.Seconds();
+    candidates.push_back(record);
+    progress.Line([&](std::ostream& out) {
+      out << tag << " closed-loop check, candidate " << k << " (training seed " << training_seed
+          << "): SECURE " << 100.0 * success << "% success, " << 100.0 * dangerous
+          << "% dangerous over " << c.episodes << " held-out episodes: "
+          << (failed.empty() ? "passes" : "fails (" + failed.dump() + ")");
+    });
+    const int failures = static_cast<int>(failed.size());
+    const double score = success - dangerous;
+    if (!best || failures < best->failed || (failures == best->failed && score > best->score)) {
+      best = Kept{k, std::move(bc), std::move(airl), std::move(barrier), record, failures, score};
+    }
+    if (failures == 0) break;
+  }
+  SECURE_INTERNAL_CHECK(best.has_value(), "max_candidates >= 1");
+  bc = std::move(best->bc);
+  airl = std::move(best->airl);
+  const bool passed = best->failed == 0;
+  summary["closed_loop"] = {{"candidates", candidates},
+                            {"selected", best->index},
+                            {"verdict", passed ? "pass" : "failed"},
+                            {"options", c.ToJson()}};
+  if (best->record.contains("bc")) summary["bc"] = best->record["bc"];
+  if (best->record.contains("airl")) summary["airl"] = best->record["airl"];
+  if (!dir.empty()) {
+    const std::string files = dir + "/candidate-" + std::to_string(best->index);
+    if (bc) bc->Save(dir + "/bc.model");
+    if (airl) airl->Save(dir + "/airl.model");
+    for (const char* curve : {"bc_curve.csv", "airl_curve.csv"}) {
+      const std::string from = files + "/" + curve;
+      if (std::filesystem::is_regular_file(from))
+        WriteFileAtomically(dir + "/" + curve, ReadFile(from));
+    }
+  }
+  progress.Line([&](std::ostream& out) {
+    out << tag << " closed-loop check: candidate " << best->index << " selected"
+        << (passed ? "" : " although it FAILS the check (the best of " +
+                              std::to_string(candidates.size()) + " candidates)");
+  });
+  return std::move(*best->barrier);
+}
+
 SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
                     const std::vector<eval::Method>& methods, int index, const SharedData& shared,
                     const domains::Environment& env,
@@ -151,61 +253,75 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
   const data::TrajectorySet& demos = shared.data.demonstrations;
   SeedOutcome outcome;
   nlohmann::json& timings = outcome.summary["seconds"];
+  timings = nlohmann::json::object();
   const bool needs_airl = Any(methods, UsesAirlPolicy);
   const bool needs_joint = Any(methods, eval::UsesJointPolicy);
   const bool needs_barrier = Any(methods, NeedsBarrier);
 
-  // BC (a method, and the warm start of AIRL and the joint policy).
-  std::optional<policy::GaussianPolicy> bc;
-  if (Any(methods, eval::UsesBcPolicy) || ((needs_airl || needs_joint) && o.airl_warm_start)) {
-    const Stopwatch clock;
-    policy::BcOptions options = o.bc;
-    options.seed = seed;
-    options.verbose = false;
-    if (!dir.empty()) options.curve_path = dir + "/bc_curve.csv";
-    policy::BcSummary summary;
-    bc = policy::TrainBc(options, demos, &summary);
-    outcome.summary["bc"] = summary.ToJson();
-    timings["bc"] = clock.Seconds();
-    if (!dir.empty()) bc->Save(dir + "/bc.model");
-    progress.Line([&](std::ostream& out) {
-      out << tag << " " << summary.BriefReport();
-    });
-    progress.Advance();
-  }
+  // BC (a method, and the warm start of AIRL and the joint policy), then AIRL, for one training
+  // seed; `files` is the directory of their curves and models ("": none).
+  const bool needs_bc =
+      Any(methods, eval::UsesBcPolicy) || ((needs_airl || needs_joint) && o.airl_warm_start);
+  std::optional<policy::GaussianPolicy> bc, airl;
+  auto train_policies = [&](std::uint64_t training_seed, const std::string& files,
+                            nlohmann::json& record) {
+    bc.reset();
+    airl.reset();
+    if (needs_bc) {
+      const Stopwatch clock;
+      policy::BcOptions options = o.bc;
+      options.seed = training_seed;
+      options.verbose = false;
+      if (!files.empty()) options.curve_path = files + "/bc_curve.csv";
+      policy::BcSummary summary;
+      bc = policy::TrainBc(options, demos, &summary);
+      record["bc"] = summary.ToJson();
+      timings["bc"] = timings.value("bc", 0.0) + clock.Seconds();
+      if (!files.empty()) bc->Save(files + "/bc.model");
+      progress.Line([&](std::ostream& out) { out << tag << " " << summary.BriefReport(); });
+      progress.Advance();
+    }
+    if (needs_airl) {
+      const Stopwatch clock;
+      policy::AirlOptions options = o.airl;
+      options.seed = training_seed;
+      options.verbose = false;
+      if (!files.empty()) options.curve_path = files + "/airl_curve.csv";
+      policy::AirlSummary summary;
+      const int report_every = std::max(1, options.iterations / 4);
+      long counted = 0;
+      airl = policy::TrainAirl(
+          options, demos, env, o.airl_warm_start ? &*bc : nullptr, &summary,
+          [&](const policy::AirlIterationStats& stats) {
+            ++counted;
+            progress.Advance();
+            if (stats.iteration % report_every == 0) {
+              progress.Line([&](std::ostream& out) {
+                out << tag << " AIRL iteration " << stats.iteration << "/" << options.iterations
+                    << ": rollout success " << stats.success_rate << ", collisions "
+                    << stats.collision_rate << " (" << clock.Seconds() << " s)";
+              });
+            }
+            return true;
+          });
+      progress.Advance(options.iterations - counted);  // the units of a run stopped early
+      record["airl"] = summary.ToJson();
+      timings["airl"] = timings.value("airl", 0.0) + clock.Seconds();
+      if (!files.empty()) airl->Save(files + "/airl.model");
+      progress.Line([&](std::ostream& out) { out << tag << " " << summary.BriefReport(); });
+    }
+  };
 
-  // AIRL.
-  std::optional<policy::GaussianPolicy> airl;
-  if (needs_airl) {
-    const Stopwatch clock;
-    policy::AirlOptions options = o.airl;
-    options.seed = seed;
-    options.verbose = false;
-    if (!dir.empty()) options.curve_path = dir + "/airl_curve.csv";
-    policy::AirlSummary summary;
-    const int report_every = std::max(1, options.iterations / 4);
-    long counted = 0;
-    airl = policy::TrainAirl(
-        options, demos, env, o.airl_warm_start ? &*bc : nullptr, &summary,
-        [&](const policy::AirlIterationStats& stats) {
-          ++counted;
-          progress.Advance();
-          if (stats.iteration % report_every == 0) {
-            progress.Line([&](std::ostream& out) {
-              out << tag << " AIRL iteration " << stats.iteration << "/" << options.iterations
-                  << ": rollout success " << stats.success_rate << ", collisions "
-                  << stats.collision_rate << " (" << clock.Seconds() << " s)";
-            });
-          }
-          return true;
-        });
-    progress.Advance(options.iterations - counted);  // the units of a run stopped early
-    outcome.summary["airl"] = summary.ToJson();
-    timings["airl"] = clock.Seconds();
-    if (!dir.empty()) airl->Save(dir + "/airl.model");
-    progress.Line([&](std::ostream& out) {
-      out << tag << " " << summary.BriefReport();
-    });
+  // With the closed-loop check: candidates until one passes (their files in candidate-K/), the
+  // selected one's models and curves also under the usual names. Without it: the seed's own.
+  std::optional<SeedBarrier> selected_barrier;
+  if (o.closed_loop.enabled) {
+    const long candidate_units =
+        (needs_bc ? 1 : 0) + (needs_airl ? o.airl.iterations : 0) + 2;  // + barrier, check
+    selected_barrier = SelectCandidate(domain, o, seed, tag, dir, shared, env, train_policies, bc,
+                                       airl, candidate_units, progress, outcome.summary);
+  } else {
+    train_policies(seed, dir, outcome.summary);
   }
 
   // One barrier per data variant (only the baseline outside `sensitivity`), each followed by its
@@ -219,7 +335,13 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
       data::StateSet safe = shared.data.safe, near_dangerous = shared.data.near_dangerous;
       ApplyBarrierDataVariant(variant, seed, &safe, &near_dangerous);
       std::string brief;
-      barrier = TrainSeedBarrier(o, seed, safe, near_dangerous, &brief);
+      if (selected_barrier && &variant == &variants.front()) {
+        barrier = std::move(selected_barrier);  // trained and checked by SelectCandidate
+        selected_barrier.reset();
+        brief = "the closed-loop check's selected candidate";
+      } else {
+        barrier = TrainSeedBarrier(o, seed, safe, near_dangerous, &brief);
+      }
       nlohmann::json& record = outcome.summary["barriers"][variant.name];
       record = {{"safe_states", safe.size()},
                 {"near_dangerous_states", near_dangerous.size()},
@@ -346,6 +468,7 @@ long SeedUnits(const ExperimentOptions& o, const std::vector<eval::Method>& meth
   if (Any(methods, eval::UsesBcPolicy) || ((needs_airl || needs_joint) && o.airl_warm_start))
     ++units;
   if (needs_airl) units += o.airl.iterations;
+  if (o.closed_loop.enabled) ++units;  // the first candidate's closed-loop check
   long per_variant = 1;
   if (needs_barrier) per_variant += shared.check ? 2 : 1;
   if (needs_joint) per_variant += o.airl.iterations;
@@ -612,6 +735,13 @@ std::vector<eval::Method> CheckRun(ExperimentKind kind, const Domain& domain,
       kind != ExperimentKind::kSensitivity ||
           std::find(methods.begin(), methods.end(), eval::Method::kSecure) != methods.end(),
       "the sensitivity experiment reports SECURE: its methods must include secure");
+  SECURE_CHECK(!o.closed_loop.enabled || kind == ExperimentKind::kMethodComparison ||
+                   kind == ExperimentKind::kAblation,
+               "closed_loop.enabled works with the kinds method-comparison and ablation, not "
+                   << ToString(kExperimentKindNames, kind));
+  SECURE_CHECK(!o.closed_loop.enabled || (Any(methods, UsesAirlPolicy) && Any(methods, NeedsBarrier)),
+               "closed_loop.enabled checks SECURE (the AIRL policy under the shield): the methods "
+               "must include AIRL and a shielded method");
   // Before any work, so that an unusable --out (a file, a read-only place) fails at once.
   CreateDirectories(o.output_dir);
   return methods;
@@ -768,6 +898,48 @@ std::vector<eval::Method> DefaultMethods(ExperimentKind kind) {
   return {};
 }
 
+void ClosedLoopCheckOptions::Validate() const {
+  constexpr const char* kOwner = "ClosedLoopCheckOptions";
+  SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, kOwner, "episodes", episodes,
+                     "in [1, " << kMaxEpisodes << "]");
+  SECURE_CHECK_FIELD(min_success >= 0 && min_success <= 1, kOwner, "min_success", min_success,
+                     "in [0, 1]");
+  SECURE_CHECK_FIELD(max_dangerous >= 0 && max_dangerous <= 1, kOwner, "max_dangerous",
+                     max_dangerous, "in [0, 1]");
+  SECURE_CHECK_FIELD(max_candidates >= 1 && max_candidates <= 64, kOwner, "max_candidates",
+                     max_candidates, "in [1, 64]");
+}
+
+void ClosedLoopCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of closed-loop check options");
+  for (const auto& item : node) {
+    const std::string name = YamlKey(item.first, source);
+    if (name == "enabled") {
+      enabled = YamlValue<bool>(item.second, name, source);
+    } else if (name == "episodes") {
+      episodes = YamlValue<long>(item.second, name, source);
+    } else if (name == "min_success") {
+      min_success = YamlValue<double>(item.second, name, source);
+    } else if (name == "max_dangerous") {
+      max_dangerous = YamlValue<double>(item.second, name, source);
+    } else if (name == "max_candidates") {
+      max_candidates = YamlValue<int>(item.second, name, source);
+    } else {
+      SECURE_THROW(source << ": unknown key '" << name
+                          << "' (valid: enabled, episodes, min_success, max_dangerous, "
+                             "max_candidates)");
+    }
+  }
+}
+
+nlohmann::json ClosedLoopCheckOptions::ToJson() const {
+  return {{"enabled", enabled},
+          {"episodes", episodes},
+          {"min_success", min_success},
+          {"max_dangerous", max_dangerous},
+          {"max_candidates", max_candidates}};
+}
+
 void ExperimentOptions::Validate() const {
   flat_barrier.Validate();
   per_obstacle_barrier.Validate();
@@ -776,6 +948,7 @@ void ExperimentOptions::Validate() const {
   joint.Validate();
   shield.Validate();
   check.Validate();
+  closed_loop.Validate();
   SECURE_CHECK_FIELD(seeds > 0 && seeds <= kMaxSeeds, kOptions, "seeds", seeds,
                      "in [1, " << kMaxSeeds << "]");
   SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, kOptions, "episodes", episodes,
@@ -836,12 +1009,14 @@ void ExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
         }
       }
       check.ApplyYaml(rest, where);
+    } else if (key == "closed_loop") {
+      closed_loop.ApplyYaml(entry.second, where);
     } else if (key == "domain" && domain != nullptr) {
       domain->ApplyYaml(entry.second, where);
     } else {
       SECURE_THROW(source << ": unknown section '" << key
                           << "' (valid: barrier, flat_barrier, per_obstacle_barrier, bc, airl, "
-                             "joint, shield, check"
+                             "joint, shield, check, closed_loop"
                           << (domain != nullptr ? ", domain" : "") << ")");
     }
   }
@@ -850,7 +1025,7 @@ void ExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
 nlohmann::json ExperimentOptions::ToJson() const {
   nlohmann::json method_names = nlohmann::json::array();
   for (eval::Method m : methods) method_names.push_back(ToString(eval::kMethodNames, m));
-  return {{"data_seed", data_seed},
+  nlohmann::json j = {{"data_seed", data_seed},
           {"barrier_kind", ToString(kBarrierKindNames, barrier_kind)},
           {"flat_barrier", flat_barrier.ToJson()},
           {"per_obstacle_barrier", per_obstacle_barrier.ToJson()},
@@ -871,6 +1046,8 @@ nlohmann::json ExperimentOptions::ToJson() const {
           {"check", check.ToJson()},
           {"augment_flagged", augment_flagged},
           {"threads", threads}};
+  if (closed_loop.enabled) j["closed_loop"] = closed_loop.ToJson();
+  return j;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -913,6 +1090,7 @@ std::string ExperimentResult::Table() const {
       << " expert demonstrations)\n\n";
   if (kind != ExperimentKind::kSensitivity) {
     out << evaluations.front().second.Table();
+    out << ClosedLoopTable();
     out << CheckTable();
     return out.str();
   }
@@ -938,6 +1116,40 @@ std::string ExperimentResult::Table() const {
     out << line;
   }
   out << CheckTable();
+  return out.str();
+}
+
+std::string ExperimentResult::ClosedLoopTable() const {
+  if (seed_summaries.empty() || !seed_summaries.front().contains("closed_loop")) return "";
+  std::ostringstream out;
+  const nlohmann::json& first = seed_summaries.front()["closed_loop"]["options"];
+  out << "\nClosed-loop check per seed (SECURE on " << first.value("episodes", 0L)
+      << " held-out episodes per candidate; passes with success >= "
+      << Percent(first.value("min_success", 0.0)) << " and dangerous <= "
+      << Percent(first.value("max_dangerous", 0.0)) << "; every method of a seed is evaluated "
+      << "with its selected candidate)\n\n"
+      << "| seed | candidates | selected | held-out success % | held-out dangerous % | verdict "
+         "|\n|---|---|---|---|---|---|\n";
+  long replaced = 0, failed = 0;
+  for (std::size_t i = 0; i < seed_summaries.size(); ++i) {
+    const nlohmann::json& c = seed_summaries[i]["closed_loop"];
+    const nlohmann::json& candidates = c["candidates"];
+    const long selected = c.value("selected", 0L);
+    const bool pass = c.value("verdict", "") == "pass";
+    replaced += selected > 0;
+    failed += !pass;
+    const nlohmann::json& chosen = candidates.at(static_cast<std::size_t>(selected));
+    char line[256];
+    std::snprintf(line, sizeof line, "| %llu | %zu | %ld | %.1f | %.1f | %s |\n",
+                  static_cast<unsigned long long>(options.first_seed + i), candidates.size(),
+                  selected, 100 * Number(chosen, "success_rate"),
+                  100 * Number(chosen, "dangerous_rate"), pass ? "pass" : "**failed**");
+    out << line;
+  }
+  out << "\n"
+      << replaced << " of " << seed_summaries.size()
+      << " seeds evaluated with a replacement candidate; " << failed
+      << " failed the check with every candidate (their best candidate is evaluated).\n";
   return out.str();
 }
 

@@ -86,6 +86,44 @@ std::vector<BarrierDataVariant> SensitivityVariants(const std::vector<double>& d
 void ApplyBarrierDataVariant(const BarrierDataVariant& variant, std::uint64_t seed,
                              data::StateSet* safe, data::StateSet* near_dangerous);
 
+/// The closed-loop check before deployment, with model selection (config section
+/// `closed_loop`; kinds method-comparison and ablation). Held-out accuracy cannot see a seed whose
+/// shielded policy stalls or whose barrier lets dangerous events through, so each seed's SECURE
+/// (its AIRL policy, barrier and shield) first runs `episodes` shielded episodes from held-out
+/// starts: their own stream, ClosedLoopCheckSeed(seed), never the evaluation's. A candidate
+/// passes when its success rate there is at least `min_success` and its dangerous rate at most
+/// `max_dangerous`. A failing candidate is replaced by one trained from another initialisation
+/// (candidate k of seed s trains BC, AIRL and the barrier with seed CandidateSeed(s, k); the data
+/// are the same), up to `max_candidates` in all. Every method of the seed is then evaluated with
+/// the selected candidate, on the seed's usual evaluation episodes, so comparisons stay paired.
+/// If no candidate passes, the best one (fewest failed criteria, then the highest success minus
+/// dangerous rate) is evaluated and the seed is reported as failed: in its summary
+/// ("closed_loop"), in Table() and on the progress stream; it is never used silently.
+struct ClosedLoopCheckOptions {
+  bool enabled = false;
+  long episodes = 50;           // held-out shielded episodes per candidate
+  double min_success = 0.85;    // required held-out success rate
+  double max_dangerous = 0.02;  // allowed held-out dangerous rate
+  int max_candidates = 4;       // initialisations tried per seed (1: check and report only)
+
+  /// Throws secure::Error naming the field, value and rule.
+  void Validate() const;
+  /// Keys: enabled, episodes, min_success, max_dangerous, max_candidates.
+  void ApplyYaml(const YAML::Node& node, const std::string& source);
+  nlohmann::json ToJson() const;
+};
+
+/// The training seed of candidate `candidate` (0-based) of experiment seed `seed`: the seed itself
+/// for the first, seed + candidate * 2^32 after it (no other seed of an experiment uses those).
+constexpr std::uint64_t CandidateSeed(std::uint64_t seed, int candidate) {
+  return seed + (static_cast<std::uint64_t>(candidate) << 32);
+}
+/// The stream of the closed-loop check's episodes for experiment seed `seed` (every candidate of
+/// the seed is checked on the same episodes), distinct from eval::EvaluationSeed's.
+constexpr std::uint64_t ClosedLoopCheckSeed(std::uint64_t seed) {
+  return seed ^ 0xc105ed100bc4ecULL;
+}
+
 /// Everything an experiment needs besides the domain. Domains give their defaults through
 /// Domain::Preset(); a config file's section and the CLI's flags override them.
 struct ExperimentOptions {
@@ -118,6 +156,9 @@ struct ExperimentOptions {
   // If a seed's barrier is flagged: add its counterexamples to the near-dangerous states, retrain
   // the barrier once (same seed), check it again, and evaluate with the retrained barrier.
   bool augment_flagged = false;
+  // The closed-loop check with model selection (off by default; part of ToJson() only when on,
+  // so that results without it keep their bytes).
+  ClosedLoopCheckOptions closed_loop;
 
   // Kind `sensitivity`.
   std::vector<double> data_fractions = {1.0, 0.1, 0.01};
@@ -174,6 +215,9 @@ struct ExperimentResult {
   std::string Table() const;
   /// The per-seed barrier-check table of Table() (empty when the check did not run).
   std::string CheckTable() const;
+  /// The per-seed closed-loop check of Table(): candidates tried, the selected one, its held-out
+  /// rates and the verdict, and how many seeds were replaced or failed (empty when it was off).
+  std::string ClosedLoopTable() const;
 };
 
 /// Runs one experiment of `kind` on `domain`; progress lines go to `progress` when

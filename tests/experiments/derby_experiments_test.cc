@@ -10,6 +10,7 @@
 #include <cmath>
 #include <set>
 
+#include "tests/experiments/tiny_derby.h"
 #include "tests/test_util.h"
 
 namespace secure::experiments {
@@ -17,18 +18,7 @@ namespace {
 
 using test::ErrorOf;
 
-// The Derby domain on its quick profile, made smaller still (shared by every test: the domain's
-// options are not changed by a test).
-const domains::derby::DerbyDomain& TinyDomain() {
-  static const domains::derby::DerbyDomain domain = [] {
-    domains::derby::DerbyDomain d(Profile::kQuick);
-    d.mutable_options().demonstrations.episodes = 12;
-    d.mutable_options().safe_states = 200;
-    d.mutable_options().near_dangerous.count = 200;
-    return d;
-  }();
-  return domain;
-}
+const domains::derby::DerbyDomain& TinyDomain() { return test::TinyDerby(); }
 
 ExperimentOptions Tiny() {
   ExperimentOptions o = TinyDomain().Preset();

@@ -36,6 +36,9 @@ class Progress {
   void Advance(long n = 1) {
     if (line_ != nullptr && n > 0) line_->Advance(n);
   }
+  void AddTotal(long n) {
+    if (line_ != nullptr && n > 0) line_->AddTotal(n);
+  }
   void Finish() {
     if (line_ != nullptr) line_->Finish();
   }

@@ -1,0 +1,169 @@
+// The closed-loop check before deployment with model selection (ClosedLoopCheckOptions), on
+// Derby's tiny profile: a passing first candidate changes no number, failing candidates are
+// replaced and recorded, the evaluated models are the selected candidate's, and a seed that no
+// candidate passes is reported as failed.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <string>
+
+#include "domains/derby/domain.h"
+#include "secure/common/atomic_file.h"
+#include "secure/eval/policy_eval.h"
+#include "secure/experiments/experiment.h"
+#include "secure/policy/gaussian_policy.h"
+#include "tests/experiments/tiny_derby.h"
+#include "tests/test_util.h"
+
+namespace secure::experiments {
+namespace {
+
+using test::ErrorOf;
+
+const domains::derby::DerbyDomain& TinyDomain() { return test::TinyDerby(); }
+
+ExperimentOptions Tiny() {
+  ExperimentOptions o = TinyDomain().Preset();
+  o.seeds = 1;
+  o.episodes = 6;
+  o.airl.iterations = 1;
+  o.airl.steps_per_iteration = 400;
+  o.check_enabled = false;
+  o.verbose = false;
+  o.methods = {eval::Method::kAirl, eval::Method::kSecure};
+  return o;
+}
+
+std::string Scratch(const std::string& name) {
+  const std::string dir = ::testing::TempDir() + "/closed_loop_" + name;
+  std::filesystem::remove_all(dir);
+  return dir;
+}
+
+TEST(ClosedLoopCheck, APassingFirstCandidateChangesNoNumber) {
+  const ExperimentOptions off = Tiny();
+  ExperimentOptions on = off;
+  on.closed_loop.enabled = true;
+  on.closed_loop.episodes = 5;
+  on.closed_loop.min_success = 0.0;  // every candidate passes
+  on.closed_loop.max_dangerous = 1.0;
+  const ExperimentResult a = RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), off, nullptr);
+  const ExperimentResult b = RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), on, nullptr);
+  const nlohmann::json ja = a.ToJson(), jb = b.ToJson();
+  for (const char* name : {"airl", "secure"})
+    for (const char* key : {"successes", "dangerous", "collision_events", "steps", "interventions"})
+      EXPECT_EQ(ja["methods"][name]["seeds"][0][key], jb["methods"][name]["seeds"][0][key])
+          << name << " " << key;
+  // Off: nothing of the check anywhere, so earlier results keep their bytes.
+  EXPECT_FALSE(ja["experiment"]["options"].contains("closed_loop"));
+  EXPECT_FALSE(ja["experiment"]["seeds"][0].contains("closed_loop"));
+  EXPECT_EQ(a.Table().find("Closed-loop check"), std::string::npos);
+  const nlohmann::json& c = jb["experiment"]["seeds"][0]["closed_loop"];
+  ASSERT_TRUE(c.is_object()) << jb["experiment"]["seeds"][0].dump();
+  EXPECT_EQ(c["verdict"], "pass");
+  EXPECT_EQ(c["selected"], 0);
+  ASSERT_EQ(c["candidates"].size(), 1u);
+  EXPECT_EQ(c["candidates"][0]["training_seed"], 0u);
+  EXPECT_EQ(c["candidates"][0]["episodes"], 5);
+  EXPECT_TRUE(jb["experiment"]["options"].contains("closed_loop"));
+  EXPECT_NE(b.Table().find("Closed-loop check per seed"), std::string::npos) << b.Table();
+  EXPECT_NE(b.Table().find("0 of 1 seeds evaluated with a replacement candidate; 0 failed"),
+            std::string::npos)
+      << b.Table();
+}
+
+TEST(ClosedLoopCheck, FailingCandidatesAreReplacedAndTheSelectedOneIsEvaluated) {
+  ExperimentOptions o = Tiny();
+  o.closed_loop.enabled = true;
+  o.closed_loop.episodes = 5;
+  o.closed_loop.min_success = 1.0;  // 100 % and no dangerous episode: rarely met after 1 AIRL iteration
+  o.closed_loop.max_dangerous = 0.0;
+  o.closed_loop.max_candidates = 3;
+  o.output_dir = Scratch("replace");
+  const ExperimentResult r = RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), o, nullptr);
+  const nlohmann::json j = r.ToJson();
+  const nlohmann::json& c = j["experiment"]["seeds"][0]["closed_loop"];
+  ASSERT_TRUE(c.is_object());
+  const nlohmann::json& candidates = c["candidates"];
+  ASSERT_GE(candidates.size(), 1u);
+  ASSERT_LE(candidates.size(), 3u);
+  // Candidates stop at the first that passes; all before it failed.
+  for (std::size_t k = 0; k + 1 < candidates.size(); ++k)
+    EXPECT_FALSE(candidates[k]["passed"].get<bool>()) << k;
+  const bool last_passed = candidates.back()["passed"].get<bool>();
+  EXPECT_TRUE(last_passed || candidates.size() == 3u);
+  EXPECT_EQ(c["verdict"], last_passed ? "pass" : "failed");
+  // Each candidate trained from its own initialisation.
+  for (std::size_t k = 0; k < candidates.size(); ++k)
+    EXPECT_EQ(candidates[k]["training_seed"].get<std::uint64_t>(),
+              CandidateSeed(0, static_cast<int>(k)));
+  // The selected candidate: the best by (failed criteria, success - dangerous).
+  const std::size_t selected = c["selected"].get<std::size_t>();
+  ASSERT_LT(selected, candidates.size());
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    const int fk = static_cast<int>(candidates[k]["failed_criteria"].size());
+    const int fs = static_cast<int>(candidates[selected]["failed_criteria"].size());
+    EXPECT_LE(fs, fk) << k;
+  }
+  // The models under the usual names are the selected candidate's, bit for bit, and the
+  // evaluation's AIRL row is that policy on the seed's evaluation episodes.
+  const std::string chosen = o.output_dir + "/seed-0/candidate-" + std::to_string(selected);
+  EXPECT_EQ(ReadFile(o.output_dir + "/seed-0/airl.model"), ReadFile(chosen + "/airl.model"));
+  EXPECT_EQ(ReadFile(o.output_dir + "/seed-0/barrier.model"), ReadFile(chosen + "/barrier.model"));
+  EXPECT_EQ(ReadFile(o.output_dir + "/seed-0/airl_curve.csv"), ReadFile(chosen + "/airl_curve.csv"));
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    if (k == selected) continue;
+    EXPECT_NE(ReadFile(o.output_dir + "/seed-0/candidate-" + std::to_string(k) + "/airl.model"),
+              ReadFile(chosen + "/airl.model"))
+        << k;
+  }
+  const policy::GaussianPolicy airl = policy::GaussianPolicy::Load(chosen + "/airl.model");
+  eval::SeedModels models;
+  models.airl = &airl;
+  const std::unique_ptr<domains::Environment> env = TinyDomain().MakeEnvironment();
+  const eval::SeedResult again = eval::EvaluateMethods(*env, {eval::Method::kAirl}, models, o.shield,
+                                                       o.episodes, eval::EvaluationSeed(0))
+                                     .at(eval::Method::kAirl);
+  const nlohmann::json& evaluated = j["methods"]["airl"]["seeds"][0];
+  EXPECT_EQ(evaluated["successes"], again.successes);
+  EXPECT_EQ(evaluated["dangerous"], again.dangerous);
+  EXPECT_EQ(evaluated["collision_events"], again.collision_events);
+  EXPECT_NE(r.Table().find(last_passed ? "| pass |" : "| **failed** |"), std::string::npos)
+      << r.Table();
+  std::filesystem::remove_all(o.output_dir);
+}
+
+TEST(ClosedLoopCheck, OptionsFromYamlAndValidation) {
+  ExperimentOptions o = Tiny();
+  o.ApplyYaml(YAML::Load("{closed_loop: {enabled: true, episodes: 20, min_success: 0.9, "
+                         "max_dangerous: 0.01, max_candidates: 5}}"),
+              "cfg.yaml");
+  EXPECT_TRUE(o.closed_loop.enabled);
+  EXPECT_EQ(o.closed_loop.episodes, 20);
+  EXPECT_EQ(o.closed_loop.min_success, 0.9);
+  EXPECT_EQ(o.closed_loop.max_dangerous, 0.01);
+  EXPECT_EQ(o.closed_loop.max_candidates, 5);
+  EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{closed_loop: {rounds: 2}}"), "cfg.yaml"); }),
+             "unknown key 'rounds'");
+  ExperimentOptions bad = Tiny();
+  bad.closed_loop.max_candidates = 0;
+  EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::max_candidates = 0");
+  bad = Tiny();
+  bad.closed_loop.min_success = 1.5;
+  EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::min_success = 1.5");
+  bad = Tiny();
+  bad.closed_loop.enabled = true;
+  EXPECT_HAS(ErrorOf([&] { RunExperiment(ExperimentKind::kSensitivity, TinyDomain(), bad, nullptr); }),
+             "closed_loop.enabled works with the kinds method-comparison and ablation");
+  bad.methods = {eval::Method::kBc};
+  EXPECT_HAS(ErrorOf([&] { RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), bad, nullptr); }),
+             "the methods must include AIRL and a shielded method");
+  // Distinct streams and seeds.
+  EXPECT_NE(ClosedLoopCheckSeed(3), eval::EvaluationSeed(3));
+  EXPECT_EQ(CandidateSeed(7, 0), 7u);
+  EXPECT_NE(CandidateSeed(7, 1), CandidateSeed(8, 0));
+}
+
+}  // namespace
+}  // namespace secure::experiments
