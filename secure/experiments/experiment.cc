@@ -315,11 +315,13 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
   // With the closed-loop check: candidates until one passes (their files in candidate-K/), the
   // selected one's models and curves also under the usual names. Without it: the seed's own.
   std::optional<SeedBarrier> selected_barrier;
+  std::uint64_t training_seed = seed;  // the selected candidate's (other variants' barriers too)
   if (o.closed_loop.enabled) {
     const long candidate_units =
         (needs_bc ? 1 : 0) + (needs_airl ? o.airl.iterations : 0) + 2;  // + barrier, check
     selected_barrier = SelectCandidate(domain, o, seed, tag, dir, shared, env, train_policies, bc,
                                        airl, candidate_units, progress, outcome.summary);
+    training_seed = CandidateSeed(seed, outcome.summary["closed_loop"]["selected"].get<int>());
   } else {
     train_policies(seed, dir, outcome.summary);
   }
@@ -340,12 +342,13 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
         selected_barrier.reset();
         brief = "the closed-loop check's selected candidate";
       } else {
-        barrier = TrainSeedBarrier(o, seed, safe, near_dangerous, &brief);
+        barrier = TrainSeedBarrier(o, training_seed, safe, near_dangerous, &brief);
       }
       nlohmann::json& record = outcome.summary["barriers"][variant.name];
       record = {{"safe_states", safe.size()},
                 {"near_dangerous_states", near_dangerous.size()},
                 {"training", barrier->summary}};
+      if (o.closed_loop.enabled) record["training_seed"] = training_seed;
       barrier_seconds += clock.Seconds();
       if (!dir.empty()) barrier->Save(dir + "/" + VariantFile("barrier", variant, ".model"));
       progress.Line([&](std::ostream& out) {
@@ -376,7 +379,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
           for (long i = 0; i < added; ++i)
             states.col(near_dangerous.size() + i) = report.worst[static_cast<std::size_t>(i)].state;
           near_dangerous.states = std::move(states);
-          barrier = TrainSeedBarrier(o, seed, safe, near_dangerous, &brief);
+          barrier = TrainSeedBarrier(o, training_seed, safe, near_dangerous, &brief);
           cbf::CheckReport after = CheckSeedBarrier(domain, o, shared, barrier->Factory(domain, env));
           record["augmented"] = {{"added_near_dangerous_states", added},
                                  {"training", barrier->summary},
@@ -735,10 +738,6 @@ std::vector<eval::Method> CheckRun(ExperimentKind kind, const Domain& domain,
       kind != ExperimentKind::kSensitivity ||
           std::find(methods.begin(), methods.end(), eval::Method::kSecure) != methods.end(),
       "the sensitivity experiment reports SECURE: its methods must include secure");
-  SECURE_CHECK(!o.closed_loop.enabled || kind == ExperimentKind::kMethodComparison ||
-                   kind == ExperimentKind::kAblation,
-               "closed_loop.enabled works with the kinds method-comparison and ablation, not "
-                   << ToString(kExperimentKindNames, kind));
   SECURE_CHECK(!o.closed_loop.enabled || (Any(methods, UsesAirlPolicy) && Any(methods, NeedsBarrier)),
                "closed_loop.enabled checks SECURE (the AIRL policy under the shield): the methods "
                "must include AIRL and a shielded method");

@@ -87,7 +87,7 @@ void ApplyBarrierDataVariant(const BarrierDataVariant& variant, std::uint64_t se
                              data::StateSet* safe, data::StateSet* near_dangerous);
 
 /// The closed-loop check before deployment, with model selection (config section
-/// `closed_loop`; kinds method-comparison and ablation). Held-out accuracy cannot see a seed whose
+/// `closed_loop`; every kind). Held-out accuracy cannot see a seed whose
 /// shielded policy stalls or whose barrier lets dangerous events through, so each seed's SECURE
 /// (its AIRL policy, barrier and shield) first runs `episodes` shielded episodes from held-out
 /// starts: their own stream, ClosedLoopCheckSeed(seed), never the evaluation's. A candidate
@@ -95,7 +95,9 @@ void ApplyBarrierDataVariant(const BarrierDataVariant& variant, std::uint64_t se
 /// `max_dangerous`. A failing candidate is replaced by one trained from another initialisation
 /// (candidate k of seed s trains BC, AIRL and the barrier with seed CandidateSeed(s, k); the data
 /// are the same), up to `max_candidates` in all. Every method of the seed is then evaluated with
-/// the selected candidate, on the seed's usual evaluation episodes, so comparisons stay paired.
+/// the selected candidate, on the seed's usual evaluation episodes, so comparisons stay paired
+/// (the joint policy starts from its BC policy and barrier; the sensitivity study's other
+/// barrier-data variants train with its training seed).
 /// If no candidate passes, the best one (fewest failed criteria, then the highest success minus
 /// dangerous rate) is evaluated and the seed is reported as failed: in its summary
 /// ("closed_loop"), in Table() and on the progress stream; it is never used silently.

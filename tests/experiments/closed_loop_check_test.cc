@@ -154,8 +154,6 @@ TEST(ClosedLoopCheck, OptionsFromYamlAndValidation) {
   EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::min_success = 1.5");
   bad = Tiny();
   bad.closed_loop.enabled = true;
-  EXPECT_HAS(ErrorOf([&] { RunExperiment(ExperimentKind::kSensitivity, TinyDomain(), bad, nullptr); }),
-             "closed_loop.enabled works with the kinds method-comparison and ablation");
   bad.methods = {eval::Method::kBc};
   EXPECT_HAS(ErrorOf([&] { RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), bad, nullptr); }),
              "the methods must include AIRL and a shielded method");
@@ -163,6 +161,26 @@ TEST(ClosedLoopCheck, OptionsFromYamlAndValidation) {
   EXPECT_NE(ClosedLoopCheckSeed(3), eval::EvaluationSeed(3));
   EXPECT_EQ(CandidateSeed(7, 0), 7u);
   EXPECT_NE(CandidateSeed(7, 1), CandidateSeed(8, 0));
+}
+
+TEST(ClosedLoopCheck, TheSensitivityStudysVariantsTrainWithTheSelectedCandidatesSeed) {
+  ExperimentOptions o = Tiny();
+  o.methods = {};
+  o.data_fractions = {1.0, 0.5};
+  o.imbalance_ratios = {1};
+  o.label_noise = {0.0};
+  o.closed_loop.enabled = true;
+  o.closed_loop.episodes = 5;
+  o.closed_loop.min_success = 1.0;
+  o.closed_loop.max_dangerous = 0.0;
+  o.closed_loop.max_candidates = 2;
+  const nlohmann::json j =
+      RunExperiment(ExperimentKind::kSensitivity, TinyDomain(), o, nullptr).ToJson();
+  const nlohmann::json& seed = j["experiment"]["seeds"][0];
+  const int selected = seed["closed_loop"]["selected"].get<int>();
+  for (const auto& [name, record] : seed["barriers"].items())
+    EXPECT_EQ(record["training_seed"].get<std::uint64_t>(), CandidateSeed(0, selected)) << name;
+  EXPECT_EQ(seed["barriers"].size(), 2u);
 }
 
 }  // namespace
