@@ -24,13 +24,10 @@ using test::ErrorOf;
 const domains::derby::DerbyDomain& TinyDomain() { return test::TinyDerby(); }
 
 ExperimentOptions Tiny() {
-  ExperimentOptions o = TinyDomain().Preset();
+  ExperimentOptions o = test::TinyDerbyOptions();
   o.seeds = 1;
   o.episodes = 6;
-  o.airl.iterations = 1;
-  o.airl.steps_per_iteration = 400;
   o.check_enabled = false;
-  o.verbose = false;
   o.methods = {eval::Method::kAirl, eval::Method::kSecure};
   return o;
 }

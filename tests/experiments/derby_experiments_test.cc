@@ -20,14 +20,7 @@ using test::ErrorOf;
 
 const domains::derby::DerbyDomain& TinyDomain() { return test::TinyDerby(); }
 
-ExperimentOptions Tiny() {
-  ExperimentOptions o = TinyDomain().Preset();
-  o.episodes = 4;
-  o.airl.iterations = 1;
-  o.airl.steps_per_iteration = 400;
-  o.verbose = false;
-  return o;
-}
+ExperimentOptions Tiny() { return test::TinyDerbyOptions(); }
 
 ExperimentResult RunTiny(ExperimentKind kind, const ExperimentOptions& o) {
   return RunExperiment(kind, TinyDomain(), o, nullptr);

@@ -3,6 +3,7 @@
 // domain's options are not changed by a test).
 #include "domains/derby/domain.h"
 #include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
 
 namespace secure::test {
 
@@ -15,6 +16,16 @@ inline const secure::domains::derby::DerbyDomain& TinyDerby() {
     return d;
   }();
   return domain;
+}
+
+/// Its preset with 4 episodes and one short AIRL iteration, quiet.
+inline experiments::ExperimentOptions TinyDerbyOptions() {
+  experiments::ExperimentOptions o = TinyDerby().Preset();
+  o.episodes = 4;
+  o.airl.iterations = 1;
+  o.airl.steps_per_iteration = 400;
+  o.verbose = false;
+  return o;
 }
 
 }  // namespace secure::test
