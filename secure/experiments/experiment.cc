@@ -24,6 +24,7 @@
 #include "secure/common/option_check.h"
 #include "secure/common/rng.h"
 #include "secure/common/timer.h"
+#include "secure/common/yaml_fields.h"
 #include "secure/common/yaml_value.h"
 #include "secure/experiments/internal/seed_runner.h"
 #include "secure/nn/torch_threads.h"
@@ -910,25 +911,13 @@ void ClosedLoopCheckOptions::Validate() const {
 }
 
 void ClosedLoopCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of closed-loop check options");
-  for (const auto& item : node) {
-    const std::string name = YamlKey(item.first, source);
-    if (name == "enabled") {
-      enabled = YamlValue<bool>(item.second, name, source);
-    } else if (name == "episodes") {
-      episodes = YamlValue<long>(item.second, name, source);
-    } else if (name == "min_success") {
-      min_success = YamlValue<double>(item.second, name, source);
-    } else if (name == "max_dangerous") {
-      max_dangerous = YamlValue<double>(item.second, name, source);
-    } else if (name == "max_candidates") {
-      max_candidates = YamlValue<int>(item.second, name, source);
-    } else {
-      SECURE_THROW(source << ": unknown key '" << name
-                          << "' (valid: enabled, episodes, min_success, max_dangerous, "
-                             "max_candidates)");
-    }
-  }
+  YamlFields()
+      .Field("enabled", &enabled)
+      .Field("episodes", &episodes)
+      .Field("min_success", &min_success)
+      .Field("max_dangerous", &max_dangerous)
+      .Field("max_candidates", &max_candidates)
+      .Apply(node, source);
 }
 
 nlohmann::json ClosedLoopCheckOptions::ToJson() const {
