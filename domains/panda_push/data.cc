@@ -77,6 +77,36 @@ Eigen::MatrixXf WithNoisyCopies(const Eigen::MatrixXf& states, int copies, Rng& 
   return out;
 }
 
+// What continuing a state's motion does (CheckLabels' continuation, data.h).
+enum class Continuation { kUnreachable, kToppled, kStayedUp };
+
+Continuation Continue(PandaPushSim& sim, const PandaPushOptions& task,
+                      const Eigen::Ref<const Eigen::VectorXf>& s, const LabelCheckOptions& options,
+                      Eigen::Ref<Eigen::VectorXf> o) {
+  if (sim.SetObservation(s) > 0.01) return Continuation::kUnreachable;
+  const int push_steps = static_cast<int>(std::lround(options.push_seconds / task.control_period));
+  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
+  const int stop_steps =
+      std::max(1, static_cast<int>(std::lround(options.stop_seconds / task.control_period)));
+  Eigen::Vector3f a;
+  for (int k = 0; k < 3; ++k)
+    a[k] = std::clamp(static_cast<float>(s[kEeVel + k] / options.velocity_gain), -1.0f, 1.0f);
+  sim.Observe(o);
+  const Eigen::Vector3f start = o.segment<3>(kEePos);
+  int stop_begin = push_steps;  // the step the ramp down starts
+  for (int t = 0; t < stop_begin + stop_steps + hold_steps; ++t) {
+    const float scale =
+        t < stop_begin ? 1.0f
+                       : std::max(0.0f, 1.0f - static_cast<float>(t - stop_begin + 1) / stop_steps);
+    sim.Step(scale * a);
+    sim.Observe(o);
+    if (t < stop_begin && (o.segment<3>(kEePos) - start).norm() >= options.push_distance)
+      stop_begin = t + 1;
+    if (sim.Toppled()) return Continuation::kToppled;
+  }
+  return Continuation::kStayedUp;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -101,6 +131,11 @@ void PandaDemonstrationOptions::Validate() const {
   SECURE_CHECK_FIELD(Finite(pause_rate) && pause_rate >= 0 && pause_rate <= 0.5, o, "pause_rate",
                      pause_rate, "in [0, 0.5]");
   CheckRange(pause_steps, o, "pause_steps", 1.0, 50.0);
+  SECURE_CHECK_FIELD(Finite(dart_noise) && dart_noise >= 0 && dart_noise <= 1, o, "dart_noise",
+                     dart_noise, "in [0, 1]");
+  SECURE_CHECK_FIELD(Finite(dart_brake_rate) && dart_brake_rate >= 0 && dart_brake_rate <= 0.5, o,
+                     "dart_brake_rate", dart_brake_rate, "in [0, 0.5]");
+  CheckRange(dart_brake_steps, o, "dart_brake_steps", 1.0, 50.0);
 }
 
 nlohmann::json PandaDemonstrationOptions::ToJson() const {
@@ -113,7 +148,10 @@ nlohmann::json PandaDemonstrationOptions::ToJson() const {
           {"approach_gap", approach_gap},
           {"action_noise", action_noise},
           {"pause_rate", pause_rate},
-          {"pause_steps", RangeJson(pause_steps)}};
+          {"pause_steps", RangeJson(pause_steps)},
+          {"dart_noise", dart_noise},
+          {"dart_brake_rate", dart_brake_rate},
+          {"dart_brake_steps", RangeJson(dart_brake_steps)}};
 }
 
 void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -128,6 +166,9 @@ void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::str
       .Field("action_noise", &action_noise)
       .Field("pause_rate", &pause_rate)
       .Section("pause_steps", RangeField(&pause_steps))
+      .Field("dart_noise", &dart_noise)
+      .Field("dart_brake_rate", &dart_brake_rate)
+      .Section("dart_brake_steps", RangeField(&dart_brake_steps))
       .Apply(node, source);
 }
 
@@ -181,6 +222,9 @@ void PandaNearDangerousOptions::Validate() const {
   CheckRange(fast_vz, o, "fast_vz", 0.0, 10.0);
   SECURE_CHECK_FIELD(Finite(back_off) && back_off >= 0 && back_off <= 0.1, o, "back_off", back_off,
                      "in [0, 0.1] m");
+  CheckRange(precursor_gap, o, "precursor_gap", 0.0, 0.3);
+  SECURE_CHECK_FIELD(max_candidates >= 1 && max_candidates <= 100000000, o, "max_candidates",
+                     max_candidates, "in [1, 1e8]");
 }
 
 nlohmann::json PandaNearDangerousOptions::ToJson() const {
@@ -193,7 +237,10 @@ nlohmann::json PandaNearDangerousOptions::ToJson() const {
           {"low_z_max", low_z_max},
           {"fast_vx", RangeJson(fast_vx)},
           {"fast_vz", RangeJson(fast_vz)},
-          {"back_off", back_off}};
+          {"back_off", back_off},
+          {"generator", ToString(kNearDangerousGeneratorNames, generator)},
+          {"precursor_gap", RangeJson(precursor_gap)},
+          {"max_candidates", max_candidates}};
 }
 
 void PandaNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -208,6 +255,9 @@ void PandaNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::str
       .Section("fast_vx", RangeField(&fast_vx))
       .Section("fast_vz", RangeField(&fast_vz))
       .Field("back_off", &back_off)
+      .Enum("generator", &generator, kNearDangerousGeneratorNames)
+      .Section("precursor_gap", RangeField(&precursor_gap))
+      .Field("max_candidates", &max_candidates)
       .Apply(node, source);
 }
 
@@ -242,7 +292,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
   out.trajectories.action_features = ActionFeatures();
   out.trajectories.episode_begin.push_back(0);
   Eigen::VectorXf o(kObservationDim), next(kObservationDim);
-  Eigen::VectorXf a(kActionDim);
+  Eigen::VectorXf a(kActionDim), applied(kActionDim);
   int kept = 0;
   for (int attempt = 0; attempt < options.max_attempts && kept < options.episodes; ++attempt) {
     Rng episode_rng(rng.NextU64());
@@ -254,6 +304,10 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
     // The pauses' own stream, drawn only when there are pauses (pause_rate 0 keeps the draws).
     Rng pause_rng(options.pause_rate > 0 ? episode_rng.NextU64() : 0);
     int paused = 0;  // steps of the current pause left
+    // The DART perturbations' own stream, drawn only when there are any.
+    const bool dart = options.dart_noise > 0 || options.dart_brake_rate > 0;
+    Rng dart_rng(dart ? episode_rng.NextU64() : 0);
+    int braking = 0;  // steps of the current brake left
     std::vector<Eigen::VectorXf> eo, ea;
     long push_begin = -1;
     bool descended = false, success = false, toppled = false;
@@ -283,7 +337,20 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
                           -1.0f, 1.0f);
       eo.push_back(o);
       ea.push_back(a);
-      const StepOutcome r = env.Step(a, next);
+      applied = a;
+      if (dart && descended) {
+        for (int k = 0; k < kActionDim; ++k)
+          applied[k] += static_cast<float>(options.dart_noise * dart_rng.Normal());
+        if (push_begin >= 0 && options.dart_brake_rate > 0 && braking == 0 &&
+            dart_rng.Uniform() < options.dart_brake_rate)
+          braking = static_cast<int>(std::floor(Draw(dart_rng, options.dart_brake_steps) + 0.5));
+        if (braking > 0) {
+          applied[0] = 0.0f;
+          --braking;
+        }
+        applied = applied.cwiseMax(-1.0f).cwiseMin(1.0f);
+      }
+      const StepOutcome r = env.Step(applied, next);
       o = next;
       if (r.collided) {
         toppled = true;
@@ -353,8 +420,10 @@ data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafe
                 all, DrawIndices(all.cols(), options.count, rng, "panda-push safe states (count)"));
 }
 
-data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
-                                        const PandaNearDangerousOptions& options, Rng& rng,
+data::StateSet PandaNearDangerousStates(const PandaPushOptions& task,
+                                        const PandaDemonstrations& demos,
+                                        const PandaNearDangerousOptions& options,
+                                        const LabelCheckOptions& continuation, Rng& rng,
                                         std::vector<NearDangerousScenario>* scenarios) {
   options.Validate();
   const data::TrajectorySet& t = demos.trajectories;
@@ -362,40 +431,74 @@ data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
                "panda-push near-dangerous states: " << demos.push_begin.size()
                                                     << " push starts for " << t.num_episodes()
                                                     << " demonstrations");
+  // One copy's scenario (u ~ U(0, 1) drawn per copy), then its values drawn per state into s.
+  auto apply_scenario = [&](double u, Eigen::VectorXf& s) {
+    const bool upper = u < options.p_upper;
+    const bool fast = !upper && u < options.p_upper + options.p_fast;
+    s[kEePos] -= static_cast<float>(options.back_off);
+    if (upper) {
+      s[kEePos + 2] = static_cast<float>(Draw(rng, options.upper_z));
+      return NearDangerousScenario::kUpper;
+    }
+    if (fast) {
+      s[kEePos + 2] = static_cast<float>(options.low_z_max * rng.Uniform());
+      if (rng.Uniform() < options.fast_x_share) {
+        s[kEeVel] = static_cast<float>(Draw(rng, options.fast_vx));
+        return NearDangerousScenario::kFastX;
+      }
+      s[kEeVel + 2] = static_cast<float>(-Draw(rng, options.fast_vz));
+      return NearDangerousScenario::kFastZ;
+    }
+    s[kEePos + 2] = static_cast<float>(Draw(rng, options.upper_z));
+    s[kEeVel] = static_cast<float>(Draw(rng, options.fast_vx));
+    return NearDangerousScenario::kBoth;
+  };
+  std::vector<long> push_states;
+  for (long e = 0; e < t.num_episodes(); ++e)
+    for (long i = demos.push_begin[e]; i < t.episode_begin[e + 1]; ++i) push_states.push_back(i);
+  SECURE_CHECK(!push_states.empty(),
+               "panda-push near-dangerous states: the demonstrations have no push");
+
+  if (options.generator == PandaNearDangerousOptions::Generator::kPrecursor) {
+    PandaPushSim sim(task);
+    Eigen::VectorXf o(kObservationDim);
+    Eigen::MatrixXf kept(kObservationDim, options.count);
+    std::vector<NearDangerousScenario> kinds;
+    long n = 0, tried = 0;
+    for (; tried < options.max_candidates && n < options.count; ++tried) {
+      const long i = push_states[rng.UniformIndex(static_cast<std::uint64_t>(push_states.size()))];
+      Eigen::VectorXf s = t.states.col(i);
+      const NearDangerousScenario kind = apply_scenario(rng.Uniform(), s);
+      s[kEePos] -= static_cast<float>(Draw(rng, options.precursor_gap));
+      if (Continue(sim, task, s, continuation, o) != Continuation::kToppled) continue;
+      kept.col(n++) = s;
+      kinds.push_back(kind);
+    }
+    SECURE_CHECK(n == options.count,
+                 "panda-push near-dangerous states (generator: precursor): only "
+                     << n << " of " << tried << " candidates topple when continued, "
+                     << options.count << " asked for (raise max_candidates or lower count)");
+    if (scenarios != nullptr) *scenarios = kinds;
+    data::StateSet out;
+    out.source = "panda-push near-dangerous precursor states (" + std::to_string(n) + " of " +
+                 std::to_string(tried) + " candidates topple when continued)";
+    out.features = ObservationFeatures();
+    out.states = std::move(kept);
+    return out;
+  }
+
   std::vector<Eigen::VectorXf> rows;
   std::vector<NearDangerousScenario> kinds;
   for (long e = 0; e < t.num_episodes(); ++e) {
     for (int c = 0; c < options.copies; ++c) {
       const double u = rng.Uniform();
-      const bool upper = u < options.p_upper;
-      const bool fast = !upper && u < options.p_upper + options.p_fast;
       for (long i = demos.push_begin[e]; i < t.episode_begin[e + 1]; ++i) {
         Eigen::VectorXf s = t.states.col(i);
-        s[kEePos] -= static_cast<float>(options.back_off);
-        NearDangerousScenario kind;
-        if (upper) {
-          kind = NearDangerousScenario::kUpper;
-          s[kEePos + 2] = static_cast<float>(Draw(rng, options.upper_z));
-        } else if (fast) {
-          s[kEePos + 2] = static_cast<float>(options.low_z_max * rng.Uniform());
-          if (rng.Uniform() < options.fast_x_share) {
-            kind = NearDangerousScenario::kFastX;
-            s[kEeVel] = static_cast<float>(Draw(rng, options.fast_vx));
-          } else {
-            kind = NearDangerousScenario::kFastZ;
-            s[kEeVel + 2] = static_cast<float>(-Draw(rng, options.fast_vz));
-          }
-        } else {
-          kind = NearDangerousScenario::kBoth;
-          s[kEePos + 2] = static_cast<float>(Draw(rng, options.upper_z));
-          s[kEeVel] = static_cast<float>(Draw(rng, options.fast_vx));
-        }
+        kinds.push_back(apply_scenario(u, s));
         rows.push_back(s);
-        kinds.push_back(kind);
       }
     }
   }
-  SECURE_CHECK(!rows.empty(), "panda-push near-dangerous states: the demonstrations have no push");
   Eigen::MatrixXf all(kObservationDim, static_cast<long>(rows.size()));
   for (long i = 0; i < all.cols(); ++i) all.col(i) = rows[i];
   const std::vector<long> idx =
@@ -458,39 +561,21 @@ LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet&
       set.dim() == kObservationDim,
       "panda-push label check: " << set.source << " has " << set.dim() << " features, expected 18");
   PandaPushSim sim(task);
-  const int push_steps = static_cast<int>(std::lround(options.push_seconds / task.control_period));
-  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
-  const int stop_steps =
-      std::max(1, static_cast<int>(std::lround(options.stop_seconds / task.control_period)));
+  Eigen::VectorXf o(kObservationDim);
   LabelCheckResult r;
   const long n = std::min<long>(set.size(), options.max_states);
   for (long i = 0; i < n; ++i) {
     ++r.states;
-    const Eigen::VectorXf s = set.states.col(i);
-    if (sim.SetObservation(s) > 0.01) {
-      ++r.unreachable;
-      continue;
+    switch (Continue(sim, task, set.states.col(i), options, o)) {
+      case Continuation::kUnreachable:
+        ++r.unreachable;
+        break;
+      case Continuation::kToppled:
+        ++r.toppled;
+        break;
+      case Continuation::kStayedUp:
+        break;
     }
-    Eigen::Vector3f a;
-    for (int k = 0; k < 3; ++k)
-      a[k] = std::clamp(static_cast<float>(s[kEeVel + k] / options.velocity_gain), -1.0f, 1.0f);
-    Eigen::VectorXf o(kObservationDim);
-    sim.Observe(o);
-    const Eigen::Vector3f start = o.segment<3>(kEePos);
-    bool toppled = false;
-    int stop_begin = push_steps;  // the step the ramp down starts
-    for (int t = 0; t < stop_begin + stop_steps + hold_steps && !toppled; ++t) {
-      const float scale =
-          t < stop_begin
-              ? 1.0f
-              : std::max(0.0f, 1.0f - static_cast<float>(t - stop_begin + 1) / stop_steps);
-      sim.Step(scale * a);
-      sim.Observe(o);
-      if (t < stop_begin && (o.segment<3>(kEePos) - start).norm() >= options.push_distance)
-        stop_begin = t + 1;
-      toppled = sim.Toppled();
-    }
-    if (toppled) ++r.toppled;
   }
   return r;
 }

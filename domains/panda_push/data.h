@@ -7,7 +7,9 @@
 // +x at a_x ~ U(approach_speed), easing off linearly to the push speed a_x ~ U(push_speed) over
 // the last approach_gap metres before the pusher touches the block; then push along +x at that
 // speed holding the height (a_z = (h - z) / 0.05 * 0.5) and the line (a_y = -5 (ee_y - block_y)),
-// each action component with N(0, action_noise^2) noise, until the block reaches the target.
+// each action component with N(0, action_noise^2) noise, until the block reaches the target;
+// with DART perturbations (dart_noise, dart_brake_rate) the applied action differs from the
+// recorded one (below).
 // The push starts (push_begin) at the first state within 5 mm of contact. Episodes that topple
 // the block or miss the target are discarded.
 //
@@ -30,6 +32,7 @@
 #include <vector>
 
 #include "domains/panda_push/panda_push.h"
+#include "secure/common/enum_strings.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
 
@@ -67,6 +70,19 @@ struct PandaDemonstrationOptions {
   // a stop (docs/RESULTS.md, Panda). 0: none (the draws are then those of a version without it).
   double pause_rate = 0.0;
   Range pause_steps = {2, 6};
+  // DART-style perturbations (Laskey et al. 2017; not in the paper; issue 30 lever 4): the
+  // *applied* action differs from the *recorded* one, which stays the demonstrator's corrective
+  // action at the perturbed state. After the descent every applied component gets
+  // N(0, dart_noise^2); once in contact, at each step with probability dart_brake_rate a brake of
+  // U(dart_brake_steps) steps (rounded) starts in which the applied a_x is 0 while the recorded
+  // a_x is the push. The data then hold states slowed or stopped against the block labelled with
+  // the push, which a policy whose a_x tracks the current velocity never sees (the stall of
+  // docs/RESULTS.md, Panda). 0.1 and 0.1 by default since 2026-12-02 (were 0 and 0, the paper's
+  // data; docs/RESULTS.md, Panda, "Demonstrations that teach recovery"). 0 and 0: none (the
+  // draws are then those of a version without it).
+  double dart_noise = 0.1;
+  double dart_brake_rate = 0.1;
+  Range dart_brake_steps = {2, 6};
   std::uint64_t seed = 0;
 
   void Validate() const;
@@ -117,10 +133,36 @@ struct PandaNearDangerousOptions {
   Range fast_vx = {0.35, 1.25};
   Range fast_vz = {0.3, 1.25};         // m/s (downwards)
   double back_off = 0.002;             // m
+  // The generator (issue 30 lever 5). kReleased: the scenarios above, labelled by construction.
+  // kPrecursor: paper Eq. 2's near-dangerous states, states a trajectory into a topple passes
+  // before it topples. Each candidate is a scenario above started a further U(precursor_gap)
+  // behind (so before contact as well as in it), and is kept only if physics confirms that
+  // continuing its motion topples the block (the label check's continuation, CheckLabels) while
+  // the block is still upright at the start (tilt below half the topple angle). Candidates are
+  // drawn until `count` are kept, at most max_candidates (else an error).
+  enum class Generator { kReleased, kPrecursor };
+  Generator generator = Generator::kReleased;
+  Range precursor_gap = {0.0, 0.05};  // m
+  long max_candidates = 20000;
   void Validate() const;
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
+
+/// The continuation of CheckLabels (below) and of the kPrecursor generator.
+struct LabelCheckOptions {
+  double push_distance = 0.1;  // m
+  double stop_seconds = 0.2;
+  double push_seconds = 1.0;
+  double hold_seconds = 1.0;
+  double velocity_gain = 1.25;  // m/s per unit action (PandaPushShieldModelOptions)
+  long max_states = 300;        // per set, the first ones (sets are already shuffled)
+};
+
+inline constexpr EnumTable<PandaNearDangerousOptions::Generator, 2> kNearDangerousGeneratorNames{{
+    {PandaNearDangerousOptions::Generator::kReleased, "released"},
+    {PandaNearDangerousOptions::Generator::kPrecursor, "precursor"},
+}};
 
 /// The scenario of each generated near-dangerous state.
 enum class NearDangerousScenario { kUpper, kFastX, kFastZ, kBoth };
@@ -130,9 +172,12 @@ const char* ScenarioName(NearDangerousScenario s);
 data::StateSet PandaSafeStates(const PandaDemonstrations& demos, const PandaSafeOptions& options,
                                Rng& rng);
 /// Near-dangerous states from the pushing part of the demonstrations; `scenarios` (if not null)
-/// receives each state's scenario.
-data::StateSet PandaNearDangerousStates(const PandaDemonstrations& demos,
-                                        const PandaNearDangerousOptions& options, Rng& rng,
+/// receives each state's scenario. `task` and `continuation` (its velocity_gain and durations)
+/// are the physics of the kPrecursor generator's check (unused by kReleased).
+data::StateSet PandaNearDangerousStates(const PandaPushOptions& task,
+                                        const PandaDemonstrations& demos,
+                                        const PandaNearDangerousOptions& options,
+                                        const LabelCheckOptions& continuation, Rng& rng,
                                         std::vector<NearDangerousScenario>* scenarios = nullptr);
 
 /// The authors' released data (official-code-facts.md §2.6-2.7): task_demos.csv (2
@@ -156,24 +201,6 @@ ReleasedPandaFiles ReadReleasedPandaFiles(const std::string& dir);
 ReleasedPandaData ReadReleasedPandaData(const std::string& dir, const PandaSafeOptions& safe,
                                         long near_count, Rng& rng);
 
-/// The labels against physics: from each state, the simulation is put in that state
-/// (PandaPushSim::SetObservation), the push continues at the state's own end-effector velocity
-/// (a = v / velocity_gain, clipped) until the end-effector has moved push_distance or
-/// push_seconds have passed, then the push ends as a careful demonstrator ends one: the action
-/// ramps down to zero over stop_seconds and the arm holds still for hold_seconds. (Every push
-/// ends somewhere; a fast push that ends lets the block slide on alone, and a tall block sliding
-/// on a table with friction above w / 2h = 0.2 tips forward.) The state "topples" if the block's tilt exceeds
-/// the topple angle at any step. States the arm cannot reach (IK error > 0.01 m) are counted
-/// apart.
-struct LabelCheckOptions {
-  double push_distance = 0.1;  // m
-  double stop_seconds = 0.2;
-  double push_seconds = 1.0;
-  double hold_seconds = 1.0;
-  double velocity_gain = 1.25;  // m/s per unit action (PandaPushShieldModelOptions)
-  long max_states = 300;        // per set, the first ones (sets are already shuffled)
-};
-
 struct LabelCheckResult {
   long states = 0, toppled = 0, unreachable = 0;
   double TopplingFraction() const {
@@ -182,7 +209,15 @@ struct LabelCheckResult {
   nlohmann::json ToJson() const;
 };
 
-/// Checks `set` (observations). Deterministic.
+/// The labels against physics: from each state, the simulation is put in that state
+/// (PandaPushSim::SetObservation), the push continues at the state's own end-effector velocity
+/// (a = v / velocity_gain, clipped) until the end-effector has moved push_distance or
+/// push_seconds have passed, then the push ends as a careful demonstrator ends one: the action
+/// ramps down to zero over stop_seconds and the arm holds still for hold_seconds. (Every push
+/// ends somewhere; a fast push that ends lets the block slide on alone, and a tall block sliding
+/// on a table with friction above w / 2h = 0.2 tips forward.) The state "topples" if the block's
+/// tilt exceeds the topple angle at any step. States the arm cannot reach (IK error > 0.01 m) are
+/// counted apart. Checks `set` (observations). Deterministic.
 LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet& set,
                              const LabelCheckOptions& options);
 

@@ -90,6 +90,12 @@ std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {
   return std::make_unique<PandaPushEnv>(options_.task, options_.shield_model);
 }
 
+LabelCheckOptions PandaPushDomain::Continuation() const {
+  LabelCheckOptions c;
+  c.velocity_gain = options_.shield_model.velocity_gain;
+  return c;
+}
+
 experiments::DomainData PandaPushDomain::GenerateData(std::uint64_t data_seed) const {
   options_.Validate();
   PandaDemonstrationOptions demo_options = options_.demonstrations;
@@ -106,7 +112,8 @@ experiments::DomainData PandaPushDomain::GenerateData(std::uint64_t data_seed) c
     d.near_dangerous = std::move(released.near_dangerous);
   } else {
     d.safe = PandaSafeStates(demos, options_.safe, rng);
-    d.near_dangerous = PandaNearDangerousStates(demos, options_.near_dangerous, rng);
+    d.near_dangerous = PandaNearDangerousStates(options_.task, demos, options_.near_dangerous,
+                                                Continuation(), rng);
   }
   return d;
 }
@@ -132,10 +139,10 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   // The same draws as GenerateData (safe, then near-dangerous).
   const data::StateSet safe = PandaSafeStates(demos, options_.safe, rng);
   std::vector<NearDangerousScenario> kinds;
-  const data::StateSet near = PandaNearDangerousStates(demos, options_.near_dangerous, rng, &kinds);
-  LabelCheckOptions check;
+  const data::StateSet near = PandaNearDangerousStates(
+      options_.task, demos, options_.near_dangerous, Continuation(), rng, &kinds);
+  LabelCheckOptions check = Continuation();
   check.max_states = max_states;
-  check.velocity_gain = options_.shield_model.velocity_gain;
   std::vector<experiments::LabelCheckRow> rows;
   auto add = [&](const std::string& name, const std::string& label, const data::StateSet& set) {
     const LabelCheckResult r = panda_push::CheckLabels(options_.task, set, check);

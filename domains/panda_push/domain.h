@@ -66,6 +66,10 @@ class PandaPushDomain final : public experiments::Domain {
   PandaPushDomainOptions& mutable_options() { return options_; }
 
  private:
+  // The label check's continuation with this domain's shield-model velocity gain (also the
+  // physics of the near-dangerous precursor generator).
+  LabelCheckOptions Continuation() const;
+
   experiments::Profile profile_;
   PandaPushDomainOptions options_;
 };

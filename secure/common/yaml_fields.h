@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/yaml_value.h"
 
@@ -31,6 +32,16 @@ class YamlFields {
     entries_.emplace_back(key, [key, field](const YAML::Node& node, const std::string& where) {
       *field = YamlValue<T>(node, key, where);
     });
+    return *this;
+  }
+  /// `key` sets the enum *field by its name in `table` (an unknown name lists the valid ones).
+  template <typename E, std::size_t N>
+  YamlFields& Enum(const std::string& key, E* field, const EnumTable<E, N>& table) {
+    entries_.emplace_back(
+        key, [key, field, &table](const YAML::Node& node, const std::string& where) {
+          *field =
+              FromString(table, YamlValue<std::string>(node, key, where), where + " [" + key + "]");
+        });
     return *this;
   }
   /// `key` is a nested mapping handled by `apply` (given the node and "source [key]").

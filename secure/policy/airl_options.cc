@@ -97,6 +97,7 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
                                               "bc_weight",
                                               "max_grad_norm",
                                               "normalize_rewards",
+                                              "absorbing_goal",
                                               "discriminator_lr",
                                               "discriminator_updates",
                                               "discriminator_batch",
@@ -153,6 +154,8 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
       max_grad_norm = dbl();
     else if (key == "normalize_rewards")
       normalize_rewards = YamlValue<bool>(v, key, source);
+    else if (key == "absorbing_goal")
+      absorbing_goal = YamlValue<bool>(v, key, source);
     else if (key == "discriminator_lr")
       discriminator_lr = dbl();
     else if (key == "discriminator_updates")
@@ -182,36 +185,39 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
 }
 
 nlohmann::json AirlOptions::ToJson() const {
-  return {{"policy_hidden", policy_hidden},
-          {"value_hidden", value_hidden},
-          {"reward_hidden", reward_hidden},
-          {"shaping_hidden", shaping_hidden},
-          {"init_log_std", init_log_std},
-          {"min_log_std", min_log_std},
-          {"iterations", iterations},
-          {"steps_per_iteration", steps_per_iteration},
-          {"gamma", gamma},
-          {"gae_lambda", gae_lambda},
-          {"clip", clip},
-          {"ppo_epochs", ppo_epochs},
-          {"minibatch_size", minibatch_size},
-          {"policy_lr", policy_lr},
-          {"value_lr", value_lr},
-          {"entropy_coef", entropy_coef},
-          {"bc_weight", bc_weight},
-          {"max_grad_norm", max_grad_norm},
-          {"normalize_rewards", normalize_rewards},
-          {"discriminator_lr", discriminator_lr},
-          {"discriminator_updates", discriminator_updates},
-          {"discriminator_batch", discriminator_batch},
-          {"discriminator_discount", discriminator_discount},
-          {"reward", ToString(kAirlRewardNames, reward)},
-          {"seed", seed},
-          {"curve_path", curve_path},
-          {"checkpoint_path", checkpoint_path},
-          {"checkpoint_every", checkpoint_every},
-          {"resume", resume},
-          {"stop_after_iterations", stop_after_iterations}};
+  nlohmann::json j = {{"policy_hidden", policy_hidden},
+                      {"value_hidden", value_hidden},
+                      {"reward_hidden", reward_hidden},
+                      {"shaping_hidden", shaping_hidden},
+                      {"init_log_std", init_log_std},
+                      {"min_log_std", min_log_std},
+                      {"iterations", iterations},
+                      {"steps_per_iteration", steps_per_iteration},
+                      {"gamma", gamma},
+                      {"gae_lambda", gae_lambda},
+                      {"clip", clip},
+                      {"ppo_epochs", ppo_epochs},
+                      {"minibatch_size", minibatch_size},
+                      {"policy_lr", policy_lr},
+                      {"value_lr", value_lr},
+                      {"entropy_coef", entropy_coef},
+                      {"bc_weight", bc_weight},
+                      {"max_grad_norm", max_grad_norm},
+                      {"normalize_rewards", normalize_rewards},
+                      {"discriminator_lr", discriminator_lr},
+                      {"discriminator_updates", discriminator_updates},
+                      {"discriminator_batch", discriminator_batch},
+                      {"discriminator_discount", discriminator_discount},
+                      {"reward", ToString(kAirlRewardNames, reward)},
+                      {"seed", seed},
+                      {"curve_path", curve_path},
+                      {"checkpoint_path", checkpoint_path},
+                      {"checkpoint_every", checkpoint_every},
+                      {"resume", resume},
+                      {"stop_after_iterations", stop_after_iterations}};
+  // Only when set, so that models and checkpoints of runs without it keep their bytes.
+  if (absorbing_goal) j["absorbing_goal"] = true;
+  return j;
 }
 
 std::vector<std::string> AirlIterationStats::Columns() {

@@ -187,7 +187,8 @@ class AirlRun {
     stats.iteration = completed_ + 1;
 
     Stopwatch watch;
-    internal::CollectRollout(Policy(), envs_, horizon_, rollout_rng, rollout_, stats);
+    internal::CollectRollout(Policy(), envs_, horizon_, o_.absorbing_goal, rollout_rng, rollout_,
+                             stats);
     timing.rollout_seconds += watch.Seconds();
 
     watch.Restart();
@@ -196,8 +197,22 @@ class AirlRun {
     const torch::Tensor x_next =
         nn::ToTensor(normalizer_.Apply(PolicyInputs(rollout_.next_obs, input_rows_)));
     const torch::Tensor a = nn::ToTensor(rollout_.actions);
-    internal::UpdateDiscriminator(o_, disc_, *disc_opt_, policy_, expert_, x, x_next, a, disc_rng,
-                                  stats);
+    if (static_cast<long>(rollout_.live.size()) == rollout_.obs.cols()) {
+      internal::UpdateDiscriminator(o_, disc_, *disc_opt_, policy_, expert_, x, x_next, a, disc_rng,
+                                    stats);
+    } else {  // absorbing_goal froze some steps: the discriminator sees those before the goal
+      SECURE_CHECK(
+          !rollout_.live.empty(),
+          "AIRL with absorbing_goal: every rollout episode reached the goal in its first "
+          "step, so the discriminator has no policy transition (the starts lie in the goal)");
+      const torch::Tensor live =
+          torch::from_blob(rollout_.live.data(), {static_cast<long>(rollout_.live.size())},
+                           torch::kLong)
+              .clone();
+      internal::UpdateDiscriminator(o_, disc_, *disc_opt_, policy_, expert_,
+                                    x.index_select(0, live), x_next.index_select(0, live),
+                                    a.index_select(0, live), disc_rng, stats);
+    }
     timing.discriminator_seconds += watch.Seconds();
 
     watch.Restart();

@@ -31,7 +31,8 @@
 // advantage normalisation, optional entropy bonus and gradient-norm clipping. Each iteration
 // rolls out ceil(steps_per_iteration / H) fixed-horizon episodes of H = env.max_steps() steps
 // (never stopped at the goal or a collision, so that no termination bias enters the reward; the
-// value is bootstrapped at the horizon as a time-limit truncation). Rollouts run the policy
+// value is bootstrapped at the horizon as a time-limit truncation; with absorbing_goal the goal
+// is an absorbing state the episode stays in). Rollouts run the policy
 // with Eigen (PolicyEvaluator) on all episodes in lock-step; rewards, advantages and updates
 // are batched LibTorch computations. Rewards are divided by a running standard deviation of the
 // discounted return (`normalize_rewards`, as in common PPO implementations) so that the value
@@ -134,6 +135,14 @@ struct AirlOptions {
   double bc_weight = 0.0;
   double max_grad_norm = 0.5;     // gradient-norm clip per network (0: off)
   bool normalize_rewards = true;  // divide rewards by the running std of discounted returns
+  // The goal as an absorbing state (issue 30 lever 3; Kostrikov et al. 2019, DAC; the released
+  // environment ends an episode at success). Once a rollout episode reaches the goal, its
+  // remaining steps record the goal observation frozen (next = current, no physics), with the
+  // policy's sampled actions, and PPO is rewarded there with the learned reward of the goal
+  // state. The discriminator sees only the transitions up to the goal: the demonstrations end at
+  // the goal, so frozen transitions have no expert counterpart and would be learned as the
+  // policy's signature. false: fixed-horizon episodes that keep running past the goal.
+  bool absorbing_goal = false;
 
   // Discriminator.
   double discriminator_lr = 1e-3;        // Adam

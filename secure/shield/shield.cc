@@ -26,14 +26,6 @@ const boost::math::normal_distribution<double, NormalPolicy> kStandardNormal(0.0
 // 2^63, i.e. 0.5).
 using SobolEngine = boost::random::sobol_engine<std::uint64_t, 64>;
 
-// A YamlFields handler reading an enum by its name in `table`.
-template <typename E, std::size_t N>
-YamlFields::Handler EnumField(const EnumTable<E, N>& table, const char* key, E* field) {
-  return [&table, key, field](const YAML::Node& node, const std::string& where) {
-    *field = FromString(table, YamlValue<std::string>(node, key, where), where);
-  };
-}
-
 }  // namespace
 
 int MaxQmcDimension() {
@@ -106,17 +98,17 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("num_samples", &num_samples)
       .Field("safe_ratio", &safe_ratio)
       .Field("dt", &dt)
-      .Section("class_k", EnumField(kClassKNames, "class_k", &class_k))
+      .Enum("class_k", &class_k, kClassKNames)
       .Field("class_k_gain", &class_k_gain)
-      .Section("aggregation", EnumField(kAggregationNames, "aggregation", &aggregation))
-      .Section("resampling", EnumField(kResamplingNames, "resampling", &resampling))
+      .Enum("aggregation", &aggregation, kAggregationNames)
+      .Enum("resampling", &resampling, kResamplingNames)
       .Field("num_probes", &num_probes)
       .Field("probe_extent", &probe_extent)
       .Field("sigma_step", &sigma_step)
       .Field("max_iterations", &max_iterations)
       .Field("time_budget_us", &time_budget_us)
       .Field("seed", &seed)
-      .Section("sampler", EnumField(kSamplerNames, "sampler", &sampler))
+      .Enum("sampler", &sampler, kSamplerNames)
       .Apply(node, source);
 }
 

@@ -5,8 +5,9 @@
 namespace secure::policy::internal {
 
 void CollectRollout(const GaussianPolicy& policy,
-                    std::vector<std::unique_ptr<domains::Environment>>& envs, int horizon, Rng& rng,
-                    RolloutBuffer& buffer, AirlIterationStats& stats) {
+                    std::vector<std::unique_ptr<domains::Environment>>& envs, int horizon,
+                    bool absorbing_goal, Rng& rng, RolloutBuffer& buffer,
+                    AirlIterationStats& stats) {
   const int episodes = static_cast<int>(envs.size());
   const int obs_dim = static_cast<int>(buffer.obs.rows());
   const int act_dim = static_cast<int>(buffer.actions.rows());
@@ -17,6 +18,7 @@ void CollectRollout(const GaussianPolicy& policy,
   Eigen::MatrixXf current_obs(obs_dim, episodes), mus(act_dim, episodes);
   Eigen::VectorXf action(act_dim), next(obs_dim);
   std::vector<char> reached(episodes, 0), collided(episodes, 0);
+  std::vector<std::vector<long>> live(episodes);
   long collision_events = 0;
   for (int e = 0; e < episodes; ++e) envs[e]->Reset(episode_rngs[e], current_obs.col(e));
   for (int t = 0; t < horizon; ++t) {
@@ -25,16 +27,23 @@ void CollectRollout(const GaussianPolicy& policy,
       const long column = static_cast<long>(e) * horizon + t;
       for (int i = 0; i < act_dim; ++i)
         action[i] = mus(i, e) + sigma[i] * static_cast<float>(episode_rngs[e].Normal());
-      const domains::StepOutcome outcome = envs[e]->Step(action, next);
       buffer.obs.col(column) = current_obs.col(e);
       buffer.actions.col(column) = action;
+      if (absorbing_goal && reached[e]) {  // absorbed: the goal observation, frozen
+        buffer.next_obs.col(column) = current_obs.col(e);
+        continue;
+      }
+      const domains::StepOutcome outcome = envs[e]->Step(action, next);
       buffer.next_obs.col(column) = next;
       current_obs.col(e) = next;
+      live[e].push_back(column);
       reached[e] |= outcome.reached_goal;
       collided[e] |= outcome.collided;
       collision_events += outcome.collisions;
     }
   }
+  buffer.live.clear();  // episode-major, as the columns
+  for (const std::vector<long>& l : live) buffer.live.insert(buffer.live.end(), l.begin(), l.end());
   stats.episodes = episodes;
   stats.success_rate =
       std::count(reached.begin(), reached.end(), 1) / static_cast<double>(episodes);
