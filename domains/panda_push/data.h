@@ -137,8 +137,8 @@ struct PandaNearDangerousOptions {
   // kPrecursor: paper Eq. 2's near-dangerous states, states a trajectory into a topple passes
   // before it topples. Each candidate is a scenario above started a further U(precursor_gap)
   // behind (so before contact as well as in it), and is kept only if physics confirms that
-  // continuing its motion topples the block (the label check's continuation, CheckLabels) while
-  // the block is still upright at the start (tilt below half the topple angle). Candidates are
+  // continuing its motion topples the block (the label check's continuation, CheckLabels; the
+  // candidates start from demonstration states, where the block stands upright). Candidates are
   // drawn until `count` are kept, at most max_candidates (else an error).
   enum class Generator { kReleased, kPrecursor };
   Generator generator = Generator::kReleased;
