@@ -18,7 +18,7 @@ void CollectRollout(const GaussianPolicy& policy,
   Eigen::MatrixXf current_obs(obs_dim, episodes), mus(act_dim, episodes);
   Eigen::VectorXf action(act_dim), next(obs_dim);
   std::vector<char> reached(episodes, 0), collided(episodes, 0);
-  std::vector<std::vector<long>> live(episodes);
+  std::vector<int> live_steps(episodes, 0);  // each episode's steps before it was absorbed
   long collision_events = 0;
   for (int e = 0; e < episodes; ++e) envs[e]->Reset(episode_rngs[e], current_obs.col(e));
   for (int t = 0; t < horizon; ++t) {
@@ -36,14 +36,17 @@ void CollectRollout(const GaussianPolicy& policy,
       const domains::StepOutcome outcome = envs[e]->Step(action, next);
       buffer.next_obs.col(column) = next;
       current_obs.col(e) = next;
-      live[e].push_back(column);
+      ++live_steps[e];
       reached[e] |= outcome.reached_goal;
       collided[e] |= outcome.collided;
       collision_events += outcome.collisions;
     }
   }
-  buffer.live.clear();  // episode-major, as the columns
-  for (const std::vector<long>& l : live) buffer.live.insert(buffer.live.end(), l.begin(), l.end());
+  // An episode's live steps are a prefix of its columns (once absorbed, it stays absorbed).
+  buffer.live.clear();
+  for (int e = 0; e < episodes; ++e)
+    for (int t = 0; t < live_steps[e]; ++t)
+      buffer.live.push_back(static_cast<long>(e) * horizon + t);
   stats.episodes = episodes;
   stats.success_rate =
       std::count(reached.begin(), reached.end(), 1) / static_cast<double>(episodes);
