@@ -90,7 +90,7 @@ std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {
   return std::make_unique<PandaPushEnv>(options_.task, options_.shield_model);
 }
 
-LabelCheckOptions PandaPushDomain::Continuation() const {
+LabelCheckOptions PandaPushDomain::ContinuationOptions() const {
   LabelCheckOptions c;
   c.velocity_gain = options_.shield_model.velocity_gain;
   return c;
@@ -113,7 +113,7 @@ experiments::DomainData PandaPushDomain::GenerateData(std::uint64_t data_seed) c
   } else {
     d.safe = PandaSafeStates(demos, options_.safe, rng);
     d.near_dangerous = PandaNearDangerousStates(options_.task, demos, options_.near_dangerous,
-                                                Continuation(), rng);
+                                                ContinuationOptions(), rng);
   }
   return d;
 }
@@ -140,8 +140,8 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   const data::StateSet safe = PandaSafeStates(demos, options_.safe, rng);
   std::vector<NearDangerousScenario> kinds;
   const data::StateSet near = PandaNearDangerousStates(
-      options_.task, demos, options_.near_dangerous, Continuation(), rng, &kinds);
-  LabelCheckOptions check = Continuation();
+      options_.task, demos, options_.near_dangerous, ContinuationOptions(), rng, &kinds);
+  LabelCheckOptions check = ContinuationOptions();
   check.max_states = max_states;
   std::vector<experiments::LabelCheckRow> rows;
   auto add = [&](const std::string& name, const std::string& label, const data::StateSet& set) {

@@ -68,7 +68,7 @@ class PandaPushDomain final : public experiments::Domain {
  private:
   // The label check's continuation with this domain's shield-model velocity gain (also the
   // physics of the near-dangerous precursor generator).
-  LabelCheckOptions Continuation() const;
+  LabelCheckOptions ContinuationOptions() const;
 
   experiments::Profile profile_;
   PandaPushDomainOptions options_;
