@@ -258,6 +258,8 @@ struct ExperimentCommand {
   std::string progress = "auto";
   int closed_loop_candidates = 0;  // --closed-loop N (absent: the config's closed_loop section)
   CLI::Option* closed_loop_option = nullptr;
+  int repair_rounds = 0;  // --closed-loop-repair R
+  CLI::Option* repair_option = nullptr;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
   CLI::Option* episodes_option = nullptr;
@@ -302,6 +304,11 @@ struct ExperimentCommand {
                     "N: the closed-loop check before deployment, trying up to N training "
                     "initialisations per seed (kinds method-comparison, ablation; thresholds "
                     "in the config's closed_loop section; docs/RESULTS.md)");
+    repair_option = cmd->add_option(
+        "--closed-loop-repair", repair_rounds,
+        "R: with --closed-loop, repair a failing candidate up to R times before replacing it: "
+        "the states before its dangerous steps join the near-dangerous states and its barrier "
+        "is retrained (closed_loop.repair_rounds)");
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     AddProgressOption(cmd, &progress);
     cmd->callback([this] { Run(); });
@@ -327,6 +334,13 @@ struct ExperimentCommand {
       CheckRange("--closed-loop", closed_loop_candidates, 1, 64);
       options.closed_loop.enabled = true;
       options.closed_loop.max_candidates = closed_loop_candidates;
+    }
+    if (repair_option->count() > 0) {
+      CheckRange("--closed-loop-repair", repair_rounds, 0, 16);
+      SECURE_CHECK(options.closed_loop.enabled,
+                   "--closed-loop-repair needs the closed-loop check (--closed-loop N, or "
+                   "closed_loop: {enabled: true} in the config)");
+      options.closed_loop.repair_rounds = repair_rounds;
     }
     if (!barrier.empty()) {
       options.barrier_kind = barrier == "per-car"

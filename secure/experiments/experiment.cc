@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -140,6 +141,71 @@ std::string CheckBrief(const cbf::CheckReport& r) {
   return line;
 }
 
+// The closed-loop check's counterexamples: in each episode with a dangerous step, the
+// observations from which the `lookback` steps up to and including the first dangerous one were
+// taken (fewer if the episode is shorter), with their episode and step indices. The observation
+// of a step is the one before it: the start observation for step 0, else the previous step's.
+class DangerPrecursors final : public eval::StepObserver {
+ public:
+  explicit DangerPrecursors(int lookback) : lookback_(lookback) {}
+  void OnEpisodeStart(long episode, const Eigen::VectorXf& observation) override {
+    history_.clear();
+    history_.push_back(observation);
+    episode_ = episode;
+    done_ = false;
+  }
+  void OnStep(const eval::StepView& step) override {
+    if (done_) return;
+    if (step.outcome.collided) {
+      // history_.back() is the observation the dangerous step started from.
+      const int n = std::min<int>(lookback_, static_cast<int>(history_.size()));
+      for (int i = n - 1; i >= 0; --i) {
+        states_.push_back(history_[history_.size() - 1 - static_cast<std::size_t>(i)]);
+        episodes_.push_back(episode_);
+        steps_.push_back(step.step - i);
+      }
+      done_ = true;
+      return;
+    }
+    history_.push_back(step.observation);
+    if (static_cast<int>(history_.size()) > lookback_) history_.pop_front();
+  }
+  // The counterexamples as columns (observation_dim x count); empty if none.
+  const Eigen::MatrixXf& states() {
+    if (matrix_.cols() != static_cast<Eigen::Index>(states_.size())) {
+      matrix_.resize(states_.empty() ? 0 : states_.front().size(),
+                     static_cast<Eigen::Index>(states_.size()));
+      for (std::size_t i = 0; i < states_.size(); ++i)
+        matrix_.col(static_cast<Eigen::Index>(i)) = states_[i];
+    }
+    return matrix_;
+  }
+  // CSV (docs/FILE_FORMATS.md, "closed-loop counterexamples"): episode, step, then the
+  // observation's features; `secure cbf train --augment-from` reads its feature columns.
+  void WriteCsv(const std::string& path, const std::vector<std::string>& features) {
+    const Eigen::MatrixXf& s = states();
+    std::vector<std::string> columns = {"episode", "step"};
+    columns.insert(columns.end(), features.begin(), features.end());
+    Eigen::MatrixXd values(static_cast<Eigen::Index>(columns.size()), s.cols());
+    for (Eigen::Index i = 0; i < s.cols(); ++i) {
+      values(0, i) = static_cast<double>(episodes_[static_cast<std::size_t>(i)]);
+      values(1, i) = steps_[static_cast<std::size_t>(i)];
+      values.col(i).tail(s.rows()) = s.col(i).cast<double>();
+    }
+    data::WriteCsv(path, columns, values);
+  }
+
+ private:
+  int lookback_;
+  std::deque<Eigen::VectorXf> history_;
+  long episode_ = 0;
+  bool done_ = false;
+  std::vector<Eigen::VectorXf> states_;
+  std::vector<long> episodes_;
+  std::vector<int> steps_;
+  Eigen::MatrixXf matrix_;
+};
+
 // The closed-loop check with model selection (ClosedLoopCheckOptions): trains candidates (BC and
 // AIRL through `train_policies`, the barrier on the baseline data) until one passes its held-out
 // shielded episodes, leaves the selected candidate's policies in `bc` and `airl`, records every
@@ -181,32 +247,89 @@ SeedBarrier SelectCandidate(const Domain& domain, const ExperimentOptions& o, st
     if (!files.empty()) barrier.Save(files + "/barrier.model");
     if (k > 0) progress.Advance();
 
-    const Stopwatch clock;
-    eval::SeedModels models;
-    models.airl = &*airl;
-    models.make_barrier = barrier.Factory(domain, env);
-    const eval::SeedResult result =
-        eval::EvaluateMethods(env, {eval::Method::kSecure}, models, o.shield, c.episodes,
-                              ClosedLoopCheckSeed(seed))
-            .at(eval::Method::kSecure);
-    progress.Advance();
-    const double success = result.success_rate(), dangerous = result.dangerous_rate();
-    nlohmann::json failed = nlohmann::json::array();
-    if (success < c.min_success) failed.push_back("success");
-    if (dangerous > c.max_dangerous) failed.push_back("dangerous");
-    record["episodes"] = c.episodes;
-    record["success_rate"] = success;
-    record["dangerous_rate"] = dangerous;
-    record["passed"] = failed.empty();
-    record["failed_criteria"] = failed;
-    record["seconds"] = clock.Seconds();
+    // The candidate's held-out shielded episodes. With repair_rounds: while it fails with
+    // dangerous episodes, the states before each one's first dangerous step join the
+    // near-dangerous states, the barrier is retrained (same training seed, same policies) and
+    // the candidate checked again on the same episodes.
+    data::StateSet near_dangerous = shared.data.near_dangerous;
+    nlohmann::json repairs = nlohmann::json::array();
+    nlohmann::json failed;
+    double success = 0.0, dangerous = 0.0;
+    for (int round = 0;; ++round) {
+      const Stopwatch clock;
+      eval::SeedModels models;
+      models.airl = &*airl;
+      models.make_barrier = barrier.Factory(domain, env);
+      const std::unique_ptr<domains::Environment> check_env = env.Clone();
+      eval::EpisodeRunner runner(*check_env);
+      DangerPrecursors precursors(c.repair_lookback);
+      const eval::SeedResult result =
+          eval::RunMethod(runner, eval::Method::kSecure, models, o.shield, c.episodes,
+                          ClosedLoopCheckSeed(seed), &precursors);
+      progress.Advance();
+      success = result.success_rate();
+      dangerous = result.dangerous_rate();
+      failed = nlohmann::json::array();
+      if (success < c.min_success) failed.push_back("success");
+      if (dangerous > c.max_dangerous) failed.push_back("dangerous");
+      nlohmann::json& at = round == 0 ? record : repairs.back();
+      at["success_rate"] = success;
+      at["dangerous_rate"] = dangerous;
+      at["passed"] = failed.empty();
+      at["failed_criteria"] = failed;
+      at["seconds"] = clock.Seconds() + at.value("seconds", 0.0);
+      if (round == 0) record["episodes"] = c.episodes;
+      progress.Line([&](std::ostream& out) {
+        out << tag << " closed-loop check, candidate " << k << " (training seed " << training_seed
+            << ")" << (round > 0 ? ", repair " + std::to_string(round) : "") << ": SECURE "
+            << 100.0 * success << "% success, " << 100.0 * dangerous << "% dangerous over "
+            << c.episodes << " held-out episodes: "
+            << (failed.empty() ? "passes" : "fails (" + failed.dump() + ")");
+      });
+      if (failed.empty() || round == c.repair_rounds || precursors.states().cols() == 0) break;
+
+      // Repair: the counterexamples (observations) join the near-dangerous states.
+      SECURE_CHECK(near_dangerous.features == env.ObservationFeatures(),
+                   "closed_loop.repair_rounds: the near-dangerous states of the "
+                       << domain.name()
+                       << " domain are not its observations (their features differ), so the "
+                          "closed-loop counterexamples cannot join them");
+      const Stopwatch repair_clock;
+      progress.AddTotal(2);
+      const Eigen::MatrixXf& added = precursors.states();
+      Eigen::MatrixXf states(near_dangerous.states.rows(), near_dangerous.size() + added.cols());
+      states << near_dangerous.states, added;
+      near_dangerous.states = std::move(states);
+      const std::string tag_r = "repair_" + std::to_string(round + 1);
+      if (!files.empty())
+        precursors.WriteCsv(files + "/counterexamples_" + std::to_string(round + 1) + ".csv",
+                            near_dangerous.features);
+      std::string repair_brief;
+      barrier = TrainSeedBarrier(o, training_seed, shared.data.safe, near_dangerous, &repair_brief);
+      if (!files.empty()) barrier.Save(files + "/barrier_" + tag_r + ".model");
+      progress.Advance();
+      repairs.push_back({{"round", round + 1},
+                         {"counterexamples", added.cols()},
+                         {"near_dangerous_states", near_dangerous.size()},
+                         {"barrier", barrier.summary},
+                         {"seconds", repair_clock.Seconds()}});
+      progress.Line([&](std::ostream& out) {
+        out << tag << " closed-loop repair " << round + 1 << " of candidate " << k << ": "
+            << added.cols() << " states before dangerous steps join the near-dangerous states ("
+            << near_dangerous.size() << "); barrier " << repair_brief;
+      });
+    }
+    if (!repairs.empty()) {
+      record["unrepaired"] = {{"success_rate", record["success_rate"]},
+                              {"dangerous_rate", record["dangerous_rate"]},
+                              {"failed_criteria", record["failed_criteria"]}};
+      record["repairs"] = repairs;
+      record["passed"] = failed.empty();
+      record["failed_criteria"] = failed;
+      record["success_rate"] = success;
+      record["dangerous_rate"] = dangerous;
+    }
     candidates.push_back(record);
-    progress.Line([&](std::ostream& out) {
-      out << tag << " closed-loop check, candidate " << k << " (training seed " << training_seed
-          << "): SECURE " << 100.0 * success << "% success, " << 100.0 * dangerous
-          << "% dangerous over " << c.episodes << " held-out episodes: "
-          << (failed.empty() ? "passes" : "fails (" + failed.dump() + ")");
-    });
     const int failures = static_cast<int>(failed.size());
     const double score = success - dangerous;
     if (!best || failures < best->failed || (failures == best->failed && score > best->score)) {
@@ -908,6 +1031,10 @@ void ClosedLoopCheckOptions::Validate() const {
                      max_dangerous, "in [0, 1]");
   SECURE_CHECK_FIELD(max_candidates >= 1 && max_candidates <= 64, kOwner, "max_candidates",
                      max_candidates, "in [1, 64]");
+  SECURE_CHECK_FIELD(repair_rounds >= 0 && repair_rounds <= 16, kOwner, "repair_rounds",
+                     repair_rounds, "in [0, 16]");
+  SECURE_CHECK_FIELD(repair_lookback >= 1 && repair_lookback <= 1000, kOwner, "repair_lookback",
+                     repair_lookback, "in [1, 1000]");
 }
 
 void ClosedLoopCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -917,15 +1044,23 @@ void ClosedLoopCheckOptions::ApplyYaml(const YAML::Node& node, const std::string
       .Field("min_success", &min_success)
       .Field("max_dangerous", &max_dangerous)
       .Field("max_candidates", &max_candidates)
+      .Field("repair_rounds", &repair_rounds)
+      .Field("repair_lookback", &repair_lookback)
       .Apply(node, source);
 }
 
 nlohmann::json ClosedLoopCheckOptions::ToJson() const {
-  return {{"enabled", enabled},
-          {"episodes", episodes},
-          {"min_success", min_success},
-          {"max_dangerous", max_dangerous},
-          {"max_candidates", max_candidates}};
+  nlohmann::json j = {{"enabled", enabled},
+                      {"episodes", episodes},
+                      {"min_success", min_success},
+                      {"max_dangerous", max_dangerous},
+                      {"max_candidates", max_candidates}};
+  // Only with repair, so that results without it keep their bytes.
+  if (repair_rounds > 0) {
+    j["repair_rounds"] = repair_rounds;
+    j["repair_lookback"] = repair_lookback;
+  }
+  return j;
 }
 
 void ExperimentOptions::Validate() const {
@@ -1113,12 +1248,16 @@ std::string ExperimentResult::ClosedLoopTable() const {
   const nlohmann::json& first = seed_summaries.front()["closed_loop"]["options"];
   out << "\nClosed-loop check per seed (SECURE on " << first.value("episodes", 0L)
       << " held-out episodes per candidate; passes with success >= "
-      << Percent(first.value("min_success", 0.0)) << " and dangerous <= "
-      << Percent(first.value("max_dangerous", 0.0)) << "; every method of a seed is evaluated "
-      << "with its selected candidate)\n\n"
-      << "| seed | candidates | selected | held-out success % | held-out dangerous % | verdict "
-         "|\n|---|---|---|---|---|---|\n";
-  long replaced = 0, failed = 0;
+      << Percent(first.value("min_success", 0.0))
+      << " and dangerous <= " << Percent(first.value("max_dangerous", 0.0))
+      << "; every method of a seed is evaluated "
+      << "with its selected candidate)\n\n";
+  // With repair: the selected candidate's repairs and its held-out dangerous rate before them.
+  const bool repair = first.value("repair_rounds", 0) > 0;
+  out << "| seed | candidates | selected | held-out success % | held-out dangerous % |"
+      << (repair ? " repairs (dangerous % before) |" : "") << " verdict |\n|---|---|---|---|---|"
+      << (repair ? "---|" : "") << "---|\n";
+  long replaced = 0, failed = 0, repaired = 0;
   for (std::size_t i = 0; i < seed_summaries.size(); ++i) {
     const nlohmann::json& c = seed_summaries[i]["closed_loop"];
     const nlohmann::json& candidates = c["candidates"];
@@ -1127,17 +1266,29 @@ std::string ExperimentResult::ClosedLoopTable() const {
     replaced += selected > 0;
     failed += !pass;
     const nlohmann::json& chosen = candidates.at(static_cast<std::size_t>(selected));
+    std::string repairs;
+    if (repair) {
+      char cell[64] = "0 |";
+      if (chosen.contains("repairs")) {
+        ++repaired;
+        std::snprintf(cell, sizeof cell, "%zu (%.1f) |", chosen["repairs"].size(),
+                      100 * Number(chosen["unrepaired"], "dangerous_rate"));
+      }
+      repairs = std::string(" ") + cell;
+    }
     char line[256];
-    std::snprintf(line, sizeof line, "| %llu | %zu | %ld | %.1f | %.1f | %s |\n",
+    std::snprintf(line, sizeof line, "| %llu | %zu | %ld | %.1f | %.1f |%s %s |\n",
                   static_cast<unsigned long long>(options.first_seed + i), candidates.size(),
                   selected, 100 * Number(chosen, "success_rate"),
-                  100 * Number(chosen, "dangerous_rate"), pass ? "pass" : "**failed**");
+                  100 * Number(chosen, "dangerous_rate"), repairs.c_str(),
+                  pass ? "pass" : "**failed**");
     out << line;
   }
   out << "\n"
       << replaced << " of " << seed_summaries.size()
-      << " seeds evaluated with a replacement candidate; " << failed
-      << " failed the check with every candidate (their best candidate is evaluated).\n";
+      << " seeds evaluated with a replacement candidate; ";
+  if (repair) out << repaired << " with a repaired barrier; ";
+  out << failed << " failed the check with every candidate (their best candidate is evaluated).\n";
   return out.str();
 }
 

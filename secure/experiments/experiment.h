@@ -101,16 +101,29 @@ void ApplyBarrierDataVariant(const BarrierDataVariant& variant, std::uint64_t se
 /// If no candidate passes, the best one (fewest failed criteria, then the highest success minus
 /// dangerous rate) is evaluated and the seed is reported as failed: in its summary
 /// ("closed_loop"), in Table() and on the progress stream; it is never used silently.
+///
+/// Repair (`repair_rounds` > 0): before a failing candidate is replaced, it is repaired with its
+/// own counterexamples, up to `repair_rounds` times. In each held-out episode with a dangerous
+/// step, the observations from which the last `repair_lookback` steps up to and including the
+/// first dangerous one started join the near-dangerous states; the barrier is retrained on them
+/// (the candidate's training seed; the policies stay) and the candidate is checked again on the
+/// same episodes. A candidate that fails only by success (a stall) has no counterexamples and is
+/// not repaired. The counterexamples are written to candidate-K/counterexamples_R.csv (episode,
+/// step, the observation's features; `secure cbf train --augment-from` reads them), each
+/// repaired barrier to candidate-K/barrier_repair_R.model.
 struct ClosedLoopCheckOptions {
   bool enabled = false;
   long episodes = 50;           // held-out shielded episodes per candidate
   double min_success = 0.85;    // required held-out success rate
   double max_dangerous = 0.02;  // allowed held-out dangerous rate
   int max_candidates = 4;       // initialisations tried per seed (1: check and report only)
+  int repair_rounds = 0;        // counterexample repairs of a failing candidate (0: none)
+  int repair_lookback = 3;      // steps before (and including) a dangerous one, as counterexamples
 
   /// Throws secure::Error naming the field, value and rule.
   void Validate() const;
-  /// Keys: enabled, episodes, min_success, max_dangerous, max_candidates.
+  /// Keys: enabled, episodes, min_success, max_dangerous, max_candidates, repair_rounds,
+  /// repair_lookback (the last two in ToJson() only when repair_rounds > 0).
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
 };

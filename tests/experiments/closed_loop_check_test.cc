@@ -9,7 +9,9 @@
 #include <string>
 
 #include "domains/derby/domain.h"
+#include "secure/cbf/car_barrier.h"
 #include "secure/common/atomic_file.h"
+#include "secure/data/data.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/experiment.h"
 #include "secure/policy/gaussian_policy.h"
@@ -131,21 +133,124 @@ TEST(ClosedLoopCheck, FailingCandidatesAreReplacedAndTheSelectedOneIsEvaluated) 
   std::filesystem::remove_all(o.output_dir);
 }
 
+// Records, for one replayed episode, the observation each step started from and whether it was
+// dangerous.
+class StepRecorder final : public eval::StepObserver {
+ public:
+  void OnEpisodeStart(long, const Eigen::VectorXf& observation) override {
+    before.push_back(observation);
+  }
+  void OnStep(const eval::StepView& step) override {
+    dangerous.push_back(step.outcome.collided);
+    before.push_back(step.observation);
+  }
+  std::vector<Eigen::VectorXf> before;  // before[t]: the observation step t started from
+  std::vector<bool> dangerous;
+};
+
+TEST(ClosedLoopCheck, RepairAddsTheStatesBeforeDangerousStepsWhichReproduceWhenReplayed) {
+  ExperimentOptions o = Tiny();
+  o.closed_loop.enabled = true;
+  o.closed_loop.episodes = 12;
+  o.closed_loop.min_success = 0.0;
+  o.closed_loop.max_dangerous = 0.0;  // any dangerous episode fails the candidate
+  o.closed_loop.max_candidates = 1;
+  o.closed_loop.repair_rounds = 1;
+  o.closed_loop.repair_lookback = 2;
+  // A myopic shield (alpha dt >> 1: any next h >= -(alpha dt - 1) h(s) is admitted) lets the
+  // tiny policy collide.
+  o.shield.class_k_gain = 1000.0;
+  o.output_dir = Scratch("repair");
+  const ExperimentResult r =
+      RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), o, nullptr);
+  const nlohmann::json j = r.ToJson();
+  EXPECT_EQ(j["experiment"]["options"]["closed_loop"]["repair_rounds"], 1);
+  const nlohmann::json& candidate = j["experiment"]["seeds"][0]["closed_loop"]["candidates"][0];
+  ASSERT_TRUE(candidate.contains("repairs"))
+      << "the tiny AIRL policy under the shield was expected to have a dangerous check episode: "
+      << candidate.dump();
+  const nlohmann::json& repair = candidate["repairs"][0];
+  EXPECT_GT(candidate["unrepaired"]["dangerous_rate"].get<double>(), 0.0);
+  const long added = repair["counterexamples"].get<long>();
+  EXPECT_GT(added, 0);
+  EXPECT_EQ(repair["near_dangerous_states"].get<long>(),
+            static_cast<long>(TinyDomain().options().near_dangerous.count) + added);
+  // The record's verdict is the repaired candidate's.
+  EXPECT_EQ(candidate["dangerous_rate"], repair["dangerous_rate"]);
+  EXPECT_EQ(candidate["passed"], repair["passed"]);
+  EXPECT_NE(r.Table().find("| repairs (dangerous % before) |"), std::string::npos) << r.Table();
+  EXPECT_NE(r.Table().find("1 with a repaired barrier"), std::string::npos) << r.Table();
+
+  // The evaluated barrier is the repaired one.
+  const std::string files = o.output_dir + "/seed-0/candidate-0";
+  EXPECT_EQ(ReadFile(o.output_dir + "/seed-0/barrier.model"),
+            ReadFile(files + "/barrier_repair_1.model"));
+  EXPECT_NE(ReadFile(files + "/barrier.model"), ReadFile(files + "/barrier_repair_1.model"));
+
+  // Every counterexample reproduces when its episode is replayed alone with the unrepaired
+  // candidate: the episode passes through that observation at that step, and the step that ends
+  // an episode's run of counterexamples is its first dangerous one.
+  const std::unique_ptr<domains::Environment> env = TinyDomain().MakeEnvironment();
+  std::vector<std::string> columns = {"episode", "step"};
+  for (const std::string& f : env->ObservationFeatures()) columns.push_back(f);
+  const data::NumericTable table = data::ReadCsv(files + "/counterexamples_1.csv", columns);
+  ASSERT_EQ(table.values.cols(), added);
+  const policy::GaussianPolicy airl = policy::GaussianPolicy::Load(files + "/airl.model");
+  const cbf::CarBarrierNet barrier = cbf::CarBarrierNet::Load(files + "/barrier.model");
+  eval::SeedModels models;
+  models.airl = &airl;
+  models.make_barrier = [&] { return barrier.MakeEvaluator(256); };
+  long replayed = 0;
+  for (Eigen::Index i = 0; i < table.values.cols(); ++i) {
+    const long episode = static_cast<long>(table.values(0, i));
+    const int step = static_cast<int>(table.values(1, i));
+    const bool last = i + 1 == table.values.cols() || table.values(0, i + 1) != episode;
+    eval::EpisodeRunnerOptions ro;
+    ro.first_episode = episode;
+    eval::EpisodeRunner runner(*env, ro);
+    StepRecorder recorder;
+    eval::RunMethod(runner, eval::Method::kSecure, models, o.shield, 1, ClosedLoopCheckSeed(0),
+                    &recorder);
+    ASSERT_LT(static_cast<std::size_t>(step), recorder.dangerous.size()) << i;
+    const Eigen::VectorXf state = table.values.col(i).tail(env->observation_dim()).cast<float>();
+    EXPECT_LE((recorder.before[static_cast<std::size_t>(step)] - state).cwiseAbs().maxCoeff(),
+              1e-5f * (1.0f + state.cwiseAbs().maxCoeff()))
+        << "counterexample " << i << " (episode " << episode << ", step " << step << ")";
+    for (int t = 0; t < step; ++t)
+      EXPECT_FALSE(recorder.dangerous[static_cast<std::size_t>(t)]) << i << " step " << t;
+    if (last) {
+      EXPECT_TRUE(recorder.dangerous[static_cast<std::size_t>(step)]) << i;
+      ++replayed;
+    }
+  }
+  EXPECT_GT(replayed, 0);
+  std::filesystem::remove_all(o.output_dir);
+}
+
 TEST(ClosedLoopCheck, OptionsFromYamlAndValidation) {
   ExperimentOptions o = Tiny();
   o.ApplyYaml(YAML::Load("{closed_loop: {enabled: true, episodes: 20, min_success: 0.9, "
-                         "max_dangerous: 0.01, max_candidates: 5}}"),
+                         "max_dangerous: 0.01, max_candidates: 5, repair_rounds: 2, "
+                         "repair_lookback: 4}}"),
               "cfg.yaml");
   EXPECT_TRUE(o.closed_loop.enabled);
   EXPECT_EQ(o.closed_loop.episodes, 20);
   EXPECT_EQ(o.closed_loop.min_success, 0.9);
   EXPECT_EQ(o.closed_loop.max_dangerous, 0.01);
   EXPECT_EQ(o.closed_loop.max_candidates, 5);
+  EXPECT_EQ(o.closed_loop.repair_rounds, 2);
+  EXPECT_EQ(o.closed_loop.repair_lookback, 4);
   EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{closed_loop: {rounds: 2}}"), "cfg.yaml"); }),
              "unknown key 'rounds'");
   ExperimentOptions bad = Tiny();
   bad.closed_loop.max_candidates = 0;
   EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::max_candidates = 0");
+  bad = Tiny();
+  bad.closed_loop.repair_rounds = -1;
+  EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::repair_rounds = -1");
+  bad = Tiny();
+  bad.closed_loop.repair_lookback = 0;
+  EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::repair_lookback = 0");
   bad = Tiny();
   bad.closed_loop.min_success = 1.5;
   EXPECT_HAS(ErrorOf([&] { bad.Validate(); }), "ClosedLoopCheckOptions::min_success = 1.5");
