@@ -8,7 +8,7 @@
 # One build serves both steps: libFuzzer needs clang, and building the libraries twice (GCC for
 # the unit tests, clang for the fuzzers) was the largest share of CI's time.
 #
-#   scripts/check.sh                               everything (FUZZ_SECONDS per fuzzer, default 60)
+#   scripts/check.sh                               everything (FUZZ_SECONDS per fuzzer, default 30)
 #   CHECK_LABELS='common|data' scripts/check.sh    only these ctest labels (a regex) in step 1
 #   CHECK_STEPS=fuzz scripts/check.sh              only step 2 (sanitizers: only step 1)
 #
@@ -21,7 +21,7 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 check_dir="${SECURE_CHECK_BUILD_DIR:-$root/build-check}"
-fuzz_seconds="${FUZZ_SECONDS:-60}"
+fuzz_seconds="${FUZZ_SECONDS:-30}"
 steps="${CHECK_STEPS:-sanitizers fuzz}"
 # Every module's label; `accuracy` and `experiments` train full-size models and take many minutes
 # under the sanitizers, and are covered by the Release run of `make test` (they are not built here).
