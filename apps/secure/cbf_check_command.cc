@@ -1,19 +1,17 @@
-// secure cbf check: the pre-deployment check of a learned barrier (cbf/barrier_check.h) on a
-// domain. The library check is generic; this file holds the glue of each domain (its state
-// region, unsafe test, action box and the shield's dynamics model):
-//   double-integrator  region: the validation box (x, y in [0, 10), v in [-1.5, 1.5)), moves
-//                      clamped to it; unsafe test: the analytic ground truth h*(s) < 0;
-//                      dynamics: the clipped exact step (dt, --accel-bound); held-out and
-//                      near-dangerous states: --safe-states / --near-dangerous-states, or drawn
-//                      from the ground truth with the check's seed;
-//   derby              derby::MakeDerbyCheckProblem (perturbed safe / near-dangerous
-//                      observations, the collision test, DerbyShieldModel); held-out states:
-//                      the files, or those of `secure experiment` (data_seed 2000), so that a
-//                      saved seed's barrier gets the check its experiment recorded.
+// secure cbf check: the pre-deployment check of a learned barrier (cbf/barrier_check.h) on any
+// registered domain with a check (experiments::Domain::HasCheck). The check is generic and so is
+// this command: the domain gives the held-out states (CheckHeldOut), the region, the unsafe test,
+// the action box and the shield's dynamics model (MakeCheckProblem); the experiment options it
+// starts from are the domain's preset with its `--config` section (as `secure experiment` reads
+// it), so that a saved seed's barrier gets the check its experiment recorded (same data_seed,
+// held-out count, shield and check options). No domain is named here.
+#include <yaml-cpp/yaml.h>
+
 #include <cstdio>
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -25,40 +23,60 @@
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
+#include "secure/common/excerpt.h"
 #include "secure/common/timer.h"
+#include "secure/common/yaml_value.h"
 #include "secure/data/data.h"
-#include "domains/derby/derby.h"
-#include "domains/double_integrator/double_integrator.h"
-#include "domains/derby/domain.h"
+#include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::cli {
 namespace {
 
-namespace di = domains::double_integrator;
-namespace derby = domains::derby;
+// The registered domains that have a barrier check, sorted ("derby, double-integrator").
+std::string CheckDomainList() {
+  const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+  std::string list;
+  for (const std::string& name : registry.Names())
+    if (registry.Make(name, experiments::Profile::kQuick)->HasCheck())
+      list += (list.empty() ? "" : ", ") + name;
+  return list.empty() ? "none" : list;
+}
 
-constexpr const char* kDerbyDomain = "derby";
-const std::vector<std::string>& KnownCheckDomains() {
-  static const std::vector<std::string> known = {kDoubleIntegratorDomain, kDerbyDomain};
-  return known;
+// The registered domains whose experiments train a per-obstacle barrier (the kind of a
+// `car_barrier` model file).
+std::string PerObstacleDomainList() {
+  const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+  std::string list;
+  for (const std::string& name : registry.Names())
+    if (registry.Make(name, experiments::Profile::kQuick)->Preset().barrier_kind ==
+        experiments::BarrierKind::kPerObstacle)
+      list += (list.empty() ? "" : ", ") + name;
+  return list.empty() ? "none" : list;
 }
 
 struct CheckCommand {
+  const Config* config = nullptr;
   std::string model, domain, safe_path, nd_path, out;
-  bool json = false;
+  bool json = false, quick = false;
   long held_out = 256;
-  std::uint64_t data_seed = 0;  // 0: the check's seed (double integrator) / 2000 (derby)
+  std::uint64_t data_seed = 0;
+  CLI::Option *held_out_opt = nullptr, *data_seed_opt = nullptr;
   // Overrides (applied only when given, over the domain's defaults and the `check:` section).
   cbf::BarrierCheckOptions parsed;
   std::vector<std::pair<CLI::Option*, std::function<void(cbf::BarrierCheckOptions*)>>> copies;
   std::string class_k;
-  double class_k_gain = 0, dt = 0, accel_bound = 3.0;
+  double class_k_gain = 0, dt = 0;
   CLI::Option *class_k_opt = nullptr, *gain_opt = nullptr, *dt_opt = nullptr;
-  di::GroundTruth truth;
+  // Task options of the domain (its `task:` keys obstacle, radius, gamma, accel_bound: the
+  // double integrator's geometry and action bound), from the flags and the `double_integrator:`
+  // section; a domain without such a key rejects it by name.
   std::vector<double> obstacle;
-  YAML::Node check_yaml;
-  std::string config_path;
+  double radius = 0, gamma = 0, accel_bound = 0;
+  CLI::Option *obstacle_opt = nullptr, *radius_opt = nullptr, *gamma_opt = nullptr,
+              *accel_opt = nullptr;
+  YAML::Node check_yaml, task_yaml;
   DeferredError config_error;  // thrown when this command runs, not at registration
 
   // A flag whose value lands in `parsed` and is copied onto the options only when given.
@@ -70,32 +88,42 @@ struct CheckCommand {
     return option;
   }
 
-  void Register(CLI::App& app, const Config& config) {
+  void Register(CLI::App& app, const Config& cfg) {
+    config = &cfg;
     CLI::App* cmd = app.add_subcommand(
         "check",
         "Check a learned barrier before deployment: held-out accuracy and a counterexample "
         "search for (a) h >= 0 with no admissible action, (b) h >= 0 near near-dangerous "
         "states, (c) h >= 0 where the domain's own test says unsafe; verdict by thresholds");
     config_error.Capture([&] {
-      check_yaml = config.Section("check");
-      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
+      check_yaml = cfg.Section("check");
+      task_yaml = TaskOfGroundTruthSection(cfg.Section("double_integrator"),
+                                           cfg.path + " [double_integrator]");
     });
-    config_path = config.path;
-    AddConfigFlag(cmd, config);
-    cmd->add_option("--model", model, "barrier model file (barrier_mlp or car_barrier)")
+    AddConfigFlag(cmd, cfg);  // `check:`, `double_integrator:` and the domain's section
+    cmd->add_option("--model", model,
+                    "barrier model file (barrier_mlp; car_barrier on a domain whose barrier is "
+                    "per-obstacle: " +
+                        PerObstacleDomainList() + ")")
         ->required()
         ->check(CLI::ExistingFile);
-    cmd->add_option("--domain", domain, "the domain: double-integrator | derby")->required();
+    cmd->add_option("--domain", domain, "a domain with a barrier check: " + CheckDomainList())
+        ->required();
+    cmd->add_flag("--quick", quick,
+                  "the domain's small profile (its data sizes and preset, as `secure experiment "
+                  "--quick`: the check of a quick experiment's barrier)");
     cmd->add_option("--safe-states", safe_path,
                     "labelled safe states (CSV or HDF5) for the accuracy (default: drawn by the "
-                    "domain's generators with a seed other than training's)");
+                    "domain's generators on a stream other than training's)");
     cmd->add_option("--near-dangerous-states", nd_path,
                     "labelled near-dangerous states (CSV or HDF5), for the accuracy and (b)");
-    cmd->add_option("--held-out", held_out, "states per class drawn when no CSV is given")
-        ->capture_default_str();
-    AddSeedOption(cmd, "--data-seed", &data_seed,
-                  "seed of the drawn states (0: double-integrator the check's seed XOR a "
-                  "constant, derby the experiments' data_seed 2000)");
+    held_out_opt = cmd->add_option("--held-out", held_out,
+                                   "states per class drawn when no file is given (default: the "
+                                   "domain's experiment's, check.held_out: 256)");
+    data_seed_opt = AddSeedOption(cmd, "--data-seed", &data_seed,
+                                  "data seed of the drawn states (default: the domain's "
+                                  "experiment data_seed, so that a saved seed's barrier gets "
+                                  "the check its experiment recorded)");
     cmd->add_option("--out", out, "CSV of the worst counterexamples (docs/FILE_FORMATS.md)");
     Bind(
         cmd, "--seed", [](cbf::BarrierCheckOptions & o) -> auto& { return o.seed; },
@@ -144,12 +172,24 @@ struct CheckCommand {
                                   "the shield's class-K function: linear | cubic (default: the "
                                   "domain's shield)");
     gain_opt = cmd->add_option("--class-k-gain", class_k_gain,
-                               "k in alpha(h) (default: double-integrator 1, derby 2)");
-    dt_opt = cmd->add_option("--dt", dt, "dt in g (default 0.1)");
-    cmd->add_option("--accel-bound", accel_bound,
-                    "double-integrator: per-axis action bound (the action box)")
-        ->capture_default_str();
-    AddGroundTruthFlags(cmd, &truth, &obstacle);
+                               "k in alpha(h) (default: the domain's shield)");
+    dt_opt = cmd->add_option("--dt", dt,
+                             "dt in g (default: the domain's shield, its control "
+                             "period)");
+    const std::string task_flag = "; the domain's task option, rejected by a domain without it";
+    obstacle_opt = cmd->add_option("--obstacle", obstacle,
+                                   "obstacle centre X,Y (task.obstacle" + task_flag +
+                                       "; double-integrator default 5,5)")
+                       ->delimiter(',')
+                       ->expected(2);
+    radius_opt =
+        cmd->add_option("--radius", radius, "obstacle radius r (task.radius" + task_flag + ")");
+    gamma_opt = cmd->add_option("--gamma", gamma,
+                                "gamma of the ground-truth CBF (task.gamma" + task_flag + ")");
+    accel_opt = cmd->add_option("--accel-bound", accel_bound,
+                                "per-axis action bound, the check's action box and the shield "
+                                "model's clip (task.accel_bound" +
+                                    task_flag + ")");
     cmd->add_flag("--json", json, "print the report as JSON");
     cmd->callback([this] {
       config_error.Rethrow();
@@ -157,9 +197,40 @@ struct CheckCommand {
     });
   }
 
+  // The `double_integrator:` section (obstacle, radius, gamma) as task options of the domain.
+  static YAML::Node TaskOfGroundTruthSection(const YAML::Node& section, const std::string& source) {
+    YAML::Node task(YAML::NodeType::Map);
+    if (!section.IsMap()) return YAML::Node();
+    for (const auto& item : section) {
+      const std::string key = YamlKey(item.first, source);
+      SECURE_CHECK(key == "obstacle" || key == "radius" || key == "gamma",
+                   source << ":" << item.first.Mark().line + 1 << ": unknown field '"
+                          << Excerpt(key)
+                          << "' in section double_integrator (valid: obstacle, radius, gamma)");
+      task[key] = item.second;
+    }
+    return task;
+  }
+
+  // The domain's task options given on the command line and in the `double_integrator:` section
+  // (the flags win), or a null node.
+  YAML::Node TaskOverrides() const {
+    YAML::Node task = task_yaml.IsMap() ? YAML::Clone(task_yaml) : YAML::Node(YAML::NodeType::Map);
+    if (obstacle_opt->count() > 0) {
+      YAML::Node xy(YAML::NodeType::Sequence);
+      xy.push_back(obstacle[0]);
+      xy.push_back(obstacle[1]);
+      task["obstacle"] = xy;
+    }
+    if (radius_opt->count() > 0) task["radius"] = radius;
+    if (gamma_opt->count() > 0) task["gamma"] = gamma;
+    if (accel_opt->count() > 0) task["accel_bound"] = accel_bound;
+    return task.size() > 0 ? task : YAML::Node();
+  }
+
   cbf::BarrierCheckOptions Options(const cbf::BarrierCheckOptions& base) const {
     cbf::BarrierCheckOptions o = base;
-    if (check_yaml.IsMap()) o.ApplyYaml(check_yaml, config_path + " [check]");
+    if (check_yaml.IsMap()) o.ApplyYaml(check_yaml, config->path + " [check]");
     for (const auto& [option, copy] : copies)
       if (option->count() > 0) copy(&o);
     o.Validate();
@@ -174,125 +245,106 @@ struct CheckCommand {
     s->Validate();
   }
 
-  void Run() {
-    bool known = false;
-    std::string list;
-    for (const std::string& d : KnownCheckDomains()) {
-      known = known || d == domain;
-      list += (list.empty() ? "" : ", ") + d;
+  // The barrier of the model file, evaluated on the domain's observations (by feature name).
+  std::unique_ptr<cbf::Barrier> LoadBarrier(const experiments::ExperimentOptions& e,
+                                            const std::vector<std::string>& features,
+                                            std::optional<cbf::BarrierNet>* flat,
+                                            std::optional<cbf::CarBarrierNet>* per_obstacle) const {
+    const std::string kind = nn::ReadModelFile(model).kind;
+    const std::string where = "the " + domain + " domain";
+    if (kind == cbf::kBarrierModelKind) {
+      *flat = cbf::BarrierNet::Load(model);
+      return (*flat)->MakeEvaluatorFor(features, where, model);
     }
-    SECURE_CHECK(known, "--domain = '" << domain << "', must be one of: " << list);
+    if (kind == cbf::kCarBarrierModelKind) {
+      SECURE_CHECK(e.barrier_kind == experiments::BarrierKind::kPerObstacle,
+                   model << " is a per-obstacle barrier (kind '" << kind << "'), but the " << domain
+                         << " domain's barrier is "
+                         << ToString(experiments::kBarrierKindNames, e.barrier_kind)
+                         << " (domains with a per-obstacle barrier: " << PerObstacleDomainList()
+                         << ")");
+      *per_obstacle = cbf::CarBarrierNet::Load(model);
+      (*per_obstacle)->CheckFeatures(features, where, model);
+      return (*per_obstacle)->MakeEvaluator(256);
+    }
+    SECURE_THROW(model << ": kind '" << kind << "' is not a barrier (expected "
+                       << cbf::kBarrierModelKind << " or " << cbf::kCarBarrierModelKind << ")");
+  }
+
+  void Run() {
+    config->Check();
+    experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+    SECURE_CHECK(registry.Has(domain),
+                 "--domain = '" << domain << "', must be one of: " << CheckDomainList());
     SECURE_CHECK(safe_path.empty() == nd_path.empty(),
                  "cbf check: --safe-states and --near-dangerous-states go together");
-    CheckRange("--held-out", held_out, 1, kMaxStates);
+    if (held_out_opt->count() > 0) CheckRange("--held-out", held_out, 1, kMaxStates);
 
-    // The barrier, by the model file's kind.
-    const std::string kind = nn::ReadModelFile(model).kind;
-    std::unique_ptr<cbf::Barrier> barrier;
-    std::optional<cbf::BarrierNet> flat;
-    std::optional<cbf::CarBarrierNet> per_car;
-    const std::vector<std::string>& features =
-        domain == kDerbyDomain ? derby::ObservationFeatures() : di::StateFeatures();
-    if (kind == cbf::kBarrierModelKind) {
-      flat = cbf::BarrierNet::Load(model);
-      barrier = flat->MakeEvaluatorFor(features, "the " + domain + " domain", model);
-    } else if (kind == cbf::kCarBarrierModelKind) {
-      SECURE_CHECK(domain == kDerbyDomain, model << " is a per-car barrier (kind '" << kind
-                                                 << "'), which needs --domain derby");
-      per_car = cbf::CarBarrierNet::Load(model);
-      per_car->CheckFeatures(features, "the derby domain", model);
-      barrier = per_car->MakeEvaluator(256);
-    } else {
-      SECURE_THROW(model << ": kind '" << kind << "' is not a barrier (expected "
-                         << cbf::kBarrierModelKind << " or " << cbf::kCarBarrierModelKind << ")");
+    // The domain and the experiment options its check starts from: the preset, then its
+    // `--config` section (the domain's own options from the section's `domain:` key, the shield,
+    // check.held_out and the check options), then the task flags.
+    const std::unique_ptr<experiments::Domain> d =
+        registry.Make(domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
+    SECURE_CHECK(d->HasCheck(), "the " << domain
+                                       << " domain has no barrier check (domains with one: "
+                                       << CheckDomainList() << ")");
+    experiments::ExperimentOptions e = d->Preset();
+    const std::string section = d->ConfigSection();
+    const YAML::Node yaml = config->Section(section);
+    if (yaml.IsMap()) e.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
+    const YAML::Node task = TaskOverrides();
+    if (task.IsMap()) {
+      YAML::Node node;
+      node["task"] = task;
+      d->ApplyYaml(node, "--obstacle/--radius/--gamma/--accel-bound or [double_integrator]");
     }
+    d->Validate();
+    ApplyShieldFlags(&e.shield);
+    const cbf::BarrierCheckOptions options = Options(e.check);
+
+    const std::vector<std::string> features = d->MakeEnvironment()->ObservationFeatures();
+    std::optional<cbf::BarrierNet> flat;
+    std::optional<cbf::CarBarrierNet> per_obstacle;
+    const std::unique_ptr<cbf::Barrier> barrier = LoadBarrier(e, features, &flat, &per_obstacle);
 
     const Stopwatch clock;
-    cbf::BarrierCheckOptions options;
-    cbf::BarrierCheckProblem problem;
-    std::unique_ptr<domains::DynamicsModel> dynamics;
-    if (domain == kDerbyDomain) {
-      options = Options(derby::DerbyCheckDefaults());
-      const derby::DerbyDomain d;
-      experiments::ExperimentOptions e = d.Preset();
-      if (data_seed != 0) e.data_seed = data_seed;
-      ApplyShieldFlags(&e.shield);
-      data::StateSet safe, nd;
-      if (!safe_path.empty()) {
-        safe = data::ReadStateSet(safe_path, features, data::kSafeLabel);
-        nd = data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
-      } else {
-        d.CheckHeldOut(e.data_seed, held_out, &safe, &nd);
-      }
-      problem = d.MakeCheckProblem(e.shield, safe, nd, &dynamics);
+    data::StateSet safe, nd;
+    const std::uint64_t seed = data_seed_opt->count() > 0 ? data_seed : e.data_seed;
+    if (!safe_path.empty()) {
+      safe = data::ReadStateSet(safe_path, features, data::kSafeLabel);
+      nd = data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
     } else {
-      options = Options(cbf::BarrierCheckOptions{});
-      FinishGroundTruth(obstacle, &truth);
-      truth.Validate();
-      shield::ShieldOptions s;
-      ApplyShieldFlags(&s);
-      problem = DoubleIntegratorProblem(s, features, options.seed);
-      dynamics = std::make_unique<di::ClippedDoubleIntegrator>(s.dt, accel_bound);
+      d->CheckHeldOut(seed, held_out_opt->count() > 0 ? held_out : e.check_held_out, &safe, &nd);
     }
+    std::unique_ptr<domains::DynamicsModel> dynamics;
+    const cbf::BarrierCheckProblem problem = d->MakeCheckProblem(e.shield, safe, nd, &dynamics);
+    const Stopwatch check_clock;
     const cbf::CheckReport report = cbf::CheckBarrier(*barrier, *dynamics, problem, options);
-    const double seconds = clock.Seconds();
+    const double check_seconds = check_clock.Seconds(), seconds = clock.Seconds();
     if (!out.empty()) report.WriteCsv(out);
     if (json) {
       nlohmann::json r = report.ToJson();
       r["command"] = "cbf check";
       r["model"] = model;
       r["domain"] = domain;
+      r["profile"] = quick ? "quick" : "full";
+      r["held_out_sources"] = {{"safe", safe.source}, {"near_dangerous", nd.source}};
+      if (safe_path.empty()) r["data_seed"] = seed;
       r["out"] = out;
       r["seconds"] = seconds;
+      r["check_seconds"] = check_seconds;
       PrintJson(r);
     } else {
       std::cout << "checked " << report.barrier << " on " << domain << " (" << report.dynamics
                 << ", alpha " << report.class_k << ", dt " << report.dt << ")\n"
+                << "region: " << report.region << "\n"
+                << "unsafe test: " << (report.unsafe_test.empty() ? "none" : report.unsafe_test)
+                << "\n"
                 << report.Summary();
       if (!out.empty())
         std::cout << "wrote " << report.worst.size() << " counterexamples to " << out << "\n";
       std::printf("%.2f s\n", seconds);
     }
-  }
-
-  // The double integrator's glue: the validation box, the ground truth, sampled labelled states.
-  cbf::BarrierCheckProblem DoubleIntegratorProblem(const shield::ShieldOptions& s,
-                                                   const std::vector<std::string>& features,
-                                                   std::uint64_t check_seed) const {
-    cbf::BarrierCheckProblem p;
-    p.action_lo = Eigen::VectorXf::Constant(di::kActionDim, -float(accel_bound));
-    p.action_hi = Eigen::VectorXf::Constant(di::kActionDim, float(accel_bound));
-    p.dt = s.dt;
-    p.class_k = [s](double h) { return shield::ClassKValue(s, h); };
-    p.class_k_description =
-        ToString(shield::kClassKNames, s.class_k) + ", k = " + std::to_string(s.class_k_gain);
-    const di::StateBox box;
-    p.sample_region = [box](Rng& rng, Eigen::Ref<Eigen::VectorXf> state) {
-      for (int i = 0; i < di::kStateDim; ++i)
-        state[i] = static_cast<float>(rng.Uniform(box.lo[i], box.hi[i]));
-    };
-    p.project = [box](Eigen::Ref<Eigen::VectorXf> state) {
-      for (int i = 0; i < di::kStateDim; ++i)
-        state[i] = std::clamp(state[i], float(box.lo[i]), float(box.hi[i]));
-    };
-    const di::GroundTruth t = truth;
-    p.is_unsafe = [t](const Eigen::Ref<const Eigen::VectorXf>& x) {
-      return t.H(x[0], x[1], x[2], x[3]) < 0;
-    };
-    p.is_unsafe_description = "ground truth h*(s) < 0";
-    p.region_description = "the validation box x, y in [0, 10), vx, vy in [-1.5, 1.5)";
-    if (!safe_path.empty()) {
-      p.held_out_safe = data::ReadStateSet(safe_path, features, data::kSafeLabel);
-      p.held_out_near_dangerous = data::ReadStateSet(nd_path, features, data::kNearDangerousLabel);
-    } else {
-      Rng rng(data_seed != 0 ? data_seed : check_seed ^ 0x5a3b1e0d7ULL);
-      di::LabelledStates l = di::SampleLabelled(t, box, held_out, held_out, rng);
-      p.held_out_safe = data::StateSet{"drawn safe states", features, std::move(l.safe)};
-      p.held_out_near_dangerous =
-          data::StateSet{"drawn unsafe states", features, std::move(l.unsafe)};
-    }
-    p.near_dangerous = *p.held_out_near_dangerous;
-    return p;
   }
 };
 

@@ -15,6 +15,7 @@
 #include "secure/common/yaml_keys.h"
 #include "secure/common/yaml_value.h"
 #include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
 
 namespace secure::cli {
 
@@ -111,12 +112,16 @@ std::unique_ptr<experiments::Domain> MakeConfiguredDomain(const std::string& nam
       name, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
   const std::string section = d->ConfigSection();
   const YAML::Node yaml = config.Section(section);
-  if (!yaml.IsMap() || !yaml["domain"]) {
+  if (!yaml.IsMap()) {
     d->Validate();
     return d;
   }
+  // The whole section is read as `secure experiment` reads it, so that a key it would reject
+  // (e.g. a domain option outside `domain:`) is an error here too, not silently ignored; the
+  // domain takes its `domain:` options from it.
+  experiments::ExperimentOptions scratch = d->Preset();
+  scratch.ApplyYaml(yaml, config.path + " [" + section + "]", d.get());
   const std::string where = config.path + " [" + section + "] [domain]";
-  d->ApplyYaml(yaml["domain"], where);
   try {
     d->Validate();
   } catch (const Error& e) {

@@ -1,8 +1,10 @@
 #include "domains/coffee_placing/domain.h"
+#include "domains/franka/arm_check.h"
 #include "domains/franka/arm_preset.h"
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -12,6 +14,11 @@
 #include "secure/common/yaml_fields.h"
 
 namespace secure::domains::coffee_placing {
+namespace {
+// The held-out states of the barrier check come from this stream (data_seed ^ salt), not the
+// training data's (data_seed, data_seed + 1).
+constexpr std::uint64_t kCheckDataSalt = 0xc0ffc4ec4aULL;
+}  // namespace
 
 const std::vector<std::string>& BarrierFeatures() {
   static const std::vector<std::string> names{
@@ -170,6 +177,68 @@ experiments::DomainData CoffeePlacingDomain::GenerateData(std::uint64_t data_see
   return ParticipantData(options_, MeanParticipant(options_.population), data_seed);
 }
 
+void CoffeePlacingDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                                       data::StateSet* near_dangerous) const {
+  CoffeePlacingDomainOptions o = options_;
+  o.labels.safe = count;
+  o.labels.unsafe = count;
+  experiments::DomainData d =
+      ParticipantData(o, MeanParticipant(o.population), data_seed ^ kCheckDataSalt);
+  *safe = std::move(d.safe);
+  *near_dangerous = std::move(d.near_dangerous);
+  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
+  safe->source += seed;
+  near_dangerous->source += seed;
+}
+
+cbf::BarrierCheckProblem CoffeePlacingDomain::MakeCheckProblem(
+    const shield::ShieldOptions& shield, const data::StateSet& safe,
+    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
+  options_.Validate();
+  franka::ArmCheckSpec spec;
+  spec.domain = name();
+  spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
+    franka::AddNoise(rng, 0.01, kEePos, 3, s);
+    franka::AddNoise(rng, 0.05, kEeVel, 3, s);
+    franka::AddNoise(rng, 0.03, kTilt, 1, s);
+    for (int k = 0; k < 3; ++k) {
+      const float arm = static_cast<float>(0.02 * rng.Normal());
+      s[kWrist + k] += arm;
+      s[kElbow + k] += arm;
+      s[kHandTip + k] += arm;
+    }
+    franka::AddNoise(rng, 0.05, kWristVel, 3, s);
+    franka::AddNoise(rng, 0.05, kElbowVel, 3, s);
+  };
+  // The tilt's physical bound, and the clearance feature as the observation's positions give it
+  // (the shield's model recomputes it so too).
+  const PersonOptions person = options_.task.person;
+  spec.project = [person](Eigen::Ref<Eigen::VectorXf> s) {
+    s[kTilt] = std::clamp(s[kTilt], -static_cast<float>(kMaxTilt), static_cast<float>(kMaxTilt));
+    s[kClearance] = static_cast<float>(ObservedClearance(person, s));
+  };
+  const Thresholds mean = MeanParticipant(options_.population).thresholds;
+  spec.is_unsafe = [person, mean](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    return mean.Violated(ObservedClearance(person, s), s[kTilt]);
+  };
+  std::ostringstream unsafe;
+  unsafe << "a violation of the mean participant's thresholds: the hand-and-cup within "
+         << mean.comfort_distance << " m of the person's arm, or |tilt| > " << mean.max_tilt
+         << " rad";
+  spec.is_unsafe_description = unsafe.str();
+  spec.region_description =
+      "held-out safe and unsafe observations, perturbed (ee position sd 0.01 m, ee velocity sd "
+      "0.05 m/s, tilt sd 0.03 rad, the person's arm sd 0.02 m, its velocities sd 0.05 m/s; the "
+      "clearance recomputed)";
+  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+}
+
+cbf::BarrierCheckOptions CoffeeCheckDefaults() {
+  cbf::BarrierCheckOptions c;
+  c.action_grid = 5;
+  return c;
+}
+
 std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(
     const experiments::PopulationOptions& options) const {
   return std::make_unique<CoffeePopulation>(options_, options);
@@ -192,6 +261,7 @@ experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
   // The user study was measured with alpha dt = 0.2 (docs/RESULTS.md); the arm preset's 0.8 has
   // not been tried on this domain.
   o.shield.class_k_gain = 5.0;
+  o.check = CoffeeCheckDefaults();
   return o;
 }
 

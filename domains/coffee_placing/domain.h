@@ -75,6 +75,29 @@ class CoffeePlacingDomain final : public experiments::Domain {
   void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   experiments::ExperimentOptions Preset() const override;
 
+  /// The barrier check (cbf/barrier_check.h), judged by the mean participant (as
+  /// MakeEnvironment and GenerateData):
+  ///  - held-out states: the mean participant's data (ParticipantData) from the stream
+  ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1), `count` safe
+  ///    and `count` unsafe (their violations, with their label noise);
+  ///  - region: a held-out safe or unsafe observation (probability 1/2 each) perturbed: ee
+  ///    position + N(0, 0.01^2) m and ee velocity + N(0, 0.05^2) m/s per axis, tilt +
+  ///    N(0, 0.03^2) rad (kept within +-kMaxTilt), the person's wrist, elbow and hand tip moved
+  ///    together by N(0, 0.02^2) m per axis, their velocities + N(0, 0.05^2) m/s; the clearance
+  ///    feature recomputed from the perturbed positions (ObservedClearance), also after every
+  ///    local-search move;
+  ///  - unsafe test (c): a violation of the mean participant's thresholds (Thresholds::Violated
+  ///    on ObservedClearance and the tilt: the environment's dangerous test);
+  ///  - dynamics: the environment's shield model (CoffeeShieldModel), action box [-1, 1]^4, dt
+  ///    and class-K from the shield's options.
+  bool HasCheck() const override { return true; }
+  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                    data::StateSet* near_dangerous) const override;
+  cbf::BarrierCheckProblem MakeCheckProblem(
+      const shield::ShieldOptions& shield, const data::StateSet& safe,
+      const data::StateSet& near_dangerous,
+      std::unique_ptr<DynamicsModel>* dynamics) const override;
+
   bool HasPopulation() const override { return true; }
   std::unique_ptr<experiments::Population> MakePopulation(
       const experiments::PopulationOptions& options) const override;
@@ -90,6 +113,10 @@ class CoffeePlacingDomain final : public experiments::Domain {
 /// The barrier's input: the end-effector position and velocity, the cup's tilt, the person's
 /// wrist and hand tip, the wrist velocity and the clearance (17 features).
 const std::vector<std::string>& BarrierFeatures();
+
+/// The barrier check's defaults on coffee-placing: cbf::BarrierCheckOptions with a 5-point action
+/// grid per axis (625 actions + the random ones per max_a g; 7^4 = 2401 would be the default).
+cbf::BarrierCheckOptions CoffeeCheckDefaults();
 
 /// A participant's data (GenerateData of the population and of the domain): demonstrations from
 /// `data_seed`, labelled states from data_seed + 1.

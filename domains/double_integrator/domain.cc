@@ -6,6 +6,7 @@
 
 #include "domains/double_integrator/ground_truth_barrier.h"
 #include "domains/double_integrator/table1.h"
+#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
@@ -13,6 +14,11 @@
 #include "secure/common/yaml_fields.h"
 
 namespace secure::domains::double_integrator {
+namespace {
+// The held-out states of the barrier check come from this stream (data_seed ^ salt), not the
+// training data's (data_seed, data_seed + 1).
+constexpr std::uint64_t kCheckDataSalt = 0xd1c4ec4a7ULL;
+}  // namespace
 
 DomainOptions DomainOptions::For(experiments::Profile profile) {
   DomainOptions o;
@@ -137,6 +143,69 @@ std::unique_ptr<cbf::Barrier> DoubleIntegratorDomain::MakeGroundTruth() const {
 
 std::optional<cbf::StateSource> DoubleIntegratorDomain::ValidationGrid() const {
   return GridStates(options_.grid);
+}
+
+void DoubleIntegratorDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                                          data::StateSet* near_dangerous) const {
+  SECURE_CHECK(count > 0 && count <= kMaxStates,
+               "double-integrator barrier check: held-out count = " << count << ", must be in [1, "
+                                                                    << kMaxStates << "]");
+  options_.task.truth.Validate();
+  Rng rng(data_seed ^ kCheckDataSalt);
+  LabelledStates l = SampleLabelled(options_.task.truth, StateBox{}, count, count, rng);
+  const std::string seed = " (data_seed " + std::to_string(data_seed) + ")";
+  *safe = {"held-out safe states: uniform in the validation box, h* >= 0" + seed, StateFeatures(),
+           std::move(l.safe)};
+  *near_dangerous = {"held-out unsafe states: uniform in the validation box, h* < 0" + seed,
+                     StateFeatures(), std::move(l.unsafe)};
+}
+
+cbf::BarrierCheckProblem DoubleIntegratorDomain::MakeCheckProblem(
+    const shield::ShieldOptions& shield, const data::StateSet& safe,
+    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
+  return MakeDoubleIntegratorCheckProblem(options_.task, shield, safe, near_dangerous, dynamics);
+}
+
+cbf::BarrierCheckProblem MakeDoubleIntegratorCheckProblem(
+    const ReachAvoidOptions& task, const shield::ShieldOptions& shield, const data::StateSet& safe,
+    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) {
+  SECURE_CHECK(safe.states.rows() == kStateDim && near_dangerous.states.rows() == kStateDim,
+               "the double-integrator barrier check needs states of "
+                   << kStateDim << " values; got " << safe.states.rows() << " (" << safe.source
+                   << ") and " << near_dangerous.states.rows() << " (" << near_dangerous.source
+                   << ")");
+  data::CheckNonEmptyFinite(safe, "double-integrator barrier check: safe states");
+  data::CheckNonEmptyFinite(near_dangerous,
+                            "double-integrator barrier check: near-dangerous states");
+  task.Validate();
+  shield.Validate();
+  *dynamics = std::make_unique<ClippedDoubleIntegrator>(shield.dt, task.accel_bound);
+  cbf::BarrierCheckProblem p;
+  p.action_lo = Eigen::VectorXf::Constant(kActionDim, -static_cast<float>(task.accel_bound));
+  p.action_hi = Eigen::VectorXf::Constant(kActionDim, static_cast<float>(task.accel_bound));
+  p.dt = shield.dt;
+  p.class_k = [shield](double h) { return shield::ClassKValue(shield, h); };
+  p.class_k_description = ToString(shield::kClassKNames, shield.class_k) +
+                          ", k = " + std::to_string(shield.class_k_gain);
+  const StateBox box;
+  p.sample_region = [box](Rng& rng, Eigen::Ref<Eigen::VectorXf> state) {
+    for (int i = 0; i < kStateDim; ++i)
+      state[i] = static_cast<float>(rng.Uniform(box.lo[i], box.hi[i]));
+  };
+  p.project = [box](Eigen::Ref<Eigen::VectorXf> state) {
+    for (int i = 0; i < kStateDim; ++i)
+      state[i] = std::clamp(state[i], static_cast<float>(box.lo[i]), static_cast<float>(box.hi[i]));
+  };
+  const GroundTruth truth = task.truth;
+  p.is_unsafe = [truth](const Eigen::Ref<const Eigen::VectorXf>& x) {
+    return truth.H(x[0], x[1], x[2], x[3]) < 0;
+  };
+  p.is_unsafe_description = "ground truth h*(s) < 0";
+  p.region_description = "the validation box x, y in [0, 10), vx, vy in [-1.5, 1.5)";
+  p.near_dangerous = near_dangerous;
+  p.held_out_safe = safe;
+  p.held_out_near_dangerous = near_dangerous;
+  return p;
 }
 
 }  // namespace secure::domains::double_integrator

@@ -1,7 +1,8 @@
 #pragma once
 // The double-integrator reach-avoid task as an experiments::Domain (the plug-in's face to the
-// generic driver and the CLI): exact dynamics, the CBF-QP expert, a flat barrier MLP, and the
-// analytic ground truth with its validation grid (Table 1).
+// generic driver and the CLI): exact dynamics, the CBF-QP expert, a flat barrier MLP, the
+// analytic ground truth with its validation grid (Table 1), and the barrier check's problem
+// (the validation box, the ground truth as the unsafe test, the clipped exact step).
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -56,6 +57,18 @@ class DoubleIntegratorDomain final : public experiments::Domain {
   std::unique_ptr<cbf::Barrier> MakeGroundTruth() const override;
   std::optional<cbf::StateSource> ValidationGrid() const override;
 
+  /// The barrier check (MakeDoubleIntegratorCheckProblem below). Held-out states: `count` safe
+  /// (h* >= 0) and `count` unsafe (h* < 0) states drawn uniformly from the validation box
+  /// (StateBox) by the ground truth of task.truth, from the stream data_seed ^ a salt (the
+  /// training data use data_seed and data_seed + 1).
+  bool HasCheck() const override { return true; }
+  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                    data::StateSet* near_dangerous) const override;
+  cbf::BarrierCheckProblem MakeCheckProblem(
+      const shield::ShieldOptions& shield, const data::StateSet& safe,
+      const data::StateSet& near_dangerous,
+      std::unique_ptr<DynamicsModel>* dynamics) const override;
+
   const DomainOptions& options() const { return options_; }
   DomainOptions& mutable_options() { return options_; }
 
@@ -63,5 +76,20 @@ class DoubleIntegratorDomain final : public experiments::Domain {
   experiments::Profile profile_;
   DomainOptions options_;
 };
+
+/// The barrier check's inputs on the double integrator:
+///  - dynamics: the clipped exact step, ClippedDoubleIntegrator(shield.dt, task.accel_bound)
+///    (the environment's own transition when shield.dt = task.dt); action box
+///    [-accel_bound, accel_bound]^2; dt, class-K and gain from `shield`;
+///  - region: uniform in the validation box (StateBox: x, y in [0, 10), vx, vy in [-1.5, 1.5)),
+///    states moved by the local search clamped back into it;
+///  - unsafe test (c): the ground truth h*(s) < 0 (task.truth);
+///  - (b) and the held-out accuracy: `near_dangerous` and `safe`.
+/// `safe` and `near_dangerous` must be states (kStateDim rows); the problem keeps copies.
+cbf::BarrierCheckProblem MakeDoubleIntegratorCheckProblem(const ReachAvoidOptions& task,
+                                                          const shield::ShieldOptions& shield,
+                                                          const data::StateSet& safe,
+                                                          const data::StateSet& near_dangerous,
+                                                          std::unique_ptr<DynamicsModel>* dynamics);
 
 }  // namespace secure::domains::double_integrator

@@ -26,7 +26,8 @@ experiments::ExperimentOptions ArmExperimentPreset(experiments::Profile profile,
   o.shield.dt = control_period;
   o.shield.class_k_gain = 20.0;
   o.shield.probe_extent = 1.0;
-  o.check_enabled = false;  // no barrier check problem for these domains
+  // The pre-deployment barrier check runs per seed (check_enabled, the default): each plug-in
+  // gives its problem (Domain::MakeCheckProblem, arm_check.h) and its defaults (o.check).
   // Statistics: 10 seeds x 100 episodes.
   o.seeds = 10;
   o.episodes = 100;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <optional>
 
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
@@ -102,11 +103,18 @@ void KitchenNearDangerousOptions::Validate() const {
   CheckIntervalField(arm_speed, o, "arm_speed", 0.0, 5.0);
   SECURE_CHECK_FIELD(Finite(look_ahead) && look_ahead > 0 && look_ahead <= 5, o, "look_ahead",
                      look_ahead, "in (0, 5] s");
+  SECURE_CHECK_FIELD(Finite(p_blade) && p_blade >= 0 && p_blade <= 1 - p_stroke, o, "p_blade",
+                     p_blade, "in [0, 1 - p_stroke] (p_stroke = " << p_stroke << ")");
+  CheckIntervalField(blade_speed, o, "blade_speed", 0.0, 5.0);
 }
 
 nlohmann::json KitchenNearDangerousOptions::ToJson() const {
-  return {{"count", count},         {"p_stroke", p_stroke},   {"near_distance", near_distance},
-          {"stroke_vz", stroke_vz}, {"arm_speed", arm_speed}, {"look_ahead", look_ahead}};
+  nlohmann::json j = {
+      {"count", count},         {"p_stroke", p_stroke},   {"near_distance", near_distance},
+      {"stroke_vz", stroke_vz}, {"arm_speed", arm_speed}, {"look_ahead", look_ahead}};
+  j["p_blade"] = p_blade;
+  j["blade_speed"] = blade_speed;
+  return j;
 }
 
 void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -117,11 +125,21 @@ void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::s
       .Field("stroke_vz", &stroke_vz)
       .Field("arm_speed", &arm_speed)
       .Field("look_ahead", &look_ahead)
+      .Field("p_blade", &p_blade)
+      .Field("blade_speed", &blade_speed)
       .Apply(node, source);
 }
 
 const char* ScenarioName(NearDangerousScenario s) {
-  return s == NearDangerousScenario::kStroke ? "stroke into the arm" : "arm into the blade";
+  switch (s) {
+    case NearDangerousScenario::kStroke:
+      return "stroke into the arm";
+    case NearDangerousScenario::kArm:
+      return "arm into the blade";
+    case NearDangerousScenario::kBlade:
+      return "blade into the resting arm";
+  }
+  return "?";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -269,11 +287,28 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
   std::iota(order.begin(), order.end(), 0L);
   Shuffle(order.begin(), order.end(), rng);
   const long max_visits = 20 * options.count + demo.cols();
+  // An arm pose with its wrist in a random direction from the edge and the arm's surface
+  // contact_distance..near_distance from it (scenarios b and c), or none for this draw.
+  auto arm_near_edge = [&](const Eigen::Vector3d& edge) -> std::optional<ArmPose> {
+    Eigen::Vector3d dir(rng.Normal(), rng.Normal(), rng.Normal());
+    if (dir.norm() < 1e-6) return std::nullopt;
+    dir.normalize();
+    const Eigen::Vector3d wrist =
+        edge + dir * rng.Uniform(0.0, options.near_distance + h.forearm_radius + 0.08);
+    if (wrist.z() < task.board_top + 0.02) return std::nullopt;
+    const ArmPose p = ArmPoseForWrist(h, wrist);
+    const double d = EdgeToArmDistance(h, edge, p);
+    if (d < task.contact_distance || d > options.near_distance) return std::nullopt;
+    return p;
+  };
   while (made < options.count && visited < max_visits) {
     Eigen::VectorXf o = demo.col(order[static_cast<size_t>(visited % demo.cols())]);
     ++visited;
     const Eigen::Vector3d edge = At(o, kBlade);
-    const bool stroke = rng.Uniform() < options.p_stroke;
+    const double u = rng.Uniform();
+    const bool stroke = u < options.p_stroke;
+    // Drawn from the same uniform, so that p_blade = 0 keeps the draws of releases without (c).
+    const bool blade = !stroke && u < options.p_stroke + options.p_blade;
     bool accepted = false;
     for (int attempt = 0; attempt < 200 && !accepted; ++attempt) {
       if (stroke) {
@@ -291,16 +326,31 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         o[kEeVel] = o[kEeVel + 1] = 0.0f;
         o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));
         accepted = true;
+      } else if (blade) {
+        // The arm at rest near the edge; the end-effector moving towards it (the direction to
+        // the wrist, perturbed) so that the edge comes within contact_distance of the arm
+        // within look_ahead if the motion continues.
+        const std::optional<ArmPose> near = arm_near_edge(edge);
+        if (!near) continue;
+        const ArmPose& p = *near;
+        Eigen::Vector3d towards = (p.wrist - edge).normalized() +
+                                  0.3 * Eigen::Vector3d(rng.Normal(), rng.Normal(), rng.Normal());
+        if (towards.norm() < 1e-6) continue;
+        const Eigen::Vector3d v = Draw(rng, options.blade_speed) * towards.normalized();
+        bool reaches = false;
+        constexpr int kPathPoints = 10;
+        for (int i = 1; i <= kPathPoints && !reaches; ++i) {
+          const Eigen::Vector3d at = edge + (options.look_ahead * i / kPathPoints) * v;
+          reaches = at.z() >= task.board_top && EdgeToArmDistance(h, at, p) < task.contact_distance;
+        }
+        if (!reaches) continue;
+        franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
+        for (int k = 0; k < 3; ++k) o[kEeVel + k] = static_cast<float>(v[k]);
+        accepted = true;
       } else {
-        Eigen::Vector3d dir(rng.Normal(), rng.Normal(), rng.Normal());
-        if (dir.norm() < 1e-6) continue;
-        dir.normalize();
-        const Eigen::Vector3d wrist =
-            edge + dir * rng.Uniform(0.0, options.near_distance + h.forearm_radius + 0.08);
-        if (wrist.z() < task.board_top + 0.02) continue;
-        const ArmPose p = ArmPoseForWrist(h, wrist);
-        const double d = EdgeToArmDistance(h, edge, p);
-        if (d < task.contact_distance || d > options.near_distance) continue;
+        const std::optional<ArmPose> near = arm_near_edge(edge);
+        if (!near) continue;
+        const ArmPose& p = *near;
         const Eigen::Vector3d towards = (edge - p.wrist).normalized();
         const double speed = Draw(rng, options.arm_speed);
         const Eigen::Vector3d wv = speed * towards, ev = 0.5 * speed * towards;
@@ -316,7 +366,9 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
     if (!accepted) continue;
     s.states.col(made++) = o;
     if (scenarios != nullptr)
-      scenarios->push_back(stroke ? NearDangerousScenario::kStroke : NearDangerousScenario::kArm);
+      scenarios->push_back(stroke  ? NearDangerousScenario::kStroke
+                           : blade ? NearDangerousScenario::kBlade
+                                   : NearDangerousScenario::kArm);
   }
   SECURE_CHECK(made == options.count, "kitchen-cutting near-dangerous states: only "
                                           << made << " of " << options.count << " made");

@@ -87,17 +87,25 @@ struct KitchenSafeOptions {
 
 struct KitchenNearDangerousOptions {
   long count = 450;  // Table 2
-  double p_stroke = 0.6;
+  // The shares of the scenarios: (a) p_stroke, (c) p_blade, (b) the rest. Until 2026-12-02
+  // p_stroke = 0.6 and no (c); (c) took the dangerous rate of SECURE from 5.8 to 2.6 % over 20
+  // seeds (docs/RESULTS.md, "Kitchen cutting").
+  double p_stroke = 0.4;
   double near_distance = 0.06;      // m, the edge's clearance from the arm at most
   Interval stroke_vz = {0.3, 1.0};  // m/s downwards
   Interval arm_speed = {0.2, 0.6};  // m/s
   double look_ahead = 0.3;          // s
+  // (c) the blade moving into an arm at rest (the person holding the food, or dwelling): the
+  // share of all states (drawn from the non-stroke share; 0 with p_stroke 0.6: the data of
+  // earlier releases).
+  double p_blade = 0.3;
+  Interval blade_speed = {0.2, 1.0};  // m/s, the end-effector's speed towards the arm
   void Validate() const;
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
 
-enum class NearDangerousScenario { kStroke, kArm };
+enum class NearDangerousScenario { kStroke, kArm, kBlade };
 const char* ScenarioName(NearDangerousScenario s);
 
 data::StateSet KitchenSafeStates(const KitchenDemonstrations& demos,

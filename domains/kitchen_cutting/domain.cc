@@ -1,8 +1,11 @@
 #include "domains/kitchen_cutting/domain.h"
+#include "domains/franka/arm_check.h"
 #include "domains/franka/arm_preset.h"
+#include "domains/franka/human_arm.h"
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -12,6 +15,11 @@
 #include "secure/common/yaml_fields.h"
 
 namespace secure::domains::kitchen_cutting {
+namespace {
+// The held-out states of the barrier check come from this stream (data_seed ^ salt), not the
+// training data's (data_seed, data_seed + 1).
+constexpr std::uint64_t kCheckDataSalt = 0x6b17c4ec4aULL;
+}  // namespace
 
 const std::vector<std::string>& BarrierFeatures() {
   static const std::vector<std::string> names{
@@ -132,7 +140,8 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
     rows.push_back(row);
   };
   add("safe states", "safe", safe);
-  for (NearDangerousScenario k : {NearDangerousScenario::kStroke, NearDangerousScenario::kArm}) {
+  for (NearDangerousScenario k : {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
+                                  NearDangerousScenario::kBlade}) {
     std::vector<long> cols;
     for (long i = 0; i < static_cast<long>(kinds.size()); ++i)
       if (kinds[i] == k) cols.push_back(i);
@@ -144,6 +153,88 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
     add(std::string("near-dangerous (") + ScenarioName(k) + ")", "near-dangerous", s);
   }
   return rows;
+}
+
+void KitchenCuttingDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                                        data::StateSet* near_dangerous) const {
+  options_.Validate();
+  const std::uint64_t stream = data_seed ^ kCheckDataSalt;
+  KitchenDemonstrationOptions demo_options = options_.demonstrations;
+  demo_options.seed = stream;
+  // KitchenSafeStates draws demonstration states without replacement.
+  demo_options.states = std::max(demo_options.states, count);
+  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(options_.task, demo_options);
+  Rng rng(stream + 1);
+  KitchenSafeOptions safe_options = options_.safe;
+  safe_options.count = count;
+  KitchenNearDangerousOptions nd_options = options_.near_dangerous;
+  nd_options.count = count;
+  *safe = KitchenSafeStates(demos, safe_options, rng);
+  *near_dangerous = KitchenNearDangerousStates(options_.task, demos, nd_options, rng);
+  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
+  safe->source += seed;
+  near_dangerous->source += seed;
+}
+
+cbf::BarrierCheckProblem KitchenCuttingDomain::MakeCheckProblem(
+    const shield::ShieldOptions& shield, const data::StateSet& safe,
+    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
+  options_.Validate();
+  franka::ArmCheckSpec spec;
+  spec.domain = name();
+  spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
+    for (int k = 0; k < 3; ++k) {
+      const float hand = static_cast<float>(0.005 * rng.Normal());
+      s[kEePos + k] += hand;
+      s[kBlade + k] += hand;
+    }
+    franka::AddNoise(rng, 0.05, kEeVel, 3, s);
+    for (int k = 0; k < 3; ++k) {
+      const float arm = static_cast<float>(0.01 * rng.Normal());
+      s[kWrist + k] += arm;
+      s[kElbow + k] += arm;
+      s[kHandTip + k] += arm;
+    }
+    franka::AddNoise(rng, 0.05, kWristVel, 3, s);
+    franka::AddNoise(rng, 0.05, kElbowVel, 3, s);
+  };
+  // The blade stops at the board (kitchen_cutting.h): the hand and the edge move up together.
+  const float board = static_cast<float>(options_.task.board_top);
+  spec.project = [board](Eigen::Ref<Eigen::VectorXf> s) {
+    const float below = board - s[kBlade + 2];
+    if (below > 0) {
+      s[kBlade + 2] += below;
+      s[kEePos + 2] += below;
+    }
+  };
+  const KitchenCuttingOptions task = options_.task;
+  spec.is_unsafe = [task](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    return ObservedEdgeClearance(task, s) < task.contact_distance;
+  };
+  std::ostringstream unsafe;
+  unsafe << "the blade's edge within the contact distance " << task.contact_distance
+         << " m of the person's arm (capsules from the observed wrist, elbow and hand tip)";
+  spec.is_unsafe_description = unsafe.str();
+  spec.region_description =
+      "held-out safe and near-dangerous observations, perturbed (hand and blade sd 0.005 m, ee "
+      "velocity sd 0.05 m/s, the person's arm sd 0.01 m, its velocities sd 0.05 m/s)";
+  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+}
+
+double ObservedEdgeClearance(const KitchenCuttingOptions& task,
+                             const Eigen::Ref<const Eigen::VectorXf>& o) {
+  SECURE_CHECK(o.size() == kObservationDim, "ObservedEdgeClearance: an observation of "
+                                                << kObservationDim << " values, got " << o.size());
+  const Vec3& sh = task.human.shoulder;
+  const ArmPose arm = franka::ReadHumanArm(o, kWrist, Eigen::Vector3d(sh[0], sh[1], sh[2]));
+  const Eigen::Vector3d edge(o[kBlade], o[kBlade + 1], o[kBlade + 2]);
+  return EdgeToArmDistance(task.human, edge, arm);
+}
+
+cbf::BarrierCheckOptions KitchenCheckDefaults() {
+  cbf::BarrierCheckOptions c;
+  c.action_grid = 5;
+  return c;
 }
 
 std::optional<experiments::PaperTable3> KitchenCuttingDomain::PaperReference() const {
@@ -171,6 +262,7 @@ experiments::ExperimentOptions KitchenCuttingDomain::Preset() const {
   // Table 2's knife-cutting barrier: 32-128-128-256-256-256-256-128-128-32, tanh.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
   o.flat_barrier.input_features = BarrierFeatures();
+  o.check = KitchenCheckDefaults();
   return o;
 }
 

@@ -51,6 +51,29 @@ class KitchenCuttingDomain final : public experiments::Domain {
                                                       long max_states) const override;
   std::string LabelCheckDescription() const override;
 
+  /// The barrier check (cbf/barrier_check.h):
+  ///  - held-out states: our generators (data.h) on new demonstrations, drawn from the stream
+  ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1): `count` safe
+  ///    states (KitchenSafeStates) and `count` near-dangerous ones (KitchenNearDangerousStates);
+  ///  - region: a held-out safe or near-dangerous observation (probability 1/2 each) perturbed:
+  ///    the end-effector and the blade's edge moved together by N(0, 0.005^2) m per axis (the
+  ///    knife is fixed to the hand), ee velocity + N(0, 0.05^2) m/s, the person's wrist, elbow
+  ///    and hand tip moved together by N(0, 0.01^2) m per axis, their velocities + N(0, 0.05^2)
+  ///    m/s; the cut's progress unchanged; the edge kept at or above the board;
+  ///  - unsafe test (c): the environment's dangerous test from the observation
+  ///    (ObservedEdgeClearance < task.contact_distance: the blade's edge within contact distance
+  ///    of the arm's capsules, the arm from the observed wrist, elbow and hand tip and the fixed
+  ///    shoulder);
+  ///  - dynamics: the environment's shield model (KitchenShieldModel), action box [-1, 1]^3, dt
+  ///    and class-K from the shield's options.
+  bool HasCheck() const override { return true; }
+  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                    data::StateSet* near_dangerous) const override;
+  cbf::BarrierCheckProblem MakeCheckProblem(
+      const shield::ShieldOptions& shield, const data::StateSet& safe,
+      const data::StateSet& near_dangerous,
+      std::unique_ptr<DynamicsModel>* dynamics) const override;
+
   /// Table 3's kitchen row: the real robot, 10 episodes (BC 70 / AIRL 80 / SECURE 90 % success,
   /// 100 / 100 / 0 % dangerous; no standard deviations).
   std::optional<experiments::PaperTable3> PaperReference() const override;
@@ -66,5 +89,18 @@ class KitchenCuttingDomain final : public experiments::Domain {
 /// The barrier's input: the blade's edge, the end-effector velocity, the person's wrist, elbow
 /// and hand tip and the wrist and elbow velocities (21 features; not the cut's progress).
 const std::vector<std::string>& BarrierFeatures();
+
+/// The distance (m) from the blade's cutting edge to the person's arm's surface as an observation
+/// shows them: the edge (its centre at blade_x/y/z, kBladeHalfLength either side along world x:
+/// the hand points down, tool x = world x) to the upper arm (task.human.shoulder to the observed
+/// elbow), forearm (elbow to wrist) and hand (wrist to the observed hand tip) capsules
+/// (EdgeToArmDistance; < 0 inside). The environment's dangerous test is this < contact_distance
+/// (KitchenCuttingSim::Dangerous measures the same with the knife's simulated orientation).
+double ObservedEdgeClearance(const KitchenCuttingOptions& task,
+                             const Eigen::Ref<const Eigen::VectorXf>& observation);
+
+/// The barrier check's defaults on kitchen-cutting: cbf::BarrierCheckOptions with a 5-point
+/// action grid per axis (125 actions + the random ones per max_a g).
+cbf::BarrierCheckOptions KitchenCheckDefaults();
 
 }  // namespace secure::domains::kitchen_cutting

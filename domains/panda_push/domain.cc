@@ -1,4 +1,5 @@
 #include "domains/panda_push/domain.h"
+#include "domains/franka/arm_check.h"
 #include "domains/franka/arm_preset.h"
 
 #include <yaml-cpp/yaml.h>
@@ -14,6 +15,11 @@
 #include "secure/common/yaml_value.h"
 
 namespace secure::domains::panda_push {
+namespace {
+// The held-out states of the barrier check come from this stream (data_seed ^ salt), not the
+// training data's (data_seed, data_seed + 1).
+constexpr std::uint64_t kCheckDataSalt = 0x9a4da7c4ecULL;
+}  // namespace
 
 const std::vector<std::string>& BarrierFeatures() {
   static const std::vector<std::string> names(ObservationFeatures().begin(),
@@ -197,6 +203,60 @@ void PandaPushDomain::CheckExperiment(const experiments::ExperimentOptions& opti
                                             << " s): the shield's model looks one step ahead");
 }
 
+void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                                   data::StateSet* near_dangerous) const {
+  options_.Validate();
+  const std::uint64_t stream = data_seed ^ kCheckDataSalt;
+  PandaDemonstrationOptions demo_options = options_.demonstrations;
+  demo_options.seed = stream;
+  const PandaDemonstrations demos = GeneratePandaDemonstrations(options_.task, demo_options);
+  Rng rng(stream + 1);
+  PandaSafeOptions safe_options = options_.safe;
+  safe_options.count = count;
+  PandaNearDangerousOptions nd_options = options_.near_dangerous;
+  nd_options.count = count;
+  *safe = PandaSafeStates(demos, safe_options, rng);
+  *near_dangerous =
+      PandaNearDangerousStates(options_.task, demos, nd_options, ContinuationOptions(), rng);
+  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
+  safe->source += seed;
+  near_dangerous->source += seed;
+}
+
+cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
+    const shield::ShieldOptions& shield, const data::StateSet& safe,
+    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
+  options_.Validate();
+  franka::ArmCheckSpec spec;
+  spec.domain = name();
+  spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
+    franka::AddNoise(rng, 0.005, kEePos, 3, s);
+    franka::AddNoise(rng, 0.05, kEeVel, 3, s);
+    franka::AddNoise(rng, 0.005, kBlockPos, 3, s);
+    franka::AddNoise(rng, 0.02, kBlockEuler, 3, s);
+    franka::AddNoise(rng, 0.02, kBlockVel, 3, s);
+    franka::AddNoise(rng, 0.05, kBlockAngVel, 3, s);
+  };
+  // The end-effector target is kept above the table (panda_push.h), and the block lies on it.
+  spec.project = [](Eigen::Ref<Eigen::VectorXf> s) {
+    s[kEePos + 2] = std::max(s[kEePos + 2], 0.0f);
+    s[kBlockPos + 2] = std::max(s[kBlockPos + 2], 0.0f);
+  };
+  const double topple = options_.task.topple_angle;
+  spec.is_unsafe = [topple](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    return ObservedBlockTilt(s) > topple;
+  };
+  std::ostringstream unsafe;
+  unsafe << "the block's observed tilt (from its Euler angles) beyond the topple angle " << topple
+         << " rad";
+  spec.is_unsafe_description = unsafe.str();
+  spec.region_description =
+      "held-out safe and near-dangerous observations, perturbed (ee position sd 0.005 m, ee "
+      "velocity sd 0.05 m/s, block position sd 0.005 m, Euler angles sd 0.02 rad, velocity sd "
+      "0.02 m/s, angular velocity sd 0.05 rad/s)";
+  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+}
+
 experiments::ExperimentOptions PandaPushDomain::Preset() const {
   experiments::ExperimentOptions o =
       franka::ArmExperimentPreset(profile_, options_.task.control_period);
@@ -205,7 +265,21 @@ experiments::ExperimentOptions PandaPushDomain::Preset() const {
   // observation features.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
   o.flat_barrier.input_features = BarrierFeatures();
+  o.check = PandaPushCheckDefaults();
   return o;
+}
+
+double ObservedBlockTilt(const Eigen::Ref<const Eigen::VectorXf>& o) {
+  SECURE_CHECK(o.size() == kObservationDim, "ObservedBlockTilt: an observation of "
+                                                << kObservationDim << " values, got " << o.size());
+  const double c = std::cos(double(o[kBlockEuler])) * std::cos(double(o[kBlockEuler + 1]));
+  return std::acos(std::clamp(c, -1.0, 1.0));
+}
+
+cbf::BarrierCheckOptions PandaPushCheckDefaults() {
+  cbf::BarrierCheckOptions c;
+  c.action_grid = 5;
+  return c;
 }
 
 }  // namespace secure::domains::panda_push

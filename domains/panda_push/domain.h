@@ -62,6 +62,31 @@ class PandaPushDomain final : public experiments::Domain {
                                                       long max_states) const override;
   std::string LabelCheckDescription() const override;
 
+  /// The barrier check (cbf/barrier_check.h):
+  ///  - held-out states: our generators (data.h) on new demonstrations, drawn from the stream
+  ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1): `count` safe
+  ///    states (PandaSafeStates with the domain's copies) and `count` near-dangerous ones
+  ///    (PandaNearDangerousStates, the domain's generator); also with barrier_data: released,
+  ///    since the barrier is deployed in this simulator;
+  ///  - region: a held-out safe or near-dangerous observation (probability 1/2 each) perturbed:
+  ///    ee position + N(0, 0.005^2) m and ee velocity + N(0, 0.05^2) m/s per axis, block position
+  ///    + N(0, 0.005^2) m, block Euler angles + N(0, 0.02^2) rad, block velocity + N(0, 0.02^2)
+  ///    m/s, angular velocity + N(0, 0.05^2) rad/s; ee_z and block_z kept >= 0;
+  ///  - unsafe test (c): the block's tilt from upright computed from the observed Euler angles
+  ///    beyond task.topple_angle (ObservedBlockTilt; the environment's own dangerous test). The
+  ///    region's blocks stand upright (the demonstrations topple nothing, and the noise tilts by
+  ///    0.02 rad), so (c) rarely has a state to test: (a) and (b) carry this check;
+  ///  - dynamics: the environment's shield model (shield_model: approximate, or the privileged
+  ///    rollout, which costs one simulated control period per action the check tries), action box
+  ///    [-1, 1]^3, dt and class-K from the shield's options.
+  bool HasCheck() const override { return true; }
+  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                    data::StateSet* near_dangerous) const override;
+  cbf::BarrierCheckProblem MakeCheckProblem(
+      const shield::ShieldOptions& shield, const data::StateSet& safe,
+      const data::StateSet& near_dangerous,
+      std::unique_ptr<DynamicsModel>* dynamics) const override;
+
   const PandaPushDomainOptions& options() const { return options_; }
   PandaPushDomainOptions& mutable_options() { return options_; }
 
@@ -77,5 +102,14 @@ class PandaPushDomain final : public experiments::Domain {
 /// The barrier's input: the first 9 observation features (ee position, ee velocity, block
 /// position), as the paper's Table 2 barrier.
 const std::vector<std::string>& BarrierFeatures();
+
+/// The block's tilt from upright (rad) as an observation shows it: the angle between the block's
+/// z axis and the world's, acos(cos(roll) cos(pitch)) for R = Rz(yaw) Ry(pitch) Rx(roll)
+/// (PandaPushSim::BlockTilt of the observed state).
+double ObservedBlockTilt(const Eigen::Ref<const Eigen::VectorXf>& observation);
+
+/// The barrier check's defaults on panda-push: cbf::BarrierCheckOptions with a 5-point action
+/// grid per axis (125 actions + the random ones per max_a g; about 1 s per Table 2 barrier).
+cbf::BarrierCheckOptions PandaPushCheckDefaults();
 
 }  // namespace secure::domains::panda_push

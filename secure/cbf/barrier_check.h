@@ -33,7 +33,8 @@
 //
 // Generic: the inputs are a Barrier, a DynamicsModel, an action box, the class-K function, a
 // region sampler and an optional unsafe predicate; the glue of a concrete domain (its region,
-// predicate, dynamics and box) lives with the caller (the CLI's `cbf check`, the experiments).
+// predicate, dynamics and box) lives with the domain (experiments::Domain::MakeCheckProblem),
+// which the CLI's `cbf check` and the experiments call.
 // Deterministic for a seed; the check uses its own Rng only.
 
 #include <Eigen/Core>

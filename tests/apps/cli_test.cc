@@ -569,6 +569,16 @@ TEST(CliTest, EvalRenderAndCheckLabelsReadTheDomainsOptionsFromTheConfig) {
     EXPECT_HAS(r.err, "kind");
     EXPECT_HAS(r.err, "perfect");
   }
+  // A domain option outside `domain:` is rejected as `secure experiment` rejects it, not ignored.
+  const std::string misplaced =
+      Write("kitchen_misplaced.yaml", "kitchen_cutting:\n  near_dangerous: {p_stroke: 0.4}\n");
+  for (const std::string& command :
+       {std::string("demos check-labels --domain kitchen-cutting --quick --max-states 1"),
+        std::string("experiment method-comparison --domain kitchen-cutting --quick")}) {
+    const Result r = RunCli(command + " --config " + misplaced);
+    EXPECT_EQ(r.exit_code, 1) << command;
+    EXPECT_HAS(r.err, "kitchen_misplaced.yaml [kitchen_cutting]: unknown section 'near_dangerous'");
+  }
 }
 
 TEST(CliTest, KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck) {
@@ -1249,12 +1259,24 @@ TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
       "--hidden 4 --out " +
       model);
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  // Every built-in domain has a check (Domain::HasCheck), listed from the registry.
   r = RunCli("cbf check --model " + model + " --domain panda");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "--domain = 'panda', must be one of: double-integrator, derby");
+  ExpectOneErrorLine(
+      r,
+      "--domain = 'panda', must be one of: coffee-placing, derby, double-integrator, "
+      "kitchen-cutting, panda-push");
+  EXPECT_HAS(RunCli("cbf check --help").out,
+             "a domain with a barrier check: coffee-placing, derby, double-integrator, "
+             "kitchen-cutting, panda-push");
+  // A model for other features than the domain's observation.
   r = RunCli("cbf check --model " + model + " --domain derby");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "features");
+  ExpectOneErrorLine(r, "without 'x', which " + model + " reads");
+  // The double integrator's task flags are the domain's options: given another domain, that
+  // domain rejects them by name; a bad value is the option's error.
+  r = RunCli("cbf check --model " + model + " --domain kitchen-cutting --quick --obstacle 3,7");
+  ExpectOneErrorLine(r, "unknown key 'obstacle'");
+  r = RunCli("cbf check --model " + model + " --domain double-integrator --radius -1");
+  ExpectOneErrorLine(r, "ReachAvoidOptions::truth.radius = -1");
   r = RunCli("cbf check --model " + model + " --domain double-integrator --max-rate-a nan");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err, "no_safe_action = nan");
@@ -1265,6 +1287,115 @@ TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
       bad + " --out " + model);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err, "vx");
+}
+
+// The obstacle flags and --accel-bound reach the double integrator's check as its task options:
+// the ground truth (c) and the action box (the dynamics' description) follow them.
+TEST(CliCbfCheckTest, TheDoubleIntegratorsFlagsSetItsTaskOptions) {
+  const std::string model = (TempDir() / "check_di_flags.model").string();
+  Result r = RunCli(
+      "cbf train --domain double-integrator --safe 100 --unsafe 100 --epochs 5 --hidden 8 "
+      "--out " +
+      model);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string check = "cbf check --model " + model +
+                            " --domain double-integrator --region-samples 200 --near-samples 100 "
+                            "--held-out 50 --json";
+  r = RunCli(check);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto base = nlohmann::json::parse(r.out);
+  EXPECT_HAS(base["dynamics"].get<std::string>(), "[-3, 3]");
+  EXPECT_EQ(base["data_seed"], 1000);  // the domain's experiment data seed
+  const std::string config = Write("check_di_truth.yaml", "double_integrator:\n  radius: 3.5\n");
+  r = RunCli(check + " --obstacle 5,5 --accel-bound 2 --config " + config);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto moved = nlohmann::json::parse(r.out);
+  EXPECT_HAS(moved["dynamics"].get<std::string>(), "[-2, 2]");
+  // A larger disc: more of the same region samples are unsafe by the ground truth.
+  EXPECT_GT(moved["kinds"]["unsafe"]["checked"].get<long>(),
+            base["kinds"]["unsafe"]["checked"].get<long>());
+  const std::string bad = Write("check_di_bad.yaml", "double_integrator:\n  goal: [1, 2]\n");
+  ExpectOneErrorLine(RunCli(check + " --config " + bad), "unknown field 'goal'");
+}
+
+// `cbf check` on each Franka domain (quick profile: its held-out states drawn by its own
+// generators): the report has the documented structure, and a small barrier trained on the
+// domain's data with the labels swapped (it calls the near-dangerous states safe) is flagged. On
+// panda-push also the barrier trained the right way round, which is more accurate.
+nlohmann::json CheckReportOf(const std::string& domain, const std::string& model,
+                             std::uint64_t data_seed) {
+  const Result r = RunCli("cbf check --domain " + domain +
+                          " --quick --region-samples 300 --near-samples 300 --held-out 64 "
+                          "--json --model " +
+                          model);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["command"], "cbf check");
+  EXPECT_EQ(j["domain"], domain);
+  EXPECT_EQ(j["profile"], "quick");
+  EXPECT_EQ(j["data_seed"], data_seed);  // the domain's experiment data seed
+  EXPECT_TRUE(j["verdict"] == "pass" || j["verdict"] == "flagged") << j["verdict"];
+  EXPECT_EQ(j["accuracy"]["held_out_safe"], 64);
+  EXPECT_EQ(j["accuracy"]["held_out_near_dangerous"], 64);
+  for (const char* field : {"barrier", "dynamics", "region", "unsafe_test", "class_k"})
+    EXPECT_FALSE(j[field].get<std::string>().empty()) << field;
+  for (const char* kind : {"no_safe_action", "near_dangerous", "unsafe"}) {
+    EXPECT_TRUE(j["kinds"][kind]["available"].get<bool>()) << kind;
+    EXPECT_GE(j["kinds"][kind]["rate"].get<double>(), 0.0) << kind;
+  }
+  EXPECT_EQ(j["kinds"]["near_dangerous"]["checked"], 300);
+  EXPECT_EQ(j["options"]["action_grid"], 5);      // the domain's default (its Preset().check)
+  EXPECT_DOUBLE_EQ(j["dt"].get<double>(), 0.04);  // its shield's: the control period
+  return j;
+}
+
+void CheckArmDomain(const std::string& domain, const std::string& generate_flags,
+                    const std::string& features, std::uint64_t data_seed, bool also_right) {
+  const std::string dir = (TempDir() / ("check_" + domain)).string();
+  Result r = RunCli("demos generate --domain " + domain + " --out " + dir + generate_flags);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string safe = dir + "/safe.csv", nd = dir + "/near_dangerous.csv";
+  const std::string train = " --features " + features + " --hidden 16,16 --epochs 20" +
+                            " --lr 0.01 --final-lr 0.001 --out ";
+  const std::string swapped = dir + "/swapped.model";
+  r = RunCli("cbf train --safe-states " + nd + " --near-dangerous-states " + safe + train +
+             swapped);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json w = CheckReportOf(domain, swapped, data_seed);
+  EXPECT_EQ(w["verdict"], "flagged") << w.dump();
+  EXPECT_GT(w["kinds"]["near_dangerous"]["rate"].get<double>(),
+            w["kinds"]["near_dangerous"]["threshold"].get<double>());
+  EXPECT_LT(w["accuracy"]["near_dangerous"].get<double>(), 0.5);
+  if (!also_right) return;
+  const std::string model = dir + "/barrier.model";
+  r = RunCli("cbf train --safe-states " + safe + " --near-dangerous-states " + nd + train + model);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = CheckReportOf(domain, model, data_seed);
+  EXPECT_GT(j["kinds"]["no_safe_action"]["checked"].get<long>(), 0);
+  EXPECT_GT(j["accuracy"]["near_dangerous"].get<double>(),
+            w["accuracy"]["near_dangerous"].get<double>() + 0.3);
+  EXPECT_LT(j["kinds"]["near_dangerous"]["rate"].get<double>(),
+            w["kinds"]["near_dangerous"]["rate"].get<double>());
+}
+
+TEST(CliCbfCheckTest, ChecksPandaPushBarriersAndFlagsOneWithSwappedLabels) {
+  CheckArmDomain("panda-push", " --episodes 3 --near-dangerous 400",
+                 "ee_x,ee_y,ee_z,ee_vx,ee_vy,ee_vz,block_x,block_y,block_z", 3000, true);
+}
+
+TEST(CliCbfCheckTest, FlagsAKitchenCuttingBarrierWithSwappedLabels) {
+  CheckArmDomain("kitchen-cutting", "",
+                 "blade_x,blade_y,blade_z,ee_vx,ee_vy,ee_vz,wrist_x,wrist_y,wrist_z,elbow_x,"
+                 "elbow_y,elbow_z,hand_x,hand_y,hand_z,wrist_vx,wrist_vy,wrist_vz,elbow_vx,"
+                 "elbow_vy,elbow_vz",
+                 4000, false);
+}
+
+TEST(CliCbfCheckTest, FlagsACoffeePlacingBarrierWithSwappedLabels) {
+  CheckArmDomain("coffee-placing", "",
+                 "ee_x,ee_y,ee_z,ee_vx,ee_vy,ee_vz,tilt,wrist_x,wrist_y,wrist_z,hand_x,hand_y,"
+                 "hand_z,wrist_vx,wrist_vy,wrist_vz,clearance",
+                 5000, false);
 }
 
 // Found by yaml_options_fuzz: a key that is a sequence (`? [a, b]`) escaped as yaml-cpp's

@@ -14,9 +14,11 @@
 #include <functional>
 #include <iostream>
 #include <limits>
+#include <memory>
 
-#include "secure/cbf/barrier.h"
+#include "domains/double_integrator/domain.h"
 #include "domains/double_integrator/double_integrator.h"
+#include "secure/cbf/barrier.h"
 #include "tests/test_util.h"
 
 namespace secure::cbf {
@@ -44,36 +46,26 @@ class FunctionBarrier final : public Barrier {
   std::function<float(const Eigen::Ref<const Eigen::VectorXf>&)> f_;
 };
 
-// The double integrator's glue as the CLI builds it: the validation box, the ground truth as the
-// unsafe test, the clipped dynamics with |a_i| <= 3, alpha(h) = h, dt = 0.1.
+// The double integrator's problem as the domain gives it (MakeDoubleIntegratorCheckProblem, what
+// `cbf check` and the experiments use): the validation box, the ground truth as the unsafe test,
+// the clipped dynamics with |a_i| <= 3, alpha(h) = h, dt = 0.1; here with 200 + 200 states
+// labelled by the ground truth.
 struct DiSetup {
   di::GroundTruth truth;
-  di::ClippedDoubleIntegrator dynamics{0.1, 3.0};
-  BarrierCheckProblem problem;
+  std::unique_ptr<domains::DynamicsModel> owned;
+  BarrierCheckProblem problem = Make(truth, &owned);
+  const domains::DynamicsModel& dynamics = *owned;
 
-  DiSetup() {
-    problem.action_lo = Eigen::VectorXf::Constant(2, -3.0f);
-    problem.action_hi = Eigen::VectorXf::Constant(2, 3.0f);
-    problem.dt = 0.1;
-    problem.class_k = [](double h) { return h; };
-    problem.class_k_description = "linear, k = 1";
-    const di::StateBox box;
-    problem.sample_region = [box](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
-      for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(rng.Uniform(box.lo[i], box.hi[i]));
-    };
-    problem.project = [box](Eigen::Ref<Eigen::VectorXf> s) {
-      for (int i = 0; i < 4; ++i) s[i] = std::clamp(s[i], float(box.lo[i]), float(box.hi[i]));
-    };
-    const di::GroundTruth t = truth;
-    problem.is_unsafe = [t](const Eigen::Ref<const Eigen::VectorXf>& s) {
-      return t.H(s[0], s[1], s[2], s[3]) < 0;
-    };
-    problem.is_unsafe_description = "ground truth h < 0";
+  static BarrierCheckProblem Make(const di::GroundTruth& truth,
+                                  std::unique_ptr<domains::DynamicsModel>* dynamics) {
     Rng rng(99);
-    di::LabelledStates l = di::SampleLabelled(truth, box, 200, 200, rng);
-    problem.near_dangerous = {"drawn", di::StateFeatures(), l.unsafe};
-    problem.held_out_safe = data::StateSet{"drawn", di::StateFeatures(), l.safe};
-    problem.held_out_near_dangerous = problem.near_dangerous;
+    di::LabelledStates l = di::SampleLabelled(truth, di::StateBox{}, 200, 200, rng);
+    const data::StateSet safe{"drawn", di::StateFeatures(), l.safe};
+    const data::StateSet unsafe{"drawn", di::StateFeatures(), l.unsafe};
+    di::ReachAvoidOptions task;
+    task.truth = truth;
+    return di::MakeDoubleIntegratorCheckProblem(task, shield::ShieldOptions{}, safe, unsafe,
+                                                dynamics);
   }
 };
 

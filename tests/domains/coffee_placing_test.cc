@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <string>
 
 #include "domains/coffee_placing/coffee_placing.h"
@@ -211,6 +212,52 @@ TEST(CoffeePlacingShieldModel, MovesTheHandByTheActionTiltsAndRecomputesTheClear
   EXPECT_NEAR(next(kTilt, 0), o[kTilt] + 0.05 + task.tilt_coupling * (-1.25 - o[kEeVel]), 1e-5);
   EXPECT_NEAR(next(kWrist, 0), o[kWrist] + 0.04 * 0.5, 1e-6);
   EXPECT_NEAR(next(kClearance, 0), ObservedClearance(task.person, next.col(0)), 1e-6);
+}
+
+// The barrier check's unsafe test (c): a violation of the mean participant's thresholds, from the
+// observation's positions and tilt; the region keeps the clearance feature consistent with them.
+TEST(CoffeePlacingCheck, TheUnsafeTestIsAViolationOfTheMeanParticipantsThresholds) {
+  const CoffeePlacingDomain domain(experiments::Profile::kQuick);
+  const Thresholds mean = MeanParticipant(domain.options().population).thresholds;
+  CoffeePlacingSim sim(StillPerson());
+  Rng rng(7);
+  sim.Reset(rng);
+  Eigen::VectorXf o(kObservationDim);
+  sim.Observe(o);  // the person at rest, far from the cup, which is upright
+  ASSERT_GT(o[kClearance], mean.comfort_distance);
+  data::StateSet set{"one state", ObservationFeatures(), o};
+  std::unique_ptr<DynamicsModel> dynamics;
+  const cbf::BarrierCheckProblem p =
+      domain.MakeCheckProblem(domain.Preset().shield, set, set, &dynamics);
+  ASSERT_TRUE(static_cast<bool>(p.is_unsafe));
+  EXPECT_EQ(p.action_lo.size(), kActionDim);
+  EXPECT_FALSE(p.is_unsafe(o));
+  Eigen::VectorXf s = o;
+  s[kTilt] = static_cast<float>(mean.max_tilt + 0.01);
+  EXPECT_TRUE(p.is_unsafe(s));
+  s[kTilt] = static_cast<float>(mean.max_tilt - 0.01);
+  EXPECT_FALSE(p.is_unsafe(s));
+  // The arm moved next to the hand: judged by the positions, not by the stale clearance feature.
+  const ArmPose arm =
+      ArmPoseForWrist(domain.options().task.person,
+                      Eigen::Vector3d(o[kEePos], o[kEePos + 1] + 0.08, o[kEePos + 2]));
+  for (int k = 0; k < 3; ++k) {
+    s[kWrist + k] = static_cast<float>(arm.wrist[k]);
+    s[kElbow + k] = static_cast<float>(arm.elbow[k]);
+    s[kHandTip + k] = static_cast<float>(arm.tip[k]);
+  }
+  ASSERT_LT(ObservedClearance(domain.options().task.person, s), mean.comfort_distance);
+  EXPECT_TRUE(p.is_unsafe(s));
+  ASSERT_TRUE(static_cast<bool>(p.project));
+  p.project(s);
+  EXPECT_NEAR(s[kClearance], ObservedClearance(domain.options().task.person, s), 1e-6);
+  Rng region(8);
+  Eigen::VectorXf r(kObservationDim);
+  for (int i = 0; i < 100; ++i) {
+    p.sample_region(region, r);
+    EXPECT_NEAR(r[kClearance], ObservedClearance(domain.options().task.person, r), 1e-5);
+    EXPECT_LE(std::abs(r[kTilt]), kMaxTilt);
+  }
 }
 
 TEST(CoffeePlacingPopulation, EnvironmentsJudgeByTheParticipantsThresholds) {

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <string>
 
 #include "domains/kitchen_cutting/data.h"
@@ -120,6 +121,71 @@ TEST(KitchenCuttingHuman, TheBladeOnTheArmIsDangerousAndFarFromItIsNot) {
   EXPECT_GT(EdgeToArmDistance(h, Eigen::Vector3d(0.0, -0.3, 0.3), p), 0.2);
 }
 
+// The barrier check's unsafe test (c): the blade's edge within contact distance of the arm, both
+// as the observation shows them (the shoulder fixed), either side of the threshold; the
+// simulator put in the same state agrees.
+TEST(KitchenCuttingCheck, TheUnsafeTestIsTheObservedEdgeWithinContactDistanceOfTheArm) {
+  const KitchenCuttingDomain domain(experiments::Profile::kQuick);
+  const KitchenCuttingOptions& task = domain.options().task;
+  const HumanArmOptions& h = task.human;
+  const ArmPose arm = ArmPoseForWrist(h, Eigen::Vector3d(0.30, 0.0, 0.06));
+  Eigen::VectorXf o = Eigen::VectorXf::Zero(kObservationDim);
+  for (int k = 0; k < 3; ++k) {
+    o[kWrist + k] = static_cast<float>(arm.wrist[k]);
+    o[kElbow + k] = static_cast<float>(arm.elbow[k]);
+    o[kHandTip + k] = static_cast<float>(arm.tip[k]);
+  }
+  o[kLifted] = 1.0f;
+  // The edge over the wrist at a height; the hand kBladeDrop above it.
+  auto at = [&](double z) {
+    Eigen::VectorXf s = o;
+    s[kBlade] = 0.30f;
+    s[kBlade + 2] = static_cast<float>(z);
+    s[kEePos] = 0.30f;
+    s[kEePos + 2] = static_cast<float>(z + kBladeDrop);
+    return s;
+  };
+  const double top = 0.06 + h.forearm_radius;  // the forearm's surface over the wrist
+  const Eigen::VectorXf near = at(top + task.contact_distance - 0.005);
+  const Eigen::VectorXf clear = at(top + task.contact_distance + 0.005);
+  const Eigen::Vector3d near_edge(near[kBlade], near[kBlade + 1], near[kBlade + 2]);
+  EXPECT_NEAR(ObservedEdgeClearance(task, near), EdgeToArmDistance(h, near_edge, arm), 1e-6);
+  EXPECT_LT(ObservedEdgeClearance(task, near), task.contact_distance);
+  EXPECT_GT(ObservedEdgeClearance(task, clear), task.contact_distance);
+  EXPECT_GT(ObservedEdgeClearance(task, at(top + 0.2)), 0.15);
+
+  data::StateSet set{"two states", ObservationFeatures(), Eigen::MatrixXf(kObservationDim, 2)};
+  set.states.col(0) = near;
+  set.states.col(1) = clear;
+  std::unique_ptr<DynamicsModel> dynamics;
+  const cbf::BarrierCheckProblem p =
+      domain.MakeCheckProblem(domain.Preset().shield, set, set, &dynamics);
+  ASSERT_TRUE(static_cast<bool>(p.is_unsafe));
+  EXPECT_TRUE(p.is_unsafe(near));
+  EXPECT_FALSE(p.is_unsafe(clear));
+  EXPECT_EQ(dynamics->Describe(), KitchenShieldModel(KitchenShieldModelOptions{}).Describe());
+  EXPECT_EQ(p.action_lo, Eigen::VectorXf::Constant(kActionDim, -1.0f));
+  EXPECT_DOUBLE_EQ(p.dt, domain.Preset().shield.dt);
+
+  // The simulation in those states (the knife by IK, the arm at the observed points) measures the
+  // same clearance with the knife's simulated orientation.
+  KitchenCuttingSim sim(task);
+  Rng rng(3);
+  sim.Reset(rng);
+  for (const Eigen::VectorXf& s : {near, clear}) {
+    EXPECT_LT(sim.SetObservation(s), 0.01);
+    EXPECT_NEAR(sim.Clearance(), ObservedEdgeClearance(task, s), 0.004);
+  }
+  // The region's samples stay above the board (the projection) and are finite.
+  Rng region(5);
+  Eigen::VectorXf r(kObservationDim);
+  for (int i = 0; i < 200; ++i) {
+    p.sample_region(region, r);
+    ASSERT_TRUE(r.allFinite());
+    EXPECT_GE(r[kBlade + 2], task.board_top - 1e-6);
+  }
+}
+
 TEST(KitchenCuttingEnv, AStrokeOntoTheReachingArmIsDangerousAndEpisodesReplay) {
   KitchenCuttingOptions task;
   task.human.into_probability = 1.0;
@@ -222,12 +288,65 @@ TEST(KitchenCuttingData, LabelsHoldAgainstPhysics) {
   // the arm (docs/RESULTS.md has the full table: `secure demos check-labels`).
   KitchenCuttingDomain domain(experiments::Profile::kQuick);
   const std::vector<experiments::LabelCheckRow> rows = domain.CheckLabels(4000, 60);
-  ASSERT_EQ(rows.size(), 3u);
+  ASSERT_EQ(rows.size(), 4u);  // safe, then scenarios (a), (b), (c)
   EXPECT_EQ(rows[0].label, "safe");
   EXPECT_LE(rows[0].DangerousFraction(), 0.05);
   for (size_t r = 1; r < rows.size(); ++r) {
     EXPECT_EQ(rows[r].label, "near-dangerous");
     EXPECT_GE(rows[r].DangerousFraction(), 0.8) << rows[r].set;
+  }
+}
+
+TEST(KitchenCuttingData, BladeIntoTheRestingArmStatesReachTheArmWhenContinued) {
+  // Scenario (c), p_blade: the arm at rest near the edge, the end-effector moving towards it.
+  // The default since 2026-12-02: shares 0.4 (a), 0.3 (b), 0.3 (c).
+  KitchenCuttingDomain domain(experiments::Profile::kQuick);
+  const KitchenCuttingDomainOptions& d = domain.options();
+  EXPECT_EQ(d.near_dangerous.ToJson()["p_blade"], 0.3);
+  EXPECT_EQ(d.near_dangerous.ToJson()["p_stroke"], 0.4);
+  KitchenDemonstrationOptions demo = d.demonstrations;
+  demo.seed = 11;
+  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(d.task, demo);
+  Rng rng(12);
+  std::vector<NearDangerousScenario> kinds;
+  const data::StateSet near =
+      KitchenNearDangerousStates(d.task, demos, d.near_dangerous, rng, &kinds);
+  long blade = 0;
+  for (long i = 0; i < near.size(); ++i) {
+    if (kinds[static_cast<std::size_t>(i)] != NearDangerousScenario::kBlade) continue;
+    ++blade;
+    const Eigen::VectorXf o = near.states.col(i);
+    EXPECT_EQ(o.segment<3>(kWristVel).norm(), 0.0f) << i;
+    EXPECT_EQ(o.segment<3>(kElbowVel).norm(), 0.0f) << i;
+    const float speed = o.segment<3>(kEeVel).norm();
+    EXPECT_GE(speed, d.near_dangerous.blade_speed[0] - 1e-4) << i;
+    EXPECT_LE(speed, d.near_dangerous.blade_speed[1] + 1e-4) << i;
+    // Moving towards the arm: the edge gets closer to the wrist.
+    const Eigen::Vector3f to_wrist = o.segment<3>(kWrist) - o.segment<3>(kBlade);
+    EXPECT_GT(o.segment<3>(kEeVel).dot(to_wrist), 0.0f) << i;
+  }
+  EXPECT_GT(blade, near.size() / 5);
+  EXPECT_LT(blade, near.size() / 2);
+  // Against physics: continuing the motion reaches the arm.
+  const std::vector<experiments::LabelCheckRow> rows = domain.CheckLabels(4000, 60);
+  ASSERT_EQ(rows.size(), 4u);
+  EXPECT_EQ(rows[3].set, "near-dangerous (blade into the resting arm)");
+  EXPECT_GE(rows[3].DangerousFraction(), 0.9);
+  // Off (p_blade 0): no state of (c), and no row for it.
+  KitchenCuttingDomain off(experiments::Profile::kQuick);
+  off.ApplyYaml(YAML::Load("{near_dangerous: {p_stroke: 0.6, p_blade: 0}}"), "test.yaml");
+  const std::vector<experiments::LabelCheckRow> off_rows = off.CheckLabels(4000, 20);
+  ASSERT_EQ(off_rows.size(), 3u);
+  for (const experiments::LabelCheckRow& row : off_rows)
+    EXPECT_EQ(row.set.find("resting"), std::string::npos) << row.set;
+  // Its share must fit beside the strokes'.
+  KitchenCuttingDomain bad(experiments::Profile::kQuick);
+  bad.ApplyYaml(YAML::Load("{near_dangerous: {p_stroke: 0.6, p_blade: 0.5}}"), "test.yaml");
+  try {
+    bad.Validate();
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("p_blade = 0.5"), std::string::npos) << e.what();
   }
 }
 

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <string>
 
 #include "domains/panda_push/data.h"
@@ -465,6 +466,52 @@ TEST(PandaPushDomain, OptionsRejectBadValuesAndUnknownKeys) {
   released.ApplyYaml(YAML::Load("{barrier_data: released}"), "cfg.yaml");
   EXPECT_THROW(released.Validate(), Error);  // no released_data_dir
   EXPECT_THROW(released.ApplyYaml(YAML::Load("{barrier_data: other}"), "cfg.yaml"), Error);
+}
+
+// The barrier check's unsafe test (c): the block's tilt from upright as the observed Euler
+// angles give it, against the topple angle; the simulator's own tilt of the same state agrees.
+TEST(PandaPushCheck, TheUnsafeTestIsTheObservedTiltBeyondTheToppleAngle) {
+  const PandaPushDomain domain(experiments::Profile::kQuick);
+  const double topple = domain.options().task.topple_angle;
+  PandaPushSim sim(PandaPushOptions{});
+  Eigen::VectorXf o(kObservationDim);
+  sim.Observe(o);  // the block upright at its start
+  EXPECT_NEAR(ObservedBlockTilt(o), 0.0, 1e-3);
+  data::StateSet safe{"upright", ObservationFeatures(), o};
+  std::unique_ptr<DynamicsModel> dynamics;
+  const cbf::BarrierCheckProblem p =
+      domain.MakeCheckProblem(domain.Preset().shield, safe, safe, &dynamics);
+  ASSERT_TRUE(static_cast<bool>(p.is_unsafe));
+  EXPECT_FALSE(p.is_unsafe(o));
+  EXPECT_EQ(dynamics->Describe(), PandaPushShieldModel(PandaPushShieldModelOptions{}).Describe());
+  EXPECT_EQ(p.action_lo, Eigen::VectorXf::Constant(kActionDim, -1.0f));
+  EXPECT_EQ(p.action_hi, Eigen::VectorXf::Constant(kActionDim, 1.0f));
+
+  // Pitch alone, either side of the threshold; yaw does not tilt.
+  Eigen::VectorXf s = o;
+  s[kBlockEuler + 1] = static_cast<float>(topple - 0.01);
+  EXPECT_NEAR(ObservedBlockTilt(s), topple - 0.01, 1e-6);
+  EXPECT_FALSE(p.is_unsafe(s));
+  s[kBlockEuler + 1] = static_cast<float>(-(topple + 0.01));
+  EXPECT_TRUE(p.is_unsafe(s));
+  s[kBlockEuler + 1] = 0.0f;
+  s[kBlockEuler + 2] = 1.5f;
+  EXPECT_FALSE(p.is_unsafe(s));
+  // Roll and pitch 0.3 rad each: neither beyond 0.4, the tilt acos(cos^2 0.3) = 0.422 is.
+  s[kBlockEuler] = 0.3f;
+  s[kBlockEuler + 1] = 0.3f;
+  EXPECT_NEAR(ObservedBlockTilt(s), std::acos(std::cos(0.3) * std::cos(0.3)), 1e-6);
+  EXPECT_TRUE(p.is_unsafe(s));
+  // The simulator put in that state measures the same tilt.
+  sim.SetObservation(s);
+  EXPECT_NEAR(sim.BlockTilt(), ObservedBlockTilt(s), 2e-3);
+  EXPECT_TRUE(sim.Toppled());
+  s[kBlockEuler] = 0.2f;
+  s[kBlockEuler + 1] = 0.2f;  // 0.283 rad
+  sim.SetObservation(s);
+  EXPECT_NEAR(sim.BlockTilt(), ObservedBlockTilt(s), 2e-3);
+  EXPECT_FALSE(sim.Toppled());
+  EXPECT_FALSE(p.is_unsafe(s));
 }
 
 TEST(PandaPushDomain, ReadsTheReleasedData) {
