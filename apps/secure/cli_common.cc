@@ -192,9 +192,14 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   track(cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(class_k_gain));
-  track(cmd->add_option("--aggregation", aggregation, "mean | random-safe | policy-draw")
+  track(cmd->add_option("--aggregation", aggregation,
+                        "mean | random-safe | policy-draw | top-q (AIRL's task value)")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(aggregation));
+  track(cmd->add_option("--top-q-fraction", so->top_q_fraction,
+                        "aggregation top-q: the fraction of the safe samples averaged")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(top_q_fraction));
   track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(resampling));
   track(cmd->add_option("--sampler", sampler,

@@ -24,7 +24,8 @@ policy::GaussianPolicy LoadDomainPolicy(const std::string& path, const domains::
 
 SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domain& domain,
                            const std::string& domain_name, const domains::Environment& env,
-                           const std::vector<eval::Method>& methods, std::uint64_t seed) {
+                           const std::vector<eval::Method>& methods, std::uint64_t seed,
+                           const shield::ShieldOptions& shield) {
   bool need_bc = false, need_airl = false, need_joint = false, need_barrier = false;
   for (eval::Method m : methods) {
     if (eval::UsesBcPolicy(m)) {
@@ -45,6 +46,16 @@ SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domai
   models_.airl = airl_ ? &*airl_ : nullptr;
   models_.joint = joint_ ? &*joint_ : nullptr;
   if (!need_barrier) return;
+  if (shield.aggregation == shield::Aggregation::kTopQ) {
+    const std::string reward = sources.Path(sources.airl_reward, "airl_reward", seed);
+    SECURE_CHECK(!reward.empty(),
+                 "shield aggregation top-q needs AIRL's reward model: give --airl-reward or --run");
+    airl_reward_ = policy::AirlRewardModel::Load(reward);
+    SECURE_CHECK(
+        airl_reward_->observation_features == env.ObservationFeatures(),
+        reward << ": the reward model's features do not match the " << domain_name << " domain's");
+    models_.airl_reward = &*airl_reward_;
+  }
   const std::string path = sources.Path(sources.barrier, "barrier", seed);
   SECURE_CHECK(!path.empty(), "the shielded methods need --barrier or --run");
   const std::string where = "the " + domain_name + " domain";

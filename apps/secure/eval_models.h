@@ -17,11 +17,13 @@
 
 namespace secure::cli {
 
-/// Where the models come from: a run directory (seed-<k>/{bc,airl,joint,barrier}.model per
-/// training seed, as `secure demo --out` and `secure experiment --out` write them) and/or explicit
-/// files, which override the run's. The barrier may be "ground-truth" (a domain that has one).
+/// Where the models come from: a run directory (seed-<k>/{bc,airl,joint,barrier,
+/// airl_reward}.model per training seed, as `secure demo --out` and `secure experiment --out`
+/// write them) and/or explicit files, which override the run's. The barrier may be
+/// "ground-truth" (a domain that has one). airl_reward (AIRL's reward and shaping networks) is
+/// read only for a shield with aggregation = top-q.
 struct ModelSources {
-  std::string run_dir, bc, airl, joint, barrier;
+  std::string run_dir, bc, airl, joint, barrier, airl_reward;
   /// `explicit_path` if given, else run_dir/seed-<seed>/<name>.model, else "".
   std::string Path(const std::string& explicit_path, const std::string& name,
                    std::uint64_t seed) const;
@@ -39,9 +41,11 @@ class SeedModelSet {
  public:
   /// @throws secure::Error naming the file or flag (a missing model: "the shielded methods need
   /// --barrier or --run").
+  /// `shield`: the shielded methods' options (aggregation = top-q also loads AIRL's reward model).
   SeedModelSet(const ModelSources& sources, const experiments::Domain& domain,
                const std::string& domain_name, const domains::Environment& env,
-               const std::vector<eval::Method>& methods, std::uint64_t seed);
+               const std::vector<eval::Method>& methods, std::uint64_t seed,
+               const shield::ShieldOptions& shield);
   SeedModelSet(const SeedModelSet&) = delete;
   SeedModelSet& operator=(const SeedModelSet&) = delete;
 
@@ -49,6 +53,7 @@ class SeedModelSet {
 
  private:
   std::optional<policy::GaussianPolicy> bc_, airl_, joint_;
+  std::optional<policy::AirlRewardModel> airl_reward_;
   std::optional<cbf::BarrierNet> net_;
   std::optional<cbf::CarBarrierNet> per_obstacle_;
   eval::SeedModels models_;

@@ -304,7 +304,8 @@ struct PolicyTrainCommand {
 
 // ------------------------------------------------------------------------------------------
 struct EvalCommand {
-  std::string domain, run_dir, airl_path, bc_path, joint_path, barrier_path, methods;
+  std::string domain, run_dir, airl_path, bc_path, joint_path, barrier_path, airl_reward_path,
+      methods;
   int seeds = 10;
   long episodes = 100;
   std::uint64_t first_seed = 0;
@@ -333,6 +334,9 @@ struct EvalCommand {
     cmd->add_option("--airl", airl_path, "AIRL policy model (instead of --run)");
     cmd->add_option("--bc", bc_path, "BC policy model (instead of --run)");
     cmd->add_option("--joint", joint_path, "joint-optimisation policy model (instead of --run)");
+    cmd->add_option("--airl-reward", airl_reward_path,
+                    "AIRL's reward model (airl_reward.model), the task value of the shield's "
+                    "aggregation top-q (instead of --run)");
     cmd->add_option("--barrier", barrier_path,
                     "barrier model (flat or per-obstacle), or 'ground-truth' for a domain that "
                     "has one (instead of / overriding --run)");
@@ -381,8 +385,8 @@ struct EvalCommand {
     for (int k = 0; k < seeds; ++k) {
       const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(k);
       const SeedModelSet models(
-          ModelSources{run_dir, bc_path, airl_path, joint_path, barrier_path}, *d, domain, *env,
-          list, seed);
+          ModelSources{run_dir, bc_path, airl_path, joint_path, barrier_path, airl_reward_path}, *d,
+          domain, *env, list, seed, shield_options);
       const auto results = eval::EvaluateMethods(*env, list, models.models(), shield_options,
                                                  episodes, eval::EvaluationSeed(seed));
       for (const auto& [method, r] : results) evaluation.Add(method, r);

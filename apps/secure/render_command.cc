@@ -21,7 +21,7 @@ namespace secure::cli {
 namespace {
 
 struct RenderCommand {
-  std::string domain, method, run_dir, policy_path, barrier_path, out, frames_dir;
+  std::string domain, method, run_dir, policy_path, barrier_path, airl_reward_path, out, frames_dir;
   std::uint64_t seed = 0;
   long episode = 0;
   eval::VideoOptions video;
@@ -49,6 +49,9 @@ struct RenderCommand {
                     "seed-<seed>/ are used");
     cmd->add_option("--policy", policy_path,
                     "the method's policy model (BC, AIRL or joint; instead of / overriding --run)");
+    cmd->add_option("--airl-reward", airl_reward_path,
+                    "AIRL's reward model, the task value of the shield's aggregation top-q "
+                    "(instead of / overriding --run)");
     cmd->add_option("--barrier", barrier_path,
                     "barrier model (flat or per-obstacle), or 'ground-truth' for a domain that "
                     "has one (shielded methods; instead of / overriding --run)");
@@ -92,6 +95,7 @@ struct RenderCommand {
     ModelSources sources;
     sources.run_dir = run_dir;
     sources.barrier = barrier_path;
+    sources.airl_reward = airl_reward_path;
     if (eval::UsesBcPolicy(m)) {
       sources.bc = policy_path;
     } else if (eval::UsesJointPolicy(m)) {
@@ -99,7 +103,7 @@ struct RenderCommand {
     } else {
       sources.airl = policy_path;
     }
-    const SeedModelSet models(sources, *d, domain, *env, methods, seed);
+    const SeedModelSet models(sources, *d, domain, *env, methods, seed, shield_options);
     // Outputs are opened before the episode runs: a missing ffmpeg or an unusable place fails
     // at once.
     if (!frames_dir.empty()) CreateDirectories(frames_dir);

@@ -260,8 +260,23 @@ SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& mod
   SECURE_CHECK(models.make_barrier != nullptr,
                "method '" << name << "' needs a barrier, and none was given");
   std::unique_ptr<cbf::Barrier> barrier = models.make_barrier();
-  shield::Shield shield(ShieldOptionsFor(method, shield_options), *barrier,
-                        runner.environment().ShieldModel());
+  const shield::ShieldOptions options = ShieldOptionsFor(method, shield_options);
+  const domains::Environment& env = runner.environment();
+  shield::Shield shield(options, *barrier, env.ShieldModel());
+  std::optional<policy::AirlActionValue> value;
+  if (options.aggregation == shield::Aggregation::kTopQ) {
+    SECURE_CHECK(models.airl_reward != nullptr,
+                 "method '" << name
+                            << "': shield aggregation top-q needs AIRL's reward model (the task "
+                               "value), and none was given");
+    SECURE_CHECK(env.ShieldModel().state_dim() == env.observation_dim(),
+                 "method '" << name << "': shield aggregation top-q needs a shield model on the "
+                            << "observations; " << env.ShieldModel().Describe() << " maps "
+                            << env.ShieldModel().state_dim() << "-D states");
+    value.emplace(*models.airl_reward, env.ObservationFeatures(),
+                  std::max(options.num_samples, options.num_probes));
+    shield.SetActionValue(&*value);
+  }
   ReferenceForwardTimer timer(*barrier, observer);
   SeedResult result = runner.Run(evaluator, &shield, episodes, seed, &timer);
   result.reference_forward_latency_us = timer.microseconds();

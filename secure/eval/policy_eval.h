@@ -41,11 +41,12 @@
 #include <string>
 #include <vector>
 
-#include "secure/common/enum_strings.h"
 #include "secure/cbf/barrier.h"
+#include "secure/common/enum_strings.h"
 #include "secure/common/rng.h"
 #include "secure/domains/environment.h"
 #include "secure/eval/latency.h"
+#include "secure/policy/airl_reward.h"
 #include "secure/policy/gaussian_policy.h"
 #include "secure/shield/shield.h"
 #include "secure/stats/statistics.h"
@@ -254,12 +255,16 @@ struct SeedModels {
   const policy::GaussianPolicy* airl = nullptr;
   const policy::GaussianPolicy* joint = nullptr;
   std::function<std::unique_ptr<cbf::Barrier>()> make_barrier;
+  // AIRL's reward and shaping networks: the task value of a shield with aggregation = top-q
+  // (null when no shielded method aggregates so).
+  const policy::AirlRewardModel* airl_reward = nullptr;
 };
 
 /// Runs `method` in `runner` for `episodes` episodes with evaluation seed `seed`, exactly as
 /// EvaluateMethods() runs each of its methods: a PolicyEvaluator of the method's policy, and for a
 /// shielded method a shield with ShieldOptionsFor(method, shield_options) over a barrier from
-/// models.make_barrier() and the runner's environment's ShieldModel(). `observer` as in
+/// models.make_barrier() and the runner's environment's ShieldModel(); with aggregation = top-q
+/// its task value is policy::AirlActionValue of models.airl_reward. `observer` as in
 /// EpisodeRunner::Run(). @throws secure::Error if the method's model is missing.
 SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& models,
                      const shield::ShieldOptions& shield_options, long episodes,

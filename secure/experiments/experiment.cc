@@ -218,12 +218,14 @@ SeedBarrier SelectCandidate(const Domain& domain, const ExperimentOptions& o, st
                             const SharedData& shared, const domains::Environment& env,
                             const TrainPolicies& train_policies,
                             std::optional<policy::GaussianPolicy>& bc,
-                            std::optional<policy::GaussianPolicy>& airl, long candidate_units,
-                            Progress& progress, nlohmann::json& summary) {
+                            std::optional<policy::GaussianPolicy>& airl,
+                            std::optional<policy::AirlRewardModel>& airl_reward,
+                            long candidate_units, Progress& progress, nlohmann::json& summary) {
   const ClosedLoopCheckOptions& c = o.closed_loop;
   struct Kept {
     int index = 0;
     std::optional<policy::GaussianPolicy> bc, airl;
+    std::optional<policy::AirlRewardModel> airl_reward;
     std::optional<SeedBarrier> barrier;
     nlohmann::json record;
     int failed = 0;
@@ -259,6 +261,7 @@ SeedBarrier SelectCandidate(const Domain& domain, const ExperimentOptions& o, st
       const Stopwatch clock;
       eval::SeedModels models;
       models.airl = &*airl;
+      models.airl_reward = airl_reward ? &*airl_reward : nullptr;
       models.make_barrier = barrier.Factory(domain, env);
       const std::unique_ptr<domains::Environment> check_env = env.Clone();
       eval::EpisodeRunner runner(*check_env);
@@ -333,13 +336,21 @@ SeedBarrier SelectCandidate(const Domain& domain, const ExperimentOptions& o, st
     const int failures = static_cast<int>(failed.size());
     const double score = success - dangerous;
     if (!best || failures < best->failed || (failures == best->failed && score > best->score)) {
-      best = Kept{k, std::move(bc), std::move(airl), std::move(barrier), record, failures, score};
+      best = Kept{k,
+                  std::move(bc),
+                  std::move(airl),
+                  std::move(airl_reward),
+                  std::move(barrier),
+                  record,
+                  failures,
+                  score};
     }
     if (failures == 0) break;
   }
   SECURE_INTERNAL_CHECK(best.has_value(), "max_candidates >= 1");
   bc = std::move(best->bc);
   airl = std::move(best->airl);
+  airl_reward = std::move(best->airl_reward);
   const bool passed = best->failed == 0;
   summary["closed_loop"] = {{"candidates", candidates},
                             {"selected", best->index},
@@ -351,6 +362,7 @@ SeedBarrier SelectCandidate(const Domain& domain, const ExperimentOptions& o, st
     const std::string files = dir + "/candidate-" + std::to_string(best->index);
     if (bc) bc->Save(dir + "/bc.model");
     if (airl) airl->Save(dir + "/airl.model");
+    if (airl_reward) airl_reward->Save(dir + "/airl_reward.model");
     for (const char* curve : {"bc_curve.csv", "airl_curve.csv"}) {
       const std::string from = files + "/" + curve;
       if (std::filesystem::is_regular_file(from))
@@ -387,10 +399,12 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
   const bool needs_bc =
       Any(methods, eval::UsesBcPolicy) || ((needs_airl || needs_joint) && o.airl_warm_start);
   std::optional<policy::GaussianPolicy> bc, airl;
+  std::optional<policy::AirlRewardModel> airl_reward;  // AIRL's g and V (top-q aggregation)
   auto train_policies = [&](std::uint64_t training_seed, const std::string& files,
                             nlohmann::json& record) {
     bc.reset();
     airl.reset();
+    airl_reward.reset();
     if (needs_bc) {
       const Stopwatch clock;
       policy::BcOptions options = o.bc;
@@ -427,11 +441,15 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
               });
             }
             return true;
-          });
+          },
+          &airl_reward.emplace());
       progress.Advance(options.iterations - counted);  // the units of a run stopped early
       record["airl"] = summary.ToJson();
       timings["airl"] = timings.value("airl", 0.0) + clock.Seconds();
-      if (!files.empty()) airl->Save(files + "/airl.model");
+      if (!files.empty()) {
+        airl->Save(files + "/airl.model");
+        airl_reward->Save(files + "/airl_reward.model");
+      }
       progress.Line([&](std::ostream& out) { out << tag << " " << summary.BriefReport(); });
     }
   };
@@ -443,8 +461,9 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
   if (o.closed_loop.enabled) {
     const long candidate_units =
         (needs_bc ? 1 : 0) + (needs_airl ? o.airl.iterations : 0) + 2;  // + barrier, check
-    selected_barrier = SelectCandidate(domain, o, seed, tag, dir, shared, env, train_policies, bc,
-                                       airl, candidate_units, progress, outcome.summary);
+    selected_barrier =
+        SelectCandidate(domain, o, seed, tag, dir, shared, env, train_policies, bc, airl,
+                        airl_reward, candidate_units, progress, outcome.summary);
     training_seed = CandidateSeed(seed, outcome.summary["closed_loop"]["selected"].get<int>());
   } else {
     train_policies(seed, dir, outcome.summary);
@@ -562,6 +581,7 @@ SeedOutcome RunSeed(const Domain& domain, const ExperimentOptions& o,
     eval::SeedModels models;
     models.bc = bc ? &*bc : nullptr;
     models.airl = airl ? &*airl : nullptr;
+    models.airl_reward = airl_reward ? &*airl_reward : nullptr;
     models.joint = joint ? &*joint : nullptr;
     if (barrier) models.make_barrier = barrier->Factory(domain, env);
     outcome.results.push_back(eval::EvaluateMethods(env, methods, models, o.shield, o.episodes,

@@ -177,6 +177,18 @@ class AirlRun {
     return p;
   }
 
+  // The discriminator's reward and shaping networks, for the shield's task value.
+  AirlRewardModel RewardModel() {
+    AirlRewardModel m;
+    m.reward = disc_->reward->ToParams();
+    m.shaping = disc_->shaping->ToParams();
+    m.input = normalizer_;
+    m.discount = o_.gamma;
+    m.observation_features = observation_features_;
+    m.input_features = input_features_;
+    return m;
+  }
+
   // One iteration: rollout, discriminator, rewards, PPO.
   AirlIterationStats Iterate(AirlSummary& timing) {
     Rng iteration_rng(internal::DeriveSeed(o_.seed, kIterationBase + completed_));
@@ -331,7 +343,7 @@ void CheckInputs(const data::TrajectorySet& demos, const domains::Environment& e
 GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectorySet& demos,
                              const domains::Environment& env, const GaussianPolicy* warm_start,
                              AirlSummary* summary, const AirlCallback& callback,
-                             internal::JointCbfTerm* joint) {
+                             internal::JointCbfTerm* joint, AirlRewardModel* reward_model) {
   options.Validate();
   CheckInputs(demos, env);
   const Stopwatch clock;
@@ -433,6 +445,13 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
     policy.provenance["warm_start"] = warm_start->provenance["trainer"];
   if (joint != nullptr) policy.provenance["joint"] = joint->options().ToJson();
   policy.Validate("AIRL policy");
+  if (reward_model != nullptr) {
+    *reward_model = run.RewardModel();
+    reward_model->provenance = {{"trainer", policy.provenance["trainer"]},
+                                {"policy_summary", policy.provenance["summary"]},
+                                {"environment", env.Describe()}};
+    reward_model->Validate("AIRL reward model");
+  }
   if (summary != nullptr) *summary = s;
   return policy;
 }
@@ -441,8 +460,9 @@ GaussianPolicy TrainAirlImpl(const AirlOptions& options, const data::TrajectoryS
 
 GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& demos,
                          const domains::Environment& env, const GaussianPolicy* warm_start,
-                         AirlSummary* summary, const AirlCallback& callback) {
-  return TrainAirlImpl(options, demos, env, warm_start, summary, callback, nullptr);
+                         AirlSummary* summary, const AirlCallback& callback,
+                         AirlRewardModel* reward_model) {
+  return TrainAirlImpl(options, demos, env, warm_start, summary, callback, nullptr, reward_model);
 }
 
 GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint_options,
@@ -463,7 +483,7 @@ GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions&
                    << "-D states; the environment (" << env.Describe() << ") has "
                    << env.observation_dim() << "-D observations");
   internal::JointCbfTerm joint(joint_options, barrier, model);
-  return TrainAirlImpl(options, demos, env, warm_start, summary, callback, &joint);
+  return TrainAirlImpl(options, demos, env, warm_start, summary, callback, &joint, nullptr);
 }
 
 GaussianPolicy TrainAirlJoint(const AirlOptions& options, const JointCbfOptions& joint_options,

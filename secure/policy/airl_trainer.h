@@ -77,12 +77,13 @@
 #include <string>
 #include <vector>
 
-#include "secure/common/enum_strings.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
+#include "secure/common/enum_strings.h"
 #include "secure/data/data.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
+#include "secure/policy/airl_reward.h"
 #include "secure/policy/gaussian_policy.h"
 
 namespace YAML {
@@ -232,11 +233,13 @@ using AirlCallback = std::function<bool(const AirlIterationStats&)>;
 /// normaliser is fitted on the demonstration states. The demonstrations' state/action features
 /// must equal env.ObservationFeatures()/ActionFeatures(), be finite, and every episode needs >= 2
 /// rows. The returned policy's provenance records options, data, environment and summary
-/// (without timing).
+/// (without timing). `reward_model`, if non-null, receives the trained discriminator's reward
+/// g and shaping V (airl_reward.h: the task value of the shield's top-q aggregation).
 /// @throws secure::Error on invalid options, data, warm start or an incompatible checkpoint.
 GaussianPolicy TrainAirl(const AirlOptions& options, const data::TrajectorySet& demos,
                          const domains::Environment& env, const GaussianPolicy* warm_start,
-                         AirlSummary* summary, const AirlCallback& callback = nullptr);
+                         AirlSummary* summary, const AirlCallback& callback = nullptr,
+                         AirlRewardModel* reward_model = nullptr);
 
 /// The joint-optimisation baseline of the paper (Section 4.1; official-code-facts.md §8.1,
 /// variant A): instead of a shield, the barrier's derivative condition is an extra term of the

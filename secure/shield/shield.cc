@@ -1,5 +1,6 @@
 #include "secure/shield/shield.h"
 
+#include <algorithm>
 #include <boost/math/distributions/normal.hpp>
 #include <boost/math/policies/policy.hpp>
 #include <boost/random/sobol.hpp>
@@ -65,6 +66,8 @@ void ShieldOptions::Validate() const {
   SECURE_CHECK_FIELD(max_iterations > 0, "ShieldOptions", "max_iterations", max_iterations, "> 0");
   SECURE_CHECK_FIELD(std::isfinite(time_budget_us) && time_budget_us >= 0, "ShieldOptions",
                      "time_budget_us", time_budget_us, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(top_q_fraction) && top_q_fraction > 0 && top_q_fraction <= 1,
+                     "ShieldOptions", "top_q_fraction", top_q_fraction, "in (0, 1]");
 }
 
 void ShieldOptions::Validate(int action_dim) const {
@@ -77,20 +80,24 @@ void ShieldOptions::Validate(int action_dim) const {
 }
 
 nlohmann::json ShieldOptions::ToJson() const {
-  return {{"num_samples", num_samples},
-          {"safe_ratio", safe_ratio},
-          {"dt", dt},
-          {"class_k", ToString(kClassKNames, class_k)},
-          {"class_k_gain", class_k_gain},
-          {"aggregation", ToString(kAggregationNames, aggregation)},
-          {"resampling", ToString(kResamplingNames, resampling)},
-          {"num_probes", num_probes},
-          {"probe_extent", probe_extent},
-          {"sigma_step", sigma_step},
-          {"max_iterations", max_iterations},
-          {"time_budget_us", time_budget_us},
-          {"seed", seed},
-          {"sampler", ToString(kSamplerNames, sampler)}};
+  nlohmann::json json = {{"num_samples", num_samples},
+                         {"safe_ratio", safe_ratio},
+                         {"dt", dt},
+                         {"class_k", ToString(kClassKNames, class_k)},
+                         {"class_k_gain", class_k_gain},
+                         {"aggregation", ToString(kAggregationNames, aggregation)},
+                         {"resampling", ToString(kResamplingNames, resampling)},
+                         {"num_probes", num_probes},
+                         {"probe_extent", probe_extent},
+                         {"sigma_step", sigma_step},
+                         {"max_iterations", max_iterations},
+                         {"time_budget_us", time_budget_us},
+                         {"seed", seed},
+                         {"sampler", ToString(kSamplerNames, sampler)}};
+  // Only where it acts, so that the options of every other shield keep their identity (run
+  // directories compare them).
+  if (aggregation == Aggregation::kTopQ) json["top_q_fraction"] = top_q_fraction;
+  return json;
 }
 
 void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -109,6 +116,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("time_budget_us", &time_budget_us)
       .Field("seed", &seed)
       .Enum("sampler", &sampler, kSamplerNames)
+      .Field("top_q_fraction", &top_q_fraction)
       .Apply(node, source);
 }
 
@@ -166,6 +174,8 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
   state_column_.resize(state_dim_, 1);
   h_one_.resize(1);
   d_sigma_.resize(action_dim_);
+  q_.resize(m);
+  order_.resize(static_cast<std::size_t>(m));
   if (options_.sampler == Sampler::kQmc) {
     // Point 0 is the origin (Boost's engine skips it), points 1 .. M - 1 follow: for M = 2^k the
     // columns are a (t, k, d)-net, and a digital shift keeps them one.
@@ -298,17 +308,41 @@ void Shield::Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
     }
     SECURE_INTERNAL_CHECK(false, "safe sample count does not match");
   }
-  // Algorithm 1, lines 6-9: the mean of the safe samples, if it is safe itself ...
-  one_action_.setZero();
+  int count = 0;
   for (int i = 0; i < m; ++i)
-    if (g_[i] >= 0.0) one_action_.col(0) += samples_.col(i);
-  one_action_ /= static_cast<float>(num_safe);
+    if (g_[i] >= 0.0) order_[static_cast<std::size_t>(count++)] = i;
+  SECURE_INTERNAL_CHECK(count == num_safe, "safe sample count does not match");
+  if (options_.aggregation == Aggregation::kTopQ) {
+    // ScoreRound was the round's last EvaluateG: next_states_ holds T(s, a_i) of its samples.
+    action_value_->Evaluate(state, next_states_.leftCols(m), q_);
+    const int keep =
+        std::clamp(static_cast<int>(std::ceil(options_.top_q_fraction * count)), 1, count);
+    // Descending Q, NaN last, ties by index: a strict weak order, so the selection is
+    // deterministic; then the kept indices ascending, so that the mean sums in a fixed order.
+    auto key = [&](int i) { return std::isnan(q_[i]) ? kNegInf : q_[i]; };
+    const auto first = order_.begin();
+    std::nth_element(first, first + (keep - 1), first + count, [&](int a, int b) {
+      const double qa = key(a), qb = key(b);
+      return qa != qb ? qa > qb : a < b;
+    });
+    std::sort(first, first + keep);
+    count = keep;
+  }
+  AggregateMean(state, h_state, count);
+}
+
+void Shield::AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
+                           int count) {
+  // Algorithm 1, lines 6-9: the mean of the samples, if it is safe itself ...
+  one_action_.setZero();
+  for (int k = 0; k < count; ++k) one_action_.col(0) += samples_.col(order_[k]);
+  one_action_ /= static_cast<float>(count);
   // g_ holds the round's values; evaluating the mean reuses the shared buffers, so keep the
   // nearest-sample search ahead of it.
   int nearest = -1;
   float nearest_distance = std::numeric_limits<float>::infinity();
-  for (int i = 0; i < m; ++i) {
-    if (!(g_[i] >= 0.0)) continue;
+  for (int k = 0; k < count; ++k) {
+    const int i = order_[k];
     const float d = (samples_.col(i) - one_action_.col(0)).squaredNorm();
     if (d < nearest_distance) {
       nearest_distance = d;
@@ -321,7 +355,7 @@ void Shield::Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
     decision_.action = one_action_.col(0);
     decision_.g = one_g_[0];
   } else {
-    // ... else the safe sample nearest to the mean.
+    // ... else the sample nearest to the mean.
     decision_.action = samples_.col(nearest);
     decision_.g = nearest_g;
   }
@@ -351,6 +385,8 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
                "Shield::Decide: mu has " << mu.size() << " values, expected " << action_dim_);
   SECURE_CHECK(sigma.size() == action_dim_,
                "Shield::Decide: sigma has " << sigma.size() << " values, expected " << action_dim_);
+  SECURE_CHECK(options_.aggregation != Aggregation::kTopQ || action_value_ != nullptr,
+               "Shield::Decide: aggregation = top-q needs a task value (Shield::SetActionValue)");
   decision_.status = Status::kInvalidInput;
   decision_.g = 0.0;
   decision_.h = std::numeric_limits<double>::quiet_NaN();

@@ -36,6 +36,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "secure/cbf/barrier.h"
 #include "secure/common/enum_strings.h"
@@ -67,11 +68,19 @@ enum class Aggregation {
   // instead of executing about the policy's mean at every step (docs/SHIELD.md). A safe draw is
   // the only sample evaluated: such a decision costs two barrier evaluations, h(s) and h(T(s, a)).
   kPolicyDraw,
+  // Task-aware (the authors' code, official-code-facts.md §4.5, methods 2 and 5; not in the
+  // paper): rank the safe samples by a task value Q(s, a) of their predicted next state
+  // (Shield::SetActionValue; e.g. AIRL's g(s) + gamma V(T(s, a))), take the mean of the best
+  // ceil(top_q_fraction x #safe) of them, re-checked as in Algorithm 1, else the one of them
+  // nearest that mean. The mean of all safe samples follows the safe set's centre; this one
+  // follows the side of it that makes progress on the task.
+  kTopQ,
 };
-inline constexpr EnumTable<Aggregation, 3> kAggregationNames{{
+inline constexpr EnumTable<Aggregation, 4> kAggregationNames{{
     {Aggregation::kMean, "mean"},
     {Aggregation::kRandomSafe, "random-safe"},
     {Aggregation::kPolicyDraw, "policy-draw"},
+    {Aggregation::kTopQ, "top-q"},
 }};
 
 /// What happens while too few samples are safe.
@@ -129,6 +138,8 @@ struct ShieldOptions {
   double time_budget_us = 0.0;      // wall-time budget per decision; 0: none (iterations only)
   std::uint64_t seed = 0;           // the shield's random stream (deterministic per seed)
   Sampler sampler = Sampler::kIid;  // how each round's M actions are drawn
+  double top_q_fraction = 0.3;      // aggregation = top-q: the fraction of the safe samples
+                                    // averaged, those of highest Q (the authors' code: 30 %)
 
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
@@ -188,6 +199,21 @@ struct Decision {
   nlohmann::json ToJson() const;
 };
 
+/// A task value of actions for Aggregation::kTopQ: Q(s, a) from the state and the shield model's
+/// predicted next state s+ = T(s, a) (the authors' code: AIRL's g(s) + 0.99 V(s+);
+/// policy::AirlActionValue). Called from Decide() once per aggregated round with the round's M
+/// predicted next states; it must not allocate there (size its scratch for max(M, N) columns).
+class ActionValue {
+ public:
+  virtual ~ActionValue() = default;
+  /// q (K) = Q(state, a_k) for the predicted next states `next_states` (state_dim x K). A NaN Q
+  /// ranks last.
+  virtual void Evaluate(const Eigen::Ref<const Eigen::VectorXf>& state,
+                        const Eigen::Ref<const Eigen::MatrixXf>& next_states,
+                        Eigen::Ref<Eigen::VectorXd> q) = 0;
+  virtual std::string Describe() const = 0;
+};
+
 /// alpha(h) for the given options.
 double ClassKValue(const ShieldOptions& options, double h);
 
@@ -203,6 +229,10 @@ class Shield {
   /// best sample when no safe action is found. Must have action_dim entries, all finite.
   void SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action);
   void ClearBackupAction() { has_backup_ = false; }
+
+  /// The task value Aggregation::kTopQ ranks the safe samples by (it must outlive the shield, or
+  /// be replaced first; null clears it). Decide() with aggregation = top-q and no value throws.
+  void SetActionValue(ActionValue* value) { action_value_ = value; }
 
   /// Re-seeds the shield's random stream.
   void Seed(std::uint64_t seed) { rng_.Seed(seed); }
@@ -237,6 +267,9 @@ class Shield {
                   const Eigen::Ref<const Eigen::VectorXf>& mu);
   // Aggregates the safe samples of the current round into decision_.action.
   void Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, int num_safe);
+  // Algorithm 1, lines 6-9, over the round's samples order_[0 .. count) (ascending, all safe):
+  // their mean if it is safe, else the one of them nearest to it.
+  void AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, int count);
   void FinishInvalid();
   // kSafe after one round, kSafeAfterResampling after more.
   Status SafeStatus() const;
@@ -250,6 +283,7 @@ class Shield {
   Decision decision_;
   bool has_backup_ = false;
   Eigen::VectorXf backup_;
+  ActionValue* action_value_ = nullptr;
 
   // Preallocated scratch (sized in the constructor).
   Eigen::VectorXf mu_, sigma_;   // the current sampling distribution
@@ -265,6 +299,8 @@ class Shield {
   Eigen::MatrixXf state_column_;  // (state_dim x 1) for h(s)
   Eigen::VectorXf h_one_;         // (1)
   Eigen::VectorXf d_sigma_;       // (action_dim)
+  Eigen::VectorXd q_;             // (M) aggregation = top-q: Q of the round's samples
+  std::vector<int> order_;        // (M) indices of the samples being aggregated
   // Sampler::kQmc: the first M Sobol points as 64-bit integers, (action_dim x M), column c =
   // point c (built in the constructor; empty for the other samplers).
   Eigen::Matrix<std::uint64_t, Eigen::Dynamic, Eigen::Dynamic> sobol_;

@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "secure/common/atomic_file.h"
+#include "secure/policy/airl_reward.h"
 #include "tests/json_util.h"
 #include "tests/test_util.h"
 
@@ -163,6 +164,33 @@ TEST(PipelineTest, OptionsAreValidated) {
 }
 
 using test::WithoutTimings;
+
+class TopQPipelineTest : public test::TempDirTest {};
+
+// The shield's top-q aggregation ranks actions by the AIRL reward model the seed trained: the
+// experiment writes it beside airl.model, and SECURE's decisions use it (a different action
+// stream from the mean's on the same episodes).
+TEST_F(TopQPipelineTest, SecureWithTopQUsesTheSeedsAirlRewardModel) {
+  ExperimentOptions o = Tiny();
+  o.seeds = 1;
+  o.methods = {eval::Method::kAirl, eval::Method::kSecure};
+  o.output_dir = PathOf("mean");
+  const nlohmann::json mean = RunTiny(o).ToJson();
+  o.output_dir = PathOf("top-q");
+  o.ApplyYaml(YAML::Load("{shield: {aggregation: top-q, top_q_fraction: 0.25}}"), "x.yaml");
+  const nlohmann::json top = RunTiny(o).ToJson();
+  const policy::AirlRewardModel reward =
+      policy::AirlRewardModel::Load(PathOf("top-q/seed-0/airl_reward.model"));
+  EXPECT_EQ(reward.observation_features, TinyDomain().MakeEnvironment()->ObservationFeatures());
+  EXPECT_EQ(ReadFile(PathOf("mean/seed-0/airl_reward.model")),
+            ReadFile(PathOf("top-q/seed-0/airl_reward.model")));  // the same AIRL run
+  EXPECT_EQ(top["experiment"]["options"]["shield"]["aggregation"], "top-q");
+  EXPECT_EQ(top["experiment"]["options"]["shield"]["top_q_fraction"], 0.25);
+  EXPECT_EQ(mean["methods"]["airl"], top["methods"]["airl"]);
+  const nlohmann::json& seed0 = top["methods"]["secure"]["seeds"][0];
+  EXPECT_EQ(seed0["decisions"], seed0["steps"]);
+  EXPECT_NE(mean["methods"]["secure"]["seeds"][0], seed0);
+}
 
 class ShardedPipelineTest : public test::TempDirTest {};
 

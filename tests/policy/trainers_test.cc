@@ -654,6 +654,37 @@ TEST_F(AirlFileTest, IdenticalRunsWriteIdenticalModelFiles) {
   EXPECT_TRUE(ReadFile(PathOf("a.model")) == ReadFile(PathOf("b.model")));
 }
 
+// The trained discriminator's reward g and shaping V, exported for the shield's top-q
+// aggregation: the policy's inputs and normaliser, the RL discount, the same bytes for the same
+// seed, and a Q that varies with the next state.
+TEST_F(AirlFileTest, ExportsTheRewardAndShapingNetworksAsARewardModel) {
+  const data::TrajectorySet demos = ExpertDemos(10, 2);
+  const PointMassEnv env;
+  AirlOptions o = SmallAirl();
+  o.gamma = 0.97;
+  AirlRewardModel a, b;
+  const GaussianPolicy pi = TrainAirl(o, demos, env, nullptr, nullptr, nullptr, &a);
+  TrainAirl(o, demos, env, nullptr, nullptr, nullptr, &b);
+  EXPECT_EQ(a.discount, 0.97);
+  EXPECT_EQ(a.observation_features, pi.observation_features);
+  EXPECT_EQ(a.input_features, pi.input_features);
+  EXPECT_EQ(a.input.mean, pi.input.mean);
+  EXPECT_EQ(a.input.scale, pi.input.scale);
+  EXPECT_EQ(a.reward.spec.hidden, o.reward_hidden);
+  EXPECT_EQ(a.shaping.spec.hidden, o.shaping_hidden);
+  EXPECT_EQ(a.provenance["environment"], env.Describe());
+  a.Save(PathOf("a.model"));
+  b.Save(PathOf("b.model"));
+  EXPECT_EQ(ReadFile(PathOf("a.model")), ReadFile(PathOf("b.model")));
+  AirlActionValue value(AirlRewardModel::Load(PathOf("a.model")), env.ObservationFeatures(), 16);
+  Eigen::MatrixXf next(2, 16);
+  for (int c = 0; c < 16; ++c) next.col(c) << -1.0f + 0.13f * c, 0.5f - 0.07f * c;
+  Eigen::VectorXd q(16);
+  value.Evaluate(Eigen::Vector2f(0.1f, 0.2f), next, q);
+  EXPECT_TRUE(q.allFinite());
+  EXPECT_GT(q.maxCoeff() - q.minCoeff(), 1e-6);
+}
+
 TEST_F(AirlFileTest, WritesTheLearningCurveEveryIteration) {
   AirlOptions o = SmallAirl();
   o.iterations = 3;

@@ -24,13 +24,14 @@
 #include <string>
 #include <vector>
 
-#include "secure/cbf/barrier.h"
-#include "secure/cbf/barrier_net.h"
-#include "secure/cbf/car_barrier.h"
 #include "domains/derby/derby.h"
 #include "domains/derby/domain.h"
 #include "domains/double_integrator/double_integrator.h"
+#include "secure/cbf/barrier.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
 #include "secure/nn/mlp.h"
+#include "secure/policy/airl_reward.h"
 
 // ------------------------------------------------------------------------------------------------
 // Counting allocators.
@@ -220,6 +221,7 @@ struct Scenario {
   ShieldOptions options;
   bool with_backup = false;
   Eigen::VectorXf backup;
+  ActionValue* value = nullptr;  // aggregation = top-q's task value
   // Expected of the warm-up decisions:
   bool expect_resampling = false;  // iterations > 1
   bool expect_fallback = false;    // a no-safe-sample decision (fallback != none)
@@ -233,6 +235,7 @@ void ExpectNoAllocations(const Scenario& s, cbf::Barrier& barrier,
   SCOPED_TRACE(s.name);
   Shield shield(s.options, barrier, dynamics);
   if (s.with_backup) shield.SetBackupAction(s.backup);
+  shield.SetActionValue(s.value);
   for (int i = 0; i < kWarmUp; ++i) {
     const Decision& d = shield.Decide(s.state, s.mu, s.sigma);
     ASSERT_TRUE(d.action.allFinite());
@@ -305,6 +308,19 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   random_safe.name = "random-safe aggregation";
   random_safe.options.aggregation = Aggregation::kRandomSafe;
   scenarios.push_back(random_safe);
+
+  // Q = x of the predicted next state (static: the scenarios outlive this function).
+  static test::LinearActionValue progress(Vec({1.0f, 0.0f, 0.0f, 0.0f}));
+  Scenario top_q = resampling;
+  top_q.name = "top-q aggregation";
+  top_q.options.aggregation = Aggregation::kTopQ;
+  top_q.value = &progress;
+  scenarios.push_back(top_q);
+  Scenario top_q_far = none;
+  top_q_far.name = "top-q aggregation, no resampling";
+  top_q_far.options.aggregation = Aggregation::kTopQ;
+  top_q_far.value = &progress;
+  scenarios.push_back(top_q_far);
 
   Scenario policy_draw = none;
   policy_draw.name = "policy-draw aggregation";
@@ -442,6 +458,30 @@ TEST(ShieldAllocTest, PandaSizedLearnedBarrierDecisionsDoNotAllocate) {
     other.name += ", sampler = " + std::string(ToString(kSamplerNames, sampler));
     other.options.sampler = sampler;
     ExpectNoAllocations(other, barrier, dynamics, 50, note);
+  }
+}
+
+// Top-q with AIRL's task value (policy::AirlActionValue: the reward and shaping MLPs on the
+// predicted next states), on all features and on some of them (rows gathered into a buffer).
+TEST(ShieldAllocTest, TopQWithAirlsTaskValueDoesNotAllocate) {
+  const di::Dynamics dynamics(0.1);
+  domains::double_integrator::GroundTruthBarrier barrier{di::GroundTruth{}};
+  for (const std::vector<std::string>& inputs :
+       {std::vector<std::string>{}, std::vector<std::string>{"s0", "s2"}}) {
+    policy::AirlRewardModel model;
+    const int in = inputs.empty() ? 4 : static_cast<int>(inputs.size());
+    model.reward = nn::RandomMlpParams(nn::MlpSpec{in, {32, 32}, 1, nn::Activation::kRelu}, 21);
+    model.shaping = nn::RandomMlpParams(nn::MlpSpec{in, {32, 32}, 1, nn::Activation::kRelu}, 22);
+    model.input = nn::Normalizer::Identity(in);
+    model.observation_features = {"s0", "s1", "s2", "s3"};
+    model.input_features = inputs;
+    policy::AirlActionValue value(model, model.observation_features, 64);
+    for (Scenario s : DoubleIntegratorScenarios(false)) {
+      if (s.options.aggregation != Aggregation::kTopQ) continue;
+      s.value = &value;
+      s.name += ", AIRL task value on " + std::to_string(in) + " features";
+      ExpectNoAllocations(s, barrier, dynamics);
+    }
   }
 }
 

@@ -55,6 +55,26 @@ class FunctionBarrier final : public cbf::Barrier {
   Fn fn_;
 };
 
+/// Q(s, a) = w . T(s, a), a linear task value of the predicted next state (allocation-free);
+/// counts its calls and the columns it was given.
+class LinearActionValue final : public ActionValue {
+ public:
+  explicit LinearActionValue(Eigen::VectorXf w) : w_(std::move(w)) {}
+  void Evaluate(const Eigen::Ref<const Eigen::VectorXf>& /*state*/,
+                const Eigen::Ref<const Eigen::MatrixXf>& next_states,
+                Eigen::Ref<Eigen::VectorXd> q) override {
+    ++calls;
+    columns += next_states.cols();
+    for (Eigen::Index i = 0; i < next_states.cols(); ++i)
+      q[i] = static_cast<double>(w_.dot(next_states.col(i)));
+  }
+  std::string Describe() const override { return "linear task value"; }
+  long calls = 0, columns = 0;
+
+ private:
+  Eigen::VectorXf w_;
+};
+
 inline Eigen::VectorXf Vec(std::initializer_list<float> values) {
   Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
   Eigen::Index i = 0;
