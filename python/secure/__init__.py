@@ -10,6 +10,7 @@ the library's domains as Gymnasium-style environments.
 See python/README.md for the API by example, the dtype rule and the GIL.
 """
 from ._secure import (  # noqa: F401
+    AirlReward,
     Barrier,
     Decision,
     Demonstrations,
@@ -32,7 +33,7 @@ from ._secure import (  # noqa: F401
 )
 
 __all__ = [
-    "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "Policy", "Rng", "Shield",
+    "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "Policy", "Rng", "Shield",
     "build_info", "domains", "episode_seed", "generate_data", "make_env", "run_episodes", "train_airl",
     "train_barrier", "train_bc", "train_car_barrier",
 ]

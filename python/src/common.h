@@ -28,6 +28,7 @@
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
 #include "secure/experiments/domain.h"
+#include "secure/policy/airl_reward.h"
 #include "secure/shield/shield.h"
 
 namespace secure::python {
@@ -113,6 +114,11 @@ std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env);
 /// ShieldOptions from keyword arguments (the fields by name, enums by their names); validated.
 /// @throws secure::Error naming an unknown key (and the valid ones) or a bad value.
 shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs);
+
+/// AIRL's reward model (secure.AirlReward): the task value of a shield with aggregation='top-q'.
+struct AirlReward {
+  std::shared_ptr<const policy::AirlRewardModel> model;
+};
 
 /// Registration, one per translation unit.
 void RegisterCommon(py::module_& m);

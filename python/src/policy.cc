@@ -196,38 +196,98 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
 Behaviour cloning on secure.Demonstrations; keyword arguments are BcOptions (the `bc` section of
 a config: hidden, epochs, seed, ...). Returns (policy, summary dict). Releases the GIL.)doc");
 
+  py::class_<AirlReward, std::shared_ptr<AirlReward>>(m, "AirlReward", R"doc(
+AIRL's learned reward g(s) and shaping V(s) (an `airl_reward.model` of a run directory, or
+train_airl(..., with_reward=True)): the task value Q(s, a) = g(s) + gamma V(T(s, a)) of a shield
+with aggregation='top-q' (Shield(..., task_value=reward)).)doc")
+      .def_static(
+          "load",
+          [](const std::string& path) {
+            return std::make_shared<AirlReward>(
+                AirlReward{std::make_shared<const policy::AirlRewardModel>(
+                    policy::AirlRewardModel::Load(path))});
+          },
+          py::arg("path"))
+      .def(
+          "save", [](const AirlReward& r, const std::string& path) { r.model->Save(path); },
+          py::arg("path"))
+      .def(
+          "q",
+          [](const AirlReward& r, py::handle state, py::handle next_states) {
+            const int dim = r.model->observation_dim();
+            const Eigen::VectorXf s = Vector(state, dim, "state");
+            const StatesArg next = States(next_states, dim, "next_states", false);
+            policy::AirlActionValue value(
+                *r.model, r.model->observation_features,
+                static_cast<int>(std::max<Eigen::Index>(1, next.map.cols())));
+            py::array_t<double> q(next.map.cols());
+            Eigen::Map<Eigen::VectorXd> out(q.mutable_data(), next.map.cols());
+            value.Evaluate(s, next.map, out);
+            return q;
+          },
+          py::arg("state"), py::arg("next_states"),
+          "Q = g(state) + gamma V(s+) for each row of next_states (K, observation_dim).")
+      .def_property_readonly("discount", [](const AirlReward& r) { return r.model->discount; })
+      .def_property_readonly("observation_features",
+                             [](const AirlReward& r) { return r.model->observation_features; })
+      .def_property_readonly("input_features",
+                             [](const AirlReward& r) { return r.model->input_features; })
+      .def("__repr__", [](const AirlReward& r) {
+        return "<secure.AirlReward on " + std::to_string(r.model->observation_dim()) +
+               " observation features, discount " + std::to_string(r.model->discount) + ">";
+      });
+
   m.def(
       "train_airl",
       [](const data::TrajectorySet& demos, py::handle env, std::shared_ptr<Policy> warm_start,
-         py::kwargs options) {
+         bool with_reward, py::kwargs options) {
         auto o = OptionsFrom<policy::AirlOptions>(options, "train_airl options");
         const std::shared_ptr<const domains::Environment> e = EnvironmentOf(env);
         policy::AirlSummary summary;
         policy::GaussianPolicy p;
+        policy::AirlRewardModel reward;
         {
           py::gil_scoped_release release;
           nn::SetTorchThreads(1);
-          p = policy::TrainAirl(o, demos, *e, warm_start ? &warm_start->model() : nullptr,
-                                &summary);
+          p = policy::TrainAirl(o, demos, *e, warm_start ? &warm_start->model() : nullptr, &summary,
+                                nullptr, with_reward ? &reward : nullptr);
         }
+        if (with_reward)
+          return py::make_tuple(
+              std::make_shared<Policy>(std::move(p)), ToPython(summary.ToJson()),
+              std::make_shared<AirlReward>(
+                  AirlReward{std::make_shared<const policy::AirlRewardModel>(std::move(reward))}));
         return py::make_tuple(std::make_shared<Policy>(std::move(p)), ToPython(summary.ToJson()));
       },
-      py::arg("demonstrations"), py::arg("env"), py::arg("warm_start") = nullptr, R"doc(
+      py::arg("demonstrations"), py::arg("env"), py::arg("warm_start") = nullptr, py::kw_only(),
+      py::arg("with_reward") = false, R"doc(
 AIRL (discriminator + PPO) on secure.Demonstrations, rolling out in `env` (a secure.Env or a
 domain name); keyword arguments are AirlOptions (the `airl` section of a config: iterations,
-steps_per_iteration, seed, ...). Returns (policy, summary dict). Releases the GIL.)doc");
+steps_per_iteration, seed, ...). Returns (policy, summary dict), and with with_reward=True
+(policy, summary, secure.AirlReward). Releases the GIL.)doc");
 
   m.def(
       "run_episodes",
       [](py::handle env, std::shared_ptr<Policy> policy, std::shared_ptr<Barrier> barrier,
-         long episodes, std::uint64_t seed, bool stop_on_collision, py::kwargs shield_options) {
+         long episodes, std::uint64_t seed, bool stop_on_collision,
+         std::shared_ptr<AirlReward> task_value, py::kwargs shield_options) {
         const std::unique_ptr<domains::Environment> e = EnvironmentOf(env)->Clone();
         const shield::ShieldOptions options = ShieldOptionsFrom(shield_options);
+        const bool top_q = options.aggregation == shield::Aggregation::kTopQ;
+        if (barrier && top_q != (task_value != nullptr))
+          throw py::value_error(top_q ? "aggregation='top-q' needs task_value=secure.AirlReward"
+                                      : "task_value is used only with aggregation='top-q'");
         std::unique_ptr<cbf::Barrier> evaluator;
         std::optional<shield::Shield> shield;
+        std::optional<policy::AirlActionValue> value;
         if (barrier) {
           evaluator = barrier->factory();
           shield.emplace(options, *evaluator, e->ShieldModel());
+          if (task_value) {
+            value.emplace(*task_value->model, e->ObservationFeatures(),
+                          std::max(options.num_samples, options.num_probes));
+            shield->SetActionValue(&*value);
+          }
         }
         policy::PolicyEvaluator evaluate(policy->model());
         eval::EpisodeRunnerOptions runner_options;
@@ -241,11 +301,13 @@ steps_per_iteration, seed, ...). Returns (policy, summary dict). Releases the GI
         return ToPython(result.ToJson());
       },
       py::arg("env"), py::arg("policy"), py::arg("barrier") = nullptr, py::arg("episodes") = 1,
-      py::arg("seed") = 0, py::arg("stop_on_collision") = false, R"doc(
+      py::arg("seed") = 0, py::arg("stop_on_collision") = false, py::kw_only(),
+      py::arg("task_value") = nullptr, R"doc(
 Runs `episodes` episodes of `policy` in (a fresh copy of) `env` (a secure.Env or a domain name)
 with the library's episode loop (eval::EpisodeRunner, as `secure eval` runs a method): shielded
 by `barrier` with the environment's shield model when given (keyword arguments: the shield's
-options), else sampling the policy. Episode i draws from secure.episode_seed(seed, i). Returns
+options; aggregation='top-q' with task_value=secure.AirlReward), else sampling the policy.
+Episode i draws from secure.episode_seed(seed, i). Returns
 the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...).
 Releases the GIL.)doc");
 }

@@ -113,10 +113,26 @@ namespace {
 class Shield {
  public:
   Shield(std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
-         const shield::ShieldOptions& options)
+         const shield::ShieldOptions& options, std::shared_ptr<AirlReward> task_value)
       : barrier_(std::move(barrier)), dynamics_(std::move(dynamics)) {
     evaluator_ = barrier_->factory();  // the shield's own: it owns scratch memory
     shield_ = std::make_unique<shield::Shield>(options, *evaluator_, *dynamics_->model);
+    const bool top_q = options.aggregation == shield::Aggregation::kTopQ;
+    if (top_q != (task_value != nullptr))
+      throw py::value_error(top_q ? "aggregation='top-q' needs task_value=secure.AirlReward"
+                                  : "task_value is used only with aggregation='top-q'");
+    if (task_value) {
+      const policy::AirlRewardModel& model = *task_value->model;
+      if (model.observation_dim() != dynamics_->model->state_dim())
+        throw py::value_error("task_value: the reward model reads " +
+                              std::to_string(model.observation_dim()) +
+                              "-D observations, the dynamics model maps " +
+                              std::to_string(dynamics_->model->state_dim()) + "-D states");
+      task_value_ = task_value;
+      value_ = std::make_unique<policy::AirlActionValue>(
+          model, model.observation_features, std::max(options.num_samples, options.num_probes));
+      shield_->SetActionValue(value_.get());
+    }
   }
 
   shield::Decision Decide(py::handle state, py::handle mu, py::handle sigma) {
@@ -180,6 +196,8 @@ class Shield {
   std::shared_ptr<Barrier> barrier_;
   std::shared_ptr<Dynamics> dynamics_;
   std::unique_ptr<cbf::Barrier> evaluator_;
+  std::shared_ptr<AirlReward> task_value_;
+  std::unique_ptr<policy::AirlActionValue> value_;
   std::unique_ptr<shield::Shield> shield_;
   std::mutex mutex_;
 };
@@ -240,14 +258,16 @@ The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the o
 fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
 class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
 sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
-'qmc')). The shield keeps the barrier (with
-its own evaluator) and the dynamics model alive.)doc")
+'qmc'), top_q_fraction=0.3). aggregation='top-q' ranks the safe samples by a task value:
+task_value=secure.AirlReward (AIRL's Q = g(s) + gamma V(T(s, a)), on the dynamics model's states,
+which must be the reward model's observations). The shield keeps the barrier (with
+its own evaluator), the dynamics model and the task value alive.)doc")
       .def(py::init([](std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
-                       py::kwargs options) {
+                       std::shared_ptr<AirlReward> task_value, py::kwargs options) {
              return std::make_shared<Shield>(std::move(barrier), std::move(dynamics),
-                                             ShieldOptionsFrom(options));
+                                             ShieldOptionsFrom(options), std::move(task_value));
            }),
-           py::arg("barrier"), py::arg("dynamics"))
+           py::arg("barrier"), py::arg("dynamics"), py::kw_only(), py::arg("task_value") = nullptr)
       .def("decide", &Shield::Decide, py::arg("state"), py::arg("mu"), py::arg("sigma"), R"doc(
 One shielded decision for the policy's Gaussian N(mu, diag(sigma^2)) at `state`: a Decision
 (action, status, g, h, iterations, ...). Bad numbers (NaN) give status 'invalid_input'; wrong

@@ -125,3 +125,36 @@ def test_run_episodes_equals_a_python_loop(demos, tiny_barrier, shielded):
     assert theirs["episodes"] == 3
     for key, value in ours.items():
         assert theirs[key] == value, key
+
+
+def test_top_q_shield_with_airls_reward(demos, tiny_barrier, tmp_path):
+    """aggregation='top-q': AIRL's reward model as the task value, in a Shield and in
+    run_episodes (the same decisions), Q = g(s) + gamma V(s+), and the reward model's file."""
+    _, barrier, _ = tiny_barrier
+    env = secure.make_env("double-integrator", task={"max_steps": 20})
+    policy, _, reward = secure.train_airl(
+        demos, env, iterations=2, steps_per_iteration=40, minibatch_size=20,
+        discriminator_updates=2, policy_hidden=[8], value_hidden=[8], reward_hidden=[8],
+        shaping_hidden=[8], seed=1, with_reward=True)
+    assert isinstance(reward, secure.AirlReward)
+    assert reward.discount == pytest.approx(0.99)
+    assert reward.observation_features == env.observation_features
+    path = str(tmp_path / "airl_reward.model")
+    reward.save(path)
+    again = secure.AirlReward.load(path)
+    state = np.array([1.0, 2.0, 0.1, -0.2], dtype=np.float32)
+    nxt = np.array([[1.0, 2.0, 0.1, -0.2], [1.5, 2.5, 0.3, 0.0]], dtype=np.float32)
+    q = reward.q(state, nxt)
+    assert q.shape == (2,) and np.isfinite(q).all()
+    assert np.array_equal(q, again.q(state, nxt))
+
+    with pytest.raises(ValueError, match="needs task_value"):
+        secure.Shield(barrier, env.dynamics, aggregation="top-q")
+    with pytest.raises(ValueError, match="only with aggregation='top-q'"):
+        secure.Shield(barrier, env.dynamics, task_value=reward)
+    shield = secure.Shield(barrier, env.dynamics, aggregation="top-q", task_value=reward)
+    ours = python_episodes(env, policy, shield, 3, seed=4)
+    theirs = secure.run_episodes(env, policy, barrier, episodes=3, seed=4, aggregation="top-q",
+                                 task_value=again)
+    for key, value in ours.items():
+        assert theirs[key] == value, key
