@@ -200,6 +200,10 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
                         "aggregation top-q: the fraction of the safe samples averaged")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(top_q_fraction));
+  track(cmd->add_option("--lookahead-steps", so->lookahead_steps,
+                        "H: the CBF condition H control periods ahead, the action held")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(lookahead_steps));
   track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(resampling));
   track(cmd->add_option("--sampler", sampler,

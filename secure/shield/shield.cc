@@ -68,6 +68,8 @@ void ShieldOptions::Validate() const {
                      "time_budget_us", time_budget_us, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(top_q_fraction) && top_q_fraction > 0 && top_q_fraction <= 1,
                      "ShieldOptions", "top_q_fraction", top_q_fraction, "in (0, 1]");
+  SECURE_CHECK_FIELD(lookahead_steps >= 1 && lookahead_steps <= kMaxLookaheadSteps, "ShieldOptions",
+                     "lookahead_steps", lookahead_steps, "in [1, " << kMaxLookaheadSteps << "]");
 }
 
 void ShieldOptions::Validate(int action_dim) const {
@@ -97,6 +99,7 @@ nlohmann::json ShieldOptions::ToJson() const {
   // Only where it acts, so that the options of every other shield keep their identity (run
   // directories compare them).
   if (aggregation == Aggregation::kTopQ) json["top_q_fraction"] = top_q_fraction;
+  if (lookahead_steps != 1) json["lookahead_steps"] = lookahead_steps;
   return json;
 }
 
@@ -117,6 +120,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("seed", &seed)
       .Enum("sampler", &sampler, kSamplerNames)
       .Field("top_q_fraction", &top_q_fraction)
+      .Field("lookahead_steps", &lookahead_steps)
       .Apply(node, source);
 }
 
@@ -175,6 +179,7 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
   h_one_.resize(1);
   d_sigma_.resize(action_dim_);
   q_.resize(m);
+  step_scratch_.resize(state_dim_, 1);
   order_.resize(static_cast<std::size_t>(m));
   if (options_.sampler == Sampler::kQmc) {
     // Point 0 is the origin (Boost's engine skips it), points 1 .. M - 1 follow: for M = 2^k the
@@ -212,12 +217,28 @@ void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
                "Shield::EvaluateG: g has " << g.size() << " entries for " << k << " actions");
   auto next = next_states_.leftCols(k);
   dynamics_.Step(state, actions, next);
+  // lookahead_steps > 1: the action held for H periods, T^H(s, a), one model step per sample
+  // and period (each sample's state differs from the second step on).
+  for (int step = 1; step < options_.lookahead_steps; ++step) {
+    for (Eigen::Index i = 0; i < k; ++i) {
+      dynamics_.Step(next.col(i), actions.col(i), step_scratch_);
+      next.col(i) = step_scratch_.col(0);
+    }
+  }
   barrier_.Evaluate(next, h_next_.head(k));
-  // g(a) = (h(T(s, a)) - h(s)) / dt + alpha(h(s)); a NaN h(T(s, a)) gives a NaN g, never safe.
-  const double alpha = ClassKValue(options_, h_state);
   const double inv_dt = 1.0 / options_.dt;
-  for (Eigen::Index i = 0; i < k; ++i)
-    g[i] = (static_cast<double>(h_next_[i]) - h_state) * inv_dt + alpha;
+  if (options_.lookahead_steps == 1) {
+    // g(a) = (h(T(s, a)) - h(s)) / dt + alpha(h(s)); a NaN h(T(s, a)) gives a NaN g, never safe.
+    const double alpha = ClassKValue(options_, h_state);
+    for (Eigen::Index i = 0; i < k; ++i)
+      g[i] = (static_cast<double>(h_next_[i]) - h_state) * inv_dt + alpha;
+    return;
+  }
+  // g_H(a) = (h(T^H(s, a)) - b_H) / dt with b_{j+1} = b_j - dt alpha(b_j), b_0 = h(s).
+  double bound = h_state;
+  for (int step = 0; step < options_.lookahead_steps; ++step)
+    bound -= options_.dt * ClassKValue(options_, bound);
+  for (Eigen::Index i = 0; i < k; ++i) g[i] = (static_cast<double>(h_next_[i]) - bound) * inv_dt;
 }
 
 void Shield::DrawRound() {

@@ -122,6 +122,9 @@ double QmcUniform(std::uint64_t word);
 double QmcNormal(std::uint64_t word);
 }  // namespace detail
 
+/// The largest ShieldOptions::lookahead_steps.
+inline constexpr int kMaxLookaheadSteps = 100;
+
 struct ShieldOptions {
   int num_samples = 64;     // M: actions drawn per iteration
   double safe_ratio = 0.1;  // rho0: resample while #safe / M <= rho0
@@ -140,6 +143,12 @@ struct ShieldOptions {
   Sampler sampler = Sampler::kIid;  // how each round's M actions are drawn
   double top_q_fraction = 0.3;      // aggregation = top-q: the fraction of the safe samples
                                     // averaged, those of highest Q (the authors' code: 30 %)
+  // H: the CBF condition looks H control periods ahead with the action held,
+  //   g_H(a) = (h(T^H(s, a)) - b_H) / dt,   b_0 = h(s), b_{j+1} = b_j - dt alpha(b_j),
+  // the discrete condition h(s_{t+1}) >= h(s_t) - dt alpha(h(s_t)) iterated H times (H = 1 is
+  // g(a) exactly). A danger that approaches fast (a moving person) is then seen H - 1 periods
+  // earlier, at the price of H model steps per sample (docs/SHIELD.md).
+  int lookahead_steps = 1;
 
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
@@ -244,7 +253,8 @@ class Shield {
                          const Eigen::Ref<const Eigen::VectorXf>& sigma);
 
   /// g for each column of `actions` (action_dim x K, K <= max(M, N)) at `state`, using h(s) =
-  /// `h_state`: the same computation Decide() uses, exposed for tests and tools.
+  /// `h_state` (g_H with lookahead_steps = H > 1): the same computation Decide() uses, exposed
+  /// for tests and tools.
   void EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
                  const Eigen::Ref<const Eigen::MatrixXf>& actions, Eigen::Ref<Eigen::VectorXd> g);
 
@@ -300,6 +310,7 @@ class Shield {
   Eigen::VectorXf h_one_;         // (1)
   Eigen::VectorXf d_sigma_;       // (action_dim)
   Eigen::VectorXd q_;             // (M) aggregation = top-q: Q of the round's samples
+  Eigen::MatrixXf step_scratch_;  // (state_dim x 1) lookahead_steps > 1: one model step
   std::vector<int> order_;        // (M) indices of the samples being aggregated
   // Sampler::kQmc: the first M Sobol points as 64-bit integers, (action_dim x M), column c =
   // point c (built in the constructor; empty for the other samplers).

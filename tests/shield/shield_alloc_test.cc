@@ -322,6 +322,11 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   top_q_far.value = &progress;
   scenarios.push_back(top_q_far);
 
+  Scenario lookahead = resampling;
+  lookahead.name = "lookahead_steps = 3";
+  lookahead.options.lookahead_steps = 3;
+  scenarios.push_back(lookahead);
+
   Scenario policy_draw = none;
   policy_draw.name = "policy-draw aggregation";
   policy_draw.options.aggregation = Aggregation::kPolicyDraw;
