@@ -258,7 +258,7 @@ The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the o
 fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
 class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
 sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
-'qmc'), top_q_fraction=0.3). aggregation='top-q' ranks the safe samples by a task value:
+'qmc'), top_q_fraction=0.3, lookahead_steps=1). aggregation='top-q' ranks the safe samples by a task value:
 task_value=secure.AirlReward (AIRL's Q = g(s) + gamma V(T(s, a)), on the dynamics model's states,
 which must be the reward model's observations). The shield keeps the barrier (with
 its own evaluator), the dynamics model and the task value alive.)doc")

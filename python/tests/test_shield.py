@@ -223,3 +223,20 @@ def test_shield_sampler_default_is_iid(tiny_barrier):
     _, barrier, _ = tiny_barrier
     model = secure.Dynamics.builtin("double-integrator")
     assert secure.Shield(barrier, model).options["sampler"] == "iid"
+
+
+def test_shield_lookahead_option(tiny_barrier):
+    """lookahead_steps=H holds each action H periods: g_H = (h(T^H(s, a)) - b_H) / dt."""
+    _, barrier, _ = tiny_barrier
+    model = secure.Dynamics.builtin("double-integrator")
+    one = secure.Shield(barrier, model, num_samples=16)
+    two = secure.Shield(barrier, model, num_samples=16, lookahead_steps=2)
+    assert "lookahead_steps" not in one.options and two.options["lookahead_steps"] == 2
+    state = np.array([1, 1, 0.2, 0.1], dtype=np.float32)
+    actions = np.array([[0.5, -0.2], [1.0, 1.0]], dtype=np.float32)
+    h0 = one.evaluate_h(state)
+    two_steps = model.step(model.step(state, actions[:1])[0], actions[:1])[0]
+    expected = (barrier.h(two_steps[None])[0] - 0.9 * 0.9 * h0) / 0.1
+    assert two.evaluate_g(state, actions)[0] == pytest.approx(expected, rel=1e-4, abs=1e-4)
+    with pytest.raises(ValueError, match="lookahead_steps = 0"):
+        secure.Shield(barrier, model, lookahead_steps=0)
