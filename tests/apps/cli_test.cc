@@ -302,6 +302,15 @@ TEST(CliTest, ShippedConfigsLoadAndTheDoubleIntegratorOneIsThePreset) {
   EXPECT_EQ(khz.exit_code, 1);
   EXPECT_HAS(khz.err, "none.model");
   EXPECT_EQ(khz.err.find("panda_push_1khz.yaml"), std::string::npos) << khz.err;
+
+  // The checked kitchen setting turns the closed-loop check on: with methods it cannot check,
+  // the run stops before any work, naming the rule (so the file was read, section and keys).
+  const Result kitchen = RunCli(
+      "experiment method-comparison --domain kitchen-cutting --methods bc "
+      "--config " +
+      std::string(SECURE_SOURCE_DIR) + "/configs/kitchen_cutting_checked.yaml");
+  EXPECT_EQ(kitchen.exit_code, 1);
+  EXPECT_HAS(kitchen.err, "closed_loop.enabled checks SECURE");
 }
 
 TEST(CliTest, ShieldRunKeepsTheDoubleIntegratorOutOfTheObstacle) {
