@@ -7,30 +7,12 @@
 #include "secure/common/strings.h"
 #include "secure/data/data.h"
 #include "secure/nn/model_file.h"
+#include "secure/policy/internal/feature_names.h"
 
 namespace secure::policy {
-namespace {
 
-std::vector<std::string> StringList(const nlohmann::json& metadata, const std::string& field,
-                                    const std::string& path) {
-  SECURE_CHECK(metadata.contains(field) && metadata[field].is_array(),
-               path << ": metadata field '" << field << "' is missing or not a list");
-  std::vector<std::string> out;
-  for (const auto& item : metadata[field]) {
-    SECURE_CHECK(item.is_string(),
-                 path << ": metadata field '" << field << "' holds a non-string: " << item.dump());
-    out.push_back(item.get<std::string>());
-  }
-  return out;
-}
-
-// The row of `name` in `features`, or -1.
-int RowOf(const std::vector<std::string>& features, const std::string& name) {
-  const auto it = std::find(features.begin(), features.end(), name);
-  return it == features.end() ? -1 : static_cast<int>(it - features.begin());
-}
-
-}  // namespace
+using internal::RowOf;
+using internal::StringList;
 
 void GaussianPolicy::Validate(const std::string& what) const {
   mean.Validate(what);
