@@ -156,7 +156,9 @@ TEST(ShieldTopQTest, AnUnsafeMeanFallsBackToTheNearestSampleOfTheTopSet) {
       int nearest = safe.front();
       for (int i : safe)
         if (std::abs(samples(0, i) - mean) < std::abs(samples(0, nearest) - mean)) nearest = i;
-      EXPECT_EQ(d.action[0], samples(0, nearest));
+      // FirstRound re-derives the draws in this file's own code (its float arithmetic may be
+      // contracted differently from the shield's): equal to within float rounding.
+      EXPECT_NEAR(d.action[0], samples(0, nearest), 1e-6f);
     }
   }
   EXPECT_GT(fallbacks, 0);
