@@ -12,19 +12,16 @@
 #include "cli_common.h"
 #include "commands.h"
 #include "eval_models.h"
-#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/progress.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
-#include "domains/double_integrator/expert.h"
-#include "domains/double_integrator/reach_avoid.h"
 #include "secure/eval/policy_eval.h"
-#include "secure/cbf/car_barrier.h"
 #include "secure/experiments/experiment.h"
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_threads.h"
@@ -34,20 +31,19 @@
 namespace secure::cli {
 namespace {
 
-namespace di = domains::double_integrator;
-
 // Safe-state augmentation: slowed copies per state (each multiplies the safe set).
 constexpr long kMaxSlowedCopies = 100;
 
 // ------------------------------------------------------------------------------------------
 struct DemosGenerateCommand {
   std::string domain, out;
-  // The data flags, defaults of the double integrator's full profile; each given flag becomes
-  // one of the domain's own options (a domain without it rejects it by name).
-  di::DemonstrationOptions demos;
-  di::NearDangerousOptions near_dangerous;
-  long safe_states = 20000;
-  int slowed_copies = 1;
+  // The data flags. Each given flag becomes one of the domain's own option keys (the table in
+  // docs/ADDING_A_DOMAIN.md, "The data flags"); a domain without that key rejects it by name.
+  // Flags not given leave the domain's values.
+  long episodes = 0, safe_states = 0, near_dangerous_count = 0;
+  int slowed_copies = 0;
+  double rho_min = 0, rho_max = 0;
+  bool stop_at_goal = false;
   std::uint64_t seed = 1000;
   bool json = false;
   CLI::Option *episodes_flag = nullptr, *safe_flag = nullptr, *slowed_flag = nullptr,
@@ -63,26 +59,30 @@ struct DemosGenerateCommand {
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
     cmd->add_option("--out", out, "output directory")->required();
-    episodes_flag = cmd->add_option("--episodes", demos.episodes,
-                                    "expert episodes to keep, at most " +
-                                        std::to_string(kMaxEpisodes) + " (default: the domain's)");
+    episodes_flag =
+        cmd->add_option("--episodes", episodes,
+                        "expert episodes to keep, at most " + std::to_string(kMaxEpisodes) +
+                            " (key demonstrations.episodes; default: the domain's)");
     safe_flag = cmd->add_option("--safe-states", safe_states,
-                                "demonstration states kept as safe states, at random (default: "
-                                "the domain's)");
+                                "demonstration states kept as safe states, at random (key "
+                                "safe_states; default: the domain's)");
     slowed_flag = cmd->add_option(
         "--slowed-copies", slowed_copies,
-        "double-integrator: safe-state augmentation, copies of each safe state with its velocity "
-        "scaled by U[0, 1)");
-    nd_flag = cmd->add_option("--near-dangerous", near_dangerous.count,
-                              "near-dangerous states (default: the domain's)");
-    rho_min_flag = cmd->add_option("--rho-min", near_dangerous.rho_min,
-                                   "double-integrator: near-dangerous band from this distance to "
-                                   "the obstacle's edge (negative: inside)");
-    rho_max_flag = cmd->add_option("--rho-max", near_dangerous.rho_max,
-                                   "double-integrator: near-dangerous band to this distance");
-    stop_flag = cmd->add_flag("--stop-at-goal", demos.stop_at_goal,
-                              "double-integrator: end each demonstration at the goal (default: "
-                              "run the full horizon)");
+        "safe-state augmentation, copies of each safe state with its velocity scaled by U[0, 1) "
+        "(key slowed_copies; double-integrator)");
+    nd_flag = cmd->add_option("--near-dangerous", near_dangerous_count,
+                              "near-dangerous states (key near_dangerous.count; default: the "
+                              "domain's)");
+    rho_min_flag = cmd->add_option("--rho-min", rho_min,
+                                   "near-dangerous band from this distance to the obstacle's edge, "
+                                   "negative: inside (key near_dangerous.rho_min; "
+                                   "double-integrator)");
+    rho_max_flag = cmd->add_option("--rho-max", rho_max,
+                                   "near-dangerous band to this distance (key "
+                                   "near_dangerous.rho_max; double-integrator)");
+    stop_flag = cmd->add_flag("--stop-at-goal", stop_at_goal,
+                              "end each demonstration at the goal, not after the full horizon "
+                              "(key demonstrations.stop_at_goal; double-integrator)");
     AddSeedOption(cmd, "--seed", &seed, "seed of all the data");
     cmd->add_flag("--json", json, "print counts as JSON");
     cmd->callback([this] { Run(); });
@@ -93,10 +93,10 @@ struct DemosGenerateCommand {
         experiments::DomainRegistry::Global().Make(domain);
     YAML::Node options;
     if (episodes_flag->count() > 0) {
-      CheckRange("--episodes", demos.episodes, 1, kMaxEpisodes);
-      options["demonstrations"]["episodes"] = demos.episodes;
+      CheckRange("--episodes", episodes, 1, kMaxEpisodes);
+      options["demonstrations"]["episodes"] = episodes;
     }
-    if (stop_flag->count() > 0) options["demonstrations"]["stop_at_goal"] = demos.stop_at_goal;
+    if (stop_flag->count() > 0) options["demonstrations"]["stop_at_goal"] = stop_at_goal;
     if (safe_flag->count() > 0) {
       CheckRange("--safe-states", safe_states, 1, kMaxStates);
       options["safe_states"] = safe_states;
@@ -106,11 +106,11 @@ struct DemosGenerateCommand {
       options["slowed_copies"] = slowed_copies;
     }
     if (nd_flag->count() > 0) {
-      CheckRange("--near-dangerous", near_dangerous.count, 1, kMaxStates);
-      options["near_dangerous"]["count"] = near_dangerous.count;
+      CheckRange("--near-dangerous", near_dangerous_count, 1, kMaxStates);
+      options["near_dangerous"]["count"] = near_dangerous_count;
     }
-    if (rho_min_flag->count() > 0) options["near_dangerous"]["rho_min"] = near_dangerous.rho_min;
-    if (rho_max_flag->count() > 0) options["near_dangerous"]["rho_max"] = near_dangerous.rho_max;
+    if (rho_min_flag->count() > 0) options["near_dangerous"]["rho_min"] = rho_min;
+    if (rho_max_flag->count() > 0) options["near_dangerous"]["rho_max"] = rho_max;
     if (options.size() > 0) d->ApplyYaml(options, "demos generate flags");
     d->Validate();
     // Before the work: an unusable --out (a file, a read-only place) fails at once.

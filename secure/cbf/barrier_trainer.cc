@@ -11,23 +11,11 @@
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
+#include "secure/nn/torch_threads.h"
 #include "secure/nn/training_loop.h"
 
 namespace secure::cbf {
 namespace {
-
-// Restores LibTorch's global intra-op thread count on scope exit.
-class TorchThreadsGuard {
- public:
-  explicit TorchThreadsGuard(int threads) : previous_(torch::get_num_threads()) {
-    torch::set_num_threads(threads);
-  }
-  ~TorchThreadsGuard() { torch::set_num_threads(previous_); }
-
- private:
-  int previous_;
-};
-
 
 // Labelled, weighted, normalised samples as tensors: x (N x d), y (N) in {+1, -1}, w (N),
 // margin (N).
@@ -121,7 +109,7 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   data::CheckNonEmptyFinite(safe, "safe states");
   data::CheckNonEmptyFinite(near_dangerous, "near-dangerous states");
   const Stopwatch clock;
-  TorchThreadsGuard threads(options.threads);
+  const nn::ScopedTorchThreads threads(options.threads);
   Rng rng(options.seed);
 
   const auto [safe_split, nd_split] = data::SplitTwoClassesForValidation(

@@ -23,18 +23,6 @@
 namespace secure::cbf {
 namespace {
 
-// Restores the calling thread's LibTorch (and OpenBLAS) thread count on scope exit.
-class TorchThreadsGuard {
- public:
-  explicit TorchThreadsGuard(int threads) : previous_(nn::TorchThreads()) {
-    nn::SetTorchThreads(threads);
-  }
-  ~TorchThreadsGuard() { nn::SetTorchThreads(previous_); }
-
- private:
-  int previous_;
-};
-
 std::string Describe(const data::StateSet& set, const std::string& what) {
   return set.source.empty() ? what : what + " (" + set.source + ")";
 }
@@ -453,7 +441,7 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
                Describe(safe, "safe states") << " and " << Describe(near_dangerous, "near-dangerous states")
                                              << " have different feature names");
   const Stopwatch clock;
-  TorchThreadsGuard threads(options.threads);
+  const nn::ScopedTorchThreads threads(options.threads);
   Rng rng(options.seed);
 
   const auto [safe_split, nd_split] = data::SplitTwoClassesForValidation(

@@ -117,19 +117,51 @@ Eigen::MatrixXf ToEigen(const torch::Tensor& tensor) {
   return Eigen::Map<const Eigen::MatrixXf>(t.data_ptr<float>(), t.size(1), t.size(0));
 }
 
+namespace {
+
+// OpenBLAS's thread-count functions, found at run time, so that the reference BLAS (no such
+// symbols) still works; null without OpenBLAS.
+using SetBlasThreadsFn = void (*)(int);
+using GetBlasThreadsFn = int (*)();
+SetBlasThreadsFn SetBlasThreadsSymbol() {
+  static const auto fn =
+      reinterpret_cast<SetBlasThreadsFn>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+  return fn;
+}
+GetBlasThreadsFn GetBlasThreadsSymbol() {
+  static const auto fn =
+      reinterpret_cast<GetBlasThreadsFn>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+  return fn;
+}
+
+}  // namespace
+
 void SetTorchThreads(int threads) {
   SECURE_CHECK(threads > 0, "SetTorchThreads: threads = " << threads << ", must be > 0");
   torch::set_num_threads(threads);
   // LibTorch's CPU matrix products go to the system BLAS, which keeps its own thread pool:
   // torch::set_num_threads does not limit it, and two trainers on two threads would each start
-  // a BLAS pool per call and fight over the cores (measured: 10-20x slower). OpenBLAS is found
-  // at run time, so that the reference BLAS (no such symbol) still works.
-  using SetBlasThreads = void (*)(int);
-  static const auto set_blas_threads =
-      reinterpret_cast<SetBlasThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
-  if (set_blas_threads != nullptr) set_blas_threads(threads);
+  // a BLAS pool per call and fight over the cores (measured: 10-20x slower).
+  if (const SetBlasThreadsFn set = SetBlasThreadsSymbol()) set(threads);
 }
 
 int TorchThreads() { return torch::get_num_threads(); }
+
+int BlasThreads() {
+  const GetBlasThreadsFn get = GetBlasThreadsSymbol();
+  return get != nullptr ? get() : 0;
+}
+
+ScopedTorchThreads::ScopedTorchThreads(int threads)
+    : previous_torch_(TorchThreads()), previous_blas_(BlasThreads()) {
+  SetTorchThreads(threads);
+}
+
+ScopedTorchThreads::~ScopedTorchThreads() {
+  torch::set_num_threads(previous_torch_);
+  if (previous_blas_ > 0) {
+    if (const SetBlasThreadsFn set = SetBlasThreadsSymbol()) set(previous_blas_);
+  }
+}
 
 }  // namespace secure::nn

@@ -9,5 +9,21 @@ namespace secure::nn {
 void SetTorchThreads(int threads);
 /// The current intra-op thread count of the calling thread.
 int TorchThreads();
+/// OpenBLAS's current thread count, or 0 when OpenBLAS is not the BLAS in use.
+int BlasThreads();
+
+/// Sets LibTorch's and OpenBLAS's thread counts for a scope (SetTorchThreads) and restores
+/// both previous counts on exit. The one guard of the trainers that take a `threads` option.
+class ScopedTorchThreads {
+ public:
+  explicit ScopedTorchThreads(int threads);
+  ~ScopedTorchThreads();
+  ScopedTorchThreads(const ScopedTorchThreads&) = delete;
+  ScopedTorchThreads& operator=(const ScopedTorchThreads&) = delete;
+
+ private:
+  int previous_torch_;
+  int previous_blas_;  // 0: no OpenBLAS, nothing to restore
+};
 
 }  // namespace secure::nn

@@ -4,9 +4,10 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
-#include "secure/common/error.h"
 #include "secure/common/atomic_file.h"
+#include "secure/common/error.h"
 #include "secure/common/rng.h"
+#include "secure/nn/torch_threads.h"
 
 namespace secure::cbf {
 namespace {
@@ -52,6 +53,28 @@ TEST(BarrierTrainerTest, LearnsASeparableProblem) {
   EXPECT_GE(test.safe, 0.95);
   EXPECT_GE(test.near_dangerous, 0.95);
   EXPECT_EQ(net.features, (std::vector<std::string>{"px", "py"}));
+}
+
+// `threads` reaches both LibTorch and OpenBLAS while training, and both counts are the caller's
+// again afterwards (the trainer once set LibTorch's count only).
+TEST(BarrierTrainerTest, ThreadsOptionHoldsForTrainingAndIsRestored) {
+  ASSERT_GT(nn::BlasThreads(), 0) << "this build's BLAS is not OpenBLAS (scripts/setup.sh)";
+  nn::SetTorchThreads(2);
+  BarrierTrainerOptions options = Fast();
+  options.threads = 1;
+  int torch_inside = -1, blas_inside = -1;
+  BarrierTrainingSummary summary;
+  TrainBarrier(options, Disk(false, 100, 1), Disk(true, 100, 2), &summary,
+               [&](int, double, double) {
+                 torch_inside = nn::TorchThreads();
+                 blas_inside = nn::BlasThreads();
+                 return true;
+               });
+  EXPECT_EQ(torch_inside, 1);
+  EXPECT_EQ(blas_inside, 1);
+  EXPECT_EQ(nn::TorchThreads(), 2);
+  EXPECT_EQ(nn::BlasThreads(), 2);
+  nn::SetTorchThreads(1);
 }
 
 TEST(BarrierTrainerTest, SummaryCountsAndProvenance) {

@@ -14,6 +14,7 @@
 #include "secure/common/rng.h"
 #include "secure/nn/inference_mlp.h"
 #include "secure/nn/mlp.h"
+#include "secure/nn/torch_threads.h"
 
 namespace secure::nn {
 namespace {
@@ -366,3 +367,17 @@ TEST(TorchConversionTest, ToEigenRejectsNon2DTensors) {
 
 }  // namespace
 }  // namespace secure::nn
+
+// ScopedTorchThreads sets both pools for its scope and puts both previous counts back.
+TEST(ScopedTorchThreadsTest, SetsAndRestoresLibTorchsAndOpenBlassCounts) {
+  ASSERT_GT(secure::nn::BlasThreads(), 0) << "this build's BLAS is not OpenBLAS (scripts/setup.sh)";
+  secure::nn::SetTorchThreads(2);
+  {
+    const secure::nn::ScopedTorchThreads scoped(1);
+    EXPECT_EQ(secure::nn::TorchThreads(), 1);
+    EXPECT_EQ(secure::nn::BlasThreads(), 1);
+  }
+  EXPECT_EQ(secure::nn::TorchThreads(), 2);
+  EXPECT_EQ(secure::nn::BlasThreads(), 2);
+  secure::nn::SetTorchThreads(1);
+}
