@@ -193,7 +193,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(class_k_gain));
   track(cmd->add_option("--aggregation", aggregation,
-                        "mean | random-safe | policy-draw | top-q (AIRL's task value)")
+                        "mean | random-safe | policy-draw | top-q (AIRL's task value) | policy-mean")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(aggregation));
   track(cmd->add_option("--top-q-fraction", so->top_q_fraction,

@@ -456,8 +456,28 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
         return decision_;
       }
     }
+    if (iteration == 1 && options_.aggregation == Aggregation::kPolicyMean) {
+      // The policy's mean alone first (after the round's draws, so that the random stream is
+      // the same as kMean's): if it is safe it is the decision. Otherwise the round is scored as
+      // for kMean, and the decision counts as an intervention (the policy's action was unsafe).
+      one_action_.col(0) = mu;
+      EvaluateG(state, h_state, one_action_, one_g_);
+      if (one_g_[0] >= 0.0) {
+        decision_.safe_ratio = 1.0;
+        decision_.action = mu;
+        decision_.g = one_g_[0];
+        decision_.status = Status::kSafe;
+        decision_.distance_to_mean = 0.0;
+        decision_.seconds = clock.Seconds();
+        return decision_;
+      }
+    }
     num_safe = ScoreRound(state, h_state);
-    if (iteration == 1) decision_.intervened = !(g_[0] >= 0.0);  // the policy's own draw
+    if (iteration == 1) {
+      // The policy's own action: its draw (round 1's first sample), or its mean for kPolicyMean.
+      decision_.intervened =
+          options_.aggregation == Aggregation::kPolicyMean || !(g_[0] >= 0.0);
+    }
     decision_.safe_ratio = static_cast<double>(num_safe) / m;
     if (decision_.safe_ratio > options_.safe_ratio) {
       enough = true;

@@ -75,12 +75,19 @@ enum class Aggregation {
   // nearest that mean. The mean of all safe samples follows the safe set's centre; this one
   // follows the side of it that makes progress on the task.
   kTopQ,
+  // Not in the paper: the policy's mean mu itself when g(mu) >= 0, else as kMean (same draws,
+  // same resampling). The minimally invasive filter (a CBF-QP also returns mu when mu satisfies
+  // the condition): the shield changes the policy's action only where it is unsafe, and never
+  // moves a safe mean toward the centre of the safe samples. Such a decision costs two barrier
+  // evaluations, h(s) and h(T(s, mu)) (docs/SHIELD.md).
+  kPolicyMean,
 };
-inline constexpr EnumTable<Aggregation, 4> kAggregationNames{{
+inline constexpr EnumTable<Aggregation, 5> kAggregationNames{{
     {Aggregation::kMean, "mean"},
     {Aggregation::kRandomSafe, "random-safe"},
     {Aggregation::kPolicyDraw, "policy-draw"},
     {Aggregation::kTopQ, "top-q"},
+    {Aggregation::kPolicyMean, "policy-mean"},
 }};
 
 /// What happens while too few samples are safe.

@@ -332,6 +332,15 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   policy_draw.options.aggregation = Aggregation::kPolicyDraw;
   scenarios.push_back(policy_draw);
 
+  Scenario policy_mean = resampling;  // an unsafe mean: Algorithm 1 after the mean's check
+  policy_mean.name = "policy-mean aggregation, unsafe mean";
+  policy_mean.options.aggregation = Aggregation::kPolicyMean;
+  scenarios.push_back(policy_mean);
+  Scenario policy_mean_safe = none;  // a safe mean: returned after one evaluation
+  policy_mean_safe.name = "policy-mean aggregation, safe mean";
+  policy_mean_safe.options.aggregation = Aggregation::kPolicyMean;
+  scenarios.push_back(policy_mean_safe);
+
   Scenario no_resampling = resampling;
   no_resampling.name = "resampling = none";
   no_resampling.options.resampling = Resampling::kNone;

@@ -132,8 +132,8 @@ ShieldOptions RandomOptions() {
   o.safe_ratio = *UniformIn(0.0, 0.5);
   o.class_k = *rc::gen::element(ClassK::kLinear, ClassK::kCubic);
   o.class_k_gain = *UniformIn(0.10005, 5.0);
-  o.aggregation =
-      *rc::gen::element(Aggregation::kMean, Aggregation::kRandomSafe, Aggregation::kPolicyDraw);
+  o.aggregation = *rc::gen::element(Aggregation::kMean, Aggregation::kRandomSafe,
+                                    Aggregation::kPolicyDraw, Aggregation::kPolicyMean);
   o.resampling = *rc::gen::element(Resampling::kAdaptive, Resampling::kNone);
   o.max_iterations = *rc::gen::resize(100, rc::gen::inRange(1, 11));
   o.seed = *rc::gen::arbitrary<std::uint64_t>();

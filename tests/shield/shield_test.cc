@@ -96,6 +96,19 @@ struct HalfLine {
                           [](const Eigen::Ref<const Eigen::VectorXf>& s) { return 1.0 - s[0]; }};
 };
 
+/// HalfLine with a count of the barrier's evaluations (not copyable: the barrier refers to it).
+struct CountedHalfLine {
+  CountedHalfLine() = default;
+  CountedHalfLine(const CountedHalfLine&) = delete;
+  CountedHalfLine& operator=(const CountedHalfLine&) = delete;
+  long evaluated = 0;
+  IntegratorDynamics dynamics{1, 0.1};
+  FunctionBarrier barrier{1, "1 - x, counted", [this](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            ++evaluated;
+                            return 1.0 - s[0];
+                          }};
+};
+
 /// 1-D: x' = x + 0.1 a, h(x) = x^2 - 1 at x = 0, dt = 0.1, alpha = 0.1 h:
 /// g(a) = 0.1 (a^2 - 1), safe iff |a| >= 1 (two disjoint intervals).
 struct TwoIntervals {
@@ -695,12 +708,8 @@ TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
 
 TEST(ShieldTest, PolicyDrawEvaluatesOnlyTheDrawWhenItIsSafe) {
   // x' = x + 0.1 a, h = 1 - x at x = 0 with k = 1: the draw a0 ~ N(0, 1) is safe iff a0 <= 1.
-  long evaluated = 0;
-  IntegratorDynamics dynamics{1, 0.1};
-  FunctionBarrier barrier{1, "1 - x, counted", [&](const Eigen::Ref<const Eigen::VectorXf>& s) {
-                            ++evaluated;
-                            return 1.0 - s[0];
-                          }};
+  CountedHalfLine sys;
+  long& evaluated = sys.evaluated;
   const Eigen::VectorXf state = Vec({0.0f}), mu = Vec({0.0f}), sigma = Vec({1.0f});
   int safe_draws = 0, unsafe_draws = 0;
   for (std::uint64_t seed = 0; seed < 20; ++seed) {
@@ -708,7 +717,7 @@ TEST(ShieldTest, PolicyDrawEvaluatesOnlyTheDrawWhenItIsSafe) {
     ShieldOptions options;
     options.seed = seed;
     options.aggregation = Aggregation::kPolicyDraw;
-    Shield shield(options, barrier, dynamics);
+    Shield shield(options, sys.barrier, sys.dynamics);
     evaluated = 0;
     const Decision d = shield.Decide(state, mu, sigma);
     Rng rng(seed);
@@ -726,6 +735,76 @@ TEST(ShieldTest, PolicyDrawEvaluatesOnlyTheDrawWhenItIsSafe) {
   }
   EXPECT_GT(safe_draws, 0);
   EXPECT_GT(unsafe_draws, 0);
+}
+
+TEST(ShieldTest, PolicyMeanAggregationReturnsASafeMeanElseAlgorithm1) {
+  DoubleIntegrator sys;
+  // Near the obstacle, moving towards it: the policy's mean is safe for some means and not for
+  // others (the same state, seeds and draws for every mean).
+  const Eigen::VectorXf state = Vec({5.0f, 7.3f, 0.0f, -0.6f});
+  const Eigen::VectorXf sigma = Vec({3.0f, 3.0f});
+  int safe_means = 0, unsafe_means = 0;
+  for (int k = 0; k <= 12; ++k) {
+    const Eigen::VectorXf mu = Vec({0.0f, -3.0f + 0.5f * static_cast<float>(k)});
+    SCOPED_TRACE("mu " + std::to_string(mu[1]));
+    ShieldOptions options;
+    options.seed = static_cast<std::uint64_t>(k);
+    options.aggregation = Aggregation::kPolicyMean;
+    Shield shield(options, sys.barrier, sys.dynamics);
+    const Decision d = shield.Decide(state, mu, sigma);
+    const double g_mu = IndependentG(sys.independent, sys.dynamics, options, state, mu);
+    // A mean within float rounding of g = 0 could go either way in the shield's own evaluation.
+    if (std::abs(g_mu) < 1e-6) continue;
+    if (g_mu > 0.0) {
+      ++safe_means;
+      EXPECT_TRUE(BitEqual(d.action, mu)) << d.action.transpose();
+      EXPECT_EQ(d.status, Status::kSafe);
+      EXPECT_EQ(d.iterations, 1);
+      EXPECT_FALSE(d.intervened);
+      EXPECT_EQ(d.fallback, Fallback::kNone);
+      EXPECT_EQ(d.distance_to_mean, 0.0);
+      EXPECT_NEAR(d.g, g_mu, 1e-9 * std::max(1.0, std::abs(g_mu)));
+    } else {
+      // An unsafe mean: exactly Algorithm 1's decision (same draws, same seed), and always an
+      // intervention (kMean's `intervened` says whether its first draw was unsafe instead).
+      ++unsafe_means;
+      ShieldOptions mean_options = options;
+      mean_options.aggregation = Aggregation::kMean;
+      Shield mean_shield(mean_options, sys.barrier, sys.dynamics);
+      EXPECT_TRUE(d.intervened);
+      Decision algorithm1 = mean_shield.Decide(state, mu, sigma);
+      algorithm1.intervened = true;
+      ExpectSameDecision(d, algorithm1);
+      EXPECT_GE(d.g, 0.0);
+    }
+  }
+  EXPECT_GT(safe_means, 0);
+  EXPECT_GT(unsafe_means, 0);
+}
+
+TEST(ShieldTest, PolicyMeanEvaluatesOnlyTheMeanWhenItIsSafe) {
+  // x' = x + 0.1 a, h = 1 - x at x = 0 with k = 1: an action is safe iff a <= 1.
+  CountedHalfLine sys;
+  long& evaluated = sys.evaluated;
+  const Eigen::VectorXf state = Vec({0.0f}), sigma = Vec({1.0f});
+  ShieldOptions options;
+  options.aggregation = Aggregation::kPolicyMean;
+  Shield shield(options, sys.barrier, sys.dynamics);
+
+  evaluated = 0;
+  const Decision safe = shield.Decide(state, Vec({0.9f}), sigma);
+  EXPECT_EQ(evaluated, 2);  // h(s) and h(T(s, mu))
+  EXPECT_EQ(safe.action[0], 0.9f);
+  EXPECT_EQ(safe.safe_ratio, 1.0);
+  EXPECT_FALSE(safe.intervened);
+
+  // Unsafe mean: the whole round is scored, and the returned action is safe and not the mean.
+  evaluated = 0;
+  const Decision shielded = shield.Decide(state, Vec({1.5f}), sigma);
+  EXPECT_GE(evaluated, 2 + options.num_samples);
+  EXPECT_LE(shielded.action[0], 1.0f);
+  EXPECT_TRUE(shielded.intervened);
+  EXPECT_NE(shielded.status, Status::kNoSafeAction);
 }
 
 TEST(ShieldTest, RandomSafeWithSameSamplesCanPickDifferentSamples) {
