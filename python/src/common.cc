@@ -189,6 +189,16 @@ std::shared_ptr<Barrier> MakeBarrier(std::string kind,
   return b;
 }
 
+std::unique_ptr<cbf::Barrier> EvaluatorOn(const Barrier& barrier,
+                                          const std::vector<std::string>& state_features) {
+  if (barrier.net == nullptr || barrier.net->features.empty() || state_features.empty() ||
+      barrier.net->features == state_features) {
+    return barrier.factory();
+  }
+  return barrier.net->MakeEvaluatorFor(state_features, "the dynamics model's states",
+                                       "the barrier");
+}
+
 void RegisterCommon(py::module_& m) {
   // secure::Error (bad input, bad option, bad file) becomes ValueError with the library's
   // message; pybind11 maps std::bad_alloc to MemoryError.

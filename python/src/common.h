@@ -91,12 +91,21 @@ struct Barrier {
 std::shared_ptr<Barrier> MakeBarrier(std::string kind,
                                      std::function<std::unique_ptr<cbf::Barrier>()> factory);
 
+/// A fresh evaluator of `barrier` on states whose rows are `state_features` (a domain's
+/// observation): a barrier trained on a subset of them by name (e.g. Panda's 9 of 18) reads its
+/// own rows (BarrierNet::MakeEvaluatorFor). Empty `state_features` (a linear or Python model,
+/// whose rows have no names), or a barrier without feature names: barrier.factory().
+/// @throws secure::Error naming the first feature of the barrier that the states lack.
+std::unique_ptr<cbf::Barrier> EvaluatorOn(const Barrier& barrier,
+                                          const std::vector<std::string>& state_features);
+
 /// A dynamics model T(s, a) with whatever keeps it alive (an environment owns its shield model).
 /// `python`: the model calls back into Python (each Step re-acquires the GIL).
 struct Dynamics {
   std::shared_ptr<const void> owner;
   const domains::DynamicsModel* model = nullptr;
   std::string kind;  // "builtin:<domain>", "linear", "python"
+  std::vector<std::string> state_features;  // the state's rows by name (builtin), else empty
   bool python = false;
   // Held while the model steps (models keep scratch memory: one caller at a time). Shields lock
   // it after their own lock; an environment locks it while it steps (its model may be its own).

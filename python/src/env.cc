@@ -40,6 +40,7 @@ class Env {
     dynamics_->owner = env_;
     dynamics_->model = &env_->ShieldModel();
     dynamics_->kind = "builtin:" + name;
+    dynamics_->state_features = env_->ObservationFeatures();
   }
 
   py::tuple Reset(std::optional<std::uint64_t> seed) {

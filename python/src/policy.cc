@@ -281,7 +281,7 @@ steps_per_iteration, seed, ...). Returns (policy, summary dict), and with with_r
         std::optional<shield::Shield> shield;
         std::optional<policy::AirlActionValue> value;
         if (barrier) {
-          evaluator = barrier->factory();
+          evaluator = EvaluatorOn(*barrier, e->ObservationFeatures());
           shield.emplace(options, *evaluator, e->ShieldModel());
           if (task_value) {
             value.emplace(*task_value->model, e->ObservationFeatures(),

@@ -96,7 +96,8 @@ py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
 
 // ShieldOptions from keyword arguments, read by ShieldOptions::ApplyYaml (the experiment
 // configuration's `shield:` section): the fields by name, enums by their names (class_k: linear |
-// cubic, aggregation: mean | random-safe | policy-draw, resampling: adaptive | none, sampler:
+// cubic, aggregation: mean | random-safe | policy-draw | top-q | policy-mean, resampling:
+// adaptive | none, sampler:
 // iid | antithetic | qmc); an unknown key is an error naming it and listing the valid keys.
 }  // namespace
 
@@ -115,7 +116,9 @@ class Shield {
   Shield(std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
          const shield::ShieldOptions& options, std::shared_ptr<AirlReward> task_value)
       : barrier_(std::move(barrier)), dynamics_(std::move(dynamics)) {
-    evaluator_ = barrier_->factory();  // the shield's own: it owns scratch memory
+    // The shield's own evaluator (it owns scratch memory), reading the barrier's features by
+    // name from the model's states where the model names them.
+    evaluator_ = EvaluatorOn(*barrier_, dynamics_->state_features);
     shield_ = std::make_unique<shield::Shield>(options, *evaluator_, *dynamics_->model);
     const bool top_q = options.aggregation == shield::Aggregation::kTopQ;
     if (top_q != (task_value != nullptr))

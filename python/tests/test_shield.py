@@ -240,3 +240,57 @@ def test_shield_lookahead_option(tiny_barrier):
     assert two.evaluate_g(state, actions)[0] == pytest.approx(expected, rel=1e-4, abs=1e-4)
     with pytest.raises(ValueError, match="lookahead_steps = 0"):
         secure.Shield(barrier, model, lookahead_steps=0)
+
+
+def test_shield_policy_mean_option(tiny_barrier):
+    """aggregation='policy-mean': a safe mean is returned as it is (no intervention); an unsafe
+    one is replaced by a checked action, as by the default aggregation."""
+    _, barrier, _ = tiny_barrier
+    model = secure.Dynamics.builtin("double-integrator")
+    shield = secure.Shield(barrier, model, num_samples=32, aggregation="policy-mean")
+    assert shield.options["aggregation"] == "policy-mean"
+    state = np.array([1, 1, 0, 0], dtype=np.float32)
+    mu = np.array([0.3, -0.2], dtype=np.float32)
+    assert shield.evaluate_g(state, mu[None])[0] >= 0  # far from the obstacle: mu is safe
+    d = shield.decide(state, mu, SIGMA)
+    assert d.status == "safe" and not d.intervened and d.distance_to_mean == 0
+    np.testing.assert_array_equal(d.action, mu)
+    # An unsafe mean: found by evaluate_g over a grid of states and means; the decision then
+    # differs from mu, counts as an intervention, and is safe or reported as not.
+    grid = np.linspace(-3, 3, 7, dtype=np.float32)
+    means = np.array([[ax, ay] for ax in grid for ay in grid], dtype=np.float32)
+    unsafe = []
+    for x in range(0, 10):
+        for y in range(0, 10):
+            s = np.array([x, y, 1.5, 1.5], dtype=np.float32)
+            g = shield.evaluate_g(s, means)
+            unsafe += [(s, means[i]) for i in np.flatnonzero(g < -1e-3)[:1]]
+    assert unsafe, "no unsafe mean on the grid"
+    for s, mu in unsafe[:5]:
+        d = shield.decide(s, mu, SIGMA)
+        assert d.intervened and d.distance_to_mean > 0
+        assert d.safe == (d.g >= 0)
+
+
+def test_barrier_on_named_features_reads_them_from_the_environments_states():
+    """A barrier trained on some of a domain's observation features by name (Panda's barrier
+    reads 9 of the 18) shields that domain's environment: the Shield and run_episodes evaluate it
+    on the model's whole states, picking its features by name."""
+    env = secure.make_env("panda-push")
+    names = ["ee_x", "ee_z", "block_x"]
+    rows = [env.observation_features.index(n) for n in names]
+    rng = np.random.default_rng(0)
+    safe = rng.uniform(0.0, 0.3, size=(64, 3)).astype(np.float32)
+    near = rng.uniform(0.5, 0.8, size=(64, 3)).astype(np.float32)
+    barrier, _ = secure.train_barrier(safe, near, features=names, hidden=[8], max_epochs=2, seed=0)
+    shield = secure.Shield(barrier, env.dynamics, num_samples=8)
+    obs, _ = env.reset(seed=1)
+    assert shield.evaluate_h(obs) == pytest.approx(float(barrier.h(obs[rows][None])[0]), abs=1e-6)
+    d = shield.decide(obs, np.zeros(env.action_dim, dtype=np.float32),
+                      np.full(env.action_dim, 0.1, dtype=np.float32))
+    assert d.h == pytest.approx(float(barrier.h(obs[rows][None])[0]), abs=1e-6)
+    # A feature the states lack is named.
+    other, _ = secure.train_barrier(safe, near, features=["ee_x", "ee_z", "cup_tilt"], hidden=[8],
+                                    max_epochs=1, seed=0)
+    with pytest.raises(ValueError, match="cup_tilt"):
+        secure.Shield(other, env.dynamics)
