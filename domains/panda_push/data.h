@@ -77,11 +77,13 @@ struct PandaDemonstrationOptions {
   // U(dart_brake_steps) steps (rounded) starts in which the applied a_x is 0 while the recorded
   // a_x is the push. The data then hold states slowed or stopped against the block labelled with
   // the push, which a policy whose a_x tracks the current velocity never sees (the stall of
-  // docs/RESULTS.md, Panda). 0.1 and 0.1 by default since 2026-12-02 (were 0 and 0, the paper's
-  // data; docs/RESULTS.md, Panda, "Demonstrations that teach recovery"). 0 and 0: none (the
-  // draws are then those of a version without it).
+  // docs/RESULTS.md, Panda). 0.1 and 0.1 since 2026-12-02 (were 0 and 0, the paper's data;
+  // docs/RESULTS.md, Panda, "Demonstrations that teach recovery"); brake rate 0.2 since
+  // 2026-12-03: at 0.1 the policies' *mean* still stopped short of the target on some seeds
+  // (docs/RESULTS.md, Panda, "The policy's mean"). 0 and 0: none (the draws are then those of a
+  // version without it).
   double dart_noise = 0.1;
-  double dart_brake_rate = 0.1;
+  double dart_brake_rate = 0.2;
   Range dart_brake_steps = {2, 6};
   std::uint64_t seed = 0;
 

@@ -13,6 +13,7 @@
 #include "secure/common/rng.h"
 #include "secure/common/yaml_fields.h"
 #include "secure/common/yaml_value.h"
+#include "secure/shield/shield.h"
 
 namespace secure::domains::panda_push {
 namespace {
@@ -266,6 +267,10 @@ experiments::ExperimentOptions PandaPushDomain::Preset() const {
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
   o.flat_barrier.input_features = BarrierFeatures();
   o.check = PandaPushCheckDefaults();
+  // The shield returns the policy's mean where it is safe (docs/SHIELD.md, `policy-mean`), and
+  // Algorithm 1's mean of the safe samples elsewhere: over 30 seeds +0.7 points of success against
+  // Algorithm 1 on the same models, no more topples (docs/RESULTS.md, Panda, "The policy's mean").
+  o.shield.aggregation = shield::Aggregation::kPolicyMean;
   return o;
 }
 
