@@ -34,7 +34,11 @@ jobs="$(nproc)"
 # LeakSanitizer reports; our own ownership is RAII throughout.
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_string_checks=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+# -O1 for the whole checking build (the Release type's flags otherwise say -O3): AddressSanitizer's
+# documented setting for usable reports, and 3-12 % less compile time per translation unit than
+# -O3 (measured on four of the largest; tests/README.md). The tests' own sources are at -O1 anyway.
 cmake -S "$root" -B "$check_dir" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=clang++ \
+  -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG" \
   -DSECURE_SANITIZE=address,undefined -DSECURE_BUILD_FUZZERS=ON \
   -DSECURE_BUILD_BENCHMARKS=OFF -DSECURE_BUILD_PYTHON=OFF \
   -DCMAKE_GTEST_DISCOVER_TESTS_DISCOVERY_MODE=PRE_TEST
