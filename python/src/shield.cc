@@ -97,8 +97,8 @@ py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
 // ShieldOptions from keyword arguments, read by ShieldOptions::ApplyYaml (the experiment
 // configuration's `shield:` section): the fields by name, enums by their names (class_k: linear |
 // cubic, aggregation: mean | random-safe | policy-draw | top-q | policy-mean, resampling:
-// adaptive | none, sampler:
-// iid | antithetic | qmc); an unknown key is an error naming it and listing the valid keys.
+// adaptive | none, sampler: iid | antithetic | qmc); an unknown key is an error naming it and
+// listing the valid keys.
 }  // namespace
 
 shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
