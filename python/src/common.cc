@@ -191,8 +191,10 @@ std::shared_ptr<Barrier> MakeBarrier(std::string kind,
 
 std::unique_ptr<cbf::Barrier> EvaluatorOn(const Barrier& barrier,
                                           const std::vector<std::string>& state_features) {
-  if (barrier.net == nullptr || barrier.net->features.empty() || state_features.empty() ||
-      barrier.net->features == state_features) {
+  // Rows by position, as always, where the dimensions agree (a barrier trained without feature
+  // names, x0, x1, ..., keeps working on a domain's states); by name where they cannot.
+  if (barrier.net == nullptr || state_features.empty() ||
+      static_cast<std::size_t>(barrier.state_dim()) == state_features.size()) {
     return barrier.factory();
   }
   return barrier.net->MakeEvaluatorFor(state_features, "the dynamics model's states",

@@ -92,9 +92,10 @@ std::shared_ptr<Barrier> MakeBarrier(std::string kind,
                                      std::function<std::unique_ptr<cbf::Barrier>()> factory);
 
 /// A fresh evaluator of `barrier` on states whose rows are `state_features` (a domain's
-/// observation): a barrier trained on a subset of them by name (e.g. Panda's 9 of 18) reads its
-/// own rows (BarrierNet::MakeEvaluatorFor). Empty `state_features` (a linear or Python model,
-/// whose rows have no names), or a barrier without feature names: barrier.factory().
+/// observation): a flat barrier with fewer inputs than the states (e.g. Panda's 9 of 18) reads
+/// its features by name (BarrierNet::MakeEvaluatorFor). Otherwise (as many inputs as rows, empty
+/// `state_features` for a linear or Python model, a per-obstacle barrier): barrier.factory(),
+/// rows by position.
 /// @throws secure::Error naming the first feature of the barrier that the states lack.
 std::unique_ptr<cbf::Barrier> EvaluatorOn(const Barrier& barrier,
                                           const std::vector<std::string>& state_features);
