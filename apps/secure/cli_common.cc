@@ -176,6 +176,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
   aggregation = ToString(shield::kAggregationNames, so->aggregation);
   resampling = ToString(shield::kResamplingNames, so->resampling);
   sampler = ToString(shield::kSamplerNames, so->sampler);
+  action_bounds = ToString(shield::kActionBoundsNames, so->action_bounds);
   using Copy = std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>;
   auto track = [this](CLI::Option* option, Copy copy) { given_.emplace_back(option, copy); };
 #define SECURE_SHIELD_FIELD_COPY(field) \
@@ -210,6 +211,11 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
                         "how each round's M actions are drawn: iid | antithetic | qmc")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(sampler));
+  track(cmd->add_option("--action-bounds", action_bounds,
+                        "the environment's actuator box: clip (samples clipped onto it) | reject "
+                        "(samples outside count unsafe) | ignore (decisions may leave it)")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(action_bounds));
   track(cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(max_iterations));
@@ -235,6 +241,7 @@ void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
   so->aggregation = FromString(shield::kAggregationNames, aggregation, "--aggregation");
   so->resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
   so->sampler = FromString(shield::kSamplerNames, sampler, "--sampler");
+  so->action_bounds = FromString(shield::kActionBoundsNames, action_bounds, "--action-bounds");
 }
 
 void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,

@@ -114,7 +114,7 @@ void FinishGroundTruth(const std::vector<double>& obstacle,
 /// Flags for the shield's options (--samples, --safe-ratio, --class-k, ...), bound to `options`;
 /// the enum-valued ones are parsed by ApplyTo() after CLI parsing.
 struct ShieldFlags {
-  std::string class_k, aggregation, resampling, sampler;
+  std::string class_k, aggregation, resampling, sampler, action_bounds;
   void Add(CLI::App* cmd, shield::ShieldOptions* options);
   void ApplyTo(shield::ShieldOptions* options) const;
   /// Copies onto `base` (e.g. a domain's preset) the fields whose flags were given, from

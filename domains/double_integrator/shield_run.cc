@@ -172,7 +172,10 @@ ShieldRunResult RunDoubleIntegratorShield(const ShieldRunOptions& options, cbf::
   const Stopwatch clock;
   di::ReachAvoidEnv env(options.task);
   std::optional<shield::Shield> shield;
-  if (shielded) shield.emplace(options.shield, barrier, env.ShieldModel());
+  if (shielded) {
+    shield.emplace(options.shield, barrier, env.ShieldModel());
+    shield->SetActionBounds(env);
+  }
   PdEpisodePolicy policy(options);
 
   ShieldRunResult result;

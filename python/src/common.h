@@ -107,6 +107,9 @@ struct Dynamics {
   const domains::DynamicsModel* model = nullptr;
   std::string kind;  // "builtin:<domain>", "linear", "python"
   std::vector<std::string> state_features;  // the state's rows by name (builtin), else empty
+  // The actuator box of the environment the model came from (builtin), else empty: a Shield on
+  // this model keeps its decisions inside it unless given another box.
+  Eigen::VectorXf action_low, action_high;
   bool python = false;
   // Held while the model steps (models keep scratch memory: one caller at a time). Shields lock
   // it after their own lock; an environment locks it while it steps (its model may be its own).

@@ -41,6 +41,9 @@ class Env {
     dynamics_->model = &env_->ShieldModel();
     dynamics_->kind = "builtin:" + name;
     dynamics_->state_features = env_->ObservationFeatures();
+    dynamics_->action_low.resize(env_->action_dim());
+    dynamics_->action_high.resize(env_->action_dim());
+    env_->ActionBox(dynamics_->action_low, dynamics_->action_high);
   }
 
   py::tuple Reset(std::optional<std::uint64_t> seed) {

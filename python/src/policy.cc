@@ -283,6 +283,7 @@ steps_per_iteration, seed, ...). Returns (policy, summary dict), and with with_r
         if (barrier) {
           evaluator = EvaluatorOn(*barrier, e->ObservationFeatures());
           shield.emplace(options, *evaluator, e->ShieldModel());
+          shield->SetActionBounds(*e);  // the environment's actuator box
           if (task_value) {
             value.emplace(*task_value->model, e->ObservationFeatures(),
                           std::max(options.num_samples, options.num_probes));

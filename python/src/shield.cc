@@ -114,12 +114,23 @@ namespace {
 class Shield {
  public:
   Shield(std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
-         const shield::ShieldOptions& options, std::shared_ptr<AirlReward> task_value)
+         const shield::ShieldOptions& options, std::shared_ptr<AirlReward> task_value,
+         py::handle action_low, py::handle action_high)
       : barrier_(std::move(barrier)), dynamics_(std::move(dynamics)) {
     // The shield's own evaluator (it owns scratch memory), reading the barrier's features by
     // name from the model's states where the model names them.
     evaluator_ = EvaluatorOn(*barrier_, dynamics_->state_features);
     shield_ = std::make_unique<shield::Shield>(options, *evaluator_, *dynamics_->model);
+    // The actuator box: the one given, else the builtin model's environment's, else none.
+    if (action_low.is_none() != action_high.is_none())
+      throw py::value_error("action_low and action_high: give both or neither");
+    const int n = dynamics_->model->action_dim();
+    if (!action_low.is_none()) {
+      shield_->SetActionBounds(Vector(action_low, n, "action_low"),
+                               Vector(action_high, n, "action_high"));
+    } else if (dynamics_->action_low.size() == n) {
+      shield_->SetActionBounds(dynamics_->action_low, dynamics_->action_high);
+    }
     const bool top_q = options.aggregation == shield::Aggregation::kTopQ;
     if (top_q != (task_value != nullptr))
       throw py::value_error(top_q ? "aggregation='top-q' needs task_value=secure.AirlReward"
@@ -191,6 +202,10 @@ class Shield {
     std::lock_guard<std::mutex> lock(mutex_);
     shield_->Seed(seed);
   }
+  py::object Bound(bool high) const {
+    if (!shield_->has_action_bounds()) return py::none();
+    return ToNumpy(high ? shield_->action_high() : shield_->action_low());
+  }
   const shield::Shield& get() const { return *shield_; }
   const Barrier& barrier() const { return *barrier_; }
   const Dynamics& dynamics() const { return *dynamics_; }
@@ -246,6 +261,9 @@ void RegisterShield(py::module_& m) {
       .def_readonly("safe_ratio", &shield::Decision::safe_ratio)
       .def_readonly("intervened", &shield::Decision::intervened)
       .def_readonly("distance_to_mean", &shield::Decision::distance_to_mean)
+      .def_readonly("bounded", &shield::Decision::bounded,
+                    "the actuator box cut into this decision (an action outside it was clipped "
+                    "or rejected)")
       .def_property_readonly(
           "fallback",
           [](const shield::Decision& d) { return ToString(shield::kFallbackNames, d.fallback); },
@@ -261,16 +279,24 @@ The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the o
 fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
 class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
 sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
-'qmc'), top_q_fraction=0.3, lookahead_steps=1). aggregation='top-q' ranks the safe samples by a task value:
+'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore')).
+The actuator box: action_low / action_high (arrays of action_dim; -inf / inf where unbounded),
+else the box of the environment a builtin model (Dynamics.builtin, env.dynamics) came from, else
+none. With a box every returned action lies in it: samples are clipped onto it
+(action_bounds='clip') or rejected (counted unsafe, 'reject'); Decision.bounded says when the box
+cut into a decision. aggregation='top-q' ranks the safe samples by a task value:
 task_value=secure.AirlReward (AIRL's Q = g(s) + gamma V(T(s, a)), on the dynamics model's states,
 which must be the reward model's observations). The shield keeps the barrier (with
 its own evaluator), the dynamics model and the task value alive.)doc")
       .def(py::init([](std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
-                       std::shared_ptr<AirlReward> task_value, py::kwargs options) {
+                       std::shared_ptr<AirlReward> task_value, py::object action_low,
+                       py::object action_high, py::kwargs options) {
              return std::make_shared<Shield>(std::move(barrier), std::move(dynamics),
-                                             ShieldOptionsFrom(options), std::move(task_value));
+                                             ShieldOptionsFrom(options), std::move(task_value),
+                                             action_low, action_high);
            }),
-           py::arg("barrier"), py::arg("dynamics"), py::kw_only(), py::arg("task_value") = nullptr)
+           py::arg("barrier"), py::arg("dynamics"), py::kw_only(), py::arg("task_value") = nullptr,
+           py::arg("action_low") = py::none(), py::arg("action_high") = py::none())
       .def("decide", &Shield::Decide, py::arg("state"), py::arg("mu"), py::arg("sigma"), R"doc(
 One shielded decision for the policy's Gaussian N(mu, diag(sigma^2)) at `state`: a Decision
 (action, status, g, h, iterations, ...). Bad numbers (NaN) give status 'invalid_input'; wrong
@@ -283,6 +309,12 @@ shapes raise ValueError. Releases the GIL (a Python dynamics model re-acquires i
       .def("seed", &Shield::Seed, py::arg("seed"), "Re-seeds the shield's random stream.")
       .def_property_readonly("options",
                              [](const Shield& s) { return ToPython(s.get().options().ToJson()); })
+      .def_property_readonly(
+          "action_low", [](const Shield& s) { return s.Bound(false); },
+          "the actuator box's lower bounds, or None (no box)")
+      .def_property_readonly(
+          "action_high", [](const Shield& s) { return s.Bound(true); },
+          "the actuator box's upper bounds, or None (no box)")
       .def_property_readonly("state_dim", [](const Shield& s) { return s.get().state_dim(); })
       .def_property_readonly("action_dim", [](const Shield& s) { return s.get().action_dim(); })
       .def_property_readonly("dynamics",

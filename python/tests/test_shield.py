@@ -91,14 +91,16 @@ def test_python_dynamics_give_the_builtin_decisions(tiny_barrier, di_data):
     states = np.concatenate([di_data["safe"][:40], di_data["near_dangerous"][:40]])
     reference = decisions(secure.Shield(barrier, builtin), states)
     assert {d.status for d in reference} >= {"safe"}
-    # The built-in model called through Python: the same numbers, so identical decisions.
+    # The built-in model called through Python: the same numbers, so identical decisions (given
+    # the same actuator box: a builtin model brings its environment's, a callable none).
+    box = dict(action_low=np.full(2, -3.0), action_high=np.full(2, 3.0))
     through_python = secure.Dynamics.from_callable(builtin.step, 4, 2)
-    for a, b in zip(reference, decisions(secure.Shield(barrier, through_python), states)):
+    for a, b in zip(reference, decisions(secure.Shield(barrier, through_python, **box), states)):
         assert a.to_dict() | {"seconds": 0} == b.to_dict() | {"seconds": 0}
     # A NumPy reimplementation: the same decisions (to float rounding: C++ may fuse a * b + c).
     numpy_model = secure.Dynamics.from_callable(double_integrator(), 4, 2, name="numpy DI")
     assert numpy_model.describe() == "numpy DI"
-    for a, b in zip(reference, decisions(secure.Shield(barrier, numpy_model), states)):
+    for a, b in zip(reference, decisions(secure.Shield(barrier, numpy_model, **box), states)):
         assert (a.status, a.iterations, a.intervened, a.fallback) == \
                (b.status, b.iterations, b.intervened, b.fallback)
         np.testing.assert_allclose(a.action, b.action, rtol=1e-5, atol=1e-5)
@@ -118,7 +120,7 @@ def test_linear_dynamics(tiny_barrier):
     np.testing.assert_allclose(linear.step(s, actions), expected, rtol=1e-6)
     # Within the action bound the linear model is the double integrator: same decisions.
     reference = secure.Shield(barrier, secure.Dynamics.builtin("double-integrator"), seed=2)
-    ours = secure.Shield(barrier, linear, seed=2)
+    ours = secure.Shield(barrier, linear, seed=2, action_low=[-3, -3], action_high=[3, 3])
     d1, d2 = reference.decide(s, np.zeros(2), SIGMA), ours.decide(s, np.zeros(2), SIGMA)
     assert d1.status == d2.status
     np.testing.assert_allclose(d1.action, d2.action, atol=1e-5)
@@ -133,7 +135,7 @@ def test_decision_record(tiny_barrier):
     d = shield.decide(np.array([1, 1, 0, 0]), np.zeros(2), SIGMA)
     record = d.to_dict()
     assert set(record) == {"status", "action", "g", "h", "iterations", "safe_ratio",
-                           "intervened", "distance_to_mean", "fallback", "seconds"}
+                           "intervened", "distance_to_mean", "bounded", "fallback", "seconds"}
     assert record["status"] == d.status and d.action.dtype == np.float32
     assert d.safe == (d.status in ("safe", "safe_after_resampling"))
     assert shield.evaluate_h(np.array([1, 1, 0, 0])) == pytest.approx(d.h)
@@ -294,3 +296,37 @@ def test_barrier_on_named_features_reads_them_from_the_environments_states():
                                     max_epochs=1, seed=0)
     with pytest.raises(ValueError, match="cup_tilt"):
         secure.Shield(other, env.dynamics)
+
+
+def test_shield_keeps_decisions_inside_the_actuator_box(tiny_barrier):
+    """The case a user met: the builtin double integrator (|a| <= 3) returned (-6.80, -6.26)."""
+    _, barrier, _ = tiny_barrier
+    state, mu = np.array([3, 3, 1, 1]), np.array([3, 3])
+    builtin = secure.Dynamics.builtin("double-integrator")
+    for mode in ("clip", "reject"):
+        shield = secure.Shield(barrier, builtin, action_bounds=mode)
+        np.testing.assert_array_equal(shield.action_low, [-3, -3])
+        np.testing.assert_array_equal(shield.action_high, [3, 3])
+        for seed in range(10):
+            shield.seed(seed)
+            d = shield.decide(state, mu, np.ones(2))
+            assert np.all(np.abs(d.action) <= 3), (mode, seed, d)
+            assert d.to_dict()["bounded"] == d.bounded
+    # A model of the user's own has no box unless given one; with one, decisions stay inside it.
+    linear = secure.Dynamics.from_callable(double_integrator(bound=1e9), 4, 2)
+    assert secure.Shield(barrier, linear).action_low is None
+    boxed = secure.Shield(barrier, linear, action_low=[-1, -2], action_high=[1, 2])
+    for seed in range(10):
+        boxed.seed(seed)
+        a = boxed.decide(state, mu, np.ones(2)).action
+        assert -1 <= a[0] <= 1 and -2 <= a[1] <= 2
+    # 'ignore' keeps the earlier behaviour: decisions may leave the box.
+    ignore = secure.Shield(barrier, builtin, action_bounds="ignore")
+    assert not all(np.all(np.abs(ignore.decide(state, mu, np.ones(2)).action) <= 3)
+                   for _ in range(10))
+    with pytest.raises(ValueError, match="give both or neither"):
+        secure.Shield(barrier, linear, action_low=[-1, -1])
+    with pytest.raises(ValueError, match="need low <= high"):
+        secure.Shield(barrier, linear, action_low=[1, 1], action_high=[-1, -1])
+    with pytest.raises(ValueError, match="action_bounds"):
+        secure.Shield(barrier, builtin, action_bounds="wrap")

@@ -65,6 +65,11 @@ class Environment {
   /// privileged information (for the double integrator: the exact clipped dynamics).
   virtual const DynamicsModel& ShieldModel() const = 0;
 
+  /// The actuator box Step() clips every action to: low and high (action_dim each; -infinity /
+  /// +infinity where a component is unbounded). The shield keeps its decisions inside it
+  /// (shield::ShieldOptions::action_bounds), so that g is checked on the action that is applied.
+  virtual void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const = 0;
+
   /// Whether ShieldModel() is the environment's own transition on observations: from any
   /// observation o the environment can be in, ShieldModel() applied to (o, a) gives exactly the
   /// observation Step(a) writes (the shield then sees the next state that will happen). A claim

@@ -263,6 +263,7 @@ SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& mod
   const shield::ShieldOptions options = ShieldOptionsFor(method, shield_options);
   const domains::Environment& env = runner.environment();
   shield::Shield shield(options, *barrier, env.ShieldModel());
+  shield.SetActionBounds(env);
   std::optional<policy::AirlActionValue> value;
   if (options.aggregation == shield::Aggregation::kTopQ) {
     SECURE_CHECK(models.airl_reward != nullptr,

@@ -95,7 +95,8 @@ nlohmann::json ShieldOptions::ToJson() const {
                          {"max_iterations", max_iterations},
                          {"time_budget_us", time_budget_us},
                          {"seed", seed},
-                         {"sampler", ToString(kSamplerNames, sampler)}};
+                         {"sampler", ToString(kSamplerNames, sampler)},
+                         {"action_bounds", ToString(kActionBoundsNames, action_bounds)}};
   // Only where it acts, so that the options of every other shield keep their identity (run
   // directories compare them).
   if (aggregation == Aggregation::kTopQ) json["top_q_fraction"] = top_q_fraction;
@@ -121,6 +122,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Enum("sampler", &sampler, kSamplerNames)
       .Field("top_q_fraction", &top_q_fraction)
       .Field("lookahead_steps", &lookahead_steps)
+      .Enum("action_bounds", &action_bounds, kActionBoundsNames)
       .Apply(node, source);
 }
 
@@ -135,6 +137,7 @@ nlohmann::json Decision::ToJson() const {
           {"safe_ratio", safe_ratio},
           {"intervened", intervened},
           {"distance_to_mean", distance_to_mean},
+          {"bounded", bounded},
           {"fallback", ToString(kFallbackNames, fallback)},
           {"seconds", seconds}};
 }
@@ -181,6 +184,9 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
   q_.resize(m);
   step_scratch_.resize(state_dim_, 1);
   order_.resize(static_cast<std::size_t>(m));
+  rejected_.assign(static_cast<std::size_t>(m), 0);
+  low_ = Eigen::VectorXf::Constant(action_dim_, -std::numeric_limits<float>::infinity());
+  high_ = Eigen::VectorXf::Constant(action_dim_, std::numeric_limits<float>::infinity());
   if (options_.sampler == Sampler::kQmc) {
     // Point 0 is the origin (Boost's engine skips it), points 1 .. M - 1 follow: for M = 2^k the
     // columns are a (t, k, d)-net, and a digital shift keeps them one.
@@ -196,8 +202,73 @@ void Shield::SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action) {
                                                                           << " values, expected "
                                                                           << action_dim_);
   SECURE_CHECK(action.allFinite(), "Shield: backup action has a non-finite value");
+  for (int r = 0; r < action_dim_; ++r) {
+    SECURE_CHECK(!has_bounds_ || (action[r] >= low_[r] && action[r] <= high_[r]),
+                 "Shield: backup action[" << r << "] = " << action[r]
+                                          << " lies outside the action bounds [" << low_[r]
+                                          << ", " << high_[r] << "]");
+  }
   backup_ = action;
   has_backup_ = true;
+}
+
+void Shield::SetActionBounds(const Eigen::Ref<const Eigen::VectorXf>& low,
+                             const Eigen::Ref<const Eigen::VectorXf>& high) {
+  SECURE_CHECK(low.size() == action_dim_ && high.size() == action_dim_,
+               "Shield: action bounds have " << low.size() << " and " << high.size()
+                                             << " values, expected " << action_dim_);
+  for (int r = 0; r < action_dim_; ++r) {
+    SECURE_CHECK(!std::isnan(low[r]) && !std::isnan(high[r]) && low[r] <= high[r],
+                 "Shield: action bounds [" << low[r] << ", " << high[r] << "] of action " << r
+                                           << ": need low <= high, no NaN");
+    SECURE_CHECK(!has_backup_ || (backup_[r] >= low[r] && backup_[r] <= high[r]),
+                 "Shield: the backup action[" << r << "] = " << backup_[r]
+                                              << " lies outside the action bounds [" << low[r]
+                                              << ", " << high[r] << "]");
+  }
+  low_ = low;
+  high_ = high;
+  has_bounds_ = true;
+}
+
+void Shield::SetActionBounds(const domains::Environment& env) {
+  SECURE_CHECK(env.action_dim() == action_dim_, "Shield: " << env.Describe() << " has "
+                                                           << env.action_dim()
+                                                           << "-dimensional actions, expected "
+                                                           << action_dim_);
+  Eigen::VectorXf low(action_dim_), high(action_dim_);
+  env.ActionBox(low, high);
+  SetActionBounds(low, high);
+}
+
+bool Shield::ClipToBox(Eigen::Ref<Eigen::MatrixXf> actions) const {
+  if (!bounds_active()) return false;
+  bool moved = false;
+  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
+    for (int r = 0; r < action_dim_; ++r) {
+      const float a = actions(r, c), clipped = std::clamp(a, low_[r], high_[r]);
+      if (clipped != a) {
+        actions(r, c) = clipped;
+        moved = true;
+      }
+    }
+  }
+  return moved;
+}
+
+bool Shield::BoundRound() {
+  if (!bounds_active()) return false;
+  if (options_.action_bounds == ActionBounds::kClip) return ClipToBox(samples_);
+  const int m = options_.num_samples;
+  bool any = false;
+  for (int c = 0; c < m; ++c) {
+    const bool inside = ((samples_.col(c).array() >= low_.array()) &&
+                         (samples_.col(c).array() <= high_.array()))
+                            .all();
+    rejected_[static_cast<std::size_t>(c)] = inside ? 0 : 1;
+    any = any || !inside;
+  }
+  return any;
 }
 
 double Shield::EvaluateH(const Eigen::Ref<const Eigen::VectorXf>& state) {
@@ -275,6 +346,11 @@ void Shield::DrawRound() {
 int Shield::ScoreRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
   const int m = options_.num_samples;
   EvaluateG(state, h_state, samples_, g_.head(m));
+  if (bounds_active() && options_.action_bounds == ActionBounds::kReject) {
+    // A sample the actuator cannot apply is never safe, never aggregated, never the fallback.
+    for (int i = 0; i < m; ++i)
+      if (rejected_[static_cast<std::size_t>(i)]) g_[i] = kNegInf;
+  }
   int num_safe = 0;
   for (int i = 0; i < m; ++i) {
     if (g_[i] >= 0.0) ++num_safe;
@@ -293,6 +369,8 @@ void Shield::AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
   for (int c = 0; c < n; ++c)
     for (int r = 0; r < action_dim_; ++r)
       probes_(r, c) = mu[r] + static_cast<float>(rng_.Uniform(-extent, extent));
+  // Probes look for danger where the actuator can go (they may become the fallback).
+  ClipToBox(probes_);
   // h(T(s, a_j)) for the probes; their g also competes for the fallback (they are evaluated).
   EvaluateG(state, decision_.h, probes_, g_.head(n));
   d_sigma_.setZero();
@@ -358,6 +436,8 @@ void Shield::AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, doubl
   one_action_.setZero();
   for (int k = 0; k < count; ++k) one_action_.col(0) += samples_.col(order_[k]);
   one_action_ /= static_cast<float>(count);
+  // The mean of actions in the box lies in it; the clip only guards the last bit of rounding.
+  ClipToBox(one_action_);
   // g_ holds the round's values; evaluating the mean reuses the shared buffers, so keep the
   // nearest-sample search ahead of it.
   int nearest = -1;
@@ -415,6 +495,7 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
   decision_.safe_ratio = 0.0;
   decision_.intervened = false;
   decision_.distance_to_mean = 0.0;
+  decision_.bounded = false;
   decision_.fallback = Fallback::kNone;
 
   // NaN/Inf anywhere: report it, return a finite action, check nothing.
@@ -434,15 +515,18 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
   mu_ = mu;
   sigma_ = sigma;
   best_g_ = kNegInf;
-  best_action_ = mu;
+  best_action_ = mu;  // the fallback when nothing evaluated is finite: in the box, too
+  ClipToBox(best_action_);
   const int m = options_.num_samples;
   int num_safe = 0;
   bool enough = false;
   for (int iteration = 1; iteration <= options_.max_iterations; ++iteration) {
     if (iteration > 1 && options_.resampling == Resampling::kAdaptive) AdaptSigma(state, mu);
     DrawRound();
+    const bool round_bounded = BoundRound();
     decision_.iterations = iteration;
-    if (iteration == 1 && options_.aggregation == Aggregation::kPolicyDraw) {
+    if (iteration == 1 && options_.aggregation == Aggregation::kPolicyDraw &&
+        !(bounds_active() && rejected_[0])) {
       // The policy's own draw alone first: if it is safe it is the decision, and the other
       // samples need no evaluation. Otherwise the round is scored as a whole, as for kMean.
       EvaluateG(state, h_state, samples_.leftCols(1), one_g_);
@@ -452,6 +536,10 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
         decision_.g = one_g_[0];
         decision_.status = Status::kSafe;
         decision_.distance_to_mean = (decision_.action - mu).norm();
+        // Clipped onto the box iff it sits on a face (a Gaussian draw does so with probability 0).
+        decision_.bounded = bounds_active() && ((decision_.action.array() == low_.array()) ||
+                                                (decision_.action.array() == high_.array()))
+                                                   .any();
         decision_.seconds = clock.Seconds();
         return decision_;
       }
@@ -461,18 +549,20 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
       // the same as kMean's): if it is safe it is the decision. Otherwise the round is scored as
       // for kMean, and the decision counts as an intervention (the policy's action was unsafe).
       one_action_.col(0) = mu;
+      if (ClipToBox(one_action_)) decision_.bounded = true;  // what the actuator would apply
       EvaluateG(state, h_state, one_action_, one_g_);
       if (one_g_[0] >= 0.0) {
         decision_.safe_ratio = 1.0;
-        decision_.action = mu;
+        decision_.action = one_action_.col(0);
         decision_.g = one_g_[0];
         decision_.status = Status::kSafe;
-        decision_.distance_to_mean = 0.0;
+        decision_.distance_to_mean = (decision_.action - mu).norm();
         decision_.seconds = clock.Seconds();
         return decision_;
       }
     }
     num_safe = ScoreRound(state, h_state);
+    if (round_bounded) decision_.bounded = true;  // the box cut into a round that was scored
     if (iteration == 1) {
       // The policy's own action: its draw (round 1's first sample), or its mean for kPolicyMean.
       decision_.intervened =
@@ -492,8 +582,16 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     const int i = static_cast<int>(rng_.UniformIndex(static_cast<std::uint64_t>(m)));
     decision_.action = samples_.col(i);
     decision_.g = g_[i];
+    if (bounds_active() && rejected_[static_cast<std::size_t>(i)]) {
+      // Rejected (outside the box): return it clipped, with the g of what is returned.
+      one_action_.col(0) = samples_.col(i);
+      ClipToBox(one_action_);
+      EvaluateG(state, h_state, one_action_, one_g_);
+      decision_.action = one_action_.col(0);
+      decision_.g = one_g_[0];
+    }
     decision_.fallback = Fallback::kRandomSample;
-    decision_.status = g_[i] >= 0.0 ? SafeStatus() : Status::kNoSafeAction;
+    decision_.status = decision_.g >= 0.0 ? SafeStatus() : Status::kNoSafeAction;
   } else if (num_safe > 0) {
     // Enough safe samples, or the budget ran out with some: aggregate the last round's.
     Aggregate(state, h_state, num_safe);

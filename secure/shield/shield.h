@@ -42,6 +42,7 @@
 #include "secure/common/enum_strings.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
+#include "secure/domains/environment.h"
 
 namespace YAML {
 class Node;
@@ -119,6 +120,25 @@ inline constexpr EnumTable<Sampler, 3> kSamplerNames{{
     {Sampler::kQmc, "qmc"},
 }};
 
+/// What the shield does with the actuator box [low, high] (Shield::SetActionBounds; the experiment
+/// driver, `secure eval` and Python's run_episodes give it the environment's box). With a box,
+/// every action the shield evaluates as a candidate, and so every action it returns (aggregate,
+/// nearest sample, fallback), lies in the box: g is checked on the action the actuator will apply.
+/// Without a box (none set) the option has no effect.
+enum class ActionBounds {
+  kClip,    // each drawn sample (and the policy's mean for policy-mean) is clipped onto the box
+            // before it is evaluated; the mean of clipped samples lies in the box (convexity)
+  kReject,  // a drawn sample outside the box counts as unsafe (g = -inf; a truncated Gaussian);
+            // the policy's mean outside the box is clipped before policy-mean checks it
+  kIgnore,  // the box is not used (earlier releases): the returned action may leave it, and the
+            // actuator then clips an action whose g was checked unclipped
+};
+inline constexpr EnumTable<ActionBounds, 3> kActionBoundsNames{{
+    {ActionBounds::kClip, "clip"},
+    {ActionBounds::kReject, "reject"},
+    {ActionBounds::kIgnore, "ignore"},
+}};
+
 /// The largest action dimension Sampler::kQmc supports (Boost.Random's Sobol tables).
 int MaxQmcDimension();
 
@@ -156,6 +176,8 @@ struct ShieldOptions {
   // g(a) exactly). A danger that approaches fast (a moving person) is then seen H - 1 periods
   // earlier, at the price of H model steps per sample (docs/SHIELD.md).
   int lookahead_steps = 1;
+  // What the actuator box does to the samples (ActionBounds; used only when a box is set).
+  ActionBounds action_bounds = ActionBounds::kClip;
 
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
@@ -208,6 +230,8 @@ struct Decision {
   double safe_ratio = 0.0;        // #safe / M in the last round (1: a safe policy-draw, alone)
   bool intervened = false;        // the policy's own sample (the first draw) had g < 0
   double distance_to_mean = 0.0;  // ||action - mu||_2
+  bool bounded = false;  // the actuator box cut into this decision: the policy's mean (policy-mean)
+                         // or a drawn sample lay outside it and was clipped or rejected
   Fallback fallback = Fallback::kNone;
   double seconds = 0.0;  // wall time of the decision
 
@@ -245,6 +269,23 @@ class Shield {
   /// best sample when no safe action is found. Must have action_dim entries, all finite.
   void SetBackupAction(const Eigen::Ref<const Eigen::VectorXf>& action);
   void ClearBackupAction() { has_backup_ = false; }
+
+  /// The actuator box (action_dim each; -inf / +inf where a component is unbounded, low <= high).
+  /// Decisions then stay inside it as ShieldOptions::action_bounds says. A backup action must lie
+  /// inside it. @throws secure::Error on a wrong size, NaN, low > high, or a backup outside.
+  void SetActionBounds(const Eigen::Ref<const Eigen::VectorXf>& low,
+                       const Eigen::Ref<const Eigen::VectorXf>& high);
+  /// The environment's actuator box (domains::Environment::ActionBox), as the experiment driver,
+  /// `secure eval` and Python's run_episodes set it.
+  void SetActionBounds(const domains::Environment& env);
+  void ClearActionBounds() { has_bounds_ = false; }
+  bool has_action_bounds() const { return has_bounds_; }
+  const Eigen::VectorXf& action_low() const { return low_; }    // -inf where no box
+  const Eigen::VectorXf& action_high() const { return high_; }  // +inf where no box
+  /// Whether a box is set and used (set, and action_bounds is not ignore).
+  bool bounds_active() const {
+    return has_bounds_ && options_.action_bounds != ActionBounds::kIgnore;
+  }
 
   /// The task value Aggregation::kTopQ ranks the safe samples by (it must outlive the shield, or
   /// be replaced first; null clears it). Decide() with aggregation = top-q and no value throws.
@@ -288,6 +329,11 @@ class Shield {
   // their mean if it is safe, else the one of them nearest to it.
   void AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, int count);
   void FinishInvalid();
+  // Keeps the round's samples in the box (bounds_active()): clips them, or sets rejected_[c] for
+  // each one outside it. Returns whether one was outside.
+  bool BoundRound();
+  // Clips the columns of `actions` onto the box (bounds_active()); returns whether one moved.
+  bool ClipToBox(Eigen::Ref<Eigen::MatrixXf> actions) const;
   // kSafe after one round, kSafeAfterResampling after more.
   Status SafeStatus() const;
 
@@ -301,6 +347,8 @@ class Shield {
   bool has_backup_ = false;
   Eigen::VectorXf backup_;
   ActionValue* action_value_ = nullptr;
+  bool has_bounds_ = false;
+  Eigen::VectorXf low_, high_;  // (action_dim) the actuator box
 
   // Preallocated scratch (sized in the constructor).
   Eigen::VectorXf mu_, sigma_;   // the current sampling distribution
@@ -319,6 +367,7 @@ class Shield {
   Eigen::VectorXd q_;             // (M) aggregation = top-q: Q of the round's samples
   Eigen::MatrixXf step_scratch_;  // (state_dim x 1) lookahead_steps > 1: one model step
   std::vector<int> order_;        // (M) indices of the samples being aggregated
+  std::vector<char> rejected_;    // (M) action_bounds = reject: the sample lies outside the box
   // Sampler::kQmc: the first M Sobol points as 64-bit integers, (action_dim x M), column c =
   // point c (built in the constructor; empty for the other samplers).
   Eigen::Matrix<std::uint64_t, Eigen::Dynamic, Eigen::Dynamic> sobol_;

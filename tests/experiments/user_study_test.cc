@@ -94,6 +94,9 @@ class RecordingEnv final : public domains::Environment {
     return inner_->Step(action, observation);
   }
   const domains::DynamicsModel& ShieldModel() const override { return inner_->ShieldModel(); }
+  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
+    inner_->ActionBox(low, high);
+  }
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
                     Eigen::Ref<Eigen::VectorXf> a) const override {
     return inner_->BackupAction(o, a);

@@ -67,6 +67,10 @@ class PointMassEnv final : public domains::Environment {
     return out;
   }
   const domains::DynamicsModel& ShieldModel() const override { return model_; }
+  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
+    low.setConstant(-1.0f);
+    high.setConstant(1.0f);
+  }
   std::unique_ptr<domains::Environment> Clone() const override {
     return std::make_unique<PointMassEnv>(horizon_);
   }

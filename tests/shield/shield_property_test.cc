@@ -277,6 +277,45 @@ RC_GTEST_PROP(ShieldProperty, ActionIsFiniteAndStatusAgreesWithG, ()) {
   RC_ASSERT(CloseRelative(d.distance_to_mean, (d.action - p.mu).norm(), 1e-5));
 }
 
+// 2a. With an actuator box, every decision (any status, aggregation, resampling, sampler start,
+//     fallback) lies in it, its g is that of the action returned, and a safe one satisfies the
+//     condition independently. The box is random: it may exclude mu, the safe set or the backup's
+//     spot (the backup is then moved into it), and a side may be unbounded.
+RC_GTEST_PROP(ShieldProperty, DecisionsStayInTheActionBox, ()) {
+  Problem p = RandomProblem();
+  p.options.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
+  Eigen::VectorXf low(2), high(2);
+  for (int r = 0; r < 2; ++r) {
+    const double a = *UniformIn(-4.0, 4.0), b = *UniformIn(-4.0, 4.0);
+    low[r] = static_cast<float>(std::min(a, b));
+    high[r] = static_cast<float>(std::max(a, b));
+    if (*rc::gen::inRange(0, 8) == 0) low[r] = -std::numeric_limits<float>::infinity();
+    if (*rc::gen::inRange(0, 8) == 0) high[r] = std::numeric_limits<float>::infinity();
+  }
+  p.backup = p.backup.cwiseMax(low).cwiseMin(high);
+  System system = MakeSystem(p.kind, p.net_seed);
+  Shield shield(p.options, *system.shield_barrier, *system.dynamics);
+  shield.SetActionBounds(low, high);
+  if (p.with_backup) shield.SetBackupAction(p.backup);
+  const Decision& d = shield.Decide(p.state, p.mu, p.sigma);
+  RC_TAG(ToString(kActionBoundsNames, p.options.action_bounds),
+         ToString(kStatusNames, d.status), d.bounded ? "bounded" : "not bounded");
+  RC_LOG() << "box [" << low.transpose() << "] .. [" << high.transpose() << "]; "
+           << d.ToJson().dump() << "\n";
+  RC_ASSERT(d.action.allFinite());
+  RC_ASSERT(((d.action.array() >= low.array()) && (d.action.array() <= high.array())).all());
+  if (d.safe()) RC_ASSERT(d.g >= 0.0);
+  if (d.status == Status::kNoSafeAction) RC_ASSERT(d.g < 0.0);
+  // The reported g is the returned action's (the same evaluation path: exact for the ground
+  // truth; a learned barrier's batch GEMM rounds by batch size, hence GTolerance).
+  Shield checker(p.options, *system.independent, *system.dynamics);
+  Eigen::MatrixXf column = d.action;
+  Eigen::VectorXd g(1);
+  checker.EvaluateG(p.state, checker.EvaluateH(p.state), column, g);
+  if (std::isfinite(d.g))
+    RC_ASSERT(std::abs(g[0] - d.g) <= GTolerance(system.learned, d.g, d.h, p.options));
+}
+
 // 2b. Non-finite inputs never produce a non-finite action.
 RC_GTEST_PROP(ShieldProperty, NonFiniteInputsGiveInvalidInputAndAFiniteAction, ()) {
   Problem p = RandomProblem();

@@ -1172,7 +1172,8 @@ TEST(ShieldTest, DecisionToJsonHasEveryField) {
   EXPECT_EQ(j["intervened"], true);
   EXPECT_DOUBLE_EQ(j["distance_to_mean"].get<double>(), d.distance_to_mean);
   EXPECT_TRUE(j["seconds"].is_number());
-  EXPECT_EQ(j.size(), 10u);
+  EXPECT_EQ(j["bounded"], false);  // no box
+  EXPECT_EQ(j.size(), 11u);
 
   HalfLine half;
   Shield safe_shield(ShieldOptions{}, half.barrier, half.dynamics);
