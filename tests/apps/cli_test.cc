@@ -466,6 +466,26 @@ TEST(CliTest, DemosConvertToHdf5TrainsIdentically) {
   }
 }
 
+// A directory argument ending in '/' (or with "//", "/./") prints and records normalised paths:
+// "data/demos.csv", not "data//demos.csv".
+TEST(CliTest, DirectoryArgumentsGiveNormalisedPaths) {
+  const std::string dir = (TempDir() / "normal").string();
+  const std::string generate =
+      "demos generate --domain double-integrator --episodes 2 --safe-states 10 "
+      "--near-dangerous 10 --out " +
+      dir + "/./";
+  Result r = RunCli(generate + "/");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find("//"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("/./"), std::string::npos) << r.out;
+  EXPECT_HAS(r.out, " -> " + dir + "/demos.csv\n");
+  EXPECT_HAS(r.out, " -> " + dir + "/near_dangerous.csv\n");
+  r = RunCli(generate + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["files"],
+            nlohmann::json({dir + "/demos.csv", dir + "/safe.csv", dir + "/near_dangerous.csv"}));
+}
+
 TEST(CliTest, Hdf5InputErrorsAreOneLineNamingTheFile) {
   const auto expect_error = [](const Result& r, const std::vector<std::string>& parts) {
     EXPECT_EQ(r.exit_code, 1) << r.out;
