@@ -34,6 +34,8 @@ set -euo pipefail
 #   python3-dev pybind11-dev    the Python module (python/): headers, the binding library
 #   python3-numpy python3-pytest  the module's arrays; its tests (ctest -L python)
 #   python3-matplotlib          `secure report`: the run's figures (tools/report/report.py, Agg backend)
+#   python3-h5py                reads our HDF5 files as robomimic does (h5py), and writes robomimic-style
+#                               files with images, in a test (tests/data/robomimic_h5py_test.py)
 #   chromium                    the report's test renders the page headless (ctest -L report)
 PACKAGES=(
   build-essential cmake git ccache
@@ -45,7 +47,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy python3-pytest
   openmpi-bin
-  python3-matplotlib chromium
+  python3-matplotlib python3-h5py chromium
 )
 # The checking build (scripts/check.sh), installed only with --check-deps:
 #   clang libclang-rt-14-dev    clang and its AddressSanitizer / UBSan runtimes

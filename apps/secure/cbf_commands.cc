@@ -57,6 +57,13 @@ class TrainerFlags {
                          [](const Options& from, Options* to) { to->verbose = from.verbose; });
   }
 
+  /// How often the flag `name` was given (0: not given, or not a flag of these).
+  std::size_t Given(const std::string& name) const {
+    for (const auto& [option, copy] : copies_)
+      if (option->check_lname(name.substr(2))) return option->count();
+    return 0;
+  }
+
   /// Copies the given flags onto `options`, then validates.
   void ApplyTo(cbf::BarrierTrainerOptions* options) const {
     for (const auto& [option, copy] : copies_)
@@ -94,6 +101,13 @@ void CheckFeatureList(const std::vector<std::string>& names) {
   }
 }
 
+// `cbf train` from files stops early by default: after this many epochs without a better
+// held-out score (the trainer's best-checkpoint score: balanced accuracy on the
+// --validation-fraction split, then its loss), keeping the best epoch's weights. Only this
+// command's default: the library's (BarrierTrainerOptions::patience), the domain presets and the
+// experiment driver keep theirs (0), so their results do not change.
+constexpr int kTrainFromFilesPatience = 50;
+
 // ------------------------------------------------------------------------------------------
 struct TrainCommand {
   YAML::Node trainer_yaml;  // the config's `trainer:` section, applied over the base options
@@ -107,12 +121,20 @@ struct TrainCommand {
   std::uint64_t seed = 0;
   double test_fraction = 0.0;
   bool json = false;
+  bool no_early_stopping = false;
   std::string progress = "auto";
   DeferredError config_error;  // thrown when this command runs, not at registration
 
   void Register(CLI::App& app, const Config& config) {
     CLI::App* cmd = app.add_subcommand(
-        "train", "Learn a barrier h(s) from safe and near-dangerous states (Eq. 4)");
+        "train",
+        "Learn a barrier h(s) from safe and near-dangerous states (Eq. 4). From files, early "
+        "stopping is on: training stops after --patience (default " +
+            std::to_string(kTrainFromFilesPatience) +
+            ") epochs without a better held-out score (balanced accuracy on the "
+            "--validation-fraction split, then its loss) and keeps the best epoch's weights; "
+            "--no-early-stopping runs every --epochs. With --domain the preset applies (no early "
+            "stopping)");
     config_path = config.path;
     config_error.Capture([&] {
       trainer_yaml = config.Section("trainer");
@@ -144,7 +166,10 @@ struct TrainCommand {
         ->capture_default_str();
     cmd->add_option("--augment-from", augment_from,
                     "a `cbf check` CSV: its states join the near-dangerous training states");
-    trainer_flags.Add(cmd, cbf::BarrierTrainerOptions{});
+    trainer_flags.Add(cmd, FromFilesDefaults());
+    cmd->add_flag("--no-early-stopping", no_early_stopping,
+                  "train for every --epochs (as --patience 0); the best epoch's weights are kept "
+                  "either way");
     cmd->add_flag("--json", json, "print the result as JSON");
     AddProgressOption(cmd, &progress)
         ->description(
@@ -156,13 +181,26 @@ struct TrainCommand {
     });
   }
 
+  // The general trainer defaults with this command's early stopping.
+  static cbf::BarrierTrainerOptions FromFilesDefaults() {
+    cbf::BarrierTrainerOptions o;
+    o.patience = kTrainFromFilesPatience;
+    return o;
+  }
+
   void Run() {
     const bool from_domain = !domain.empty();
     SECURE_CHECK(std::isfinite(test_fraction) && test_fraction >= 0 && test_fraction < 1,
                  "--test-fraction = " << test_fraction << ", must be in [0, 1)");
-    trainer = from_domain ? cbf::DoubleIntegratorTrainerPreset() : cbf::BarrierTrainerOptions{};
+    trainer = from_domain ? cbf::DoubleIntegratorTrainerPreset() : FromFilesDefaults();
     if (trainer_yaml.IsMap()) trainer.ApplyYaml(trainer_yaml, config_path);
     trainer_flags.ApplyTo(&trainer);
+    if (no_early_stopping) {
+      SECURE_CHECK(trainer_flags.Given("--patience") == 0 || trainer.patience == 0,
+                   "cbf train: --no-early-stopping and --patience " << trainer.patience
+                                                                   << " contradict each other");
+      trainer.patience = 0;
+    }
     trainer.seed = seed;
     data::StateSet safe, nd;
     const bool from_files = !safe_path.empty() || !nd_path.empty();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <string_view>
 #include <iostream>
 
 #include "secure/common/build_info.h"
@@ -145,6 +146,33 @@ const CLI::Validator& NonNegativeSeed() {
 CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
                            const std::string& help) {
   return cmd->add_option(name, *seed, help)->check(NonNegativeSeed())->capture_default_str();
+}
+
+std::string NormalDirectoryPath(const std::string& path) {
+  if (path.empty()) return path;
+  std::string out = path.front() == '/' ? "/" : "";
+  std::size_t begin = 0;
+  while (begin <= path.size()) {
+    std::size_t end = path.find('/', begin);
+    if (end == std::string::npos) end = path.size();
+    const std::string_view part(path.data() + begin, end - begin);
+    if (!part.empty() && part != ".") {
+      if (!out.empty() && out.back() != '/') out += '/';
+      out += part;
+    }
+    begin = end + 1;
+  }
+  return out.empty() ? "." : out;
+}
+
+const CLI::Validator& DirectoryPath() {
+  static const CLI::Validator validator(
+      [](std::string& value) -> std::string {
+        value = NormalDirectoryPath(value);
+        return "";
+      },
+      "DIR");
+  return validator;
 }
 
 CLI::Option* AddProgressOption(CLI::App* cmd, std::string* mode) {

@@ -81,6 +81,14 @@ const CLI::Validator& NonNegativeSeed();
 CLI::Option* AddSeedOption(CLI::App* cmd, const std::string& name, std::uint64_t* seed,
                            const std::string& help);
 
+/// A transform for directory options (`->transform(DirectoryPath())`): the path without
+/// repeated or trailing slashes and "." components ("data//x/./" -> "data/x", "./" -> "."), so
+/// the files under it print as "data/x/demos.csv". ".." is kept (it is not lexical with
+/// symbolic links).
+const CLI::Validator& DirectoryPath();
+/// The same normalisation of one path.
+std::string NormalDirectoryPath(const std::string& path);
+
 /// Adds --progress auto|always|never: a live progress line on stderr (done/total, elapsed, time
 /// left; common/progress.h) when stderr is a terminal (auto), always, or never. Without one only
 /// the milestone lines are printed, as they always were.

@@ -295,7 +295,8 @@ struct ExperimentCommand {
                     "secure-no-resampling, bc+shield, secure-myopic, joint (default: the "
                     "experiment's)");
     cmd->add_option("--out", out,
-                    "directory for the data, per-seed models and learning curves, result.json");
+                    "directory for the data, per-seed models and learning curves, result.json")
+        ->transform(DirectoryPath());
     cmd->add_option("--shard", shard,
                     "k/N: run only the seeds with index k mod N (0-based; needs --out), then "
                     "`secure experiment merge`; default: a SLURM array element's or an mpirun "
@@ -410,8 +411,11 @@ struct MergeCommand {
         "task files of RUN_DIR... (the shards' --out directories, or the one they shared) are "
         "of one experiment, with every seed once, and writes result.json and the table an "
         "unsharded run writes");
-    cmd->add_option("run_dirs", dirs, "the shards' run directories")->required();
-    cmd->add_option("--out", out, "where to write result.json (default: the first RUN_DIR)");
+    cmd->add_option("run_dirs", dirs, "the shards' run directories")
+        ->required()
+        ->transform(DirectoryPath());
+    cmd->add_option("--out", out, "where to write result.json (default: the first RUN_DIR)")
+        ->transform(DirectoryPath());
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     cmd->callback([this] { Run(); });
   }
@@ -466,7 +470,7 @@ struct UserStudyCommand {
                   "subsample the grouped data to one participant's size (default: all "
                   "participants' data pooled, as the paper)");
     cmd->add_option("--threads", threads, "parallel jobs")->capture_default_str();
-    cmd->add_option("--out", out, "directory for result.json");
+    cmd->add_option("--out", out, "directory for result.json")->transform(DirectoryPath());
     cmd->add_flag("--json", json, "print the result document");
     cmd->callback([this] { Run(); });
   }

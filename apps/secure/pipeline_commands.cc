@@ -58,7 +58,7 @@ struct DemosGenerateCommand {
     cmd->add_option("--domain", domain,
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
-    cmd->add_option("--out", out, "output directory")->required();
+    cmd->add_option("--out", out, "output directory")->required()->transform(DirectoryPath());
     episodes_flag =
         cmd->add_option("--episodes", episodes,
                         "expert episodes to keep, at most " + std::to_string(kMaxEpisodes) +
@@ -330,7 +330,8 @@ struct EvalCommand {
     cmd->add_option("--run", run_dir,
                     "a `secure demo --out` or `secure experiment --out` directory: "
                     "seed-<k>/{bc,airl,joint,barrier}.model per training seed (the paper's "
-                    "protocol: a seed covers training)");
+                    "protocol: a seed covers training)")
+        ->transform(DirectoryPath());
     cmd->add_option("--airl", airl_path, "AIRL policy model (instead of --run)");
     cmd->add_option("--bc", bc_path, "BC policy model (instead of --run)");
     cmd->add_option("--joint", joint_path, "joint-optimisation policy model (instead of --run)");

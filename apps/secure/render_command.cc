@@ -46,7 +46,8 @@ struct RenderCommand {
         ->required();
     cmd->add_option("--run", run_dir,
                     "a `secure demo --out` or `secure experiment --out` directory: the models of "
-                    "seed-<seed>/ are used");
+                    "seed-<seed>/ are used")
+        ->transform(DirectoryPath());
     cmd->add_option("--policy", policy_path,
                     "the method's policy model (BC, AIRL or joint; instead of / overriding --run)");
     cmd->add_option("--airl-reward", airl_reward_path,
@@ -64,7 +65,8 @@ struct RenderCommand {
         ->capture_default_str();
     cmd->add_option("--out", out, "the MP4 file to write (needs ffmpeg)");
     cmd->add_option("--frames-dir", frames_dir,
-                    "also (or instead) write every frame as DIR/frame-NNNNNN.ppm");
+                    "also (or instead) write every frame as DIR/frame-NNNNNN.ppm")
+        ->transform(DirectoryPath());
     cmd->add_option("--width", video.width, "frame width in pixels (even)")->capture_default_str();
     cmd->add_option("--height", video.height, "frame height in pixels (even)")
         ->capture_default_str();

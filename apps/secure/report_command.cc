@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "cli_common.h"
 #include "commands.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
@@ -145,7 +146,8 @@ void RegisterReportCommand(CLI::App& app) {
       "--out` / `secure experiment --out`: the method comparison with its significance marks "
       "beside the paper's Table 3, learning curves, variants, the learned barrier");
   cmd->add_option("RUN_DIR", report.run_dir, "the run directory (holds result.json)")
-      ->required();
+      ->required()
+      ->transform(DirectoryPath());
   cmd->add_option("--out", report.out,
                   "the HTML file (default RUN_DIR/report.html; the figures also go to "
                   "<out without .html>_figures/)");

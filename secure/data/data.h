@@ -130,9 +130,14 @@ struct LabelledStateSet {
 ///   data/demo_<k>        episode k; attribute num_samples
 ///     obs/<key>          (T, n) float64: feature names "<key>[0]" .. "<key>[n-1]" (n >= 2) form
 ///                        one key; any other name is a (T, 1) key of its own
+///     next_obs/<key>     as obs/<key>, row t the observation of step t + 1 (the last row
+///                        repeats the last observation: the one after the last action is not
+///                        recorded)
 ///     actions            (T, n_a) float64
 ///     dones, rewards     (T,) int64 (1 at the last step) and float64 (zeros)
 ///     states             (T, state dim) float64: the obs columns in feature order
+///   mask/train, mask/valid  robomimic's filter keys: (n,) fixed-length byte strings, the demo
+///                        names of each split (IsValidationDemo)
 ///   safety/<label>       a state set; attribute num_samples
 ///     obs/<key>          (N, n) float64, keys as above
 /// Groups keep creation order and no time stamps: the same data give the same bytes, and keys
@@ -143,14 +148,25 @@ struct LabelledStateSet {
 void WriteHdf5(const std::string& path, const TrajectorySet* demos,
                const std::vector<LabelledStateSet>& sets);
 
+/// The train/valid split of the filter keys WriteHdf5 writes (mask/valid), deterministic: demo
+/// `index` (0-based) of `demos` is a validation demo if index % 10 == 9 (every tenth: 10 % of the
+/// demos rounded down, robomimic's split_train_val.py ratio), or, with 2 to 9 demos, if it is
+/// the last one; one demo is a training demo.
+bool IsValidationDemo(long index, long demos);
+
 /// What an HDF5 data file holds.
 struct Hdf5Contents {
   bool has_demonstrations = false;
-  std::vector<std::string> observation_features;  // data/demo_0/obs columns, in file order
+  std::vector<std::string> observation_features;  // the first demo's obs columns, in file order
+  std::vector<std::string> unreadable_obs_keys;   // its obs keys that are no (T,) or (T, k)
+                                                  // float dataset (robomimic's images)
   std::vector<std::string> action_features;
   std::vector<std::string> state_sets;  // labels under safety/, in file order
 };
-/// @throws secure::Error as ReadTrajectories, or if the file holds neither data/ nor safety/.
+/// Says what a file holds from the first demo's keys and the actions' shape and types (no values
+/// are read; ReadTrajectories checks every demo).
+/// @throws secure::Error on a file that is not HDF5, holds neither data/ nor safety/, a data/
+///   without demos, a demo without obs keys, or actions that are no (T,) or (T, k) float dataset.
 Hdf5Contents InspectHdf5(const std::string& path);
 
 namespace internal {

@@ -216,9 +216,6 @@ class Reader {
     SECURE_CHECK(dataset.ok(), path_ << ": " << where << ": cannot open" << Hdf5Reason());
     Handle type(H5Dget_type(dataset.get()), H5Tclose);
     const H5T_class_t type_class = type.ok() ? H5Tget_class(type.get()) : H5T_NO_CLASS;
-    SECURE_CHECK(type_class == H5T_FLOAT, path_ << ": " << where << ": data type is "
-                                                << ClassName(type_class)
-                                                << ", expected float32 or float64");
     Handle space(H5Dget_space(dataset.get()), H5Sclose);
     const int rank = space.ok() ? H5Sget_simple_extent_ndims(space.get()) : -1;
     SECURE_CHECK(rank >= 0, path_ << ": " << where << ": cannot read the shape" << Hdf5Reason());
@@ -227,6 +224,10 @@ class Reader {
     std::string shape = "(";
     for (int i = 0; i < rank; ++i) shape += (i > 0 ? ", " : "") + std::to_string(dims[i]);
     shape += rank == 1 ? ",)" : ")";
+    // E.g. robomimic's images: "data type is uint8 (shape (T, 84, 84, 3)), expected ...".
+    SECURE_CHECK(type_class == H5T_FLOAT, path_ << ": " << where << ": data type is "
+                                                << TypeName(type.get(), type_class) << " (shape "
+                                                << shape << "), expected float32 or float64");
     SECURE_CHECK(rank == 1 || rank == 2, path_ << ": " << where << ": shape " << shape
                                                << " has rank " << rank
                                                << ", expected (T,) or (T, k)");
@@ -308,7 +309,17 @@ class Reader {
       columns.push_back(c);
     };
     if (select.empty()) {
-      for (const Key& k : keys) usable(k);
+      std::vector<std::string> readable;
+      for (const Key& k : keys)
+        if (k.problem.empty()) readable.push_back(k.name);
+      for (const Key& k : keys) {
+        SECURE_CHECK(k.problem.empty(),
+                     k.problem << "; no keys were selected, so every key is read: select the "
+                               << "others by name ("
+                               << (readable.empty() ? std::string("none is readable")
+                                                    : Excerpt(Join(readable), 400))
+                               << ")");
+      }
       for (const std::string& name : all) add(name, column_of.at(name));
       return columns;
     }
@@ -434,6 +445,17 @@ class Reader {
     for (std::size_t at = 0; at + kSignature.size() <= image_.size(); at = at == 0 ? 512 : 2 * at)
       if (std::string_view(image_).substr(at, kSignature.size()) == kSignature) return true;
     return false;
+  }
+
+  // "uint8", "int64", "float32", "string", ...: the numpy name where there is one.
+  static std::string TypeName(hid_t type, H5T_class_t c) {
+    const std::size_t bits = type >= 0 ? 8 * H5Tget_size(type) : 0;
+    if (c == H5T_INTEGER) {
+      return std::string(H5Tget_sign(type) == H5T_SGN_NONE ? "uint" : "int") +
+             std::to_string(bits);
+    }
+    if (c == H5T_FLOAT) return "float" + std::to_string(bits);
+    return ClassName(c);
   }
 
   static const char* ClassName(H5T_class_t c) {
@@ -654,6 +676,33 @@ class Writer {
             hsize_t(count), 2);
   }
 
+  // Columns `steps` (in this order) of rows [first, first + count) of `m` (features x steps), as
+  // a (steps.size(), count) float64 dataset.
+  void Matrix(hid_t loc, const std::string& name, const Eigen::MatrixXf& m, Eigen::Index first,
+              Eigen::Index count, const std::vector<Eigen::Index>& steps) {
+    std::vector<double> values;
+    values.reserve(static_cast<std::size_t>(count) * steps.size());
+    for (const Eigen::Index t : steps)
+      for (Eigen::Index j = first; j < first + count; ++j) values.push_back(m(j, t));
+    Dataset(loc, name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, values.data(), hsize_t(steps.size()),
+            hsize_t(count), 2);
+  }
+
+  // A (n,) dataset of fixed-length byte strings, null-padded, as h5py writes
+  // np.array(strings, dtype="S") (robomimic's filter keys); its width is the longest string's
+  // (1 when there is none, as numpy's).
+  void Strings(hid_t loc, const std::string& name, const std::vector<std::string>& strings) {
+    std::size_t width = 1;
+    for (const std::string& text : strings) width = std::max(width, text.size());
+    std::string values(width * strings.size() + 1, '\0');  // + 1: never a null pointer
+    for (std::size_t i = 0; i < strings.size(); ++i)
+      std::copy(strings[i].begin(), strings[i].end(), values.begin() + long(i * width));
+    Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
+    H5Tset_size(type.get(), width);
+    H5Tset_strpad(type.get(), H5T_STR_NULLPAD);
+    Dataset(loc, name, type.get(), type.get(), values.data(), hsize_t(strings.size()), 1, 1);
+  }
+
   void IntAttribute(hid_t loc, const char* name, long long value) {
     Handle space(H5Screate(H5S_SCALAR), H5Sclose);
     Handle attr(H5Acreate2(loc, name, H5T_STD_I64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT),
@@ -753,6 +802,25 @@ void WriteObs(Writer& w, hid_t group, const std::vector<KeyRange>& keys, const E
   for (const KeyRange& k : keys) w.Matrix(obs.get(), k.name, m, k.first, k.count, begin, end);
 }
 
+// next_obs/<key>: row t is the observation of step t + 1; the last step's is its own (the
+// observation after the last action is not recorded; dones marks the step).
+void WriteNextObs(Writer& w, hid_t group, const std::vector<KeyRange>& keys,
+                  const Eigen::MatrixXf& m, Eigen::Index begin, Eigen::Index end) {
+  std::vector<Eigen::Index> next;
+  for (Eigen::Index t = begin; t < end; ++t) next.push_back(std::min(t + 1, end - 1));
+  const Handle obs = w.Group(group, "next_obs");
+  for (const KeyRange& k : keys) w.Matrix(obs.get(), k.name, m, k.first, k.count, next);
+}
+
+}  // namespace
+
+bool IsValidationDemo(long index, long demos) {
+  if (demos < 2 || index < 0 || index >= demos) return false;
+  return index % 10 == 9 || (demos < 10 && index == demos - 1);
+}
+
+namespace {
+
 void WriteDemos(Writer& w, const std::string& path, const TrajectorySet& set) {
   const auto state_dim = static_cast<Eigen::Index>(set.state_features.size());
   const auto action_dim = static_cast<Eigen::Index>(set.action_features.size());
@@ -790,6 +858,7 @@ void WriteDemos(Writer& w, const std::string& path, const TrajectorySet& set) {
     const long b = begin[k], e = begin[k + 1], n = e - b;
     w.IntAttribute(demo.get(), "num_samples", n);
     WriteObs(w, demo.get(), keys, set.states, b, e);
+    WriteNextObs(w, demo.get(), keys, set.states, b, e);
     w.Matrix(demo.get(), "actions", set.actions, 0, action_dim, b, e);
     std::vector<long long> dones(static_cast<std::size_t>(n), 0);
     dones.back() = 1;
@@ -799,6 +868,14 @@ void WriteDemos(Writer& w, const std::string& path, const TrajectorySet& set) {
               1, 1);
     w.Matrix(demo.get(), "states", set.states, 0, state_dim, b, e);
   }
+  // robomimic's filter keys (mask/train, mask/valid: demo names), see IsValidationDemo.
+  std::vector<std::string> train, valid;
+  const long demos = set.num_episodes();
+  for (long k = 0; k < demos; ++k)
+    (IsValidationDemo(k, demos) ? valid : train).push_back("demo_" + std::to_string(k));
+  const Handle mask = w.Group(w.file(), "mask");
+  w.Strings(mask.get(), "train", train);
+  w.Strings(mask.get(), "valid", valid);
 }
 
 void WriteSets(Writer& w, const std::string& path, const std::vector<LabelledStateSet>& sets) {
@@ -839,10 +916,26 @@ Hdf5Contents InspectHdf5(const std::string& path) {
   const Reader r(path);
   Hdf5Contents c;
   if (r.KindOf(r.file(), "data") != H5I_BADID) {
-    const TrajectorySet demos = ReadDemos(r, {}, {}, true);
+    // The first demo's keys and actions, by their types and shapes: no values are read, and a
+    // key that is no (T,) or (T, k) float dataset (robomimic's images) is listed, not an error.
+    const Handle data =
+        r.OpenGroup(r.file(), "data", "data", "robomimic demonstrations: data/demo_<i>/obs/<key>");
+    const std::string first = DemoNames(r, data.get()).front();
+    const std::string where = "data/" + first;
+    const Handle demo = r.OpenGroup(data.get(), first, where, "a demo");
+    const Handle obs = r.OpenGroup(demo.get(), "obs", where + "/obs", "the demo's observations");
+    for (const Key& k : r.Keys(obs.get(), where + "/obs")) {
+      if (!k.problem.empty()) {
+        c.unreadable_obs_keys.push_back(k.name);
+        continue;
+      }
+      for (long j = 0; j < k.cols; ++j)
+        c.observation_features.push_back(ColumnName(k.name, k.cols, j));
+    }
+    long rows = 0, cols = 0;
+    r.OpenFloatDataset(demo.get(), "actions", where + "/actions", &rows, &cols);
+    ActionKeys(r, data.get(), cols, &c.action_features);
     c.has_demonstrations = true;
-    c.observation_features = demos.state_features;
-    c.action_features = demos.action_features;
   }
   if (r.KindOf(r.file(), "safety") != H5I_BADID) {
     const Handle safety = r.OpenGroup(r.file(), "safety", "safety", "labelled state sets");

@@ -466,6 +466,79 @@ TEST(CliTest, DemosConvertToHdf5TrainsIdentically) {
   }
 }
 
+// A directory argument ending in '/' (or with "//", "/./") prints and records normalised paths:
+// "data/demos.csv", not "data//demos.csv".
+TEST(CliTest, DirectoryArgumentsGiveNormalisedPaths) {
+  const std::string dir = (TempDir() / "normal").string();
+  const std::string generate =
+      "demos generate --domain double-integrator --episodes 2 --safe-states 10 "
+      "--near-dangerous 10 --out " +
+      dir + "/./";
+  Result r = RunCli(generate + "/");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find("//"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("/./"), std::string::npos) << r.out;
+  EXPECT_HAS(r.out, " -> " + dir + "/demos.csv\n");
+  EXPECT_HAS(r.out, " -> " + dir + "/near_dangerous.csv\n");
+  r = RunCli(generate + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["files"],
+            nlohmann::json({dir + "/demos.csv", dir + "/safe.csv", dir + "/near_dangerous.csv"}));
+}
+
+// `cbf train` from files stops early by default (patience 50 on the held-out score, the best
+// epoch's weights kept); --no-early-stopping (= --patience 0) trains every epoch. With --domain,
+// and with configs/cbf_panda_push.yaml (what docs/RESULTS.md ran), nothing changes: no early
+// stopping, the same model bytes as before.
+TEST(CliTest, CbfTrainFromFilesStopsEarlyByDefault) {
+  WriteToyData();
+  const std::string files = "cbf train --safe-states " + (TempDir() / "safe.csv").string() +
+                            " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
+                            " --features x,y --hidden 8,8 --epochs 300 --json --out ";
+  const auto train = [&](const std::string& name, const std::string& extra) {
+    const Result r = RunCli(files + (TempDir() / name).string() + extra);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out) : nlohmann::json::object();
+  };
+  const nlohmann::json early = train("early.model", "");
+  EXPECT_EQ(early["options"]["patience"], 50);
+  EXPECT_EQ(early["summary"]["stop_reason"], "early_stopping");
+  const int epochs = early["summary"]["epochs"].get<int>();
+  EXPECT_LT(epochs, 300);
+  EXPECT_EQ(epochs, early["summary"]["best_epoch"].get<int>() + 50);
+  EXPECT_GE(early["summary"]["validation_accuracy"]["safe"].get<double>(), 0.9);
+
+  const nlohmann::json all = train("all.model", " --no-early-stopping");
+  EXPECT_EQ(all["options"]["patience"], 0);
+  EXPECT_EQ(all["summary"]["stop_reason"], "max_epochs");
+  EXPECT_EQ(all["summary"]["epochs"], 300);
+  const nlohmann::json zero = train("zero.model", " --patience 0");
+  EXPECT_EQ(zero["summary"]["epochs"], 300);
+  EXPECT_EQ(FileBytes((TempDir() / "all.model").string()),
+            FileBytes((TempDir() / "zero.model").string()));
+  EXPECT_EQ(train("five.model", " --patience 5")["options"]["patience"], 5);
+
+  Result r = RunCli(files + "x.model --no-early-stopping --patience 5");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--no-early-stopping and --patience 5");
+  r = RunCli("cbf train --help");
+  EXPECT_HAS(r.out, "--no-early-stopping");
+  EXPECT_HAS(r.out, "early stopping is on");
+
+  // The double-integrator preset and the shipped Panda config: every epoch, as before.
+  r = RunCli("cbf train --domain double-integrator --safe 30 --unsafe 30 --epochs 25 --json --out " +
+             (TempDir() / "di.model").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["options"]["patience"], 0);
+  EXPECT_EQ(j["summary"]["epochs"], 25);
+  j = train("panda_cfg.model", " --config " + std::string(SECURE_SOURCE_DIR) +
+                                   "/configs/cbf_panda_push.yaml");
+  EXPECT_EQ(j["options"]["patience"], 0);
+  EXPECT_EQ(j["summary"]["stop_reason"], "max_epochs");
+  EXPECT_EQ(j["summary"]["epochs"], 300);
+}
+
 TEST(CliTest, Hdf5InputErrorsAreOneLineNamingTheFile) {
   const auto expect_error = [](const Result& r, const std::vector<std::string>& parts) {
     EXPECT_EQ(r.exit_code, 1) << r.out;

@@ -271,7 +271,8 @@ TEST_F(Hdf5Test, RejectsWrongRankShapeAndType) {
   }
   ExpectContainsAll(
       ErrorOf([&] { ReadStateSet(types); }),
-      {types, "safety/safe/obs/count", "data type is integer", "expected float32 or float64"});
+      {types, "safety/safe/obs/count", "data type is int64 (shape (2,))",
+       "expected float32 or float64"});
   const std::string zero = PathOf("zero.h5");
   {
     Hdf5TestFile f(zero);
@@ -286,6 +287,146 @@ TEST_F(Hdf5Test, RejectsWrongRankShapeAndType) {
   }
   ExpectContainsAll(ErrorOf([&] { ReadStateSet(group); }),
                     {group, "safety/safe/obs/nested is a group"});
+}
+
+// A robomimic file as released: low-dimensional keys beside (T, H, W, C) uint8 images. The
+// images are read only when selected (an error naming the file, the dataset and its dtype);
+// InspectHdf5 lists them apart.
+TEST_F(Hdf5Test, RobomimicImageKeysAreAnErrorOnlyWhenSelected) {
+  const std::string path = PathOf("image.hdf5");
+  {
+    Hdf5TestFile f(path);
+    for (int d = 0; d < 2; ++d) {
+      const std::string demo = "data/demo_" + std::to_string(d);
+      f.UInt8s(demo + "/obs/agentview_image", {3, 4, 4, 3}, std::vector<unsigned char>(144, 7));
+      f.Doubles(demo + "/obs/robot0_eef_pos", {3, 3}, {1, 2, 3, 4, 5, 6, 7, 8, 9});
+      f.Floats(demo + "/obs/object", {3, 2}, {0, 1, 2, 3, 4, 5});
+      f.Doubles(demo + "/actions", {3, 2}, {0.5, -0.5, 1, -1, 2, -2});
+      f.IntAttribute(demo, "num_samples", 3);
+    }
+    f.Group("mask");
+  }
+  const Hdf5Contents c = InspectHdf5(path);
+  EXPECT_TRUE(c.has_demonstrations);
+  EXPECT_EQ(c.observation_features,
+            (std::vector<std::string>{"object[0]", "object[1]", "robot0_eef_pos[0]",
+                                      "robot0_eef_pos[1]", "robot0_eef_pos[2]"}));
+  EXPECT_EQ(c.unreadable_obs_keys, (std::vector<std::string>{"agentview_image"}));
+  EXPECT_EQ(c.action_features, kActions);
+
+  const TrajectorySet set = ReadTrajectories(path, {"robot0_eef_pos"}, {});
+  EXPECT_EQ(set.state_features,
+            (std::vector<std::string>{"robot0_eef_pos[0]", "robot0_eef_pos[1]",
+                                      "robot0_eef_pos[2]"}));
+  EXPECT_EQ(set.episode_begin, (std::vector<long>{0, 3, 6}));
+  EXPECT_EQ(set.states.col(4), Eigen::Vector3f(4, 5, 6));
+  EXPECT_EQ(set.actions.col(5), Eigen::Vector2f(2, -2));
+  EXPECT_EQ(ReadStateSet(path, {"object[1]"}).size(), 6);
+
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {"object", "agentview_image"}, {}); }),
+                    {path, "data/demo_0/obs/agentview_image",
+                     "data type is uint8 (shape (3, 4, 4, 3)), expected float32 or float64"});
+  // With no selection every key is read: the message names the keys to select.
+  ExpectContainsAll(ErrorOf([&] { ReadTrajectories(path, {}, {}); }),
+                    {path, "data/demo_0/obs/agentview_image", "data type is uint8",
+                     "select the others by name (object, robot0_eef_pos)"});
+}
+
+// What robomimic reads beyond obs and actions: next_obs, and the filter keys mask/train and
+// mask/valid (fixed-length byte strings, as h5py writes np.array(names, dtype="S")).
+TEST_F(Hdf5Test, WritesNextObsAndRobomimicFilterKeys) {
+  TrajectorySet set;
+  set.state_features = {"p[0]", "p[1]", "v"};
+  set.action_features = {"a"};
+  const long demos = 12;
+  for (long k = 0; k <= demos; ++k) set.episode_begin.push_back(3 * k - (k > 0 ? 1 : 0));
+  set.episode_begin.front() = 0;  // demo 0: 2 steps, the others 3
+  const long steps = set.episode_begin.back();
+  set.states.resize(3, steps);
+  set.actions.resize(1, steps);
+  for (long t = 0; t < steps; ++t) {
+    set.states.col(t) << float(t), float(10 * t), float(-t);
+    set.actions(0, t) = float(t) / 2;
+  }
+  const std::string path = PathOf("masks.hdf5");
+  WriteTrajectories(path, set);
+
+  const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  // next_obs of demo_1 (steps 2, 3, 4): rows 3, 4, 4 of p (the last repeats).
+  {
+    std::vector<double> next(6), obs(6);
+    const hid_t d = H5Dopen2(file, "data/demo_1/next_obs/p", H5P_DEFAULT);
+    H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, next.data());
+    H5Dclose(d);
+    EXPECT_EQ(next, (std::vector<double>{3, 30, 4, 40, 4, 40}));
+    const hid_t v = H5Dopen2(file, "data/demo_1/next_obs/v", H5P_DEFAULT);
+    const hid_t space = H5Dget_space(v);
+    hsize_t dims[2] = {};
+    EXPECT_EQ(H5Sget_simple_extent_ndims(space), 2);
+    H5Sget_simple_extent_dims(space, dims, nullptr);
+    EXPECT_EQ(dims[0], 3u);
+    EXPECT_EQ(dims[1], 1u);
+    H5Sclose(space);
+    H5Dclose(v);
+  }
+  const auto strings = [&](const char* name) {
+    const hid_t d = H5Dopen2(file, name, H5P_DEFAULT);
+    const hid_t type = H5Dget_type(d);
+    EXPECT_EQ(H5Tget_class(type), H5T_STRING) << name;
+    EXPECT_LE(H5Tis_variable_str(type), 0) << name << ": robomimic's are fixed-length";
+    const std::size_t width = H5Tget_size(type);
+    const hid_t space = H5Dget_space(d);
+    const hssize_t n = H5Sget_simple_extent_npoints(space);
+    std::string bytes(width * static_cast<std::size_t>(n), '\0');
+    if (n > 0) H5Dread(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, bytes.data());
+    std::vector<std::string> out;
+    for (hssize_t i = 0; i < n; ++i) {
+      std::string s = bytes.substr(static_cast<std::size_t>(i) * width, width);
+      out.push_back(s.substr(0, s.find('\0')));
+    }
+    H5Sclose(space);
+    H5Tclose(type);
+    H5Dclose(d);
+    return out;
+  };
+  EXPECT_EQ(strings("mask/valid"), (std::vector<std::string>{"demo_9"}));
+  std::vector<std::string> train;
+  for (long k = 0; k < demos; ++k)
+    if (k != 9) train.push_back("demo_" + std::to_string(k));
+  EXPECT_EQ(strings("mask/train"), train);
+  H5Fclose(file);
+  // Our reader ignores next_obs and mask/: the data read back as written.
+  const TrajectorySet back = ReadTrajectories(path, {}, {});
+  EXPECT_EQ(back.states, set.states);
+  EXPECT_EQ(back.episode_begin, set.episode_begin);
+
+  // The split rule: every tenth demo; with 2 to 9 demos the last; one demo trains.
+  const auto valid = [](long n) {
+    std::vector<long> v;
+    for (long k = 0; k < n; ++k)
+      if (IsValidationDemo(k, n)) v.push_back(k);
+    return v;
+  };
+  EXPECT_EQ(valid(1), std::vector<long>{});
+  EXPECT_EQ(valid(2), std::vector<long>{1});
+  EXPECT_EQ(valid(9), std::vector<long>{8});
+  EXPECT_EQ(valid(10), std::vector<long>{9});
+  EXPECT_EQ(valid(25), (std::vector<long>{9, 19}));
+  // One demo: an empty valid key, still a (0,) dataset robomimic can read.
+  TrajectorySet one = set;
+  one.episode_begin = {0, steps};
+  const std::string single = PathOf("single.hdf5");
+  WriteTrajectories(single, one);
+  const hid_t f1 = H5Fopen(single.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(f1, 0);
+  const hid_t d = H5Dopen2(f1, "mask/valid", H5P_DEFAULT);
+  EXPECT_GE(d, 0);
+  const hid_t space = H5Dget_space(d);
+  EXPECT_EQ(H5Sget_simple_extent_npoints(space), 0);
+  H5Sclose(space);
+  H5Dclose(d);
+  H5Fclose(f1);
 }
 
 TEST_F(Hdf5Test, RejectsNonFiniteValuesNamingRowAndColumn) {

@@ -5,6 +5,7 @@
 //   Hdf5TestFile f(path);
 //   f.Doubles("data/demo_0/obs/pos", {3, 2}, {1, 2, 3, 4, 5, 6});   // (3, 2) float64
 //   f.Floats("data/demo_0/actions", {3}, {0, 1, 2});                 // (3,) float32
+//   f.UInt8s("data/demo_0/obs/image", {3, 4, 4, 3}, pixels);         // robomimic's images
 //   f.IntAttribute("data/demo_0", "num_samples", 3);
 //   // closed by the destructor
 //
@@ -50,6 +51,10 @@ class Hdf5TestFile {
   void Ints(const std::string& path, const std::vector<hsize_t>& dims,
             const std::vector<long long>& values) {
     Write(path, dims, H5T_STD_I64LE, H5T_NATIVE_LLONG, values.data());
+  }
+  void UInt8s(const std::string& path, const std::vector<hsize_t>& dims,
+              const std::vector<unsigned char>& values) {
+    Write(path, dims, H5T_STD_U8LE, H5T_NATIVE_UCHAR, values.data());
   }
   void IntAttribute(const std::string& object, const std::string& name, long long value) {
     const hid_t o = H5Oopen(file_, object.c_str(), H5P_DEFAULT);

@@ -116,6 +116,19 @@ TEST_P(DomainContract, OptionsAndPresetValidateInBothProfiles) {
   }
 }
 
+// The experiments train their barriers for every epoch (patience 0, the library default, as
+// docs/RESULTS.md measured them): early stopping is only `secure cbf train`'s default when it
+// trains from files (apps/secure/cbf_commands.cc), and must not reach a preset.
+TEST_P(DomainContract, PresetBarrierTrainersDoNotStopEarly) {
+  EXPECT_EQ(cbf::BarrierTrainerOptions{}.patience, 0);
+  EXPECT_EQ(cbf::CarBarrierTrainerOptions{}.patience, 0);
+  for (Profile p : {Profile::kQuick, Profile::kFull}) {
+    const experiments::ExperimentOptions o = DomainRegistry::Global().Make(GetParam(), p)->Preset();
+    EXPECT_EQ(o.flat_barrier.patience, 0);
+    EXPECT_EQ(o.per_obstacle_barrier.patience, 0);
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Environment
 
