@@ -232,6 +232,13 @@ class CoffeePlacingEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
+  /// [-1, 1] per component (the clip of Step()).
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
+                    Eigen::Ref<Eigen::VectorXf> high) const override {
+    low.setConstant(-1.0f);
+    high.setConstant(1.0f);
+  }
+  double StepSeconds() const override { return sim_.options().control_period; }
   bool CanRender() const override { return true; }
   void Render(int width, int height, Frame* frame) override;
 

@@ -190,6 +190,13 @@ class DerbyEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
+  /// [-accel_bound, accel_bound] per axis (the clip of Step()).
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
+                    Eigen::Ref<Eigen::VectorXf> high) const override {
+    low.setConstant(-static_cast<float>(options_.accel_bound));
+    high.setConstant(static_cast<float>(options_.accel_bound));
+  }
+  double StepSeconds() const override { return options_.dt; }
 
   /// A constructed situation (tests, replays): ego state (px, py, vx, vy), goal, and the cars'
   /// positions and velocities (2 x num_cars), every car then moving at CONSTANT velocity for all

@@ -164,6 +164,7 @@ void ReachAvoidEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
                                                     << observation.size()
                                                     << " entries, expected 4");
   state_ = DrawStartState(options_, rng);
+  in_obstacle_ = InObstacle(state_[0], state_[1]);
   started_ = true;
   observation = state_;
 }
@@ -187,7 +188,8 @@ StepOutcome ReachAvoidEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
   StepOutcome out;
   out.reached_goal = InGoal(state_[0], state_[1]);
   out.collided = InObstacle(state_[0], state_[1]);
-  out.collisions = out.collided ? 1 : 0;
+  out.collisions = out.collided && !in_obstacle_ ? 1 : 0;  // entering (environment.h)
+  in_obstacle_ = out.collided;
   return out;
 }
 
@@ -215,6 +217,7 @@ void ReachAvoidEnv::SetState(const Eigen::Ref<const Eigen::VectorXf>& state) {
                                               << StateFeatures()[static_cast<std::size_t>(i)]
                                               << " = " << state[i] << ", must be finite");
   state_ = state;
+  in_obstacle_ = InObstacle(state_[0], state_[1]);
   started_ = true;
 }
 

@@ -139,11 +139,20 @@ class ReachAvoidEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
+  /// [-accel_bound, accel_bound] per component (the clip of Step()).
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
+                    Eigen::Ref<Eigen::VectorXf> high) const override {
+    low.setConstant(-static_cast<float>(options_.accel_bound));
+    high.setConstant(static_cast<float>(options_.accel_bound));
+  }
+  double StepSeconds() const override { return options_.dt; }
 
   const ReachAvoidOptions& options() const { return options_; }
   /// The current state (valid after Reset() or SetState()).
   const Eigen::Vector4f& state() const { return state_; }
-  /// Puts the system into `state` (4 finite values), e.g. to replay or test a situation.
+  /// Puts the system into `state` (4 finite values), e.g. to replay or test a situation. A state
+  /// inside the obstacle counts as a contact already under way (the next step inside reports
+  /// collided, with collisions = 0).
   void SetState(const Eigen::Ref<const Eigen::VectorXf>& state);
 
   /// ||p - goal|| < goal_radius.
@@ -156,6 +165,7 @@ class ReachAvoidEnv final : public Environment {
   ClippedDoubleIntegrator model_;
   Eigen::Vector4f state_ = Eigen::Vector4f::Zero();
   Eigen::Vector4f next_ = Eigen::Vector4f::Zero();
+  bool in_obstacle_ = false;  // the current state is inside the obstacle (StepOutcome.collisions)
   bool started_ = false;
 };
 

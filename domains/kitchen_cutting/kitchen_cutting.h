@@ -243,6 +243,13 @@ class KitchenCuttingEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
+  /// [-1, 1] per component (the clip of Step()).
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
+                    Eigen::Ref<Eigen::VectorXf> high) const override {
+    low.setConstant(-1.0f);
+    high.setConstant(1.0f);
+  }
+  double StepSeconds() const override { return sim_.options().control_period; }
   /// domains/franka/'s offscreen renderer (OSMesa), created on the first call; frames up to
   /// 1280 x 720, seen from the robot's right, the person's arm at the back.
   bool CanRender() const override { return true; }

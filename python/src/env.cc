@@ -1,5 +1,5 @@
-// secure.domains(), secure.make_env / secure.Env (Gymnasium-style), Dynamics.builtin,
-// Barrier.ground_truth, secure.generate_data.
+// secure.domains(), secure._secure.EnvCore (a domain's environment; python/secure/env.py wraps it
+// as secure.Env in Gymnasium's API), Dynamics.builtin, Barrier.ground_truth, secure.generate_data.
 #include <algorithm>
 #include <optional>
 
@@ -27,7 +27,8 @@ std::unique_ptr<experiments::Domain> MakeDomain(const std::string& name, const s
 
 namespace {
 
-// A domain's environment with an episode stream, in the Gymnasium API.
+// A domain's environment with an episode stream: the C++ half of secure.Env (env.py adds the
+// spaces, np_random, reset's options and render_mode).
 class Env {
  public:
   Env(const std::string& name, const std::string& profile, bool terminate_on_collision,
@@ -68,15 +69,42 @@ class Env {
     ++steps_;
     const bool terminated = outcome.reached_goal || (outcome.collided && terminate_on_collision_);
     const bool truncated = !terminated && steps_ >= env_->max_steps();
-    const double reward =
-        (outcome.reached_goal ? 1.0 : 0.0) -
-        (outcome.collided ? static_cast<double>(std::max(1, outcome.collisions)) : 0.0);
+    // Per step (python/README.md): +1 for reaching the goal, -1 for being in danger after it
+    // (every step of a contact, as eval's collision_events counts), else 0.
+    const double reward = (outcome.reached_goal ? 1.0 : 0.0) - (outcome.collided ? 1.0 : 0.0);
     py::dict info;
     info["reached_goal"] = outcome.reached_goal;
     info["collided"] = outcome.collided;
     info["collisions"] = outcome.collisions;
     info["step"] = steps_;
     return py::make_tuple(ToNumpy(observation_), reward, terminated, truncated, info);
+  }
+
+  // The current state drawn offscreen: a (height, width, 3) uint8 array, rows top to bottom.
+  py::array_t<std::uint8_t> Render(int width, int height) {
+    SECURE_CHECK(env_->CanRender(), "the " << name_
+                                           << " domain cannot render (no offscreen renderer)");
+    if (!started_) throw std::runtime_error(name_ + ": call reset() before render()");
+    SECURE_CHECK(width > 0 && height > 0,
+                 "render size = " << width << " x " << height << ", must be positive");
+    {
+      py::gil_scoped_release release;
+      std::lock_guard<std::mutex> lock(dynamics_->mutex);
+      env_->Render(width, height, &frame_);
+    }
+    SECURE_CHECK(frame_.width == width && frame_.height == height &&
+                     frame_.rgb.size() == 3u * static_cast<std::size_t>(width) * height,
+                 "the " << name_ << " renderer returned a " << frame_.width << " x "
+                        << frame_.height << " frame for " << width << " x " << height);
+    py::array_t<std::uint8_t> out({height, width, 3});
+    std::copy(frame_.rgb.begin(), frame_.rgb.end(), out.mutable_data());
+    return out;
+  }
+
+  std::pair<py::array_t<float>, py::array_t<float>> ActionBounds() const {
+    Eigen::VectorXf low(env_->action_dim()), high(env_->action_dim());
+    env_->ActionBounds(low, high);
+    return {ToNumpy(low), ToNumpy(high)};
   }
 
   py::object Backup(py::handle observation) const {
@@ -101,6 +129,7 @@ class Env {
   std::shared_ptr<Dynamics> dynamics_;
   Rng rng_;
   Eigen::VectorXf observation_;
+  domains::Frame frame_;
   int steps_ = 0;
   bool started_ = false;
 };
@@ -113,7 +142,17 @@ std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
         MakeDomain(env.cast<std::string>(), "full", py::dict());
     return std::shared_ptr<const domains::Environment>(d->MakeEnvironment());
   }
-  return env.cast<Env&>().shared_env();
+  // A secure.Env (env.py) holds its EnvCore as `_core`; through Gymnasium's wrappers (gymnasium
+  // .make) it is env.unwrapped.
+  py::object core = py::reinterpret_borrow<py::object>(env);
+  if (!py::isinstance<Env>(core) && py::hasattr(core, "unwrapped"))
+    core = core.attr("unwrapped");
+  if (!py::isinstance<Env>(core) && py::hasattr(core, "_core")) core = core.attr("_core");
+  if (core.is_none()) throw std::runtime_error("env: the environment is closed");
+  if (!py::isinstance<Env>(core))
+    throw py::type_error("env: expected a domain name or a secure.Env, got " +
+                         py::str(py::type::of(env)).cast<std::string>());
+  return core.cast<Env&>().shared_env();
 }
 
 void RegisterEnvironment(py::module_& m) {
@@ -121,19 +160,28 @@ void RegisterEnvironment(py::module_& m) {
       "domains", [] { return experiments::DomainRegistry::Global().Names(); },
       "The registered domains (names for make_env, Dynamics.builtin, ...).");
 
-  py::class_<Env, std::shared_ptr<Env>>(m, "Env", R"doc(
-A domain's task environment in the Gymnasium API (without needing Gymnasium): reset(seed) ->
-(obs, info), step(action) -> (obs, reward, terminated, truncated, info). Make one with
-secure.make_env(name, profile='full', terminate_on_collision=False, **domain_options).
-Rewards: +1 when the goal is reached, -1 per collision event, else 0 (the library's domains
-define outcomes, not rewards); terminated: the goal was reached (or a collision, with
-terminate_on_collision); truncated: max_steps reached. info: reached_goal, collided, collisions,
-step.)doc")
+  py::class_<Env, std::shared_ptr<Env>>(m, "EnvCore", R"doc(
+The C++ half of secure.Env (use secure.make_env / secure.Env, which add Gymnasium's spaces,
+np_random, reset options and render_mode): reset(seed) -> (obs, {}), step(action) -> (obs,
+reward, terminated, truncated, info), render(width, height) -> (height, width, 3) uint8.
+Per step: reward +1 when the goal is reached, -1 when the new state is dangerous, else 0;
+info: reached_goal, collided (this step ends in danger), collisions (a contact begins in this
+step), step.)doc")
+      .def(py::init<const std::string&, const std::string&, bool, const py::dict&>(),
+           py::arg("name"), py::arg("profile") = "full",
+           py::arg("terminate_on_collision") = false, py::arg("options") = py::dict())
       .def("reset", &Env::Reset, py::arg("seed") = py::none(), R"doc(
 Starts an episode. With a seed, the episode stream (env.rng) is re-seeded first; without one the
 stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
       .def("step", &Env::Step, py::arg("action"),
            "Applies the action (clipped to the actuator bounds by the domain).")
+      .def("render", &Env::Render, py::arg("width"), py::arg("height"),
+           "The current state drawn offscreen: (height, width, 3) uint8 (rendering domains).")
+      .def_property_readonly("can_render", [](const Env& e) { return e.env().CanRender(); })
+      .def_property_readonly("action_bounds", &Env::ActionBounds,
+                             "(low, high): the actuator box Step() clips actions to.")
+      .def_property_readonly("step_seconds", [](const Env& e) { return e.env().StepSeconds(); },
+                             "Simulated seconds per step (0: the task has no clock).")
       .def("backup_action", &Env::Backup, py::arg("observation"),
            "The domain's safe fallback action at `observation` (e.g. braking), or None.")
       .def_property_readonly("name", &Env::name)
@@ -154,19 +202,8 @@ stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
       .def_property_readonly("options",
                              [](const Env& e) { return ToPython(e.domain().OptionsJson()); })
       .def("describe", [](const Env& e) { return e.env().Describe(); })
-      .def("__repr__", [](const Env& e) { return "<secure.Env " + e.env().Describe() + ">"; });
-
-  m.def(
-      "make_env",
-      [](const std::string& name, const std::string& profile, bool terminate_on_collision,
-         py::kwargs options) {
-        return std::make_shared<Env>(name, profile, terminate_on_collision, options);
-      },
-      py::arg("name"), py::arg("profile") = "full", py::arg("terminate_on_collision") = false,
-      R"doc(
-The environment of domain `name` (secure.domains()). Keyword arguments are the domain's options
-(its config-file keys, e.g. task={'max_steps': 200} for double-integrator); unknown keys are a
-ValueError naming them.)doc");
+      .def("__repr__",
+           [](const Env& e) { return "<secure.EnvCore " + e.env().Describe() + ">"; });
 
   // Dynamics.builtin and Barrier.ground_truth live on the classes registered elsewhere.
   py::object dynamics = m.attr("Dynamics");

@@ -17,6 +17,7 @@
 // environment per thread (Clone()).
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -27,11 +28,19 @@
 
 namespace secure::domains {
 
-/// What happened in one step.
+/// What happened in one step. Both danger fields describe this step only:
+///  - collided: the new state is dangerous (inside an obstacle, touching a car, the box toppled,
+///    a threshold violated): true on EVERY step a contact lasts;
+///  - collisions: dangerous events that BEGIN in this step: 1 when the state enters danger (the
+///    new state is dangerous, the previous one, or the start, was not), 0 while a contact goes on
+///    (the released code's collision_num). So collisions > 0 implies collided, not the converse:
+///    a step inside a lasting contact has collided = true, collisions = 0. Summed over an
+///    episode, collisions counts the separate contacts. Checked for every registered domain by
+///    tests/domains/domain_contract_test.cc (CollisionsCountEntriesIntoDanger).
 struct StepOutcome {
   bool reached_goal = false;  // the new state is within the goal region
-  bool collided = false;      // the new state is inside an obstacle (a dangerous event)
-  int collisions = 0;         // dangerous events in this step (e.g. cars touched; >= collided)
+  bool collided = false;      // the new state is dangerous (every step of a contact)
+  int collisions = 0;         // contacts that begin in this step (1 on entering danger, else 0)
 };
 
 /// An RGB frame, rows top to bottom, 3 bytes per pixel (rgb.size() == 3 * width * height).
@@ -83,6 +92,19 @@ class Environment {
                             Eigen::Ref<Eigen::VectorXf> action) const {
     return false;
   }
+
+  /// The actuator box: Step() clips action component i to [low[i], high[i]] before applying it
+  /// (low <= high; `low` and `high` have action_dim entries). The default, for an environment
+  /// without one, is unbounded (-inf, +inf). The Python module's action_space; the contract suite
+  /// checks that an action outside the box steps exactly as the clipped one.
+  virtual void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
+                            Eigen::Ref<Eigen::VectorXf> high) const {
+    low.setConstant(-std::numeric_limits<float>::infinity());
+    high.setConstant(std::numeric_limits<float>::infinity());
+  }
+  /// Simulated seconds one Step() lasts (the control period), or 0 if the task has no clock
+  /// (the Python module's metadata['render_fps'] is 1 / StepSeconds()).
+  virtual double StepSeconds() const { return 0.0; }
 
   /// Whether Render() works (an offscreen renderer exists for this domain). False by default.
   virtual bool CanRender() const { return false; }

@@ -5,7 +5,8 @@
 //
 // Per domain: the registry lists and makes it; its options and preset validate; an episode is
 // replayed exactly from the same Rng; a clone is independent; bad actions are rejected; the
-// backup action (where claimed) is finite; the shield model has the environment's dimensions and,
+// backup action (where claimed) is finite; collisions count entries into danger; the action box
+// is the clip of Step(); the shield model has the environment's dimensions and,
 // where the environment claims it is exact (ShieldModelIsExact), predicts every step exactly;
 // GenerateData is deterministic and gives non-empty finite sets of the environment's dimension;
 // the ground truth (where given) has the right dimension, is finite and agrees with the data's
@@ -230,6 +231,62 @@ TEST_P(DomainContract, BackupActionIsFiniteWhereClaimed) {
   }
   // A domain either has a backup action everywhere on this episode or nowhere here.
   EXPECT_TRUE(claimed == 0 || claimed == steps_) << claimed << " of " << steps_;
+}
+
+// StepOutcome (environment.h): collided on every step of a contact, collisions = 1 only on the
+// step that enters danger, so collisions > 0 implies collided. Random actions, several episodes.
+TEST_P(DomainContract, CollisionsCountEntriesIntoDanger) {
+  int contact_steps = 0;
+  for (std::uint64_t seed = 0; seed < 6; ++seed) {
+    const Episode e = RunEpisode(*env_, 61 + seed, 71 + seed, steps_);
+    bool before = false;  // no domain starts an episode in danger
+    for (std::size_t t = 0; t < e.collided.size(); ++t) {
+      contact_steps += e.collided[t];
+      const int entered = e.collided[t] && !before ? 1 : 0;
+      ASSERT_EQ(e.collisions[t], entered)
+          << "seed " << seed << " step " << t << ": collided " << e.collided[t]
+          << ", collided before " << before;
+      before = e.collided[t];
+    }
+  }
+  RecordProperty("contact_steps", contact_steps);
+}
+
+// The actuator box (Environment::ActionBounds) is what Step() clips to: an action outside it
+// steps exactly as the action clipped to it, in a second environment on the same episode.
+TEST_P(DomainContract, ActionBoundsAreTheClipOfStep) {
+  const int n = env_->action_dim();
+  Eigen::VectorXf low(n), high(n);
+  env_->ActionBounds(low, high);
+  EXPECT_GT(env_->StepSeconds(), 0.0) << "every registered domain has a control period";
+  for (int i = 0; i < n; ++i) {
+    ASSERT_TRUE(std::isfinite(low[i]) && std::isfinite(high[i]))
+        << "component " << i << ": [" << low[i] << ", " << high[i] << "]";
+    ASSERT_LT(low[i], high[i]) << "component " << i;
+  }
+  std::unique_ptr<domains::Environment> clipped = domain_->MakeEnvironment();
+  Rng rng_a(81), rng_b(81), action_rng(82);
+  Eigen::VectorXf oa(env_->observation_dim()), ob(env_->observation_dim());
+  Eigen::VectorXf a(n), b(n);
+  env_->Reset(rng_a, oa);
+  clipped->Reset(rng_b, ob);
+  ASSERT_EQ(oa, ob);
+  int outside = 0;
+  for (int t = 0; t < std::min(steps_, 20); ++t) {
+    for (int i = 0; i < n; ++i) {
+      const double width = high[i] - low[i];
+      a[i] = static_cast<float>(action_rng.Uniform(low[i] - 2 * width, high[i] + 2 * width));
+      b[i] = std::clamp(a[i], low[i], high[i]);
+      outside += a[i] != b[i];
+    }
+    const domains::StepOutcome x = env_->Step(a, oa);
+    const domains::StepOutcome y = clipped->Step(b, ob);
+    ASSERT_EQ(oa, ob) << "step " << t << ": action " << a.transpose() << " vs clipped "
+                      << b.transpose();
+    ASSERT_EQ(x.collided, y.collided);
+    ASSERT_EQ(x.reached_goal, y.reached_goal);
+  }
+  EXPECT_GT(outside, 0);
 }
 
 TEST_P(DomainContract, ShieldModelMatchesTheEnvironmentWhereExact) {

@@ -230,9 +230,24 @@ TEST(ReachAvoidEnvTest, FlagsGoalAndCollisionOfTheNewState) {
   EXPECT_TRUE(out.collided);
   EXPECT_EQ(out.collisions, 1);
   EXPECT_FALSE(out.reached_goal);
-  // Still inside and moving out: every step inside is flagged.
+  // The next step still inside: collided, but no new collision (the contact goes on).
+  out = env.Step(zero, o);
+  EXPECT_TRUE(out.collided);
+  EXPECT_EQ(out.collisions, 0);
+  // Still inside and moving out: every step inside is flagged; SetState inside the obstacle is a
+  // contact under way, so no new collision either.
   env.SetState(Eigen::Vector4f(5.0f, 3.1f, 0.0f, -0.5f));
-  EXPECT_TRUE(env.Step(zero, o).collided);
+  out = env.Step(zero, o);
+  EXPECT_TRUE(out.collided);
+  EXPECT_EQ(out.collisions, 0);
+  // Braking down and out (y 3.05 -> 2.985), then pushed back up: the re-entry is a new collision.
+  const Eigen::Vector2f down(0.0f, -3.0f), up(0.0f, 3.0f);
+  EXPECT_FALSE(env.Step(down, o).collided);
+  int steps = 0, collisions = 0;
+  for (; steps < 20 && !(out = env.Step(up, o)).collided; ++steps) collisions += out.collisions;
+  ASSERT_LT(steps, 20);
+  EXPECT_EQ(collisions, 0);
+  EXPECT_EQ(out.collisions, 1);
   // Touching is not colliding (strict <), and Step() does not end anything: stepping continues.
   env.SetState(Eigen::Vector4f(5.0f, 7.0f, 0.0f, 0.0f));
   EXPECT_FALSE(env.Step(zero, o).collided);

@@ -86,6 +86,7 @@ void ToyCartEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
                                             << observation.size() << " entries, expected 2");
   x_ = static_cast<float>(rng.Uniform(0.0, 1.0));
   v_ = static_cast<float>(rng.Uniform(0.0, 0.2));
+  at_wall_ = x_ >= options_.wall;
   started_ = true;
   observation << x_, v_;
 }
@@ -103,7 +104,8 @@ domains::StepOutcome ToyCartEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& a
   observation << x_, v_;
   domains::StepOutcome out;
   out.collided = x_ >= options_.wall;
-  out.collisions = out.collided ? 1 : 0;
+  out.collisions = out.collided && !at_wall_ ? 1 : 0;  // entering (environment.h)
+  at_wall_ = out.collided;
   out.reached_goal = !out.collided && x_ >= options_.goal_lo && std::abs(v_) < options_.goal_speed;
   return out;
 }

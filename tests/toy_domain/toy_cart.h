@@ -102,11 +102,18 @@ class ToyCartEnv final : public domains::Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<domains::Environment> Clone() const override;
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
+                    Eigen::Ref<Eigen::VectorXf> high) const override {
+    low.setConstant(-static_cast<float>(options_.accel_bound));
+    high.setConstant(static_cast<float>(options_.accel_bound));
+  }
+  double StepSeconds() const override { return options_.dt; }
 
  private:
   ToyCartOptions options_;
   ToyCartModel model_;
   float x_ = 0.0f, v_ = 0.0f;
+  bool at_wall_ = false;  // the current state is at or past the wall (StepOutcome.collisions)
   bool started_ = false;
 };
 
