@@ -223,11 +223,6 @@ class CoffeePlacingEnv final : public Environment {
   StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
                    Eigen::Ref<Eigen::VectorXf> observation) override;
   const DynamicsModel& ShieldModel() const override { return shield_model_; }
-  /// The actuator box: every component in [-1, 1] (Step() clips).
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    low.setConstant(-1.0f);
-    high.setConstant(1.0f);
-  }
   /// Stop and level the cup: a = (0, 0, 0, turn the tilt back, the stop's own tilt included).
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;

@@ -180,11 +180,6 @@ class DerbyEnv final : public Environment {
                    Eigen::Ref<Eigen::VectorXf> observation) override;
 
   const DynamicsModel& ShieldModel() const override { return model_; }
-  /// The actuator box: every component in [-accel_bound, accel_bound] (Step() clips).
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    high.setConstant(static_cast<float>(options_.accel_bound));
-    low = -high;
-  }
   /// Braking: a = clip(-v / dt) per axis (stops in one step when the bound allows). A fallback
   /// candidate only: it ignores the cars, which may still drive into a stopped ego.
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,

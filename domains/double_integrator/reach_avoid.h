@@ -128,11 +128,6 @@ class ReachAvoidEnv final : public Environment {
                    Eigen::Ref<Eigen::VectorXf> observation) override;
 
   const DynamicsModel& ShieldModel() const override { return model_; }
-  /// The actuator box: every component in [-accel_bound, accel_bound] (Step() clips).
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    high.setConstant(static_cast<float>(options_.accel_bound));
-    low = -high;
-  }
   /// The shield model is the environment's own clipped step on the state (= observation).
   bool ShieldModelIsExact() const override { return true; }
   /// Braking: clip(-brake_gain v) per component. Always available.

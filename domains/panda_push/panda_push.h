@@ -239,11 +239,6 @@ class PandaPushEnv final : public Environment {
                    Eigen::Ref<Eigen::VectorXf> observation) override;
   /// The approximate model, or with shield_model.kind = rollout the privileged rollout model.
   const DynamicsModel& ShieldModel() const override;
-  /// The actuator box: every component in [-1, 1] (Step() clips).
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    low.setConstant(-1.0f);
-    high.setConstant(1.0f);
-  }
   /// True with the rollout model (exact from every observation the environment is in).
   bool ShieldModelIsExact() const override { return rollout_model_ != nullptr; }
   /// Holding still: a = 0 (the end-effector target stays where it is).

@@ -44,7 +44,7 @@ class Env {
     dynamics_->state_features = env_->ObservationFeatures();
     dynamics_->action_low.resize(env_->action_dim());
     dynamics_->action_high.resize(env_->action_dim());
-    env_->ActionBox(dynamics_->action_low, dynamics_->action_high);
+    env_->ActionBounds(dynamics_->action_low, dynamics_->action_high);
   }
 
   py::tuple Reset(std::optional<std::uint64_t> seed) {

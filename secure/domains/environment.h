@@ -74,11 +74,6 @@ class Environment {
   /// privileged information (for the double integrator: the exact clipped dynamics).
   virtual const DynamicsModel& ShieldModel() const = 0;
 
-  /// The actuator box Step() clips every action to: low and high (action_dim each; -infinity /
-  /// +infinity where a component is unbounded). The shield keeps its decisions inside it
-  /// (shield::ShieldOptions::action_bounds), so that g is checked on the action that is applied.
-  virtual void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const = 0;
-
   /// Whether ShieldModel() is the environment's own transition on observations: from any
   /// observation o the environment can be in, ShieldModel() applied to (o, a) gives exactly the
   /// observation Step(a) writes (the shield then sees the next state that will happen). A claim
@@ -95,8 +90,10 @@ class Environment {
 
   /// The actuator box: Step() clips action component i to [low[i], high[i]] before applying it
   /// (low <= high; `low` and `high` have action_dim entries). The default, for an environment
-  /// without one, is unbounded (-inf, +inf). The Python module's action_space; the contract suite
-  /// checks that an action outside the box steps exactly as the clipped one.
+  /// without one, is unbounded (-inf, +inf). The Python module's action_space, and the box the
+  /// shield keeps its decisions in (shield::ShieldOptions::action_bounds), so that g is checked on
+  /// the action that is applied; the contract suite checks that an action outside the box steps
+  /// exactly as the clipped one, and that a backup action lies inside it.
   virtual void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
                             Eigen::Ref<Eigen::VectorXf> high) const {
     low.setConstant(-std::numeric_limits<float>::infinity());

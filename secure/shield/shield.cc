@@ -237,7 +237,7 @@ void Shield::SetActionBounds(const domains::Environment& env) {
                                                            << "-dimensional actions, expected "
                                                            << action_dim_);
   Eigen::VectorXf low(action_dim_), high(action_dim_);
-  env.ActionBox(low, high);
+  env.ActionBounds(low, high);
   SetActionBounds(low, high);
 }
 

@@ -275,7 +275,7 @@ class Shield {
   /// inside it. @throws secure::Error on a wrong size, NaN, low > high, or a backup outside.
   void SetActionBounds(const Eigen::Ref<const Eigen::VectorXf>& low,
                        const Eigen::Ref<const Eigen::VectorXf>& high);
-  /// The environment's actuator box (domains::Environment::ActionBox), as the experiment driver,
+  /// The environment's actuator box (domains::Environment::ActionBounds), as the experiment driver,
   /// `secure eval` and Python's run_episodes set it.
   void SetActionBounds(const domains::Environment& env);
   void ClearActionBounds() { has_bounds_ = false; }

@@ -223,6 +223,11 @@ TEST_P(DomainContract, BackupActionIsFiniteWhereClaimed) {
     if (env_->BackupAction(o, backup)) {
       ++claimed;
       ASSERT_TRUE(backup.allFinite()) << "step " << t << ": " << backup.transpose();
+      // Inside the actuator box (a shield with the box rejects a backup outside it).
+      Eigen::VectorXf low(env_->action_dim()), high(env_->action_dim());
+      env_->ActionBounds(low, high);
+      ASSERT_TRUE(((backup.array() >= low.array()) && (backup.array() <= high.array())).all())
+          << "step " << t << ": backup " << backup.transpose() << " outside the actuator box";
       ASSERT_NO_THROW(env_->Step(backup, o));  // applicable as an action
     } else {
       DrawAction(action_rng, a);

@@ -44,8 +44,8 @@ class RenderableEnv final : public domains::Environment {
     return outcome;
   }
   const domains::DynamicsModel& ShieldModel() const override { return inner_->ShieldModel(); }
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    inner_->ActionBox(low, high);
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
+    inner_->ActionBounds(low, high);
   }
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override {

@@ -94,8 +94,8 @@ class RecordingEnv final : public domains::Environment {
     return inner_->Step(action, observation);
   }
   const domains::DynamicsModel& ShieldModel() const override { return inner_->ShieldModel(); }
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    inner_->ActionBox(low, high);
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
+    inner_->ActionBounds(low, high);
   }
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
                     Eigen::Ref<Eigen::VectorXf> a) const override {

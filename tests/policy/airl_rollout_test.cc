@@ -34,8 +34,8 @@ class CountingEnv final : public domains::Environment {
     return env_.Step(action, observation);
   }
   const domains::DynamicsModel& ShieldModel() const override { return env_.ShieldModel(); }
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    env_.ActionBox(low, high);
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
+    env_.ActionBounds(low, high);
   }
   std::unique_ptr<domains::Environment> Clone() const override {
     return std::make_unique<CountingEnv>(steps_);

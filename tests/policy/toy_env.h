@@ -67,7 +67,7 @@ class PointMassEnv final : public domains::Environment {
     return out;
   }
   const domains::DynamicsModel& ShieldModel() const override { return model_; }
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
+  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }

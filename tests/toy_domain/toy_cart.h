@@ -93,11 +93,6 @@ class ToyCartEnv final : public domains::Environment {
   domains::StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
                             Eigen::Ref<Eigen::VectorXf> observation) override;
   const domains::DynamicsModel& ShieldModel() const override { return model_; }
-  /// The actuator box: every component in [-accel_bound, accel_bound] (Step() clips).
-  void ActionBox(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    high.setConstant(static_cast<float>(options_.accel_bound));
-    low = -high;
-  }
   bool ShieldModelIsExact() const override { return true; }
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
