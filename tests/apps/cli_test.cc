@@ -524,9 +524,10 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
 
 // Every command that takes --domain lists the registered domains in its help and its error.
 TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
-  for (const std::string command :
-       {"experiment method-comparison", "experiment ablation", "eval", "cbf validate",
-        "demos generate", "policy train"}) {
+  // (A command that needs a capability, e.g. `cbf validate` a ground truth, lists the domains
+  // that offer it: cli_domains_test.cc.)
+  for (const std::string command : {"experiment method-comparison", "experiment ablation", "eval",
+                                    "demos generate", "policy train"}) {
     const Result help = RunCli(command + " --help");
     EXPECT_EQ(help.exit_code, 0) << command;
     EXPECT_HAS(help.out, "derby | double-integrator");
