@@ -281,10 +281,13 @@ struct ExperimentCommand {
                   "the domain's small profile (2 seeds, few episodes, short training)");
     seeds_option = cmd->add_option(
         "--seeds", seeds,
-        "seeds, at most " + std::to_string(kMaxSeeds) + " (default: the domain's; 10)");
+        "seeds, at most " + std::to_string(kMaxSeeds) +
+            " (default: the domain's preset, `secure domains NAME [--quick]`)");
     episodes_option = cmd->add_option("--episodes", episodes,
                                       "episodes per method and seed, at most " +
-                                          std::to_string(kMaxEpisodes) + " (default: 100)");
+                                          std::to_string(kMaxEpisodes) +
+                                          " (default: the domain's preset, `secure domains NAME "
+                                          "[--quick]`)");
     AddSeedOption(cmd, "--first-seed", &first_seed, "seeds first-seed, first-seed + 1, ...");
     cmd->add_option("--threads", threads, "seeds run in parallel")->capture_default_str();
     cmd->add_option("--barrier", barrier,
