@@ -4,8 +4,6 @@
 // where a domain's preset applies, and `secure domains NAME` lists those values. Runs the real
 // binary; the domains and their capabilities are read from `secure domains --json`, not assumed.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -14,46 +12,17 @@
 #include <string>
 #include <vector>
 
+#include "tests/apps/cli_run.h"
 #include "tests/test_util.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int exit_code;
-  std::string out, err;
-};
-
-fs::path TempDir() {
-  static const fs::path dir = [] {
-    fs::path d =
-        fs::path(::testing::TempDir()) / ("secure_cli_domains_test_" + std::to_string(::getpid()));
-    fs::remove_all(d);
-    fs::create_directories(d);
-    return d;
-  }();
-  return dir;
-}
-
-Result RunCli(const std::string& args) {
-  const fs::path out = TempDir() / "stdout.txt", err = TempDir() / "stderr.txt";
-  const std::string cmd =
-      std::string(SECURE_CLI) + " " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
-  auto slurp = [](const fs::path& p) {
-    std::ifstream in(p);
-    return std::string(std::istreambuf_iterator<char>(in), {});
-  };
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
-}
-
-void ExpectOneErrorLine(const Result& r, const std::string& needle) {
-  EXPECT_EQ(r.exit_code, 1) << r.err;
-  EXPECT_EQ(r.err.rfind("secure: error: ", 0), 0u) << r.err;
-  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-  EXPECT_HAS(r.err, needle);
-}
+using Result = secure::test::CliResult;
+using secure::test::ExpectOneErrorLine;
+using secure::test::RunCli;
+fs::path TempDir() { return secure::test::CliTempDir(); }
 
 // The registered domains and their capabilities, as `secure domains --json` lists them.
 nlohmann::json Domains() {
