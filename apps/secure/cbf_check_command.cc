@@ -23,9 +23,7 @@
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
-#include "secure/common/excerpt.h"
 #include "secure/common/timer.h"
-#include "secure/common/yaml_value.h"
 #include "secure/data/data.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
@@ -36,12 +34,8 @@ namespace {
 
 // The registered domains that have a barrier check, sorted ("derby, double-integrator").
 std::string CheckDomainList() {
-  const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
-  std::string list;
-  for (const std::string& name : registry.Names())
-    if (registry.Make(name, experiments::Profile::kQuick)->HasCheck())
-      list += (list.empty() ? "" : ", ") + name;
-  return list.empty() ? "none" : list;
+  return experiments::DomainRegistry::Global().ListOffering(
+      [](const experiments::Domain& d) { return d.HasCheck(); });
 }
 
 // The registered domains whose experiments train a per-obstacle barrier (the kind of a
@@ -70,13 +64,10 @@ struct CheckCommand {
   double class_k_gain = 0, dt = 0;
   CLI::Option *class_k_opt = nullptr, *gain_opt = nullptr, *dt_opt = nullptr;
   // Task options of the domain (its `task:` keys obstacle, radius, gamma, accel_bound: the
-  // double integrator's geometry and action bound), from the flags and the `double_integrator:`
-  // section; a domain without such a key rejects it by name.
-  std::vector<double> obstacle;
-  double radius = 0, gamma = 0, accel_bound = 0;
-  CLI::Option *obstacle_opt = nullptr, *radius_opt = nullptr, *gamma_opt = nullptr,
-              *accel_opt = nullptr;
-  YAML::Node check_yaml, task_yaml;
+  // double integrator's geometry and action bound), from the flags and the domain's ground-truth
+  // section (`double_integrator:`); a domain without such a key rejects it by name.
+  TaskFlags task_flags;
+  YAML::Node check_yaml;
   DeferredError config_error;  // thrown when this command runs, not at registration
 
   // A flag whose value lands in `parsed` and is copied onto the options only when given.
@@ -95,12 +86,8 @@ struct CheckCommand {
         "Check a learned barrier before deployment: held-out accuracy and a counterexample "
         "search for (a) h >= 0 with no admissible action, (b) h >= 0 near near-dangerous "
         "states, (c) h >= 0 where the domain's own test says unsafe; verdict by thresholds");
-    config_error.Capture([&] {
-      check_yaml = cfg.Section("check");
-      task_yaml = TaskOfGroundTruthSection(cfg.Section("double_integrator"),
-                                           cfg.path + " [double_integrator]");
-    });
-    AddConfigFlag(cmd, cfg);  // `check:`, `double_integrator:` and the domain's section
+    config_error.Capture([&] { check_yaml = cfg.Section("check"); });
+    AddConfigFlag(cmd, cfg);  // `check:`, the domain's section and its ground-truth section
     cmd->add_option("--model", model,
                     "barrier model file (barrier_mlp; car_barrier on a domain whose barrier is "
                     "per-obstacle: " +
@@ -119,7 +106,8 @@ struct CheckCommand {
                     "labelled near-dangerous states (CSV or HDF5), for the accuracy and (b)");
     held_out_opt = cmd->add_option("--held-out", held_out,
                                    "states per class drawn when no file is given (default: the "
-                                   "domain's experiment's, check.held_out: 256)");
+                                   "domain's experiment's check.held_out, `secure domains "
+                                   "NAME`)");
     data_seed_opt = AddSeedOption(cmd, "--data-seed", &data_seed,
                                   "data seed of the drawn states (default: the domain's "
                                   "experiment data_seed, so that a saved seed's barrier gets "
@@ -176,56 +164,15 @@ struct CheckCommand {
     dt_opt = cmd->add_option("--dt", dt,
                              "dt in g (default: the domain's shield, its control "
                              "period)");
-    const std::string task_flag = "; the domain's task option, rejected by a domain without it";
-    obstacle_opt = cmd->add_option("--obstacle", obstacle,
-                                   "obstacle centre X,Y (task.obstacle" + task_flag +
-                                       "; double-integrator default 5,5)")
-                       ->delimiter(',')
-                       ->expected(2);
-    radius_opt =
-        cmd->add_option("--radius", radius, "obstacle radius r (task.radius" + task_flag + ")");
-    gamma_opt = cmd->add_option("--gamma", gamma,
-                                "gamma of the ground-truth CBF (task.gamma" + task_flag + ")");
-    accel_opt = cmd->add_option("--accel-bound", accel_bound,
-                                "per-axis action bound, the check's action box and the shield "
-                                "model's clip (task.accel_bound" +
-                                    task_flag + ")");
+    task_flags.AddGeometry(cmd);
+    task_flags.AddNumber(cmd, "--accel-bound", "accel_bound",
+                         "per-axis action bound, the check's action box and the shield model's "
+                         "clip");
     cmd->add_flag("--json", json, "print the report as JSON");
     cmd->callback([this] {
       config_error.Rethrow();
       Run();
     });
-  }
-
-  // The `double_integrator:` section (obstacle, radius, gamma) as task options of the domain.
-  static YAML::Node TaskOfGroundTruthSection(const YAML::Node& section, const std::string& source) {
-    YAML::Node task(YAML::NodeType::Map);
-    if (!section.IsMap()) return YAML::Node();
-    for (const auto& item : section) {
-      const std::string key = YamlKey(item.first, source);
-      SECURE_CHECK(key == "obstacle" || key == "radius" || key == "gamma",
-                   source << ":" << item.first.Mark().line + 1 << ": unknown field '"
-                          << Excerpt(key)
-                          << "' in section double_integrator (valid: obstacle, radius, gamma)");
-      task[key] = item.second;
-    }
-    return task;
-  }
-
-  // The domain's task options given on the command line and in the `double_integrator:` section
-  // (the flags win), or a null node.
-  YAML::Node TaskOverrides() const {
-    YAML::Node task = task_yaml.IsMap() ? YAML::Clone(task_yaml) : YAML::Node(YAML::NodeType::Map);
-    if (obstacle_opt->count() > 0) {
-      YAML::Node xy(YAML::NodeType::Sequence);
-      xy.push_back(obstacle[0]);
-      xy.push_back(obstacle[1]);
-      task["obstacle"] = xy;
-    }
-    if (radius_opt->count() > 0) task["radius"] = radius;
-    if (gamma_opt->count() > 0) task["gamma"] = gamma;
-    if (accel_opt->count() > 0) task["accel_bound"] = accel_bound;
-    return task.size() > 0 ? task : YAML::Node();
   }
 
   cbf::BarrierCheckOptions Options(const cbf::BarrierCheckOptions& base) const {
@@ -292,13 +239,7 @@ struct CheckCommand {
     const std::string section = d->ConfigSection();
     const YAML::Node yaml = config->Section(section);
     if (yaml.IsMap()) e.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
-    const YAML::Node task = TaskOverrides();
-    if (task.IsMap()) {
-      YAML::Node node;
-      node["task"] = task;
-      d->ApplyYaml(node, "--obstacle/--radius/--gamma/--accel-bound or [double_integrator]");
-    }
-    d->Validate();
+    task_flags.ApplyTo(d.get(), *config);  // the ground-truth section, the task flags; Validate
     ApplyShieldFlags(&e.shield);
     const cbf::BarrierCheckOptions options = Options(e.check);
 

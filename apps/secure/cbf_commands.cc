@@ -13,7 +13,6 @@
 #include "secure/cbf/barrier_check.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/barrier_trainer.h"
-#include "domains/double_integrator/table1.h"
 #include "secure/cbf/validation.h"
 #include "secure/common/error.h"
 #include "secure/common/progress.h"
@@ -21,11 +20,32 @@
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
 #include "secure/experiments/domain.h"
+#include "secure/experiments/ground_truth_study.h"
 
 namespace secure::cli {
 namespace {
 
-namespace di = domains::double_integrator;
+// The registered domains with a ground truth (reference barrier, validation grid, labelled
+// sampler), for the help and the errors.
+std::string GroundTruthDomains() {
+  return experiments::DomainRegistry::Global().ListOffering(
+      [](const experiments::Domain& d) { return d.HasGroundTruth(); });
+}
+
+// The domain `name` (full profile) with a ground truth, its task options from `flags` and the
+// config's ground-truth section. @throws secure::Error naming the domains with one if it has
+// none.
+std::unique_ptr<experiments::Domain> MakeGroundTruthDomain(const std::string& name,
+                                                           const std::string& command,
+                                                           const TaskFlags& flags,
+                                                           const Config& config) {
+  std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(name);
+  SECURE_CHECK(d->HasGroundTruth(), command << ": the " << name
+                                            << " domain has no ground truth (domains with one: "
+                                            << GroundTruthDomains() << ")");
+  flags.ApplyTo(d.get(), config);
+  return d;
+}
 
 // Flags for BarrierTrainerOptions fields (shared by train and table1). Values land in
 // `parsed`; ApplyTo() copies only the flags that were given onto a base (the general defaults or a
@@ -111,11 +131,10 @@ constexpr int kTrainFromFilesPatience = 50;
 // ------------------------------------------------------------------------------------------
 struct TrainCommand {
   YAML::Node trainer_yaml;  // the config's `trainer:` section, applied over the base options
-  std::string config_path;
+  const Config* config = nullptr;
   cbf::BarrierTrainerOptions trainer;
   TrainerFlags trainer_flags;
-  di::GroundTruth truth;
-  std::vector<double> obstacle;
+  TaskFlags task_flags;
   std::string domain, safe_path, nd_path, features, out, augment_from;
   long n_safe = 800, n_unsafe = 800;
   std::uint64_t seed = 0;
@@ -133,17 +152,16 @@ struct TrainCommand {
             std::to_string(kTrainFromFilesPatience) +
             ") epochs without a better held-out score (balanced accuracy on the "
             "--validation-fraction split, then its loss) and keeps the best epoch's weights; "
-            "--no-early-stopping runs every --epochs. With --domain the preset applies (no early "
-            "stopping)");
-    config_path = config.path;
-    config_error.Capture([&] {
-      trainer_yaml = config.Section("trainer");
-      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &truth);
-    });
+            "--no-early-stopping runs every --epochs. With --domain the domain's ground-truth "
+            "preset applies (no early stopping)");
+    this->config = &config;
+    config_error.Capture([&] { trainer_yaml = config.Section("trainer"); });
     AddConfigFlag(cmd, config);
     cmd->add_option("--domain", domain,
-                    "sample labelled states from a domain: double-integrator (trainer options then "
-                    "start from the double-integrator preset, see docs/RESULTS.md)");
+                    "sample labelled states from a domain's ground truth: " +
+                        GroundTruthDomains() +
+                        " (trainer options then start from the domain's ground-truth preset, "
+                        "`secure domains NAME`)");
     cmd->add_option("--safe-states", safe_path,
                     "safe states: a CSV (header row) or an HDF5 file (.h5, .hdf5; its set "
                     "safety/safe, or its only set)");
@@ -157,7 +175,7 @@ struct TrainCommand {
         ->capture_default_str();
     cmd->add_option("--unsafe", n_unsafe, "unsafe states to sample (with --domain)")
         ->capture_default_str();
-    AddGroundTruthFlags(cmd, &truth, &obstacle);
+    task_flags.AddGeometry(cmd);
     AddSeedOption(cmd, "--seed", &seed, "seed for sampling, weights and minibatches");
     cmd->add_option("--out", out, "model file to write")->required();
     cmd->add_option("--test-fraction", test_fraction,
@@ -192,8 +210,10 @@ struct TrainCommand {
     const bool from_domain = !domain.empty();
     SECURE_CHECK(std::isfinite(test_fraction) && test_fraction >= 0 && test_fraction < 1,
                  "--test-fraction = " << test_fraction << ", must be in [0, 1)");
-    trainer = from_domain ? cbf::DoubleIntegratorTrainerPreset() : FromFilesDefaults();
-    if (trainer_yaml.IsMap()) trainer.ApplyYaml(trainer_yaml, config_path);
+    std::unique_ptr<experiments::Domain> d;
+    if (from_domain) d = MakeGroundTruthDomain(domain, "cbf train --domain", task_flags, *config);
+    trainer = d ? d->GroundTruthTrainerPreset() : FromFilesDefaults();
+    if (trainer_yaml.IsMap()) trainer.ApplyYaml(trainer_yaml, config->path);
     trainer_flags.ApplyTo(&trainer);
     if (no_early_stopping) {
       SECURE_CHECK(trainer_flags.Given("--patience") == 0 || trainer.patience == 0,
@@ -210,11 +230,9 @@ struct TrainCommand {
     const std::vector<std::string> names = data::SplitList(features);
     CheckFeatureList(names);
     if (from_domain) {
-      CheckDoubleIntegratorDomain(domain);
       CheckRange("--safe", n_safe, 1, kMaxStates);
       CheckRange("--unsafe", n_unsafe, 1, kMaxStates);
-      FinishGroundTruth(obstacle, &truth);
-      auto sampled = cbf::SampleDoubleIntegratorData(truth, di::StateBox{}, n_safe, n_unsafe, seed);
+      experiments::GroundTruthSample sampled = d->SampleGroundTruth(n_safe, n_unsafe, seed);
       safe = std::move(sampled.safe);
       nd = std::move(sampled.unsafe);
     } else {
@@ -266,11 +284,10 @@ struct TrainCommand {
           {"accuracy_safe", accuracy_json(safe_test.size(), test->safe)},
           {"accuracy_near_dangerous", accuracy_json(nd_test.size(), test->near_dangerous)}};
     }
-    if (from_domain) {
-      net.provenance["double_integrator"] = {{"obstacle", {truth.obstacle_x, truth.obstacle_y}},
-                                             {"radius", truth.radius},
-                                             {"gamma", truth.gamma}};
-    }
+    // The ground truth the states came from (the double integrator: its geometry), under the
+    // domain's section name, which `shield run` compares with its own.
+    if (d && !d->GroundTruthSection().empty())
+      net.provenance[d->GroundTruthSection()] = d->GroundTruthJson();
     net.Save(out);
     if (json) {
       nlohmann::json r{{"command", "cbf train"},
@@ -312,14 +329,11 @@ struct TrainCommand {
 
 // ------------------------------------------------------------------------------------------
 struct ValidateCommand {
-  di::GroundTruth truth;
-  std::vector<double> obstacle;
+  const Config* config = nullptr;
+  TaskFlags task_flags;
   std::string model, domain;
   cbf::GridValidationOptions validation;
   bool json = false;
-  bool truth_from_config = false;
-  std::vector<CLI::Option*> truth_flags;
-  DeferredError config_error;
   std::string name;
 
   void Register(CLI::App& app, const Config& config, const std::string& command) {
@@ -329,53 +343,25 @@ struct ValidateCommand {
                      ? "Confusion matrix of a barrier against a domain's ground truth on the "
                        "domain's validation grid"
                      : "Alias of `cbf validate`");
-    config_error.Capture([&] {
-      const YAML::Node section = config.Section("double_integrator");
-      truth_from_config = section.IsMap();
-      ApplyGroundTruthYaml(section, config.path, &truth);
-    });
-    AddConfigFlag(cmd, config);
+    this->config = &config;
+    AddConfigFlag(cmd, config);  // the domain's ground-truth section (double_integrator:)
     cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--domain", domain,
-                    "a domain with a ground truth: " +
-                        experiments::DomainRegistry::Global().NameList())
+    cmd->add_option("--domain", domain, "a domain with a ground truth: " + GroundTruthDomains())
         ->required();
-    const std::size_t before = cmd->get_options().size();
-    AddGroundTruthFlags(cmd, &truth, &obstacle);
-    for (std::size_t k = before; k < cmd->get_options().size(); ++k)
-      truth_flags.push_back(cmd->get_options()[k]);
+    task_flags.AddGeometry(cmd);
     cmd->add_option("--threads", validation.threads, "worker threads")->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
-    cmd->callback([this] {
-      config_error.Rethrow();
-      Run();
-    });
+    cmd->callback([this] { Run(); });
   }
 
   void Run() {
+    // The geometry flags and the domain's ground-truth section are its task options; a domain
+    // without them rejects them by name.
     const std::unique_ptr<experiments::Domain> d =
-        experiments::DomainRegistry::Global().Make(domain);
-    // The obstacle flags and the `double_integrator:` section are the domain's task options
-    // (obstacle, radius, gamma); a domain without them rejects them by name.
-    bool given = truth_from_config;
-    for (const CLI::Option* o : truth_flags) given = given || o->count() > 0;
-    if (given) {
-      FinishGroundTruth(obstacle, &truth);
-      YAML::Node task;
-      task["obstacle"].push_back(truth.obstacle_x);
-      task["obstacle"].push_back(truth.obstacle_y);
-      task["radius"] = truth.radius;
-      task["gamma"] = truth.gamma;
-      YAML::Node node;
-      node["task"] = task;
-      d->ApplyYaml(node, "--obstacle/--radius/--gamma");
-    }
-    d->Validate();
-    std::unique_ptr<cbf::Barrier> reference = d->MakeGroundTruth();
+        MakeGroundTruthDomain(domain, "cbf " + name, task_flags, *config);
     const std::optional<cbf::StateSource> grid = d->ValidationGrid();
-    SECURE_CHECK(reference != nullptr && grid.has_value(),
-                 "cbf " << name << ": the " << domain
-                        << " domain has no ground truth to validate against");
+    SECURE_CHECK(grid.has_value(),
+                 "cbf " << name << ": the " << domain << " domain has no validation grid");
     const cbf::BarrierNet net = cbf::BarrierNet::Load(model);
     const std::vector<std::string> features = d->MakeEnvironment()->ObservationFeatures();
     const std::string where = "the " + domain + " domain";
@@ -464,30 +450,45 @@ struct PredictCommand {
 };
 
 // ------------------------------------------------------------------------------------------
+// The ground-truth study (the paper's Table 1) on any domain with a ground truth
+// (experiments/ground_truth_study.h).
 struct Table1Command {
-  cbf::Table1Options options;
+  const Config* config = nullptr;
+  experiments::GroundTruthStudyOptions options;
+  YAML::Node trainer_yaml;
   TrainerFlags trainer_flags;
-  std::vector<double> obstacle;
+  TaskFlags task_flags;
+  std::string domain;
   bool json = false;
   DeferredError config_error;
 
-  void Register(CLI::App& app, const Config& config, const std::string& name,
+  void Register(CLI::App& app, const Config& cfg, const std::string& name,
                 const std::string& description) {
+    config = &cfg;
     CLI::App* cmd = app.add_subcommand(name, description);
-    config_error.Capture([&] {
-      if (config.Section("trainer").IsMap())
-        options.trainer.ApplyYaml(config.Section("trainer"), config.path);
-      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.truth);
-    });
-    AddConfigFlag(cmd, config);
+    config_error.Capture([&] { trainer_yaml = cfg.Section("trainer"); });
+    AddConfigFlag(cmd, cfg);
+    // The default: the first registered domain with a ground truth (the double integrator).
+    const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+    for (const std::string& d : registry.Names()) {
+      if (registry.Make(d, experiments::Profile::kQuick)->HasGroundTruth()) {
+        domain = d;
+        break;
+      }
+    }
+    cmd->add_option("--domain", domain, "a domain with a ground truth: " + GroundTruthDomains())
+        ->capture_default_str();
     cmd->add_option("--seeds", options.seeds, "number of training seeds")->capture_default_str();
     AddSeedOption(cmd, "--first-seed", &options.first_seed, "seed of the first run");
     cmd->add_option("--safe", options.n_safe, "safe training states")->capture_default_str();
     cmd->add_option("--unsafe", options.n_unsafe, "unsafe training states")->capture_default_str();
-    AddGroundTruthFlags(cmd, &options.truth, &obstacle);
+    task_flags.AddGeometry(cmd);
     cmd->add_option("--grid-threads", options.validation.threads, "threads for grid validation")
         ->capture_default_str();
-    trainer_flags.Add(cmd, options.trainer);
+    // Shown: the default domain's ground-truth preset (a trainer flag not given keeps the
+    // chosen domain's value).
+    trainer_flags.Add(cmd, domain.empty() ? cbf::BarrierTrainerOptions{}
+                                          : registry.Make(domain)->GroundTruthTrainerPreset());
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] {
       config_error.Rethrow();
@@ -499,20 +500,25 @@ struct Table1Command {
     CheckRange("--seeds", options.seeds, 1, kMaxSeeds);
     CheckRange("--safe", options.n_safe, 1, kMaxStates);
     CheckRange("--unsafe", options.n_unsafe, 1, kMaxStates);
+    SECURE_CHECK(!domain.empty(), "cbf table1: no registered domain has a ground truth");
+    const std::unique_ptr<experiments::Domain> d =
+        MakeGroundTruthDomain(domain, "cbf table1", task_flags, *config);
+    // The trainer: the domain's ground-truth preset, the config's `trainer:`, then the flags.
+    options.trainer = d->GroundTruthTrainerPreset();
+    if (trainer_yaml.IsMap()) options.trainer.ApplyYaml(trainer_yaml, config->path);
     trainer_flags.ApplyTo(&options.trainer);
-    FinishGroundTruth(obstacle, &options.truth);
-    const cbf::Table1Result result = cbf::RunTable1(options);
+    const experiments::GroundTruthStudyResult result = experiments::RunGroundTruthStudy(*d, options);
     if (json) {
       nlohmann::json r = result.ToJson();
       r["command"] = "cbf table1";
-      r["options"] = {{"seeds", options.seeds},
-                      {"first_seed", options.first_seed},
-                      {"safe", options.n_safe},
-                      {"unsafe", options.n_unsafe},
-                      {"obstacle", {options.truth.obstacle_x, options.truth.obstacle_y}},
-                      {"radius", options.truth.radius},
-                      {"gamma", options.truth.gamma},
-                      {"trainer", options.trainer.ToJson()}};
+      nlohmann::json o = {{"seeds", options.seeds},
+                          {"first_seed", options.first_seed},
+                          {"safe", options.n_safe},
+                          {"unsafe", options.n_unsafe},
+                          {"trainer", options.trainer.ToJson()}};
+      const nlohmann::json parameters = d->GroundTruthJson();  // the ground truth's geometry
+      for (const auto& [key, value] : parameters.items()) o[key] = value;
+      r["options"] = o;
       PrintJson(r);
     } else {
       std::cout << result.Table();
@@ -534,8 +540,9 @@ void RegisterCbfCommands(CLI::App& app, const Config& config) {
   eval.Register(*cbf, config, "eval");
   predict.Register(*cbf, config);
   table1.Register(*cbf, config, "table1",
-                  "The paper's Table 1: learn the double-integrator CBF over seeds, validate on "
-                  "the 9M-state grid");
+                  "The paper's Table 1 on a domain with a ground truth (default: the double "
+                  "integrator): learn a CBF from states labelled by the ground truth over seeds, "
+                  "validate it on the domain's grid (the double integrator's: 9M states)");
   RegisterCbfCheckCommand(*cbf, config);
 }
 

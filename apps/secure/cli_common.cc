@@ -22,13 +22,17 @@ namespace secure::cli {
 
 const std::vector<std::string>& KnownConfigSections() {
   // The commands' own sections, then each registered domain's experiment section
-  // (Domain::ConfigSection: "pipeline" for the double integrator, "derby", ...). Computed once,
-  // after main() registered the domains.
+  // (Domain::ConfigSection: "pipeline" for the double integrator, "derby", ...) and ground-truth
+  // section (Domain::GroundTruthSection: "double_integrator"). Computed once, after main()
+  // registered the domains.
   static const std::vector<std::string> known = [] {
-    std::vector<std::string> names = {"airl", "bc", "check", "double_integrator", "trainer"};
+    std::vector<std::string> names = {"airl", "bc", "check", "trainer"};
     const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
-    for (const std::string& domain : registry.Names())
-      names.push_back(registry.Make(domain)->ConfigSection());
+    for (const std::string& domain : registry.Names()) {
+      const std::unique_ptr<experiments::Domain> d = registry.Make(domain);
+      names.push_back(d->ConfigSection());
+      if (!d->GroundTruthSection().empty()) names.push_back(d->GroundTruthSection());
+    }
     std::sort(names.begin(), names.end());
     names.erase(std::unique(names.begin(), names.end()), names.end());
     return names;
@@ -199,14 +203,18 @@ int ReportError(const std::string& message) {
   return 1;
 }
 
-void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so) {
+void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_preset) {
   class_k = ToString(shield::kClassKNames, so->class_k);
   aggregation = ToString(shield::kAggregationNames, so->aggregation);
   resampling = ToString(shield::kResamplingNames, so->resampling);
   sampler = ToString(shield::kSamplerNames, so->sampler);
   action_bounds = ToString(shield::kActionBoundsNames, so->action_bounds);
   using Copy = std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>;
-  auto track = [this](CLI::Option* option, Copy copy) { given_.emplace_back(option, copy); };
+  // The default shown: the general one, or "preset" where the chosen domain's preset applies.
+  auto track = [this, domain_preset](CLI::Option* option, Copy copy) {
+    if (domain_preset) option->default_str("preset");
+    given_.emplace_back(option, copy);
+  };
 #define SECURE_SHIELD_FIELD_COPY(field) \
   [](const shield::ShieldOptions& from, shield::ShieldOptions* to) { to->field = from.field; }
   track(cmd->add_option("--samples", so->num_samples, "M: actions drawn per round")
@@ -278,54 +286,89 @@ void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,
     if (option->count() > 0) copy(parsed, base);
 }
 
-void CheckDoubleIntegratorDomain(const std::string& domain) {
-  SECURE_CHECK(domain == kDoubleIntegratorDomain,
-               "--domain = '" << domain << "', must be " << kDoubleIntegratorDomain);
+void TaskFlags::AddGeometry(CLI::App* cmd) {
+  AddPair(cmd, "--obstacle", "obstacle", "obstacle centre X,Y");
+  AddNumber(cmd, "--radius", "radius", "obstacle radius r");
+  AddNumber(cmd, "--gamma", "gamma", "gamma of the ground-truth CBF");
 }
 
-void AddGroundTruthFlags(CLI::App* cmd, domains::double_integrator::GroundTruth* truth,
-                         std::vector<double>* obstacle) {
-  cmd->add_option("--obstacle", *obstacle, "obstacle centre X,Y")
-      ->delimiter(',')
-      ->expected(2)
-      ->default_str("5,5");
-  cmd->add_option("--radius", truth->radius, "obstacle radius r")->capture_default_str();
-  cmd->add_option("--gamma", truth->gamma, "gamma of the ground-truth CBF")->capture_default_str();
+namespace {
+// The help of a task flag: what it sets, and that its default is the domain's.
+std::string TaskFlagHelp(const std::string& help, const std::string& key) {
+  return help + " (task." + key + "; default: the domain's, `secure domains NAME`)";
+}
+}  // namespace
+
+CLI::Option* TaskFlags::AddPair(CLI::App* cmd, const std::string& flag, const std::string& key,
+                                const std::string& help) {
+  pairs_.push_back(std::make_unique<std::vector<double>>());
+  std::vector<double>* value = pairs_.back().get();
+  CLI::Option* option =
+      cmd->add_option(flag, *value, TaskFlagHelp(help, key))->delimiter(',')->expected(2);
+  entries_.push_back({option, key, [value] {
+                        YAML::Node pair(YAML::NodeType::Sequence);
+                        for (double v : *value) pair.push_back(v);
+                        return pair;
+                      }});
+  return option;
 }
 
-void ApplyGroundTruthYaml(const YAML::Node& node, const std::string& source,
-                          domains::double_integrator::GroundTruth* truth) {
-  if (!node.IsMap()) return;  // section absent
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    try {
-      if (key == "obstacle") {
-        const auto xy = item.second.as<std::vector<double>>();
-        SECURE_CHECK(xy.size() == 2, source << ": double_integrator.obstacle must be [x, y]");
-        truth->obstacle_x = xy[0];
-        truth->obstacle_y = xy[1];
-      } else if (key == "radius") {
-        truth->radius = item.second.as<double>();
-      } else if (key == "gamma") {
-        truth->gamma = item.second.as<double>();
-      } else {
-        SECURE_THROW(source << ":" << item.first.Mark().line + 1 << ": unknown field '"
-                            << Excerpt(key) << "' in section double_integrator");
+CLI::Option* TaskFlags::AddNumber(CLI::App* cmd, const std::string& flag, const std::string& key,
+                                  const std::string& help, bool integer) {
+  CLI::Option* option = nullptr;
+  if (integer) {
+    integers_.push_back(std::make_unique<long>(0));
+    long* value = integers_.back().get();
+    option = cmd->add_option(flag, *value, TaskFlagHelp(help, key));
+    entries_.push_back({option, key, [value] { return YAML::Node(*value); }});
+  } else {
+    numbers_.push_back(std::make_unique<double>(0.0));
+    double* value = numbers_.back().get();
+    option = cmd->add_option(flag, *value, TaskFlagHelp(help, key));
+    entries_.push_back({option, key, [value] { return YAML::Node(*value); }});
+  }
+  return option;
+}
+
+void TaskFlags::ApplyTo(experiments::Domain* domain, const Config& config) const {
+  config.Check();
+  // The domain's ground-truth section: only the ground truth's parameters, as task options.
+  const std::string section = domain->GroundTruthSection();
+  if (!section.empty()) {
+    const YAML::Node node = config.Section(section);
+    if (node.IsMap()) {
+      const nlohmann::json parameters = domain->GroundTruthJson();
+      std::vector<std::string> valid;
+      for (const auto& item : parameters.items()) valid.push_back(item.key());
+      const std::string source = config.path + " [" + section + "]";
+      YAML::Node task(YAML::NodeType::Map);
+      for (const auto& item : node) {
+        const std::string key = YamlKey(item.first, source);
+        SECURE_CHECK(parameters.contains(key),
+                     config.path << ":" << item.first.Mark().line + 1 << ": unknown field '"
+                                 << Excerpt(key) << "' in section " << section
+                                 << " (valid: " << Join(valid) << ")");
+        task[key] = item.second;
       }
-    } catch (const YAML::Exception&) {
-      SECURE_THROW(source << ":" << item.second.Mark().line + 1 << ": field double_integrator."
-                          << Excerpt(key) << " has an invalid value");
+      YAML::Node wrapped;
+      wrapped["task"] = task;
+      domain->ApplyYaml(wrapped, source);
     }
   }
-}
-
-void FinishGroundTruth(const std::vector<double>& obstacle,
-                       domains::double_integrator::GroundTruth* truth) {
-  if (obstacle.size() == 2) {
-    truth->obstacle_x = obstacle[0];
-    truth->obstacle_y = obstacle[1];
+  // Then the flags given (they win).
+  YAML::Node task(YAML::NodeType::Map);
+  std::string flags;
+  for (const Entry& e : entries_) {
+    if (e.option->count() == 0) continue;
+    task[e.key] = e.value();
+    flags += (flags.empty() ? "" : "/") + e.option->get_name();
   }
-  truth->Validate();
+  if (task.size() > 0) {
+    YAML::Node wrapped;
+    wrapped["task"] = task;
+    domain->ApplyYaml(wrapped, flags);
+  }
+  domain->Validate();
 }
 
 void PrintJson(nlohmann::json result) {

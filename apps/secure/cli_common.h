@@ -12,7 +12,6 @@
 #include <utility>
 #include <vector>
 
-#include "domains/double_integrator/double_integrator.h"
 #include "secure/common/limits.h"
 #include "secure/shield/shield.h"
 
@@ -23,7 +22,8 @@ class Domain;
 namespace secure::cli {
 
 /// The top-level sections a config file may have: the union of what the commands read with
-/// Config::Section (trainer, double_integrator, pipeline, bc, airl, derby).
+/// Config::Section (airl, bc, check, trainer) and each registered domain's sections
+/// (Domain::ConfigSection: pipeline, derby, ...; Domain::GroundTruthSection: double_integrator).
 const std::vector<std::string>& KnownConfigSections();
 
 /// The YAML config named by --config (pre-scanned from argv so that flags parsed afterwards
@@ -104,26 +104,47 @@ void CheckRange(const std::string& name, long value, long lo, long hi);
 /// of every error.
 int ReportError(const std::string& message);
 
-/// The one domain with a ground truth so far, as named by --domain.
-inline constexpr const char* kDoubleIntegratorDomain = "double-integrator";
-/// Throws unless `domain` is kDoubleIntegratorDomain ("--domain = 'x', must be double-integrator").
-void CheckDoubleIntegratorDomain(const std::string& domain);
+/// Flags that set options of the domain's task (its `task:` keys of the same names: the double
+/// integrator's --obstacle X,Y, --radius, --gamma, --accel-bound, ...), and the domain's
+/// ground-truth config section (Domain::GroundTruthSection, e.g. `double_integrator:`; its keys
+/// are the ground truth's parameters, Domain::GroundTruthJson, and task options too). A domain
+/// without such an option rejects it by name; a flag not given leaves the domain's value, so the
+/// help names no default.
+class TaskFlags {
+ public:
+  /// --obstacle X,Y, --radius R, --gamma G (the ground truth's geometry).
+  void AddGeometry(CLI::App* cmd);
+  /// `--<flag> A,B` for task option `key` (a pair).
+  CLI::Option* AddPair(CLI::App* cmd, const std::string& flag, const std::string& key,
+                       const std::string& help);
+  /// `--<flag> VALUE` for task option `key` (a number; `integer`: an integer).
+  CLI::Option* AddNumber(CLI::App* cmd, const std::string& flag, const std::string& key,
+                         const std::string& help, bool integer = false);
+  /// Applies to `domain` its ground-truth section of `config` (if the domain has one and the file
+  /// holds it), then the flags given, as `task:` options, and validates the domain. @throws
+  /// secure::Error naming the file and line, or the flags, and the key.
+  void ApplyTo(experiments::Domain* domain, const Config& config) const;
 
-/// --obstacle X,Y --radius R --gamma G bound to `truth`.
-void AddGroundTruthFlags(CLI::App* cmd, domains::double_integrator::GroundTruth* truth,
-                         std::vector<double>* obstacle);
-/// Applies the `double_integrator:` YAML section (obstacle: [x, y], radius, gamma).
-void ApplyGroundTruthYaml(const YAML::Node& node, const std::string& source,
-                          domains::double_integrator::GroundTruth* truth);
-/// Copies a parsed --obstacle X,Y into truth (no-op when the flag was not given).
-void FinishGroundTruth(const std::vector<double>& obstacle,
-                       domains::double_integrator::GroundTruth* truth);
+ private:
+  struct Entry {
+    CLI::Option* option;
+    std::string key;
+    std::function<YAML::Node()> value;
+  };
+  std::vector<Entry> entries_;
+  std::vector<std::unique_ptr<std::vector<double>>> pairs_;
+  std::vector<std::unique_ptr<double>> numbers_;
+  std::vector<std::unique_ptr<long>> integers_;
+};
 
 /// Flags for the shield's options (--samples, --safe-ratio, --class-k, ...), bound to `options`;
 /// the enum-valued ones are parsed by ApplyTo() after CLI parsing.
 struct ShieldFlags {
   std::string class_k, aggregation, resampling, sampler, action_bounds;
-  void Add(CLI::App* cmd, shield::ShieldOptions* options);
+  /// `domain_preset`: the command starts from a chosen domain's options (OverlayGiven onto its
+  /// preset), so the help shows "=preset" (the values: `secure domains NAME`), not the general
+  /// defaults in `options`.
+  void Add(CLI::App* cmd, shield::ShieldOptions* options, bool domain_preset = false);
   void ApplyTo(shield::ShieldOptions* options) const;
   /// Copies onto `base` (e.g. a domain's preset) the fields whose flags were given, from
   /// `parsed` (the options Add() bound, after ApplyTo()).

@@ -22,6 +22,9 @@ void RegisterRenderCommand(CLI::App& app, const Config& config);
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
 /// secure report RUN_DIR (report_command.cc): the run's HTML report (tools/report/report.py).
 void RegisterReportCommand(CLI::App& app);
+/// secure domains [NAME] (domains_command.cc): the registered domains, their capabilities, and
+/// the values a domain's preset gives the commands.
+void RegisterDomainsCommand(CLI::App& app);
 /// secure compare A.json B.json (compare_command.cc): two `secure eval --json` results of the same
 /// episodes, paired by seed (TOST of the rates, latencies).
 void RegisterCompareCommand(CLI::App& app);

@@ -281,10 +281,13 @@ struct ExperimentCommand {
                   "the domain's small profile (2 seeds, few episodes, short training)");
     seeds_option = cmd->add_option(
         "--seeds", seeds,
-        "seeds, at most " + std::to_string(kMaxSeeds) + " (default: the domain's; 10)");
+        "seeds, at most " + std::to_string(kMaxSeeds) +
+            " (default: the domain's preset, `secure domains NAME [--quick]`)");
     episodes_option = cmd->add_option("--episodes", episodes,
                                       "episodes per method and seed, at most " +
-                                          std::to_string(kMaxEpisodes) + " (default: 100)");
+                                          std::to_string(kMaxEpisodes) +
+                                          " (default: the domain's preset, `secure domains NAME "
+                                          "[--quick]`)");
     AddSeedOption(cmd, "--first-seed", &first_seed, "seeds first-seed, first-seed + 1, ...");
     cmd->add_option("--threads", threads, "seeds run in parallel")->capture_default_str();
     cmd->add_option("--barrier", barrier,
@@ -455,7 +458,8 @@ struct UserStudyCommand {
     AddConfigFlag(cmd, cfg);
     cmd->add_option("--domain", domain,
                     "a domain with participants (default: the first registered one): " +
-                        experiments::DomainRegistry::Global().NameList());
+                        experiments::DomainRegistry::Global().ListOffering(
+                            [](const experiments::Domain& d) { return d.HasPopulation(); }));
     cmd->add_flag("--quick", quick, "the small profile (3 participants x 3 episodes, small data)");
     participants_option = cmd->add_option("--participants", participants,
                                           "participants, 2 to 1000 (default 12)");

@@ -14,6 +14,12 @@
 namespace secure::cli {
 namespace {
 
+// The registered domains with a label check (Domain::HasLabelCheck).
+std::string LabelCheckDomains() {
+  return experiments::DomainRegistry::Global().ListOffering(
+      [](const experiments::Domain& d) { return d.HasLabelCheck(); });
+}
+
 struct CheckLabelsCommand {
   const Config* config = nullptr;
   std::string domain;
@@ -29,7 +35,7 @@ struct CheckLabelsCommand {
         "Check the safe and near-dangerous labels of a domain's data against its physics: "
         "simulate forward from each labelled state and count dangerous events");
     cmd->add_option("--domain", domain,
-                    "the domain: " + experiments::DomainRegistry::Global().NameList())
+                    "a domain with a label check: " + LabelCheckDomains())
         ->required();
     cmd->add_flag("--quick", quick, "the domain's small profile");
     AddConfigFlag(cmd, cfg);  // the domain's options: section <domain's>, key `domain`
@@ -46,7 +52,8 @@ struct CheckLabelsCommand {
     const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, quick, *config);
     SECURE_CHECK(d->HasLabelCheck(), "the " << domain
                                             << " domain has no label check (it cannot simulate "
-                                               "forward from a labelled state)");
+                                               "forward from a labelled state; domains with one: "
+                                            << LabelCheckDomains() << ")");
     const std::uint64_t data_seed = seed_option->count() > 0 ? seed : d->Preset().data_seed;
     const std::vector<experiments::LabelCheckRow> rows = d->CheckLabels(data_seed, max_states);
     if (json) {

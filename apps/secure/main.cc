@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterExperimentCommands(app, config);
     secure::cli::RegisterReportCommand(app);
     secure::cli::RegisterCompareCommand(app);
+    secure::cli::RegisterDomainsCommand(app);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // --help and --version end parsing with exit code 0: CLI11 prints them. Every other parse

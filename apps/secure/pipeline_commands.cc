@@ -69,20 +69,21 @@ struct DemosGenerateCommand {
     slowed_flag = cmd->add_option(
         "--slowed-copies", slowed_copies,
         "safe-state augmentation, copies of each safe state with its velocity scaled by U[0, 1) "
-        "(key slowed_copies; double-integrator)");
+        "(key slowed_copies; a domain without it rejects the flag)");
     nd_flag = cmd->add_option("--near-dangerous", near_dangerous_count,
                               "near-dangerous states (key near_dangerous.count; default: the "
                               "domain's)");
     rho_min_flag = cmd->add_option("--rho-min", rho_min,
                                    "near-dangerous band from this distance to the obstacle's edge, "
-                                   "negative: inside (key near_dangerous.rho_min; "
-                                   "double-integrator)");
+                                   "negative: inside (key near_dangerous.rho_min; a domain "
+                                   "without it rejects the flag)");
     rho_max_flag = cmd->add_option("--rho-max", rho_max,
                                    "near-dangerous band to this distance (key "
-                                   "near_dangerous.rho_max; double-integrator)");
+                                   "near_dangerous.rho_max; a domain without it rejects the flag)");
     stop_flag = cmd->add_flag("--stop-at-goal", stop_at_goal,
                               "end each demonstration at the goal, not after the full horizon "
-                              "(key demonstrations.stop_at_goal; double-integrator)");
+                              "(key demonstrations.stop_at_goal; a domain without it rejects the "
+                              "flag)");
     AddSeedOption(cmd, "--seed", &seed, "seed of all the data");
     cmd->add_flag("--json", json, "print counts as JSON");
     cmd->callback([this] { Run(); });
@@ -322,7 +323,8 @@ struct EvalCommand {
         "eval",
         "Evaluate saved models on any domain: bc, airl, secure, the shield ablations, bc+shield, "
         "secure-myopic, joint; success and dangerous rates over seeds, Mann-Whitney U and TOST "
-        "of SECURE vs AIRL, Kruskal-Wallis + Dunn across the ablations");
+        "of SECURE vs AIRL, Kruskal-Wallis + Dunn across the ablations. The shield flags marked "
+        "=preset default to the domain's preset (`secure domains NAME` lists it)");
     cmd->add_option("--domain", domain,
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
@@ -352,7 +354,7 @@ struct EvalCommand {
         ->capture_default_str();
     cmd->add_option("--tost-bound", tost_bound, "TOST equivalence bound (fraction)")
         ->capture_default_str();
-    shield_flags.Add(cmd, &shield);
+    shield_flags.Add(cmd, &shield, /*domain_preset=*/true);  // `secure domains NAME` lists it
     cmd->add_flag("--json", json, "print every number as JSON");
     cmd->callback([this] { Run(); });
   }

@@ -35,7 +35,8 @@ struct RenderCommand {
         "render",
         "Render one evaluation episode of a method (the episode `secure eval` plays for that "
         "seed and index) with the domain's offscreen renderer: an MP4 video (ffmpeg) and/or PPM "
-        "frames");
+        "frames. The shield flags marked =preset default to the domain's preset (`secure domains "
+        "NAME` lists it)");
     cmd->add_option("--domain", domain,
                     "the domain: " + experiments::DomainRegistry::Global().NameList())
         ->required();
@@ -71,7 +72,7 @@ struct RenderCommand {
     cmd->add_option("--height", video.height, "frame height in pixels (even)")
         ->capture_default_str();
     cmd->add_option("--fps", video.fps, "frames per second of the video")->capture_default_str();
-    shield_flags.Add(cmd, &shield);
+    shield_flags.Add(cmd, &shield, /*domain_preset=*/true);  // `secure domains NAME` lists it
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] { Run(); });
   }

@@ -1,132 +1,129 @@
-// secure shield run: the closed-loop check of the CBF shield
-// (domains/double_integrator/shield_run.h).
+// secure shield run: the closed-loop check of the CBF shield on any domain that offers a shield
+// run (experiments::Domain::HasShieldRun; the double integrator's: its shield_run.h). The domain
+// gives the task, the nominal policy and the run's values (ShieldRunPreset); this command names
+// no domain.
 #include <iostream>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "cli_common.h"
 #include "commands.h"
-#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
-#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
-#include "domains/double_integrator/shield_run.h"
+#include "secure/experiments/domain.h"
 
 namespace secure::cli {
 namespace {
 
-namespace di = domains::double_integrator;
-
 constexpr const char* kGroundTruthBarrier = "ground-truth";
 
-// Warns on stderr when a model's recorded training geometry differs from the run's.
-void WarnOnGeometryMismatch(const cbf::BarrierNet& net, const di::GroundTruth& truth,
-                            const std::string& path) {
-  const auto it = net.provenance.find("double_integrator");
+// The registered domains with a shield run, for the help and the errors.
+std::string ShieldRunDomains() {
+  return experiments::DomainRegistry::Global().ListOffering(
+      [](const experiments::Domain& d) { return d.HasShieldRun(); });
+}
+
+// Warns on stderr when a model's recorded ground truth (the provenance of `cbf train --domain`,
+// under the domain's GroundTruthSection) differs from the run's.
+void WarnOnGroundTruthMismatch(const cbf::BarrierNet& net, const experiments::Domain& domain,
+                               const std::string& path) {
+  const std::string key = domain.GroundTruthSection();
+  if (key.empty()) return;
+  const auto it = net.provenance.find(key);
   if (it == net.provenance.end() || !it->is_object()) return;
-  try {
-    const auto obstacle = it->at("obstacle").get<std::vector<double>>();
-    const double radius = it->at("radius").get<double>(), gamma = it->at("gamma").get<double>();
-    if (obstacle.size() == 2 && obstacle[0] == truth.obstacle_x &&
-        obstacle[1] == truth.obstacle_y && radius == truth.radius && gamma == truth.gamma)
-      return;
-    std::cerr << "secure: warning: " << path << " was trained for " << it->dump()
-              << ", the run uses obstacle (" << truth.obstacle_x << ", " << truth.obstacle_y
-              << "), radius " << truth.radius << ", gamma " << truth.gamma << "\n";
-  } catch (const nlohmann::json::exception&) {
-    // An unexpected provenance layout is not an error: the record is informational.
-  }
+  const nlohmann::json run = domain.GroundTruthJson();
+  if (*it == run) return;
+  std::cerr << "secure: warning: " << path << " was trained for " << it->dump()
+            << ", the run uses " << run.dump() << "\n";
 }
 
 // ------------------------------------------------------------------------------------------
 struct ShieldRunCommand {
-  eval::ShieldRunOptions options;
-  std::vector<double> obstacle, goal;
-  std::string domain, barrier;
+  const Config* config = nullptr;
+  experiments::ShieldRunRequest request;  // the flags' values; copied onto the preset if given
+  shield::ShieldOptions shield;
   ShieldFlags shield_flags;
+  TaskFlags task_flags;
+  std::string domain, barrier;
+  CLI::Option *episodes_flag = nullptr, *seed_flag = nullptr, *sigma_flag = nullptr;
   bool unshielded = false;
   bool json = false;
-  DeferredError config_error;
 
-  void Register(CLI::App& app, const Config& config) {
+  void Register(CLI::App& app, const Config& cfg) {
+    config = &cfg;
     CLI::App* cmd = app.add_subcommand(
         "run",
-        "Closed-loop episodes of a noisy goal-seeking policy past an obstacle, with the CBF "
-        "shield in the loop (or --unshielded): collisions, successes, interventions, latency");
-    config_error.Capture([&] {
-      ApplyGroundTruthYaml(config.Section("double_integrator"), config.path, &options.task.truth);
-    });
-    AddConfigFlag(cmd, config);
-    cmd->add_option("--domain", domain, "domain: double-integrator")->required();
-    cmd->add_option("--barrier", barrier,
-                    "the shield's barrier: 'ground-truth' or a barrier model file")
+        "Closed-loop episodes of the domain's noisy nominal policy (the double integrator: "
+        "goal-seeking past an obstacle), with the CBF shield in the loop (or --unshielded): "
+        "collisions, successes, interventions, latency. Defaults marked =preset and the task "
+        "flags' are the domain's (`secure domains NAME`)");
+    AddConfigFlag(cmd, cfg);  // the domain's ground-truth section (double_integrator:)
+    cmd->add_option("--domain", domain, "a domain with a shield run: " + ShieldRunDomains())
         ->required();
-    cmd->add_option("--episodes", options.episodes,
-                    "episodes, at most " + std::to_string(kMaxEpisodes))
-        ->capture_default_str();
-    AddSeedOption(cmd, "--seed", &options.seed, "seed for start states, shield and policy noise");
+    cmd->add_option("--barrier", barrier,
+                    "the shield's barrier: 'ground-truth' (a domain with one) or a barrier model "
+                    "file")
+        ->required();
+    episodes_flag = cmd->add_option("--episodes", request.episodes,
+                                    "episodes, at most " + std::to_string(kMaxEpisodes))
+                        ->default_str("preset");
+    seed_flag = AddSeedOption(cmd, "--seed", &request.seed,
+                              "seed for start states, shield and policy noise");
     cmd->add_flag("--unshielded", unshielded,
                   "apply the policy's sampled actions directly (the baseline)");
-    AddGroundTruthFlags(cmd, &options.task.truth, &obstacle);
-    std::ostringstream goal_default;
-    goal_default << options.task.goal_x << "," << options.task.goal_y;
-    cmd->add_option("--goal", goal, "goal X,Y")
-        ->delimiter(',')
-        ->expected(2)
-        ->default_str(goal_default.str());
-    cmd->add_option("--max-steps", options.task.max_steps, "steps per episode")
-        ->capture_default_str();
-    cmd->add_option("--policy-sigma", options.policy_sigma, "the policy's noise per axis")
-        ->capture_default_str();
-    cmd->add_option("--accel-bound", options.task.accel_bound,
-                    "per-component acceleration bound (environment and policy)")
-        ->capture_default_str();
-    shield_flags.Add(cmd, &options.shield);
-    cmd->add_option("--dt", options.task.dt,
-                    "control period (environment step and the shield's dt)")
-        ->capture_default_str();
+    task_flags.AddGeometry(cmd);
+    task_flags.AddPair(cmd, "--goal", "goal", "goal X,Y");
+    task_flags.AddNumber(cmd, "--max-steps", "max_steps", "steps per episode", true);
+    sigma_flag = cmd->add_option("--policy-sigma", request.policy_sigma,
+                                 "the policy's noise per action component")
+                     ->default_str("preset");
+    task_flags.AddNumber(cmd, "--accel-bound", "accel_bound",
+                         "per-component acceleration bound (environment and policy)");
+    shield_flags.Add(cmd, &shield, /*domain_preset=*/true);
+    task_flags.AddNumber(cmd, "--dt", "dt",
+                         "control period (environment step and the shield's dt)");
     cmd->add_flag("--json", json, "print the result as JSON");
-    cmd->callback([this] {
-      config_error.Rethrow();
-      Run();
-    });
+    cmd->callback([this] { Run(); });
   }
 
   void Run() {
-    CheckDoubleIntegratorDomain(domain);
-    CheckRange("--episodes", options.episodes, 1, kMaxEpisodes);
-    FinishGroundTruth(obstacle, &options.task.truth);
-    if (goal.size() == 2) {
-      options.task.goal_x = goal[0];
-      options.task.goal_y = goal[1];
-    }
-    shield::ShieldOptions& so = options.shield;
-    shield_flags.ApplyTo(&so);
-    so.dt = options.task.dt;
-    options.Validate();
+    experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+    const std::unique_ptr<experiments::Domain> d = registry.Make(domain);
+    SECURE_CHECK(d->HasShieldRun(), "the " << domain << " domain has no shield run (domains with "
+                                           << "one: " << ShieldRunDomains() << ")");
+    if (episodes_flag->count() > 0) CheckRange("--episodes", request.episodes, 1, kMaxEpisodes);
+    task_flags.ApplyTo(d.get(), *config);
+    // The run: the domain's values, then the flags given.
+    experiments::ShieldRunRequest run = d->ShieldRunPreset();
+    if (episodes_flag->count() > 0) run.episodes = request.episodes;
+    if (seed_flag->count() > 0) run.seed = request.seed;
+    if (sigma_flag->count() > 0) run.policy_sigma = request.policy_sigma;
+    shield_flags.ApplyTo(&shield);
+    shield_flags.OverlayGiven(shield, &run.shield);
+    run.shielded = !unshielded;
 
     std::unique_ptr<cbf::Barrier> evaluator;
     if (barrier == kGroundTruthBarrier) {
-      evaluator =
-          std::make_unique<domains::double_integrator::GroundTruthBarrier>(options.task.truth);
+      evaluator = d->MakeGroundTruth();
+      SECURE_CHECK(evaluator != nullptr,
+                   "--barrier ground-truth: the " << domain << " domain has no ground truth");
     } else {
       const cbf::BarrierNet net = cbf::BarrierNet::Load(barrier);
-      net.CheckFeatures(di::StateFeatures(), "the double-integrator domain", barrier);
-      WarnOnGeometryMismatch(net, options.task.truth, barrier);
+      net.CheckFeatures(d->MakeEnvironment()->ObservationFeatures(), "the " + domain + " domain",
+                        barrier);
+      WarnOnGroundTruthMismatch(net, *d, barrier);
       evaluator = net.MakeEvaluator();
     }
-    const eval::ShieldRunResult result =
-        eval::RunDoubleIntegratorShield(options, *evaluator, !unshielded);
+    const experiments::ShieldRunReport report = d->RunShield(run, *evaluator);
     if (json) {
-      nlohmann::json r = result.ToJson();
+      nlohmann::json r = report.json;
       r["command"] = "shield run";
       r["barrier_source"] = barrier;
       PrintJson(r);
     } else {
-      std::cout << result.Table();
+      std::cout << report.table;
     }
   }
 };

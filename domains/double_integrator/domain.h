@@ -56,6 +56,24 @@ class DoubleIntegratorDomain final : public experiments::Domain {
 
   std::unique_ptr<cbf::Barrier> MakeGroundTruth() const override;
   std::optional<cbf::StateSource> ValidationGrid() const override;
+  // The rest of the ground truth and the shield run: capabilities.cc.
+  /// Table 1's sampler: uniform in the state box (StateBox), labelled by task.truth, from the
+  /// stream seed ^ a salt (cbf::SampleDoubleIntegratorData).
+  experiments::GroundTruthSample SampleGroundTruth(long n_safe, long n_unsafe,
+                                                   std::uint64_t seed) const override;
+  /// cbf::DoubleIntegratorTrainerPreset() (table1.h).
+  cbf::BarrierTrainerOptions GroundTruthTrainerPreset() const override;
+  /// {"obstacle": [x, y], "radius": r, "gamma": g} of task.truth.
+  nlohmann::json GroundTruthJson() const override;
+  std::string GroundTruthSection() const override { return "double_integrator"; }
+  /// Table 1 of the paper: 1.9 % (1.0 %) over-, 4.1 % (2.2 %) under-conservative.
+  std::optional<experiments::PaperGroundTruthStudy> PaperGroundTruthReference() const override;
+  /// The shield run of shield_run.h: a noisy PD policy at the goal past the obstacle, in the
+  /// reach-avoid task of the domain's options; the shield's dt is the task's.
+  bool HasShieldRun() const override { return true; }
+  experiments::ShieldRunRequest ShieldRunPreset() const override;
+  experiments::ShieldRunReport RunShield(const experiments::ShieldRunRequest& request,
+                                         cbf::Barrier& barrier) const override;
 
   /// The barrier check (MakeDoubleIntegratorCheckProblem below). Held-out states: `count` safe
   /// (h* >= 0) and `count` unsafe (h* < 0) states drawn uniformly from the validation box

@@ -27,6 +27,18 @@ cbf::BarrierCheckProblem Domain::MakeCheckProblem(const shield::ShieldOptions&,
   SECURE_THROW("the " << name() << " domain has no barrier check");
 }
 
+GroundTruthSample Domain::SampleGroundTruth(long, long, std::uint64_t) const {
+  SECURE_THROW("the " << name() << " domain has no ground truth to sample labelled states from");
+}
+
+ShieldRunRequest Domain::ShieldRunPreset() const {
+  SECURE_THROW("the " << name() << " domain has no shield run");
+}
+
+ShieldRunReport Domain::RunShield(const ShieldRunRequest&, cbf::Barrier&) const {
+  SECURE_THROW("the " << name() << " domain has no shield run");
+}
+
 DomainRegistry& DomainRegistry::Global() {
   static DomainRegistry registry;
   return registry;
@@ -80,6 +92,14 @@ std::string DomainRegistry::Summaries() const {
   std::ostringstream out;
   for (const Entry& e : entries_) out << "  " << e.name << "  " << e.summary << "\n";
   return out.str();
+}
+
+std::string DomainRegistry::ListOffering(
+    const std::function<bool(const Domain&)>& offers) const {
+  std::string list;
+  for (const Entry& e : entries_)
+    if (offers(*Make(e.name, Profile::kQuick))) list += (list.empty() ? "" : ", ") + e.name;
+  return list.empty() ? "none" : list;
 }
 
 }  // namespace secure::experiments

@@ -11,9 +11,13 @@
 //     states), held-out states for the barrier check;
 //   - the experiment preset: which barrier kind and which trainer settings, the shield, the
 //     evaluation size (ExperimentOptions);
-//   - optionally: the barrier check's problem (region, unsafe test), an analytic ground-truth
-//     barrier and a validation grid.
-// Generic modules never include a concrete domain; they see domains through this interface.
+//   - optionally, capabilities (each a group of methods below with its Has...() test): the
+//     barrier check's problem (region, unsafe test), the label check, participants for a user
+//     study, the paper's numbers, an analytic ground truth (reference barrier, validation grid,
+//     labelled-state sampler: what the ground-truth study, Table 1, needs), and a closed-loop
+//     shield run of a nominal policy.
+// Generic modules and hosts (the CLI, the Python module) never include a concrete domain; they
+// see domains through this interface (the build checks it: cmake/SecureArchitecture.cmake).
 //
 //   experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
 //   std::unique_ptr<experiments::Domain> d = registry.Make("derby", experiments::Profile::kQuick);
@@ -32,6 +36,7 @@
 
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_check.h"
+#include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/validation.h"
 #include "secure/common/enum_strings.h"
 #include "secure/data/data.h"
@@ -100,6 +105,35 @@ struct PopulationOptions {
 struct PaperUserStudy {
   std::string source;  // "Table 4, 12 participants, Likert ratings (not rates)"
   std::vector<std::pair<std::string, std::vector<double>>> rows;  // (what, 4 values)
+};
+
+/// States drawn and labelled by a domain's ground truth (Domain::SampleGroundTruth).
+struct GroundTruthSample {
+  data::StateSet safe;    // h*(s) >= 0
+  data::StateSet unsafe;  // h*(s) < 0
+};
+
+/// The paper's numbers for the ground-truth study (Table 1: a barrier learned from labelled
+/// states against the ground truth on the validation grid), in %.
+struct PaperGroundTruthStudy {
+  double over_conservative = 0, over_conservative_std = 0;    // predicted unsafe | truly safe
+  double under_conservative = 0, under_conservative_std = 0;  // predicted safe | truly unsafe
+};
+
+/// A closed-loop shield run (Domain::RunShield): episodes of the domain's nominal policy (with
+/// Gaussian noise) in its task, with the shield over a given barrier in the loop or without it.
+/// Domain::ShieldRunPreset() gives the domain's values; a caller overrides fields.
+struct ShieldRunRequest {
+  long episodes = 1000;
+  std::uint64_t seed = 0;     // start states, shield samples and policy noise
+  double policy_sigma = 0.3;  // the nominal policy's noise per action component
+  shield::ShieldOptions shield;
+  bool shielded = true;       // false: the policy's draws are applied unchecked (the baseline)
+};
+/// What a shield run reports: its JSON document and a Markdown table.
+struct ShieldRunReport {
+  nlohmann::json json;
+  std::string table;
 };
 
 class Population {
@@ -192,11 +226,49 @@ class Domain {
   /// The paper's Table 3 numbers for this domain, if the paper has a row for it (printed beside
   /// a method comparison by `secure experiment`; nothing by default).
   virtual std::optional<PaperTable3> PaperReference() const { return std::nullopt; }
+
+  // The ground truth (optional): an analytic barrier h*, the states to validate a learned
+  // barrier on, and a sampler of labelled states (`cbf validate`, `cbf train --domain`, the
+  // ground-truth study `cbf table1`, `--barrier ground-truth`).
+  /// Whether the domain has a ground truth (MakeGroundTruth() is not null).
+  bool HasGroundTruth() const { return MakeGroundTruth() != nullptr; }
   /// An analytic ground-truth barrier, or null if the domain has none.
   virtual std::unique_ptr<cbf::Barrier> MakeGroundTruth() const { return nullptr; }
   /// The states to validate a barrier on against the ground truth (only with a ground truth);
   /// valid while the domain lives.
   virtual std::optional<cbf::StateSource> ValidationGrid() const { return std::nullopt; }
+  /// `n_safe` states with h* >= 0 and `n_unsafe` with h* < 0, drawn by the domain from its state
+  /// box (deterministic for `seed`; a stream independent of a trainer's with the same seed).
+  /// Only with a ground truth. @throws secure::Error otherwise, or on bad counts.
+  virtual GroundTruthSample SampleGroundTruth(long n_safe, long n_unsafe,
+                                              std::uint64_t seed) const;
+  /// The trainer settings for a barrier learned from SampleGroundTruth's states (`cbf train
+  /// --domain`, the ground-truth study); the general defaults unless the domain tuned its own.
+  virtual cbf::BarrierTrainerOptions GroundTruthTrainerPreset() const { return {}; }
+  /// The ground truth's parameters, recorded with a barrier trained on its samples and in the
+  /// study's options (the double integrator: {"obstacle": [x, y], "radius": r, "gamma": g});
+  /// each is a `task:` option of the domain of the same name.
+  virtual nlohmann::json GroundTruthJson() const { return nlohmann::json::object(); }
+  /// The top-level config section holding those parameters (its keys are the domain's `task:`
+  /// options), also the key of their record in a model's provenance ("double_integrator"), or ""
+  /// for none.
+  virtual std::string GroundTruthSection() const { return ""; }
+  /// The paper's numbers for the ground-truth study on this domain, if the paper has them.
+  virtual std::optional<PaperGroundTruthStudy> PaperGroundTruthReference() const {
+    return std::nullopt;
+  }
+
+  // The shield run (optional): the closed-loop check of the shield with the domain's nominal
+  // policy (`secure shield run`).
+  /// Whether RunShield works.
+  virtual bool HasShieldRun() const { return false; }
+  /// The run's values for this domain (episodes, seed, policy noise, shield). Only if
+  /// HasShieldRun().
+  virtual ShieldRunRequest ShieldRunPreset() const;
+  /// Runs `request` with `barrier` as the shield's barrier (not evaluated unshielded).
+  /// Deterministic per request.seed apart from latencies. Only if HasShieldRun(). @throws
+  /// secure::Error on invalid options, or a barrier that does not take the domain's states.
+  virtual ShieldRunReport RunShield(const ShieldRunRequest& request, cbf::Barrier& barrier) const;
 };
 
 /// Makes a domain with its options for a profile.
@@ -222,6 +294,10 @@ class DomainRegistry {
   std::string NameList() const;
   /// "  name  summary" lines, one per domain.
   std::string Summaries() const;
+  /// The registered names (sorted) of the domains (quick profile) for which `offers` is true:
+  /// those that offer a capability ("coffee-placing, derby" or "none"), for help texts and the
+  /// error for a domain that lacks it.
+  std::string ListOffering(const std::function<bool(const Domain&)>& offers) const;
 
  private:
   struct Entry {

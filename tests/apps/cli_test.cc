@@ -14,51 +14,17 @@
 #include <string>
 #include <vector>
 
+#include "tests/apps/cli_run.h"
 #include "tests/test_util.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int exit_code;
-  std::string out;  // stdout
-  std::string err;  // stderr
-};
-
-// One directory per test process: ctest runs the tests of this file as parallel processes.
-fs::path TempDir() {
-  static const fs::path dir = [] {
-    fs::path d = fs::path(::testing::TempDir()) / ("secure_cli_test_" + std::to_string(::getpid()));
-    fs::remove_all(d);
-    fs::create_directories(d);
-    return d;
-  }();
-  return dir;
-}
-
-// Removes the directory after the run unless a test failed (its files help to debug it).
-class RemoveTempDirOnSuccess : public ::testing::Environment {
- public:
-  void TearDown() override {
-    if (::testing::UnitTest::GetInstance()->Passed()) fs::remove_all(TempDir());
-  }
-};
-[[maybe_unused]] ::testing::Environment* const kRemoveTempDir =
-    ::testing::AddGlobalTestEnvironment(new RemoveTempDirOnSuccess);
-
-// Runs `secure <args>`; stdout and stderr are captured through files.
-Result RunCli(const std::string& args) {
-  const fs::path out = TempDir() / "stdout.txt", err = TempDir() / "stderr.txt";
-  const std::string cmd =
-      std::string(SECURE_CLI) + " " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
-  auto slurp = [](const fs::path& p) {
-    std::ifstream in(p);
-    return std::string(std::istreambuf_iterator<char>(in), {});
-  };
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
-}
+using Result = secure::test::CliResult;
+using secure::test::ExpectOneErrorLine;
+using secure::test::RunCli;
+fs::path TempDir() { return secure::test::CliTempDir(); }
 
 std::string Write(const std::string& name, const std::string& content) {
   const fs::path p = TempDir() / name;
@@ -597,9 +563,10 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
 
 // Every command that takes --domain lists the registered domains in its help and its error.
 TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
-  for (const std::string command :
-       {"experiment method-comparison", "experiment ablation", "eval", "cbf validate",
-        "demos generate", "policy train"}) {
+  // (A command that needs a capability, e.g. `cbf validate` a ground truth, lists the domains
+  // that offer it: cli_domains_test.cc.)
+  for (const std::string command : {"experiment method-comparison", "experiment ablation", "eval",
+                                    "demos generate", "policy train"}) {
     const Result help = RunCli(command + " --help");
     EXPECT_EQ(help.exit_code, 0) << command;
     EXPECT_HAS(help.out, "derby | double-integrator");
@@ -925,14 +892,6 @@ TEST(CliTest, SameSeedGivesByteIdenticalModelFilesTimingStaysInTheJson) {
 // ------------------------------------------------------------------------------------------
 // Hardening (helper C): every error is one "secure: error: ..." line with exit code 1, sizes
 // are bounded before any work, config files are checked strictly, undefined figures read "n/a".
-
-// The error line of a failed run: exit code 1, exactly one line on stderr, with the prefix.
-void ExpectOneErrorLine(const Result& r, const std::string& needle) {
-  EXPECT_EQ(r.exit_code, 1) << r.err;
-  EXPECT_EQ(r.err.rfind("secure: error: ", 0), 0u) << r.err;
-  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-  EXPECT_HAS(r.err, needle);
-}
 
 std::string Slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

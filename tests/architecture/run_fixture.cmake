@@ -103,6 +103,11 @@ plant(torch_in_cbf_header secure/cbf/barrier.h "#include <ATen/ATen.h>"
 # Another module's internal header.
 plant(internal_from_shield secure/shield/shield.cc "#include \"secure/cbf/internal/impl.h\""
   "secure/shield/shield\\.cc:[0-9]+: error: #include \"secure/cbf/internal/impl\\.h\": internal: secure/cbf/internal/impl\\.h is internal to secure/cbf/ and may be included only from files under it \\[secure_shield\\]")
+# A host (apps/) including a plug-in it links: the plugin rule, from a source and from a header.
+plant(app_includes_plugin apps/tool/main.cc "#include \"domains/derby/derby.h\""
+  "apps/tool/main\\.cc:[0-9]+: error: #include \"domains/derby/derby\\.h\": plugin: domains/derby/derby\\.h is a domain's header, and apps/ is a host: it meets domains only through the registry and their capabilities \\(secure/experiments/domain\\.h\\) \\[tool\\]")
+plant(app_header_includes_plugin apps/tool/tool.h "#include \"domains/derby/derby.h\""
+  "apps/tool/tool\\.h:[0-9]+: error: #include \"domains/derby/derby\\.h\": plugin: domains/derby/derby\\.h is a domain's header, and apps/ is a host")
 # A file of no target (tests/).
 plant(library_includes_test_helper secure/common/common.cc "#include \"tests/helper.h\""
   "secure/common/common\\.cc:[0-9]+: error: #include \"tests/helper\\.h\": layering: tests/helper\\.h belongs to no target of the project")

@@ -4,10 +4,11 @@
 
 #include <filesystem>
 
+#include "domains/double_integrator/domain.h"
 #include "secure/cbf/barrier_trainer.h"
-#include "domains/double_integrator/table1.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
+#include "secure/experiments/ground_truth_study.h"
 
 namespace secure::cbf {
 namespace {
@@ -15,9 +16,11 @@ namespace {
 // The paper's Table 1 (1.9% over-, 4.1% under-conservative); our targets are 1.0% and 2.0%,
 // as means over 5 training seeds with 800 + 800 states, on the 9M-state grid.
 TEST(AccuracyTest, Table1MeetsTheTargetsOnTheDefaultObstacle) {
-  Table1Options options;  // the double-integrator preset, seeds 0-4
+  const domains::double_integrator::DoubleIntegratorDomain domain;
+  experiments::GroundTruthStudyOptions options;  // seeds 0-4
+  options.trainer = domain.GroundTruthTrainerPreset();  // the double-integrator preset
   options.progress = false;
-  const Table1Result r = RunTable1(options);
+  const experiments::GroundTruthStudyResult r = experiments::RunGroundTruthStudy(domain, options);
   ASSERT_EQ(r.per_seed.size(), 5u);
   EXPECT_EQ(r.per_seed[0].total(), 9'000'000);
   EXPECT_LE(r.over_conservative.mean, 0.010);

@@ -460,6 +460,30 @@ TEST_P(DomainContract, GroundTruthWhereGiven) {
   }
 }
 
+// The ground truth's sampler (cbf train --domain, the ground-truth study): the requested counts,
+// labelled by the ground truth, the environment's features, the same states for the same seed.
+TEST_P(DomainContract, GroundTruthSamplerWhereGiven) {
+  if (!domain_->HasGroundTruth()) {
+    EXPECT_THROW(domain_->SampleGroundTruth(10, 10, 0), Error);
+    GTEST_SKIP() << GetParam() << " has no ground truth";
+  }
+  const experiments::GroundTruthSample a = domain_->SampleGroundTruth(50, 30, 4);
+  ASSERT_EQ(a.safe.size(), 50);
+  ASSERT_EQ(a.unsafe.size(), 30);
+  EXPECT_EQ(a.safe.features, env_->ObservationFeatures());
+  EXPECT_EQ(a.unsafe.features, env_->ObservationFeatures());
+  std::unique_ptr<cbf::Barrier> truth = domain_->MakeGroundTruth();
+  Eigen::VectorXf h_safe(50), h_unsafe(30);
+  truth->Evaluate(a.safe.states, h_safe);
+  truth->Evaluate(a.unsafe.states, h_unsafe);
+  EXPECT_TRUE((h_safe.array() >= 0.0f).all());
+  EXPECT_TRUE((h_unsafe.array() < 0.0f).all());
+  const experiments::GroundTruthSample b = domain_->SampleGroundTruth(50, 30, 4);
+  EXPECT_EQ(a.safe.states, b.safe.states);
+  EXPECT_NE(a.safe.states, domain_->SampleGroundTruth(50, 30, 5).safe.states);
+  EXPECT_NO_THROW(domain_->GroundTruthTrainerPreset().Validate());
+}
+
 INSTANTIATE_TEST_SUITE_P(AllRegistered, DomainContract, ::testing::ValuesIn(ContractDomainNames()),
                          [](const ::testing::TestParamInfo<std::string>& info) {
                            return ParamName(info.param);

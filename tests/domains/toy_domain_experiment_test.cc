@@ -14,6 +14,7 @@
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/ground_truth_study.h"
 #include "tests/domains/domain_contract_util.h"
 
 namespace secure::test {
@@ -63,6 +64,46 @@ TEST(ToyDomainExperiment, QuickMethodComparisonThroughTheGenericDriver) {
         << "seed " << s;
   EXPECT_LE(secure.dangerous_rate.mean, 0.05);
   EXPECT_GT(secure.success_rate.mean, 0.5);
+}
+
+// The ground-truth study (Table 1, `secure cbf table1`) is generic: it runs on any domain with a
+// ground truth, here the toy's (its sampler, grid and analytic barrier), and a domain without one
+// is refused naming the domains that have one.
+TEST(ToyDomainExperiment, GroundTruthStudyRunsOnTheToyDomain) {
+  ContractDomainNames();  // registers the toy domain
+  const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
+  const std::unique_ptr<experiments::Domain> toy = registry.Make("toy-cart", Profile::kQuick);
+  experiments::GroundTruthStudyOptions o;
+  o.n_safe = o.n_unsafe = 300;
+  o.seeds = 2;
+  o.trainer = toy->GroundTruthTrainerPreset();
+  o.trainer.hidden = {16, 16};
+  o.trainer.max_epochs = 60;
+  o.trainer.learning_rate = 0.01;
+  o.progress = false;
+  const experiments::GroundTruthStudyResult r = experiments::RunGroundTruthStudy(*toy, o);
+  ASSERT_EQ(r.per_seed.size(), 2u);
+  EXPECT_EQ(r.per_seed[0].total(), 41 * 41);  // the toy's validation grid
+  EXPECT_NEAR(r.safe_correct.mean + r.over_conservative.mean, 1.0, 1e-12);
+  EXPECT_LT(r.over_conservative.mean, 0.2);   // a learned barrier, not a coin
+  EXPECT_LT(r.under_conservative.mean, 0.2);
+  EXPECT_FALSE(r.paper.has_value());
+  EXPECT_EQ(r.Table().find("[paper:"), std::string::npos);
+  // Deterministic per seed.
+  EXPECT_EQ(experiments::RunGroundTruthStudy(*toy, o).ToJson()["over_conservative"],
+            r.ToJson()["over_conservative"]);
+
+  const std::unique_ptr<experiments::Domain> derby = registry.Make("derby", Profile::kQuick);
+  try {
+    experiments::RunGroundTruthStudy(*derby, o);
+    FAIL() << "derby has no ground truth";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("the derby domain has no ground truth"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("double-integrator"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("toy-cart"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -280,6 +280,27 @@ std::optional<cbf::StateSource> ToyCartDomain::ValidationGrid() const {
   return s;
 }
 
+experiments::GroundTruthSample ToyCartDomain::SampleGroundTruth(long n_safe, long n_unsafe,
+                                                                std::uint64_t seed) const {
+  SECURE_CHECK(n_safe > 0 && n_unsafe > 0,
+               "toy-cart sampler: counts " << n_safe << ", " << n_unsafe << ", must be > 0");
+  Rng rng(seed ^ 0x70c7'0000'0000'0000ULL);  // not the trainer's stream for the same seed
+  ToyCartGroundTruth truth(options_);
+  Eigen::MatrixXf safe(2, n_safe), unsafe(2, n_unsafe);
+  long s = 0, u = 0;
+  Eigen::VectorXf h(1);
+  for (long draw = 0; s < n_safe || u < n_unsafe; ++draw) {
+    SECURE_CHECK(draw < 1000 * (n_safe + n_unsafe), "toy-cart sampler: too few states of a class");
+    Eigen::Vector2f x(float(rng.Uniform(0.0, options_.wall + 0.5)), float(rng.Uniform(-1.0, 3.0)));
+    truth.Evaluate(x, h);
+    if (h[0] >= 0 && s < n_safe) safe.col(s++) = x;
+    if (h[0] < 0 && u < n_unsafe) unsafe.col(u++) = x;
+  }
+  const std::string source = "toy-cart sampler (seed " + std::to_string(seed) + ")";
+  return {{source + " safe", {"x", "v"}, std::move(safe)},
+          {source + " unsafe", {"x", "v"}, std::move(unsafe)}};
+}
+
 void RegisterToyCart(experiments::DomainRegistry& registry) {
   if (registry.Has("toy-cart")) return;
   registry.Add("toy-cart", "a cart must stop in front of a wall (tests only)",

@@ -147,6 +147,9 @@ class ToyCartDomain final : public experiments::Domain {
   void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   std::unique_ptr<cbf::Barrier> MakeGroundTruth() const override;
   std::optional<cbf::StateSource> ValidationGrid() const override;
+  /// Uniform in the grid's box (x in [0, wall + 0.5), v in [-1, 3)), labelled by the ground truth.
+  experiments::GroundTruthSample SampleGroundTruth(long n_safe, long n_unsafe,
+                                                   std::uint64_t seed) const override;
 
   ToyCartOptions& mutable_options() { return options_; }
 
