@@ -149,3 +149,24 @@ def test_import_without_the_extension_names_the_interpreter(tmp_path):
     assert last.startswith("ImportError: secure's C++ extension secure._secure is not built for "
                            f"this Python ({sys.executable}"), last
     assert "holds none" in last
+
+
+@pytest.mark.parametrize("name", secure.domains())
+def test_every_domain_lists_its_valid_task_keys_and_accepts_each(name):
+    import re
+    env = secure.make_env(name, profile="quick")
+    for options, section in (({"no_such_key": 1}, None), ({"task": {"no_such_key": 1}}, "task")):
+        with pytest.raises(ValueError) as raised:
+            secure.make_env(name, profile="quick", **options)
+        m = re.search(r"\(valid: ([^)]*)\)$", str(raised.value))
+        assert m, str(raised.value)
+        keys = m.group(1).split(", ")
+        if section is None:
+            assert "task" in keys, keys
+            continue
+        # The task section lists every key of its options, and each takes its current value.
+        current = env.options["task"]
+        assert set(keys) >= set(current), (keys, sorted(current))
+        for key in keys:
+            if key in current:
+                secure.make_env(name, profile="quick", task={key: current[key]})
