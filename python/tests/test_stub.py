@@ -36,7 +36,9 @@ def test_stub_declares_every_public_name_the_package_exports():
     declared |= {n.target.id for n in tree.body if isinstance(n, ast.AnnAssign)}
     public = {n for n in dir(_secure) if not n.startswith("_")}
     assert public <= declared
-    assert set(secure.__all__) == public
+    # The package offers every public name of the extension (itself, or a Python wrapper of it).
+    assert all(hasattr(secure, n) for n in public), sorted(n for n in public if not hasattr(secure, n))
+    assert set(secure.__all__) >= public, sorted(public - set(secure.__all__))
     assert "__version__" in declared
 
 
