@@ -33,6 +33,11 @@ set -euo pipefail
 #   openmpi-bin                 mpirun, for the sharded-experiment tests (tests/apps/shard_test.cc); nothing links MPI
 #   python3-dev pybind11-dev    the Python module (python/): headers, the binding library
 #   python3-numpy python3-pytest  the module's arrays; its tests (ctest -L python)
+#   python3-pip python3-venv python3-setuptools python3-wheel mypy
+#                               `pip install --no-build-isolation .` (pyproject.toml, setup.py: the
+#                               PEP 517 backend and wheel building offline; venvs; its slow test)
+#   mypy                        type-checks the package's stub and examples/python against it
+#                               (ctest python_typecheck_*: the stub is usable, the examples typed)
 #   python3-matplotlib          `secure report`: the run's figures (tools/report/report.py, Agg backend)
 #   python3-h5py                reads our HDF5 files as robomimic does (h5py), and writes robomimic-style
 #                               files with images, in a test (tests/data/robomimic_h5py_test.py)
@@ -46,6 +51,7 @@ PACKAGES=(
   ffmpeg
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy python3-pytest
+  python3-pip python3-venv python3-setuptools python3-wheel mypy
   openmpi-bin
   python3-matplotlib python3-h5py chromium
 )

@@ -131,8 +131,13 @@ void DerbyOptions::ApplyYaml(const YAML::Node& node, const std::string& source) 
                       : key == "car_kd"           ? &car_kd
                       : key == "car_noise"        ? &car_noise
                                                   : nullptr;
-      SECURE_CHECK(field != nullptr,
-                   source << ": unknown field '" << key << "' in the demolition derby task options");
+      if (field == nullptr) {
+        const nlohmann::json all = ToJson();  // exactly the keys read here
+        std::string valid;
+        for (const auto& entry : all.items()) valid += (valid.empty() ? "" : ", ") + entry.key();
+        SECURE_THROW(source << ": unknown field '" << key
+                            << "' in the demolition derby task options (valid: " << valid << ")");
+      }
       *field = YamlValue<double>(v, key, source);
     }
   }

@@ -10,6 +10,7 @@
 
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
+#include "secure/common/strings.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::domains::double_integrator {
@@ -95,7 +96,9 @@ void ReachAvoidOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key << "' in the reach-avoid task options");
+                 source << ": unknown field '" << key
+                        << "' in the reach-avoid task options (valid: "
+                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
     const YAML::Node& v = item.second;
     if (key == "obstacle") {
       YamlPair(v, key, source, &truth.obstacle_x, &truth.obstacle_y);

@@ -1,6 +1,7 @@
 // secure.Barrier (load, h, save) and secure.train_barrier.
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <sstream>
 
 #include "python/src/common.h"
@@ -29,6 +30,7 @@ std::shared_ptr<Barrier> FromCar(cbf::CarBarrierNet net) {
 }
 
 std::shared_ptr<Barrier> Load(const std::string& path) {
+  RequireFile(path);
   std::string kind;
   {
     py::gil_scoped_release release;
@@ -54,7 +56,7 @@ void CheckFinite(const StatesArg& s, const std::string& what) {
       }
 }
 
-py::object H(Barrier& b, py::handle states) {
+FloatOrArray H(Barrier& b, ArrayLike states) {
   const StatesArg s = States(states, b.state_dim(), "states");
   CheckFinite(s, "states");
   py::array_t<float> h(s.map.cols());
@@ -64,8 +66,8 @@ py::object H(Barrier& b, py::handle states) {
     std::lock_guard<std::mutex> lock(b.mutex);
     b.evaluator->Evaluate(s.map, out);
   }
-  if (s.one) return py::float_(static_cast<double>(out[0]));
-  return std::move(h);
+  if (s.one) return FloatOrArray(py::float_(static_cast<double>(out[0])));
+  return FloatOrArray(std::move(h));
 }
 
 data::StateSet StateSetOf(py::handle states, int dim, const std::vector<std::string>* features,
@@ -87,9 +89,15 @@ void RegisterBarrier(py::module_& m) {
 A control barrier function h(s): h >= 0 on the safe set. Load one with Barrier.load(path) (a
 `secure cbf train` model, flat or per-obstacle), train one with secure.train_barrier, or take a
 domain's analytic ground truth with Barrier.ground_truth(domain).)doc")
-      .def_static("load", &Load, py::arg("path"), "Loads a barrier model file (any barrier kind).")
-      .def_property_readonly("kind", [](const Barrier& b) { return b.kind; })
-      .def_property_readonly("state_dim", &Barrier::state_dim)
+      .def_static("load", &Load, py::arg("path"), R"doc(
+Loads a barrier model file (any barrier kind: a `secure cbf train` model, flat or per-obstacle).
+Raises FileNotFoundError if there is no such file, ValueError (naming the file) if it is not a
+barrier model or is corrupt.)doc")
+      .def_property_readonly(
+          "kind", [](const Barrier& b) { return b.kind; },
+          "'barrier_mlp' (flat), 'car_barrier' (per-obstacle) or 'ground_truth'.")
+      .def_property_readonly("state_dim", &Barrier::state_dim,
+                             "The width of a state: the columns of h's input.")
       .def_property_readonly(
           "features",
           [](const Barrier& b) -> std::vector<std::string> {
@@ -100,19 +108,23 @@ domain's analytic ground truth with Barrier.ground_truth(domain).)doc")
           "Names of the state rows the model reads (empty if unknown).")
       .def_property_readonly(
           "provenance",
-          [](const Barrier& b) -> py::object {
+          [](const Barrier& b) -> JsonDict {
             if (b.net) return ToPython(b.net->provenance);
             if (b.car) return ToPython(b.car->provenance);
             return py::dict();
           },
           "The training options, summary and data the model file records.")
-      .def("describe", [](const Barrier& b) { return b.evaluator->Describe(); })
+      .def(
+          "describe", [](const Barrier& b) { return b.evaluator->Describe(); },
+          "One line: the model's kind and layers (e.g. 'barrier_mlp 4-64-64-1 tanh'), or the "
+          "ground truth's parameters.")
       .def("__repr__",
            [](const Barrier& b) { return "<secure.Barrier " + b.evaluator->Describe() + ">"; })
       .def("h", &H, py::arg("states"), R"doc(
 h(s) of a batch of states, an (N, state_dim) array -> (N,) float32 array; or of one state, a
 (state_dim,) array -> float. C-contiguous float32 input is read in place; other real dtypes are
-converted. Raises ValueError on a wrong width or a non-finite entry. Releases the GIL.)doc")
+converted. Raises ValueError on a wrong shape or a non-finite entry, TypeError on a bool,
+complex, object or string array. Releases the GIL.)doc")
       .def(
           "save",
           [](const Barrier& b, const std::string& path) {
@@ -121,12 +133,15 @@ converted. Raises ValueError on a wrong width or a non-finite entry. Releases th
             if (b.car) return b.car->Save(path);
             SECURE_THROW("a " << b.kind << " barrier has no model file to save");
           },
-          py::arg("path"), "Writes the model file (atomically).");
+          py::arg("path"),
+          "Writes the model file (atomically). A ground-truth barrier has none: ValueError.");
 
   m.def(
       "train_barrier",
-      [](py::handle safe, py::handle near_dangerous, py::handle features, py::kwargs options) {
+      [](ArrayLike safe, ArrayLike near_dangerous, FeatureNamesArg features,
+         py::kwargs options) -> BarrierAndSummary {
         cbf::BarrierTrainerOptions o;
+        CheckOptionTypes(options, o.ToJson(), "train_barrier options");
         o.ApplyYaml(ToYaml(options, "train_barrier"), "train_barrier options");
         const StatesArg probe = States(safe, -1, "safe", false);
         const int dim = static_cast<int>(probe.map.rows());
@@ -145,23 +160,25 @@ converted. Raises ValueError on a wrong width or a non-finite entry. Releases th
 Trains a flat barrier (an MLP, paper Eq. 4) on safe and near-dangerous states, two (N, d)
 arrays with the same d. `features` names the d columns (default x0, x1, ...); the keyword
 arguments are the trainer's options, the keys of `secure cbf train`'s config section `trainer`
-(hidden=[64, 64], max_epochs=400, seed=0, ...; an unknown key is a ValueError naming it and
-listing the valid ones). Returns (barrier, summary dict). Releases the GIL while training.)doc");
+(hidden=[64, 64], max_epochs=400, seed=0, ...): an unknown key is a ValueError naming it and
+listing the valid ones, a value of the wrong type (max_epochs='many') a TypeError, a value out of
+range (batch_size=0) a ValueError naming the field and the rule. Returns (barrier, summary
+dict). Releases the GIL while training.)doc");
 
   m.def(
       "train_car_barrier",
-      [](py::handle safe, py::handle near_dangerous, py::object domain, py::handle features,
-         py::kwargs options) {
+      [](ArrayLike safe, ArrayLike near_dangerous, std::optional<std::string> domain,
+         FeatureNamesArg features, py::kwargs options) -> BarrierAndSummary {
         // The domain's preset (its obstacle layout, radii and trainer settings), or the defaults
         // (then `layout` must be given), with the keyword arguments on top.
         cbf::CarBarrierTrainerOptions o;
         std::vector<std::string> domain_features;
-        if (!domain.is_none()) {
-          const std::unique_ptr<experiments::Domain> d =
-              MakeDomain(domain.cast<std::string>(), "full", py::dict());
+        if (domain) {
+          const std::unique_ptr<experiments::Domain> d = MakeDomain(*domain, "full", py::dict());
           o = d->Preset().per_obstacle_barrier;
           domain_features = d->MakeEnvironment()->ObservationFeatures();
         }
+        CheckOptionTypes(options, o.ToJson(), "train_car_barrier options");
         o.ApplyYaml(ToYaml(options, "train_car_barrier"), "train_car_barrier options");
         const StatesArg probe = States(safe, -1, "safe", false);
         const int dim = static_cast<int>(probe.map.rows());
@@ -185,8 +202,8 @@ Trains a per-obstacle barrier (cbf::CarBarrierNet: one MLP per car, min over the
 on observations, two (N, obs_dim) arrays. `domain` (e.g. 'derby') starts from that domain's
 preset (its obstacle layout and trainer settings) and names the columns with its observation
 features; the keyword arguments are the car barrier trainer's options (the keys of a config's
-`per_obstacle_barrier` section: hidden, max_epochs, seed, layout={...}, ...). Returns
-(barrier, summary dict). Releases the GIL while training.)doc");
+`per_obstacle_barrier` section: hidden, max_epochs, seed, layout={...}, ...; errors as for
+train_barrier). Returns (barrier, summary dict). Releases the GIL while training.)doc");
 }
 
 }  // namespace secure::python

@@ -1,8 +1,11 @@
 // NumPy/YAML/JSON conversions, secure.Rng, the exception translation, and the module itself.
 #include "python/src/common.h"
 
+#include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <map>
 #include <new>
 #include <sstream>
 
@@ -21,6 +24,10 @@ std::string ShapeOf(const py::array& a) {
   for (py::ssize_t k = 0; k < a.ndim(); ++k) out << (k ? ", " : "") << a.shape(k);
   out << (a.ndim() == 1 ? ",)" : ")");
   return out.str();
+}
+
+std::string TypeName(py::handle obj) {
+  return py::str(py::type::handle_of(obj).attr("__name__"));
 }
 
 }  // namespace
@@ -172,12 +179,79 @@ std::vector<std::string> FeatureNames(py::handle names, int dim, const std::stri
     for (int k = 0; k < dim; ++k) out.push_back(prefix + std::to_string(k));
     return out;
   }
-  out = names.cast<std::vector<std::string>>();
+  if (py::isinstance<py::str>(names) || !py::isinstance<py::sequence>(names)) {
+    throw py::type_error(what + ": expected a sequence of str (or None), got " +
+                         TypeName(names));
+  }
+  try {
+    out = names.cast<std::vector<std::string>>();
+  } catch (const py::cast_error&) {
+    throw py::type_error(what + ": expected a sequence of str, got " +
+                         std::string(py::repr(names)));
+  }
   if (static_cast<int>(out.size()) != dim) {
     throw py::value_error(what + ": " + std::to_string(out.size()) + " names for " +
                           std::to_string(dim) + " columns");
   }
   return out;
+}
+
+void RequireFile(const std::string& path) {
+  std::error_code error;
+  if (std::filesystem::exists(path, error) || error) return;  // other problems: the loader's
+  py::object e = py::module_::import("builtins")
+                     .attr("FileNotFoundError")(ENOENT, std::strerror(ENOENT), path);
+  PyErr_SetObject(PyExc_FileNotFoundError, e.ptr());
+  throw py::error_already_set();
+}
+
+void CheckOptionTypes(py::handle options, const nlohmann::json& defaults,
+                      const std::string& source) {
+  if (!defaults.is_object() || !py::isinstance<py::dict>(options)) return;
+  py::module_ numbers = py::module_::import("numbers");
+  py::module_ numpy = py::module_::import("numpy");
+  for (const auto& item : options.cast<py::dict>()) {
+    if (!py::isinstance<py::str>(item.first)) continue;  // ToYaml names it
+    const std::string key = item.first.cast<std::string>();
+    const auto it = defaults.find(key);
+    if (it == defaults.end() || it->is_null()) continue;  // unknown keys: the options' reader
+    py::handle v = item.second;
+    const bool is_bool = py::isinstance<py::bool_>(v) || py::isinstance(v, numpy.attr("bool_"));
+    const bool is_sequence = py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v) ||
+                             py::isinstance<py::array>(v);
+    const char* expected = nullptr;
+    switch (it->type()) {
+      case nlohmann::json::value_t::boolean:
+        if (!is_bool) expected = "a bool";
+        break;
+      case nlohmann::json::value_t::number_integer:
+      case nlohmann::json::value_t::number_unsigned:
+        if (is_bool || !py::isinstance(v, numbers.attr("Integral"))) expected = "an int";
+        break;
+      case nlohmann::json::value_t::number_float:
+        if (is_bool || !py::isinstance(v, numbers.attr("Real"))) expected = "a number";
+        break;
+      case nlohmann::json::value_t::string:
+        if (!py::isinstance<py::str>(v)) expected = "a str";
+        break;
+      case nlohmann::json::value_t::array:
+        if (!is_sequence) expected = "a list";
+        break;
+      case nlohmann::json::value_t::object:
+        if (!py::isinstance<py::dict>(v)) {
+          expected = "a dict";
+        } else {
+          CheckOptionTypes(v, *it, source + " [" + key + "]");
+        }
+        break;
+      default:
+        break;
+    }
+    if (expected != nullptr) {
+      throw py::type_error(source + ": option '" + key + "' = " + std::string(py::repr(v)) +
+                           " (" + TypeName(v) + "), expected " + expected);
+    }
+  }
 }
 
 std::shared_ptr<Barrier> MakeBarrier(std::string kind,
@@ -203,12 +277,17 @@ std::unique_ptr<cbf::Barrier> EvaluatorOn(const Barrier& barrier,
 
 void RegisterCommon(py::module_& m) {
   // secure::Error (bad input, bad option, bad file) becomes ValueError with the library's
-  // message; pybind11 maps std::bad_alloc to MemoryError.
+  // message; a failed conversion of a Python value TypeError; pybind11 maps std::bad_alloc to
+  // MemoryError. (A missing file is a FileNotFoundError from RequireFile, before the loader.)
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const secure::Error& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const py::cast_error& e) {
+      // A Python value of the wrong type reached a C++ conversion (pybind11 would say
+      // RuntimeError): a TypeError, as Python's own conversions raise.
+      PyErr_SetString(PyExc_TypeError, e.what());
     }
   });
 
@@ -216,10 +295,8 @@ void RegisterCommon(py::module_& m) {
   m.def(
       "build_info",
       [] {
-        py::dict d;
-        d["version"] = std::string(secure::Version());
-        d["git_sha"] = std::string(secure::GitSha());
-        return d;
+        return std::map<std::string, std::string>{{"version", std::string(secure::Version())},
+                                                  {"git_sha", std::string(secure::GitSha())}};
       },
       "The library's version and git sha.");
 
@@ -227,8 +304,8 @@ void RegisterCommon(py::module_& m) {
 The library's random stream (xoshiro256++ with its own normal transform): the same numbers as
 the C++ code for the same seed, so a Python loop can replay a C++ run.)doc")
       .def(py::init<std::uint64_t>(), py::arg("seed") = 0)
-      .def("seed", &Rng::Seed, py::arg("seed"))
-      .def("next_u64", &Rng::NextU64)
+      .def("seed", &Rng::Seed, py::arg("seed"), "Restarts the stream from `seed`.")
+      .def("next_u64", &Rng::NextU64, "The next raw 64-bit value.")
       .def("uniform", py::overload_cast<>(&Rng::Uniform), "Uniform in [0, 1).")
       .def("normal", &Rng::Normal, "Standard normal.");
 

@@ -37,6 +37,58 @@ namespace py = pybind11;
 
 using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
 
+// ---------------------------------------------------------------------------------------------
+// Python type names for signatures. pybind11 2.10 calls a py::handle / py::object argument
+// "handle" / "object" in help() and in the stubs; a Typed<Name> is a py::object that accepts any
+// value (the conversions below check it, raising TypeError / ValueError with our messages) and is
+// called Name::name there. python/tools/make_stub.py turns these names into the stub's types, and
+// refuses "handle" and "object": every argument and result of the module has a real type.
+inline int AnyPythonObject(PyObject* /*object*/) { return 1; }
+
+template <typename Name>
+class Typed : public py::object {
+ public:
+  PYBIND11_OBJECT_DEFAULT(Typed, py::object, AnyPythonObject)
+};
+
+#define SECURE_PYTHON_TYPE(Alias, text)                              \
+  struct Alias##TypeName {                                           \
+    static constexpr auto name = pybind11::detail::const_name(text); \
+  };                                                                 \
+  using Alias = Typed<Alias##TypeName>
+
+SECURE_PYTHON_TYPE(ArrayLike, "numpy.typing.ArrayLike");
+SECURE_PYTHON_TYPE(OptionalArrayLike, "Optional[numpy.typing.ArrayLike]");
+SECURE_PYTHON_TYPE(FloatOrArray, "Union[float, numpy.typing.NDArray[numpy.float32]]");
+SECURE_PYTHON_TYPE(OptionalArray, "Optional[numpy.typing.NDArray[numpy.float32]]");
+SECURE_PYTHON_TYPE(FeatureNamesArg, "Optional[Sequence[str]]");
+SECURE_PYTHON_TYPE(JsonDict, "Dict[str, Any]");
+SECURE_PYTHON_TYPE(EnvOrName, "Union[Env, str]");
+SECURE_PYTHON_TYPE(RngOrSeed, "Union[Rng, int]");
+SECURE_PYTHON_TYPE(DynamicsFunction,
+                   "Callable[[numpy.typing.NDArray[numpy.float32], "
+                   "numpy.typing.NDArray[numpy.float32]], numpy.typing.ArrayLike]");
+SECURE_PYTHON_TYPE(OptionalBarrier, "Optional[Barrier]");
+SECURE_PYTHON_TYPE(BarrierAndSummary, "Tuple[Barrier, Dict[str, Any]]");
+SECURE_PYTHON_TYPE(PolicyAndSummary, "Tuple[Policy, Dict[str, Any]]");
+SECURE_PYTHON_TYPE(
+    AirlResult, "Union[Tuple[Policy, Dict[str, Any]], Tuple[Policy, Dict[str, Any], AirlReward]]");
+SECURE_PYTHON_TYPE(ResetResult, "Tuple[numpy.typing.NDArray[numpy.float32], Dict[str, Any]]");
+SECURE_PYTHON_TYPE(StepResult,
+                   "Tuple[numpy.typing.NDArray[numpy.float32], float, bool, bool, Dict[str, Any]]");
+
+/// TypeError if a keyword option's Python type does not fit the type of its default in
+/// `defaults` (an options object's ToJson(): a bool for a bool, an int for an integer, a real
+/// number for a float, a str for a string, a list/tuple/array for a list, a dict for a section,
+/// checked inside); keys not in `defaults` or with a null default are left to the options' reader.
+/// "train_barrier options: option 'max_epochs' = 'many' (str), expected an int".
+void CheckOptionTypes(py::handle options, const nlohmann::json& defaults,
+                      const std::string& source);
+
+/// FileNotFoundError (errno ENOENT, the path as `filename`) if `path` does not exist, before a
+/// loader reads it (the library's own error for a missing file is a secure::Error, ValueError).
+void RequireFile(const std::string& path);
+
 /// `obj` as a C-contiguous float32 array: the same object when it already is one, else a
 /// converted copy (dtype rule above). `what` names the argument in messages.
 FloatArray AsFloat32(py::handle obj, const std::string& what);
@@ -105,7 +157,7 @@ std::unique_ptr<cbf::Barrier> EvaluatorOn(const Barrier& barrier,
 struct Dynamics {
   std::shared_ptr<const void> owner;
   const domains::DynamicsModel* model = nullptr;
-  std::string kind;  // "builtin:<domain>", "linear", "python"
+  std::string kind;                         // "builtin:<domain>", "linear", "python"
   std::vector<std::string> state_features;  // the state's rows by name (builtin), else empty
   // The actuator box of the environment the model came from (builtin), else empty: a Shield on
   // this model keeps its decisions inside it unless given another box.
@@ -142,3 +194,10 @@ void RegisterPolicy(py::module_& m);
 void RegisterEnvironment(py::module_& m);
 
 }  // namespace secure::python
+
+namespace pybind11::detail {
+template <typename Name>
+struct handle_type_name<secure::python::Typed<Name>> {
+  static constexpr auto name = Name::name;
+};
+}  // namespace pybind11::detail

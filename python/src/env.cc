@@ -19,6 +19,7 @@ std::unique_ptr<experiments::Domain> MakeDomain(const std::string& name, const s
       name, profile == "quick" ? experiments::Profile::kQuick : experiments::Profile::kFull);
   if (!options.empty()) {
     const std::string source = "domain '" + name + "' options";
+    CheckOptionTypes(options, d->OptionsJson(), source);
     d->ApplyYaml(ToYaml(options, source), source);
   }
   d->Validate();
@@ -47,7 +48,7 @@ class Env {
     env_->ActionBounds(dynamics_->action_low, dynamics_->action_high);
   }
 
-  py::tuple Reset(std::optional<std::uint64_t> seed) {
+  ResetResult Reset(std::optional<std::uint64_t> seed) {
     if (seed) rng_.Seed(*seed);
     {
       std::lock_guard<std::mutex> lock(dynamics_->mutex);
@@ -58,7 +59,7 @@ class Env {
     return py::make_tuple(ToNumpy(observation_), py::dict());
   }
 
-  py::tuple Step(py::handle action) {
+  StepResult Step(ArrayLike action) {
     if (!started_) throw std::runtime_error(name_ + ": call reset() before step()");
     const Eigen::VectorXf a = Vector(action, env_->action_dim(), "action");
     domains::StepOutcome outcome;
@@ -107,11 +108,11 @@ class Env {
     return {ToNumpy(low), ToNumpy(high)};
   }
 
-  py::object Backup(py::handle observation) const {
+  OptionalArray Backup(ArrayLike observation) const {
     const Eigen::VectorXf o = Vector(observation, env_->observation_dim(), "observation");
     Eigen::VectorXf a(env_->action_dim());
     if (!env_->BackupAction(o, a)) return py::none();
-    return ToNumpy(a);
+    return OptionalArray(ToNumpy(a));
   }
 
   const std::string& name() const { return name_; }
@@ -137,6 +138,10 @@ class Env {
 }  // namespace
 
 std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
+  if (!py::isinstance<py::str>(env) && !py::isinstance<Env>(env)) {
+    throw py::type_error("env: expected a secure.Env or a domain name (str), got " +
+                         std::string(py::repr(env)));
+  }
   if (py::isinstance<py::str>(env)) {
     std::shared_ptr<experiments::Domain> d =
         MakeDomain(env.cast<std::string>(), "full", py::dict());
@@ -199,41 +204,40 @@ stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
                              [](const Env& e) { return e.env().ShieldModelIsExact(); })
       .def_property_readonly("rng", &Env::rng, py::return_value_policy::reference_internal,
                              "The episode stream (a secure.Rng): reset() draws the start from it.")
-      .def_property_readonly("options",
-                             [](const Env& e) { return ToPython(e.domain().OptionsJson()); })
+      .def_property_readonly(
+          "options", [](const Env& e) -> JsonDict { return ToPython(e.domain().OptionsJson()); },
+          "The domain's options in force (its config-file keys), as a dict.")
       .def("describe", [](const Env& e) { return e.env().Describe(); })
       .def("__repr__",
            [](const Env& e) { return "<secure.EnvCore " + e.env().Describe() + ">"; });
 
   // Dynamics.builtin and Barrier.ground_truth live on the classes registered elsewhere.
-  py::object dynamics = m.attr("Dynamics");
-  dynamics.attr("builtin") = py::reinterpret_steal<py::object>(PyStaticMethod_New(
-      py::cpp_function(
+  py::reinterpret_borrow<py::class_<Dynamics, std::shared_ptr<Dynamics>>>(m.attr("Dynamics"))
+      .def_static(
+          "builtin",
           [](const std::string& name, const std::string& profile, py::kwargs options) {
             Env env(name, profile, false, options);
             return env.dynamics();  // keeps the environment that owns the model alive
           },
           py::arg("domain"), py::arg("profile") = "full",
-          "The shield model of a domain (the one its environment hands out), with its options.")
-          .ptr()));
+          "The shield model of a domain (the one its environment hands out), with its options.");
 
-  py::object barrier = m.attr("Barrier");
-  barrier.attr("ground_truth") = py::reinterpret_steal<py::object>(PyStaticMethod_New(
-      py::cpp_function(
+  py::reinterpret_borrow<py::class_<Barrier, std::shared_ptr<Barrier>>>(m.attr("Barrier"))
+      .def_static(
+          "ground_truth",
           [](const std::string& name, const std::string& profile,
-             py::kwargs options) -> py::object {
+             py::kwargs options) -> OptionalBarrier {
             std::shared_ptr<experiments::Domain> d = MakeDomain(name, profile, options);
             if (!d->MakeGroundTruth()) return py::none();
             return py::cast(MakeBarrier("ground_truth", [d] { return d->MakeGroundTruth(); }));
           },
           py::arg("domain"), py::arg("profile") = "full",
-          "The domain's analytic ground-truth barrier, or None if it has none.")
-          .ptr()));
+          "The domain's analytic ground-truth barrier, or None if it has none.");
 
   m.def(
       "generate_data",
       [](const std::string& name, std::uint64_t seed, const std::string& profile,
-         py::kwargs options) {
+         py::kwargs options) -> JsonDict {
         std::shared_ptr<experiments::Domain> d = MakeDomain(name, profile, options);
         experiments::DomainData data;
         {

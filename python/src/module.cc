@@ -6,10 +6,12 @@ PYBIND11_MODULE(_secure, m) {
   m.doc() = "SECURE: learned control barrier functions and the CBF shield (C++ library binding)";
   // The domain plug-ins of this build, as the CLI registers them.
   secure::plugins::RegisterBuiltinDomains(secure::experiments::DomainRegistry::Global());
+  // Classes before the functions that take or return them, so that signatures name them
+  // (help(), the stub python/secure/_secure.pyi): the shield takes an AirlReward (policy.cc).
   RegisterCommon(m);
   RegisterBarrier(m);
+  RegisterPolicy(m);
   RegisterDynamics(m);
   RegisterShield(m);
-  RegisterPolicy(m);
   RegisterEnvironment(m);
 }

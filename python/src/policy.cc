@@ -16,8 +16,9 @@ namespace {
 
 // Demonstrations from arrays: states (T, d), actions (T, n), episode (T,) labels (adjacent equal
 // labels form one episode, as the CSV's `episode` column).
-data::TrajectorySet DemosFromArrays(py::handle states, py::handle actions, py::handle episode,
-                                    py::handle state_features, py::handle action_features) {
+data::TrajectorySet DemosFromArrays(ArrayLike states, ArrayLike actions, OptionalArrayLike episode,
+                                    FeatureNamesArg state_features,
+                                    FeatureNamesArg action_features) {
   const StatesArg s = States(states, -1, "states", false);
   const StatesArg a = States(actions, -1, "actions", false);
   const long t = static_cast<long>(s.map.cols());
@@ -52,7 +53,7 @@ class Policy {
   explicit Policy(policy::GaussianPolicy p)
       : model_(std::make_shared<const policy::GaussianPolicy>(std::move(p))), evaluator_(*model_) {}
 
-  py::object Mean(py::handle observation) {
+  py::array_t<float> Mean(ArrayLike observation) {
     const StatesArg o = States(observation, model_->observation_dim(), "observation");
     Eigen::MatrixXf mu(model_->action_dim(), o.map.cols());
     {
@@ -68,8 +69,13 @@ class Policy {
     return StatesToNumpy(mu);
   }
 
-  py::array_t<float> Sample(py::handle observation, py::handle rng) {
+  py::array_t<float> Sample(ArrayLike observation, RngOrSeed rng) {
     const Eigen::VectorXf o = Vector(observation, model_->observation_dim(), "observation");
+    if (!py::isinstance<Rng>(rng) &&
+        (py::isinstance<py::bool_>(rng) || !py::isinstance<py::int_>(rng))) {
+      throw py::type_error("rng: expected a secure.Rng or an int seed, got " +
+                           std::string(py::repr(rng)));
+    }
     Eigen::VectorXf a(model_->action_dim());
     std::lock_guard<std::mutex> lock(mutex_);
     if (py::isinstance<Rng>(rng)) {
@@ -81,7 +87,7 @@ class Policy {
     return ToNumpy(a);
   }
 
-  double LogProb(py::handle observation, py::handle action) {
+  double LogProb(ArrayLike observation, ArrayLike action) {
     const Eigen::VectorXf o = Vector(observation, model_->observation_dim(), "observation");
     const Eigen::VectorXf a = Vector(action, model_->action_dim(), "action");
     std::lock_guard<std::mutex> lock(mutex_);
@@ -99,6 +105,7 @@ class Policy {
 template <typename Options>
 Options OptionsFrom(const py::kwargs& kwargs, const std::string& source) {
   Options o;
+  CheckOptionTypes(kwargs, o.ToJson(), source);
   o.ApplyYaml(ToYaml(kwargs, source), source);
   return o;
 }
@@ -114,14 +121,25 @@ Task demonstrations: state/action pairs grouped into episodes.
       .def(py::init(&DemosFromArrays), py::arg("states"), py::arg("actions"),
            py::arg("episode") = py::none(), py::arg("state_features") = py::none(),
            py::arg("action_features") = py::none())
-      .def_static("load", &data::ReadTrajectories, py::arg("path"), py::arg("state_features"),
-                  py::arg("action_features"), py::arg("episode_column") = "episode")
+      .def_static(
+          "load",
+          [](const std::string& path, const std::vector<std::string>& state_features,
+             const std::vector<std::string>& action_features, const std::string& column) {
+            RequireFile(path);
+            return data::ReadTrajectories(path, state_features, action_features, column);
+          },
+          py::arg("path"), py::arg("state_features"), py::arg("action_features"),
+          py::arg("episode_column") = "episode", R"doc(
+Reads demonstrations from a CSV file (a header row; the episode column and the named state and
+action columns) or an HDF5 file in robomimic's layout (.h5, .hdf5). Raises FileNotFoundError if
+there is no such file, ValueError (naming the file, column and row) if it is malformed.)doc")
       .def(
           "save",
           [](const data::TrajectorySet& d, const std::string& path, const std::string& column) {
             data::WriteTrajectories(path, d, column);
           },
-          py::arg("path"), py::arg("episode_column") = "episode")
+          py::arg("path"), py::arg("episode_column") = "episode",
+          "Writes the demonstrations as CSV (atomically), or HDF5 for a .h5 / .hdf5 path.")
       .def_property_readonly("states",
                              [](const data::TrajectorySet& d) { return StatesToNumpy(d.states); })
       .def_property_readonly("actions",
@@ -142,19 +160,23 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
       .def_static(
           "load",
           [](const std::string& path) {
+            RequireFile(path);
             return std::make_shared<Policy>(policy::GaussianPolicy::Load(path));
           },
-          py::arg("path"))
+          py::arg("path"), R"doc(
+Loads a policy model file (`secure policy train`, BC or AIRL). Raises FileNotFoundError if there
+is no such file, ValueError (naming the file) if it is not a policy model or is corrupt.)doc")
       .def("mean", &Policy::Mean, py::arg("observation"),
            "mu(o) of one (observation_dim,) observation -> (action_dim,), or of a batch (N, "
            "observation_dim) -> (N, action_dim). Releases the GIL.")
       .def("sample", &Policy::Sample, py::arg("observation"), py::arg("rng"),
            "a ~ N(mu(o), sigma): `rng` is a secure.Rng (advanced by action_dim normals) or an "
            "integer seed.")
-      .def("log_prob", &Policy::LogProb, py::arg("observation"), py::arg("action"))
+      .def("log_prob", &Policy::LogProb, py::arg("observation"), py::arg("action"),
+           "log N(action; mu(observation), diag(sigma^2)) of one observation and action.")
       .def(
           "save", [](const Policy& p, const std::string& path) { p.model().Save(path); },
-          py::arg("path"))
+          py::arg("path"), "Writes the model file (atomically).")
       .def_property_readonly(
           "sigma",
           [](const Policy& p) { return ToNumpy(p.model().log_std.array().exp().matrix()); })
@@ -172,8 +194,9 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
                              })
       .def_property_readonly("action_features",
                              [](const Policy& p) { return p.model().action_features; })
-      .def_property_readonly("provenance",
-                             [](const Policy& p) { return ToPython(p.model().provenance); })
+      .def_property_readonly(
+          "provenance", [](const Policy& p) -> JsonDict { return ToPython(p.model().provenance); },
+          "The training options, summary and data the model file records.")
       .def("__repr__", [](const Policy& p) {
         return "<secure.Policy " + std::to_string(p.model().observation_dim()) + " -> " +
                std::to_string(p.model().action_dim()) + ">";
@@ -181,7 +204,7 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
 
   m.def(
       "train_bc",
-      [](const data::TrajectorySet& demos, py::kwargs options) {
+      [](const data::TrajectorySet& demos, py::kwargs options) -> PolicyAndSummary {
         const auto o = OptionsFrom<policy::BcOptions>(options, "train_bc options");
         policy::BcSummary summary;
         policy::GaussianPolicy p;
@@ -194,7 +217,8 @@ mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).)doc")
       },
       py::arg("demonstrations"), R"doc(
 Behaviour cloning on secure.Demonstrations; keyword arguments are BcOptions (the `bc` section of
-a config: hidden, epochs, seed, ...). Returns (policy, summary dict). Releases the GIL.)doc");
+a config: hidden, epochs, seed, ...; an unknown key is a ValueError listing the valid ones, a
+value of the wrong type a TypeError). Returns (policy, summary dict). Releases the GIL.)doc");
 
   py::class_<AirlReward, std::shared_ptr<AirlReward>>(m, "AirlReward", R"doc(
 AIRL's learned reward g(s) and shaping V(s) (an `airl_reward.model` of a run directory, or
@@ -203,17 +227,19 @@ with aggregation='top-q' (Shield(..., task_value=reward)).)doc")
       .def_static(
           "load",
           [](const std::string& path) {
+            RequireFile(path);
             return std::make_shared<AirlReward>(
                 AirlReward{std::make_shared<const policy::AirlRewardModel>(
                     policy::AirlRewardModel::Load(path))});
           },
-          py::arg("path"))
+          py::arg("path"),
+          "Loads an AIRL reward model file. Raises FileNotFoundError if there is no such file.")
       .def(
           "save", [](const AirlReward& r, const std::string& path) { r.model->Save(path); },
-          py::arg("path"))
+          py::arg("path"), "Writes the model file (atomically).")
       .def(
           "q",
-          [](const AirlReward& r, py::handle state, py::handle next_states) {
+          [](const AirlReward& r, ArrayLike state, ArrayLike next_states) {
             const int dim = r.model->observation_dim();
             const Eigen::VectorXf s = Vector(state, dim, "state");
             const StatesArg next = States(next_states, dim, "next_states", false);
@@ -239,8 +265,8 @@ with aggregation='top-q' (Shield(..., task_value=reward)).)doc")
 
   m.def(
       "train_airl",
-      [](const data::TrajectorySet& demos, py::handle env, std::shared_ptr<Policy> warm_start,
-         bool with_reward, py::kwargs options) {
+      [](const data::TrajectorySet& demos, EnvOrName env, std::shared_ptr<Policy> warm_start,
+         bool with_reward, py::kwargs options) -> AirlResult {
         auto o = OptionsFrom<policy::AirlOptions>(options, "train_airl options");
         const std::shared_ptr<const domains::Environment> e = EnvironmentOf(env);
         policy::AirlSummary summary;
@@ -263,14 +289,14 @@ with aggregation='top-q' (Shield(..., task_value=reward)).)doc")
       py::arg("with_reward") = false, R"doc(
 AIRL (discriminator + PPO) on secure.Demonstrations, rolling out in `env` (a secure.Env or a
 domain name); keyword arguments are AirlOptions (the `airl` section of a config: iterations,
-steps_per_iteration, seed, ...). Returns (policy, summary dict), and with with_reward=True
-(policy, summary, secure.AirlReward). Releases the GIL.)doc");
+steps_per_iteration, seed, ...; errors as for train_bc). Returns (policy, summary dict), and
+with with_reward=True (policy, summary, secure.AirlReward). Releases the GIL.)doc");
 
   m.def(
       "run_episodes",
-      [](py::handle env, std::shared_ptr<Policy> policy, std::shared_ptr<Barrier> barrier,
+      [](EnvOrName env, std::shared_ptr<Policy> policy, std::shared_ptr<Barrier> barrier,
          long episodes, std::uint64_t seed, bool stop_on_collision,
-         std::shared_ptr<AirlReward> task_value, py::kwargs shield_options) {
+         std::shared_ptr<AirlReward> task_value, py::kwargs shield_options) -> JsonDict {
         const std::unique_ptr<domains::Environment> e = EnvironmentOf(env)->Clone();
         const shield::ShieldOptions options = ShieldOptionsFrom(shield_options);
         const bool top_q = options.aggregation == shield::Aggregation::kTopQ;

@@ -58,7 +58,7 @@ class CallableDynamics final : public domains::DynamicsModel {
   std::string name_;
 };
 
-std::shared_ptr<Dynamics> Linear(py::handle a, py::handle b) {
+std::shared_ptr<Dynamics> Linear(ArrayLike a, ArrayLike b) {
   const Eigen::MatrixXf am = Matrix(a, -1, -1, "A");
   const Eigen::MatrixXf bm = Matrix(b, -1, -1, "B");
   auto model = std::make_shared<const domains::LinearDynamics>(am, bm);
@@ -69,7 +69,7 @@ std::shared_ptr<Dynamics> Linear(py::handle a, py::handle b) {
   return d;
 }
 
-std::shared_ptr<Dynamics> FromCallable(py::object fn, int state_dim, int action_dim,
+std::shared_ptr<Dynamics> FromCallable(DynamicsFunction fn, int state_dim, int action_dim,
                                        const std::string& name) {
   if (!PyCallable_Check(fn.ptr()))
     throw py::type_error("Dynamics.from_callable: fn is not callable");
@@ -82,7 +82,7 @@ std::shared_ptr<Dynamics> FromCallable(py::object fn, int state_dim, int action_
   return d;
 }
 
-py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
+py::array_t<float> Step(Dynamics& d, ArrayLike state, ArrayLike actions) {
   const Eigen::VectorXf s = Vector(state, d.model->state_dim(), "state");
   const StatesArg a = States(actions, d.model->action_dim(), "actions", false);
   Eigen::MatrixXf next(d.model->state_dim(), a.map.cols());
@@ -104,6 +104,7 @@ py::array_t<float> Step(Dynamics& d, py::handle state, py::handle actions) {
 shield::ShieldOptions ShieldOptionsFrom(const py::dict& kwargs) {
   shield::ShieldOptions o;
   const std::string source = "Shield options";
+  CheckOptionTypes(kwargs, o.ToJson(), source);
   o.ApplyYaml(ToYaml(kwargs, source), source);
   o.Validate();
   return o;
@@ -149,7 +150,7 @@ class Shield {
     }
   }
 
-  shield::Decision Decide(py::handle state, py::handle mu, py::handle sigma) {
+  shield::Decision Decide(ArrayLike state, ArrayLike mu, ArrayLike sigma) {
     const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
     const Eigen::VectorXf m = Vector(mu, shield_->action_dim(), "mu");
     const Eigen::VectorXf sg = Vector(sigma, shield_->action_dim(), "sigma");
@@ -161,14 +162,14 @@ class Shield {
     return shield_->Decide(s, m, sg);
   }
 
-  double EvaluateH(py::handle state) {
+  double EvaluateH(ArrayLike state) {
     const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
     py::gil_scoped_release release;
     std::lock_guard<std::mutex> lock(mutex_);
     return shield_->EvaluateH(s);
   }
 
-  py::array_t<double> EvaluateG(py::handle state, py::handle actions) {
+  py::array_t<double> EvaluateG(ArrayLike state, ArrayLike actions) {
     const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
     const StatesArg a = States(actions, shield_->action_dim(), "actions", false);
     const long limit = std::max(shield_->options().num_samples, shield_->options().num_probes);
@@ -185,7 +186,7 @@ class Shield {
     return g;
   }
 
-  void SetBackup(py::handle action) {
+  void SetBackup(OptionalArrayLike action) {
     if (action.is_none()) {
       py::gil_scoped_release release;  // never wait for the lock holding the GIL (see Decide)
       std::lock_guard<std::mutex> lock(mutex_);
@@ -202,9 +203,9 @@ class Shield {
     std::lock_guard<std::mutex> lock(mutex_);
     shield_->Seed(seed);
   }
-  py::object Bound(bool high) const {
-    if (!shield_->has_action_bounds()) return py::none();
-    return ToNumpy(high ? shield_->action_high() : shield_->action_low());
+  OptionalArray Bound(bool high) const {
+    if (!shield_->has_action_bounds()) return OptionalArray(py::none());
+    return OptionalArray(ToNumpy(high ? shield_->action_high() : shield_->action_low()));
   }
   const shield::Shield& get() const { return *shield_; }
   const Barrier& barrier() const { return *barrier_; }
@@ -270,7 +271,9 @@ void RegisterShield(py::module_& m) {
           "none | best_sample | backup_action | random_sample")
       .def_readonly("seconds", &shield::Decision::seconds)
       .def_property_readonly("safe", &shield::Decision::safe)
-      .def("to_dict", [](const shield::Decision& d) { return ToPython(d.ToJson()); })
+      .def(
+          "to_dict", [](const shield::Decision& d) -> JsonDict { return ToPython(d.ToJson()); },
+          "The whole record (shield::Decision::ToJson), as a dict.")
       .def("__repr__",
            [](const shield::Decision& d) { return "<secure.Decision " + d.ToJson().dump() + ">"; });
 
@@ -289,8 +292,8 @@ task_value=secure.AirlReward (AIRL's Q = g(s) + gamma V(T(s, a)), on the dynamic
 which must be the reward model's observations). The shield keeps the barrier (with
 its own evaluator), the dynamics model and the task value alive.)doc")
       .def(py::init([](std::shared_ptr<Barrier> barrier, std::shared_ptr<Dynamics> dynamics,
-                       std::shared_ptr<AirlReward> task_value, py::object action_low,
-                       py::object action_high, py::kwargs options) {
+                       std::shared_ptr<AirlReward> task_value, OptionalArrayLike action_low,
+                       OptionalArrayLike action_high, py::kwargs options) {
              return std::make_shared<Shield>(std::move(barrier), std::move(dynamics),
                                              ShieldOptionsFrom(options), std::move(task_value),
                                              action_low, action_high);
@@ -307,8 +310,9 @@ shapes raise ValueError. Releases the GIL (a Python dynamics model re-acquires i
       .def("set_backup_action", &Shield::SetBackup, py::arg("action"),
            "The fallback action competing on g when no safe sample exists (None: clear).")
       .def("seed", &Shield::Seed, py::arg("seed"), "Re-seeds the shield's random stream.")
-      .def_property_readonly("options",
-                             [](const Shield& s) { return ToPython(s.get().options().ToJson()); })
+      .def_property_readonly(
+          "options", [](const Shield& s) -> JsonDict { return ToPython(s.get().options().ToJson()); },
+          "The shield's options (ShieldOptions::ToJson), as a dict.")
       .def_property_readonly(
           "action_low", [](const Shield& s) { return s.Bound(false); },
           "the actuator box's lower bounds, or None (no box)")

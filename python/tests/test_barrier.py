@@ -71,7 +71,7 @@ def test_train_rejects_unknown_option_and_bad_data(di_data):
 
 def test_load_errors_carry_the_library_message(tmp_path, tiny_barrier):
     missing = tmp_path / "nope.model"
-    with pytest.raises(ValueError, match="nope.model"):
+    with pytest.raises(FileNotFoundError, match="nope.model"):  # test_errors.py: more
         secure.Barrier.load(str(missing))
     junk = tmp_path / "junk.model"
     junk.write_text("not a model\n")

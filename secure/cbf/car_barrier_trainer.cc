@@ -13,6 +13,7 @@
 #include "secure/common/option_check.h"
 #include "secure/common/progress.h"
 #include "secure/common/rng.h"
+#include "secure/common/strings.h"
 #include "secure/common/timer.h"
 #include "secure/common/yaml_value.h"
 #include "secure/nn/model_file.h"
@@ -226,7 +227,9 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key << "' in the car barrier trainer options");
+                 source << ": unknown field '" << key
+                        << "' in the car barrier trainer options (valid: "
+                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
     const YAML::Node& v = item.second;
     if (key == "layout") {
       SECURE_CHECK(v.IsMap(), source << ": field 'layout' must be a mapping");

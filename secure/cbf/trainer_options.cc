@@ -11,6 +11,7 @@
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
+#include "secure/common/strings.h"
 #include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
@@ -71,7 +72,8 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key << "' in the barrier trainer options");
+                 source << ": unknown field '" << key << "' in the barrier trainer options (valid: "
+                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
     const YAML::Node& v = item.second;
     if (key == "input_features") {
       SECURE_CHECK(v.IsSequence(),

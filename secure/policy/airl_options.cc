@@ -7,6 +7,7 @@
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
+#include "secure/common/strings.h"
 #include "secure/common/yaml_value.h"
 #include "secure/policy/airl_trainer.h"
 #include "secure/policy/internal/options_util.h"
@@ -112,7 +113,9 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
                                               "stop_after_iterations"};
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
-    SECURE_CHECK(known.count(key), source << ": unknown field '" << key << "' in the AIRL options");
+    SECURE_CHECK(known.count(key),
+                 source << ": unknown field '" << key << "' in the AIRL options (valid: "
+                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
     const YAML::Node& v = item.second;
     auto dbl = [&] { return YamlValue<double>(v, key, source); };
     auto integer = [&] { return YamlValue<int>(v, key, source); };

@@ -6,6 +6,7 @@
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
+#include "secure/common/strings.h"
 #include "secure/common/yaml_value.h"
 #include "secure/policy/bc_trainer.h"
 #include "secure/policy/internal/options_util.h"
@@ -59,7 +60,9 @@ void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key << "' in the behaviour cloning options");
+                 source << ": unknown field '" << key
+                        << "' in the behaviour cloning options (valid: "
+                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
     const YAML::Node& v = item.second;
     if (key == "hidden") {
       hidden = internal::YamlWidths(v, key, source);

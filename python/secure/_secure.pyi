@@ -1,0 +1,407 @@
+"""SECURE: learned control barrier functions and the CBF shield (C++ library binding)"""
+
+# The type stub of secure._secure (the C++ extension; the package `secure` re-exports it).
+# Generated from the built module by python/tools/make_stub.py: do not edit by hand. Change
+# the binding (python/src/), rebuild, then run
+#   PYTHONPATH=build/python /usr/bin/python3 python/tools/make_stub.py
+# python/tests/test_stub.py checks that this file matches the module.
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy
+from numpy.typing import ArrayLike, NDArray
+
+__version__: str
+
+def build_info() -> Dict[str, str]:
+    """The library's version and git sha."""
+    ...
+
+class Rng:
+    """The library's random stream (xoshiro256++ with its own normal transform): the same numbers as
+    the C++ code for the same seed, so a Python loop can replay a C++ run.
+    """
+    def __init__(self, seed: int = 0) -> None: ...
+    def seed(self, seed: int) -> None:
+        """Restarts the stream from `seed`."""
+        ...
+    def next_u64(self) -> int:
+        """The next raw 64-bit value."""
+        ...
+    def uniform(self) -> float:
+        """Uniform in [0, 1)."""
+        ...
+    def normal(self) -> float:
+        """Standard normal."""
+        ...
+
+def episode_seed(seed: int, episode: int) -> int:
+    """The stream of episode `episode` of an evaluation with `seed` (eval::EpisodeSeed)."""
+    ...
+
+class Barrier:
+    """A control barrier function h(s): h >= 0 on the safe set. Load one with Barrier.load(path) (a
+    `secure cbf train` model, flat or per-obstacle), train one with secure.train_barrier, or take a
+    domain's analytic ground truth with Barrier.ground_truth(domain).
+    """
+    @staticmethod
+    def load(path: str) -> Barrier:
+        """Loads a barrier model file (any barrier kind: a `secure cbf train` model, flat or per-obstacle).
+        Raises FileNotFoundError if there is no such file, ValueError (naming the file) if it is not a
+        barrier model or is corrupt.
+        """
+        ...
+    @property
+    def kind(self) -> str:
+        """'barrier_mlp' (flat), 'car_barrier' (per-obstacle) or 'ground_truth'."""
+        ...
+    @property
+    def state_dim(self) -> int:
+        """The width of a state: the columns of h's input."""
+        ...
+    @property
+    def features(self) -> List[str]:
+        """Names of the state rows the model reads (empty if unknown)."""
+        ...
+    @property
+    def provenance(self) -> Dict[str, Any]:
+        """The training options, summary and data the model file records."""
+        ...
+    def describe(self) -> str:
+        """One line: the model's kind and layers (e.g. 'barrier_mlp 4-64-64-1 tanh'), or the ground truth's parameters."""
+        ...
+    def __repr__(self) -> str: ...
+    def h(self, states: ArrayLike) -> Union[float, NDArray[numpy.float32]]:
+        """h(s) of a batch of states, an (N, state_dim) array -> (N,) float32 array; or of one state, a
+        (state_dim,) array -> float. C-contiguous float32 input is read in place; other real dtypes are
+        converted. Raises ValueError on a wrong shape or a non-finite entry, TypeError on a bool,
+        complex, object or string array. Releases the GIL.
+        """
+        ...
+    def save(self, path: str) -> None:
+        """Writes the model file (atomically). A ground-truth barrier has none: ValueError."""
+        ...
+    @staticmethod
+    def ground_truth(domain: str, profile: str = 'full', **kwargs: Any) -> Optional[Barrier]:
+        """The domain's analytic ground-truth barrier, or None if it has none."""
+        ...
+
+def train_barrier(safe: ArrayLike, near_dangerous: ArrayLike, features: Optional[Sequence[str]] = None, **kwargs: Any) -> Tuple[Barrier, Dict[str, Any]]:
+    """Trains a flat barrier (an MLP, paper Eq. 4) on safe and near-dangerous states, two (N, d)
+    arrays with the same d. `features` names the d columns (default x0, x1, ...); the keyword
+    arguments are the trainer's options, the keys of `secure cbf train`'s config section `trainer`
+    (hidden=[64, 64], max_epochs=400, seed=0, ...): an unknown key is a ValueError naming it and
+    listing the valid ones, a value of the wrong type (max_epochs='many') a TypeError, a value out of
+    range (batch_size=0) a ValueError naming the field and the rule. Returns (barrier, summary
+    dict). Releases the GIL while training.
+    """
+    ...
+
+def train_car_barrier(safe: ArrayLike, near_dangerous: ArrayLike, domain: Optional[str] = None, features: Optional[Sequence[str]] = None, **kwargs: Any) -> Tuple[Barrier, Dict[str, Any]]:
+    """Trains a per-obstacle barrier (cbf::CarBarrierNet: one MLP per car, min over the cars in range)
+    on observations, two (N, obs_dim) arrays. `domain` (e.g. 'derby') starts from that domain's
+    preset (its obstacle layout and trainer settings) and names the columns with its observation
+    features; the keyword arguments are the car barrier trainer's options (the keys of a config's
+    `per_obstacle_barrier` section: hidden, max_epochs, seed, layout={...}, ...; errors as for
+    train_barrier). Returns (barrier, summary dict). Releases the GIL while training.
+    """
+    ...
+
+class Demonstrations:
+    """Task demonstrations: state/action pairs grouped into episodes.
+      Demonstrations(states (T, d), actions (T, n), episode=None (T,) labels,
+                     state_features=None, action_features=None)
+      Demonstrations.load(path, state_features, action_features, episode_column='episode')
+    """
+    def __init__(self, states: ArrayLike, actions: ArrayLike, episode: Optional[ArrayLike] = None, state_features: Optional[Sequence[str]] = None, action_features: Optional[Sequence[str]] = None) -> None: ...
+    @staticmethod
+    def load(path: str, state_features: List[str], action_features: List[str], episode_column: str = 'episode') -> Demonstrations:
+        """Reads demonstrations from a CSV file (a header row; the episode column and the named state and
+        action columns) or an HDF5 file in robomimic's layout (.h5, .hdf5). Raises FileNotFoundError if
+        there is no such file, ValueError (naming the file, column and row) if it is malformed.
+        """
+        ...
+    def save(self, path: str, episode_column: str = 'episode') -> None:
+        """Writes the demonstrations as CSV (atomically), or HDF5 for a .h5 / .hdf5 path."""
+        ...
+    @property
+    def states(self) -> NDArray[numpy.float32]: ...
+    @property
+    def actions(self) -> NDArray[numpy.float32]: ...
+    @property
+    def state_features(self) -> List[str]: ...
+    @property
+    def action_features(self) -> List[str]: ...
+    @property
+    def episode_begin(self) -> List[int]: ...
+    @property
+    def num_episodes(self) -> int: ...
+    @property
+    def num_steps(self) -> int: ...
+    def __repr__(self) -> str: ...
+
+class Policy:
+    """A Gaussian policy N(mu(o), diag(sigma^2)) (a `secure policy train` model): Policy.load(path),
+    mean(obs), sample(obs, rng_or_seed), log_prob(obs, action), save(path).
+    """
+    @staticmethod
+    def load(path: str) -> Policy:
+        """Loads a policy model file (`secure policy train`, BC or AIRL). Raises FileNotFoundError if there
+        is no such file, ValueError (naming the file) if it is not a policy model or is corrupt.
+        """
+        ...
+    def mean(self, observation: ArrayLike) -> NDArray[numpy.float32]:
+        """mu(o) of one (observation_dim,) observation -> (action_dim,), or of a batch (N, observation_dim) -> (N, action_dim). Releases the GIL."""
+        ...
+    def sample(self, observation: ArrayLike, rng: Union[Rng, int]) -> NDArray[numpy.float32]:
+        """a ~ N(mu(o), sigma): `rng` is a secure.Rng (advanced by action_dim normals) or an integer seed."""
+        ...
+    def log_prob(self, observation: ArrayLike, action: ArrayLike) -> float:
+        """log N(action; mu(observation), diag(sigma^2)) of one observation and action."""
+        ...
+    def save(self, path: str) -> None:
+        """Writes the model file (atomically)."""
+        ...
+    @property
+    def sigma(self) -> NDArray[numpy.float32]: ...
+    @property
+    def log_std(self) -> NDArray[numpy.float32]: ...
+    @property
+    def observation_dim(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def observation_features(self) -> List[str]: ...
+    @property
+    def input_features(self) -> List[str]: ...
+    @property
+    def action_features(self) -> List[str]: ...
+    @property
+    def provenance(self) -> Dict[str, Any]:
+        """The training options, summary and data the model file records."""
+        ...
+    def __repr__(self) -> str: ...
+
+def train_bc(demonstrations: Demonstrations, **kwargs: Any) -> Tuple[Policy, Dict[str, Any]]:
+    """Behaviour cloning on secure.Demonstrations; keyword arguments are BcOptions (the `bc` section of
+    a config: hidden, epochs, seed, ...; an unknown key is a ValueError listing the valid ones, a
+    value of the wrong type a TypeError). Returns (policy, summary dict). Releases the GIL.
+    """
+    ...
+
+class AirlReward:
+    """AIRL's learned reward g(s) and shaping V(s) (an `airl_reward.model` of a run directory, or
+    train_airl(..., with_reward=True)): the task value Q(s, a) = g(s) + gamma V(T(s, a)) of a shield
+    with aggregation='top-q' (Shield(..., task_value=reward)).
+    """
+    @staticmethod
+    def load(path: str) -> AirlReward:
+        """Loads an AIRL reward model file. Raises FileNotFoundError if there is no such file."""
+        ...
+    def save(self, path: str) -> None:
+        """Writes the model file (atomically)."""
+        ...
+    def q(self, state: ArrayLike, next_states: ArrayLike) -> NDArray[numpy.float64]:
+        """Q = g(state) + gamma V(s+) for each row of next_states (K, observation_dim)."""
+        ...
+    @property
+    def discount(self) -> float: ...
+    @property
+    def observation_features(self) -> List[str]: ...
+    @property
+    def input_features(self) -> List[str]: ...
+    def __repr__(self) -> str: ...
+
+def train_airl(demonstrations: Demonstrations, env: Union[Env, str], warm_start: Optional[Policy] = None, *, with_reward: bool = False, **kwargs: Any) -> Union[Tuple[Policy, Dict[str, Any]], Tuple[Policy, Dict[str, Any], AirlReward]]:
+    """AIRL (discriminator + PPO) on secure.Demonstrations, rolling out in `env` (a secure.Env or a
+    domain name); keyword arguments are AirlOptions (the `airl` section of a config: iterations,
+    steps_per_iteration, seed, ...; errors as for train_bc). Returns (policy, summary dict), and
+    with with_reward=True (policy, summary, secure.AirlReward). Releases the GIL.
+    """
+    ...
+
+def run_episodes(env: Union[Env, str], policy: Policy, barrier: Optional[Barrier] = None, episodes: int = 1, seed: int = 0, stop_on_collision: bool = False, *, task_value: Optional[AirlReward] = None, **kwargs: Any) -> Dict[str, Any]:
+    """Runs `episodes` episodes of `policy` in (a fresh copy of) `env` (a secure.Env or a domain name)
+    with the library's episode loop (eval::EpisodeRunner, as `secure eval` runs a method): shielded
+    by `barrier` with the environment's shield model when given (keyword arguments: the shield's
+    options; aggregation='top-q' with task_value=secure.AirlReward), else sampling the policy.
+    Episode i draws from secure.episode_seed(seed, i). Returns
+    the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...).
+    Releases the GIL.
+    """
+    ...
+
+class Dynamics:
+    """A dynamics model T(s, a) the shield looks one step ahead with. Made by
+      Dynamics.builtin(domain, **domain_options)  a domain's shield model (secure.domains())
+      Dynamics.linear(A, B)                        next = A s + B a
+      Dynamics.from_callable(fn, state_dim, action_dim)
+                                                   fn(state (d,), actions (M, n)) -> (M, d)
+      env.dynamics                                 the shield model of an environment
+    """
+    @staticmethod
+    def linear(A: ArrayLike, B: ArrayLike) -> Dynamics:
+        """next = A s + B a; A is (d, d), B is (d, n) (copied)."""
+        ...
+    @staticmethod
+    def from_callable(fn: Callable[[NDArray[numpy.float32], NDArray[numpy.float32]], ArrayLike], state_dim: int, action_dim: int, name: str = 'python dynamics') -> Dynamics:
+        """A model written in Python: fn(state, actions) gets a (state_dim,) float32 array and an
+        (M, action_dim) float32 array (M actions, one per row) and returns the (M, state_dim) next states.
+        Called with the GIL held, once per batch the shield evaluates (a few per decision); see
+        python/README.md for its cost.
+        """
+        ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def kind(self) -> str: ...
+    def describe(self) -> str: ...
+    def __repr__(self) -> str: ...
+    def step(self, state: ArrayLike, actions: ArrayLike) -> NDArray[numpy.float32]:
+        """next states (M, state_dim) of one state under M actions (M, action_dim)."""
+        ...
+    @staticmethod
+    def builtin(domain: str, profile: str = 'full', **kwargs: Any) -> Dynamics:
+        """The shield model of a domain (the one its environment hands out), with its options."""
+        ...
+
+class Decision:
+    """One shield decision with its diagnostics."""
+    @property
+    def status(self) -> str:
+        """safe | safe_after_resampling | no_safe_action | invalid_input"""
+        ...
+    @property
+    def action(self) -> NDArray[numpy.float32]: ...
+    @property
+    def g(self) -> float: ...
+    @property
+    def h(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def safe_ratio(self) -> float: ...
+    @property
+    def intervened(self) -> bool: ...
+    @property
+    def distance_to_mean(self) -> float: ...
+    @property
+    def fallback(self) -> str:
+        """none | best_sample | backup_action | random_sample"""
+        ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def safe(self) -> bool: ...
+    def to_dict(self) -> Dict[str, Any]:
+        """The whole record (shield::Decision::ToJson), as a dict."""
+        ...
+    def __repr__(self) -> str: ...
+
+class Shield:
+    """The CBF shield (Algorithms 1 and 2): Shield(barrier, dynamics, **options), the options being the
+    fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
+    class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
+    sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
+    'qmc'), top_q_fraction=0.3, lookahead_steps=1). aggregation='top-q' ranks the safe samples by a task value:
+    task_value=secure.AirlReward (AIRL's Q = g(s) + gamma V(T(s, a)), on the dynamics model's states,
+    which must be the reward model's observations). The shield keeps the barrier (with
+    its own evaluator), the dynamics model and the task value alive.
+    """
+    def __init__(self, barrier: Barrier, dynamics: Dynamics, *, task_value: Optional[AirlReward] = None, **kwargs: Any) -> None: ...
+    def decide(self, state: ArrayLike, mu: ArrayLike, sigma: ArrayLike) -> Decision:
+        """One shielded decision for the policy's Gaussian N(mu, diag(sigma^2)) at `state`: a Decision
+        (action, status, g, h, iterations, ...). Bad numbers (NaN) give status 'invalid_input'; wrong
+        shapes raise ValueError. Releases the GIL (a Python dynamics model re-acquires it).
+        """
+        ...
+    def evaluate_h(self, state: ArrayLike) -> float:
+        """h(state) through the shield."""
+        ...
+    def evaluate_g(self, state: ArrayLike, actions: ArrayLike) -> NDArray[numpy.float64]:
+        """g(a) of each row of `actions` (K, action_dim), K <= max(num_samples, num_probes)."""
+        ...
+    def set_backup_action(self, action: Optional[ArrayLike]) -> None:
+        """The fallback action competing on g when no safe sample exists (None: clear)."""
+        ...
+    def seed(self, seed: int) -> None:
+        """Re-seeds the shield's random stream."""
+        ...
+    @property
+    def options(self) -> Dict[str, Any]:
+        """The shield's options (ShieldOptions::ToJson), as a dict."""
+        ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def dynamics(self) -> str: ...
+    def __repr__(self) -> str: ...
+
+def domains() -> List[str]:
+    """The registered domains (names for make_env, Dynamics.builtin, ...)."""
+    ...
+
+class Env:
+    """A domain's task environment in the Gymnasium API (without needing Gymnasium): reset(seed) ->
+    (obs, info), step(action) -> (obs, reward, terminated, truncated, info). Make one with
+    secure.make_env(name, profile='full', terminate_on_collision=False, **domain_options).
+    Rewards: +1 when the goal is reached, -1 per collision event, else 0 (the library's domains
+    define outcomes, not rewards); terminated: the goal was reached (or a collision, with
+    terminate_on_collision); truncated: max_steps reached. info: reached_goal, collided, collisions,
+    step.
+    """
+    def reset(self, seed: Optional[int] = None) -> Tuple[NDArray[numpy.float32], Dict[str, Any]]:
+        """Starts an episode. With a seed, the episode stream (env.rng) is re-seeded first; without one the
+        stream continues. Returns (observation float32 (observation_dim,), {}).
+        """
+        ...
+    def step(self, action: ArrayLike) -> Tuple[NDArray[numpy.float32], float, bool, bool, Dict[str, Any]]:
+        """Applies the action (clipped to the actuator bounds by the domain)."""
+        ...
+    def backup_action(self, observation: ArrayLike) -> Optional[NDArray[numpy.float32]]:
+        """The domain's safe fallback action at `observation` (e.g. braking), or None."""
+        ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def observation_dim(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def observation_features(self) -> List[str]: ...
+    @property
+    def action_features(self) -> List[str]: ...
+    @property
+    def max_steps(self) -> int: ...
+    @property
+    def dynamics(self) -> Dynamics:
+        """The shield's model of this environment (a secure.Dynamics)."""
+        ...
+    @property
+    def shield_model_is_exact(self) -> bool: ...
+    @property
+    def rng(self) -> Rng:
+        """The episode stream (a secure.Rng): reset() draws the start from it."""
+        ...
+    @property
+    def options(self) -> Dict[str, Any]:
+        """The domain's options in force (its config-file keys), as a dict."""
+        ...
+    def describe(self) -> str: ...
+    def __repr__(self) -> str: ...
+
+def make_env(name: str, profile: str = 'full', terminate_on_collision: bool = False, **kwargs: Any) -> Env:
+    """The environment of domain `name` (secure.domains()). Keyword arguments are the domain's options
+    (its config-file keys, e.g. task={'max_steps': 200} for double-integrator); unknown keys are a
+    ValueError naming them.
+    """
+    ...
+
+def generate_data(domain: str, seed: int = 0, profile: str = 'quick', **kwargs: Any) -> Dict[str, Any]:
+    """A domain's experiment data from a data seed: {'features', 'safe' (N, d), 'near_dangerous'
+    (M, d), 'demonstrations' (secure.Demonstrations)}; profile 'quick' (default) is small.
+    """
+    ...
