@@ -287,6 +287,10 @@ class Decision:
     @property
     def distance_to_mean(self) -> float: ...
     @property
+    def bounded(self) -> bool:
+        """the actuator box cut into this decision (an action outside it was clipped or rejected)"""
+        ...
+    @property
     def fallback(self) -> str:
         """none | best_sample | backup_action | random_sample"""
         ...
@@ -304,12 +308,17 @@ class Shield:
     fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
     class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
     sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
-    'qmc'), top_q_fraction=0.3, lookahead_steps=1). aggregation='top-q' ranks the safe samples by a task value:
+    'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore')).
+    The actuator box: action_low / action_high (arrays of action_dim; -inf / inf where unbounded),
+    else the box of the environment a builtin model (Dynamics.builtin, env.dynamics) came from, else
+    none. With a box every returned action lies in it: samples are clipped onto it
+    (action_bounds='clip') or rejected (counted unsafe, 'reject'); Decision.bounded says when the box
+    cut into a decision. aggregation='top-q' ranks the safe samples by a task value:
     task_value=secure.AirlReward (AIRL's Q = g(s) + gamma V(T(s, a)), on the dynamics model's states,
     which must be the reward model's observations). The shield keeps the barrier (with
     its own evaluator), the dynamics model and the task value alive.
     """
-    def __init__(self, barrier: Barrier, dynamics: Dynamics, *, task_value: Optional[AirlReward] = None, **kwargs: Any) -> None: ...
+    def __init__(self, barrier: Barrier, dynamics: Dynamics, *, task_value: Optional[AirlReward] = None, action_low: Optional[ArrayLike] = None, action_high: Optional[ArrayLike] = None, **kwargs: Any) -> None: ...
     def decide(self, state: ArrayLike, mu: ArrayLike, sigma: ArrayLike) -> Decision:
         """One shielded decision for the policy's Gaussian N(mu, diag(sigma^2)) at `state`: a Decision
         (action, status, g, h, iterations, ...). Bad numbers (NaN) give status 'invalid_input'; wrong
@@ -333,6 +342,14 @@ class Shield:
         """The shield's options (ShieldOptions::ToJson), as a dict."""
         ...
     @property
+    def action_low(self) -> Optional[NDArray[numpy.float32]]:
+        """the actuator box's lower bounds, or None (no box)"""
+        ...
+    @property
+    def action_high(self) -> Optional[NDArray[numpy.float32]]:
+        """the actuator box's upper bounds, or None (no box)"""
+        ...
+    @property
     def state_dim(self) -> int: ...
     @property
     def action_dim(self) -> int: ...
@@ -344,15 +361,15 @@ def domains() -> List[str]:
     """The registered domains (names for make_env, Dynamics.builtin, ...)."""
     ...
 
-class Env:
-    """A domain's task environment in the Gymnasium API (without needing Gymnasium): reset(seed) ->
-    (obs, info), step(action) -> (obs, reward, terminated, truncated, info). Make one with
-    secure.make_env(name, profile='full', terminate_on_collision=False, **domain_options).
-    Rewards: +1 when the goal is reached, -1 per collision event, else 0 (the library's domains
-    define outcomes, not rewards); terminated: the goal was reached (or a collision, with
-    terminate_on_collision); truncated: max_steps reached. info: reached_goal, collided, collisions,
-    step.
+class EnvCore:
+    """The C++ half of secure.Env (use secure.make_env / secure.Env, which add Gymnasium's spaces,
+    np_random, reset options and render_mode): reset(seed) -> (obs, {}), step(action) -> (obs,
+    reward, terminated, truncated, info), render(width, height) -> (height, width, 3) uint8.
+    Per step: reward +1 when the goal is reached, -1 when the new state is dangerous, else 0;
+    info: reached_goal, collided (this step ends in danger), collisions (a contact begins in this
+    step), step.
     """
+    def __init__(self, name: str, profile: str = 'full', terminate_on_collision: bool = False, options: dict = {}) -> None: ...
     def reset(self, seed: Optional[int] = None) -> Tuple[NDArray[numpy.float32], Dict[str, Any]]:
         """Starts an episode. With a seed, the episode stream (env.rng) is re-seeded first; without one the
         stream continues. Returns (observation float32 (observation_dim,), {}).
@@ -360,6 +377,19 @@ class Env:
         ...
     def step(self, action: ArrayLike) -> Tuple[NDArray[numpy.float32], float, bool, bool, Dict[str, Any]]:
         """Applies the action (clipped to the actuator bounds by the domain)."""
+        ...
+    def render(self, width: int, height: int) -> NDArray[numpy.uint8]:
+        """The current state drawn offscreen: (height, width, 3) uint8 (rendering domains)."""
+        ...
+    @property
+    def can_render(self) -> bool: ...
+    @property
+    def action_bounds(self) -> Tuple[NDArray[numpy.float32], NDArray[numpy.float32]]:
+        """(low, high): the actuator box Step() clips actions to."""
+        ...
+    @property
+    def step_seconds(self) -> float:
+        """Simulated seconds per step (0: the task has no clock)."""
         ...
     def backup_action(self, observation: ArrayLike) -> Optional[NDArray[numpy.float32]]:
         """The domain's safe fallback action at `observation` (e.g. braking), or None."""
@@ -392,13 +422,6 @@ class Env:
         ...
     def describe(self) -> str: ...
     def __repr__(self) -> str: ...
-
-def make_env(name: str, profile: str = 'full', terminate_on_collision: bool = False, **kwargs: Any) -> Env:
-    """The environment of domain `name` (secure.domains()). Keyword arguments are the domain's options
-    (its config-file keys, e.g. task={'max_steps': 200} for double-integrator); unknown keys are a
-    ValueError naming them.
-    """
-    ...
 
 def generate_data(domain: str, seed: int = 0, profile: str = 'quick', **kwargs: Any) -> Dict[str, Any]:
     """A domain's experiment data from a data seed: {'features', 'safe' (N, d), 'near_dangerous'
