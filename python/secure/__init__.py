@@ -57,14 +57,15 @@ from ._secure import (  # noqa: F401
     train_car_barrier,
     train_bc,
 )
-from .env import Env, env_id, make_env, register_gymnasium  # noqa: F401  (Gymnasium's API)
-from .env import _gym as _gymnasium
+from ._secure import EnvCore  # noqa: F401  (the C++ half of secure.Env)
+from .env import Env, env_id, gymnasium_installed, make_env, register_gymnasium  # noqa: F401
 
-if _gymnasium is not None:  # gymnasium.make("secure/DoubleIntegrator-v0"), one id per domain
+if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one id per domain
     register_gymnasium()
 
 __all__ = [
-    "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "Policy", "Rng", "Shield",
-    "build_info", "domains", "env_id", "episode_seed", "generate_data", "make_env", "register_gymnasium",
-    "run_episodes", "train_airl", "train_barrier", "train_bc", "train_car_barrier",
+    "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Policy",
+    "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
+    "gymnasium_installed", "make_env", "register_gymnasium", "run_episodes", "train_airl",
+    "train_barrier", "train_bc", "train_car_barrier",
 ]

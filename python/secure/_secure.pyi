@@ -211,7 +211,7 @@ class AirlReward:
     def input_features(self) -> List[str]: ...
     def __repr__(self) -> str: ...
 
-def train_airl(demonstrations: Demonstrations, env: Union[Env, str], warm_start: Optional[Policy] = None, *, with_reward: bool = False, **kwargs: Any) -> Union[Tuple[Policy, Dict[str, Any]], Tuple[Policy, Dict[str, Any], AirlReward]]:
+def train_airl(demonstrations: Demonstrations, env: Union[str, Any], warm_start: Optional[Policy] = None, *, with_reward: bool = False, **kwargs: Any) -> Union[Tuple[Policy, Dict[str, Any]], Tuple[Policy, Dict[str, Any], AirlReward]]:
     """AIRL (discriminator + PPO) on secure.Demonstrations, rolling out in `env` (a secure.Env or a
     domain name); keyword arguments are AirlOptions (the `airl` section of a config: iterations,
     steps_per_iteration, seed, ...; errors as for train_bc). Returns (policy, summary dict), and
@@ -219,7 +219,7 @@ def train_airl(demonstrations: Demonstrations, env: Union[Env, str], warm_start:
     """
     ...
 
-def run_episodes(env: Union[Env, str], policy: Policy, barrier: Optional[Barrier] = None, episodes: int = 1, seed: int = 0, stop_on_collision: bool = False, *, task_value: Optional[AirlReward] = None, **kwargs: Any) -> Dict[str, Any]:
+def run_episodes(env: Union[str, Any], policy: Policy, barrier: Optional[Barrier] = None, episodes: int = 1, seed: int = 0, stop_on_collision: bool = False, *, task_value: Optional[AirlReward] = None, **kwargs: Any) -> Dict[str, Any]:
     """Runs `episodes` episodes of `policy` in (a fresh copy of) `env` (a secure.Env or a domain name)
     with the library's episode loop (eval::EpisodeRunner, as `secure eval` runs a method): shielded
     by `barrier` with the environment's shield model when given (keyword arguments: the shield's
@@ -369,7 +369,7 @@ class EnvCore:
     info: reached_goal, collided (this step ends in danger), collisions (a contact begins in this
     step), step.
     """
-    def __init__(self, name: str, profile: str = 'full', terminate_on_collision: bool = False, options: dict = {}) -> None: ...
+    def __init__(self, name: str, profile: str = 'full', terminate_on_collision: bool = False, options: Optional[Dict[str, Any]] = None) -> None: ...
     def reset(self, seed: Optional[int] = None) -> Tuple[NDArray[numpy.float32], Dict[str, Any]]:
         """Starts an episode. With a seed, the episode stream (env.rng) is re-seeded first; without one the
         stream continues. Returns (observation float32 (observation_dim,), {}).

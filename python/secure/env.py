@@ -262,6 +262,11 @@ def env_id(domain: str) -> str:
     return "secure/" + "".join(p[0].upper() + p[1:] for p in parts) + "-v0"
 
 
+def gymnasium_installed() -> bool:
+    """Whether `gymnasium` is importable (secure.Env then subclasses gymnasium.Env)."""
+    return _gym is not None
+
+
 def register_gymnasium() -> List[str]:
     """Registers every domain of the registry with Gymnasium (done by `import secure` when
     Gymnasium is importable; again is harmless) and returns the ids, in secure.domains() order.

@@ -63,7 +63,9 @@ SECURE_PYTHON_TYPE(FloatOrArray, "Union[float, numpy.typing.NDArray[numpy.float3
 SECURE_PYTHON_TYPE(OptionalArray, "Optional[numpy.typing.NDArray[numpy.float32]]");
 SECURE_PYTHON_TYPE(FeatureNamesArg, "Optional[Sequence[str]]");
 SECURE_PYTHON_TYPE(JsonDict, "Dict[str, Any]");
-SECURE_PYTHON_TYPE(EnvOrName, "Union[Env, str]");
+// A secure.Env (the Python class of env.py, or a Gymnasium wrapper of one) or a domain name.
+SECURE_PYTHON_TYPE(EnvOrName, "Union[str, Any]");
+SECURE_PYTHON_TYPE(OptionalJsonDict, "Optional[Dict[str, Any]]");
 SECURE_PYTHON_TYPE(RngOrSeed, "Union[Rng, int]");
 SECURE_PYTHON_TYPE(DynamicsFunction,
                    "Callable[[numpy.typing.NDArray[numpy.float32], "

@@ -138,10 +138,6 @@ class Env {
 }  // namespace
 
 std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
-  if (!py::isinstance<py::str>(env) && !py::isinstance<Env>(env)) {
-    throw py::type_error("env: expected a secure.Env or a domain name (str), got " +
-                         std::string(py::repr(env)));
-  }
   if (py::isinstance<py::str>(env)) {
     std::shared_ptr<experiments::Domain> d =
         MakeDomain(env.cast<std::string>(), "full", py::dict());
@@ -155,7 +151,7 @@ std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
   if (!py::isinstance<Env>(core) && py::hasattr(core, "_core")) core = core.attr("_core");
   if (core.is_none()) throw std::runtime_error("env: the environment is closed");
   if (!py::isinstance<Env>(core))
-    throw py::type_error("env: expected a domain name or a secure.Env, got " +
+    throw py::type_error("env: expected a secure.Env or a domain name (str), got " +
                          py::str(py::type::of(env)).cast<std::string>());
   return core.cast<Env&>().shared_env();
 }
@@ -172,9 +168,13 @@ reward, terminated, truncated, info), render(width, height) -> (height, width, 3
 Per step: reward +1 when the goal is reached, -1 when the new state is dangerous, else 0;
 info: reached_goal, collided (this step ends in danger), collisions (a contact begins in this
 step), step.)doc")
-      .def(py::init<const std::string&, const std::string&, bool, const py::dict&>(),
+      .def(py::init([](const std::string& name, const std::string& profile,
+                       bool terminate_on_collision, OptionalJsonDict options) {
+             return std::make_shared<Env>(name, profile, terminate_on_collision,
+                                          options.is_none() ? py::dict() : py::dict(options));
+           }),
            py::arg("name"), py::arg("profile") = "full",
-           py::arg("terminate_on_collision") = false, py::arg("options") = py::dict())
+           py::arg("terminate_on_collision") = false, py::arg("options") = py::none())
       .def("reset", &Env::Reset, py::arg("seed") = py::none(), R"doc(
 Starts an episode. With a seed, the episode stream (env.rng) is re-seeded first; without one the
 stream continues. Returns (observation float32 (observation_dim,), {}).)doc")

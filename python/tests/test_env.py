@@ -324,7 +324,7 @@ def test_library_calls_take_the_env_or_a_wrapper_of_it(di_data):
     for key in ("steps", "successes", "dangerous", "collision_events"):
         assert direct[key] == wrapped[key], key
     assert direct["steps"] > 0
-    with pytest.raises(TypeError, match="env: expected a domain name or a secure.Env, got"):
+    with pytest.raises(TypeError, match="env: expected a secure.Env or a domain name \\(str\\), got"):
         secure.run_episodes(42, policy, episodes=1)
     env.close()
     with pytest.raises(RuntimeError, match="closed"):

@@ -211,15 +211,24 @@ TEST(DoubleIntegratorShieldRunTest, BarrierOfTheWrongDimensionIsAnError) {
 }
 
 // The counts of the hand-written episode loop this run had before it ran on eval::EpisodeRunner
-// (the same episodes: the same streams, start states, policy, crash rule and counting).
+// (the same episodes: the same streams, start states, policy, crash rule and counting), with the
+// actuator box ignored as it was then; and the counts with the box (action_bounds = clip, the
+// default since 2026-12-03).
 TEST(DoubleIntegratorShieldRunTest, ResultsOfTheFormerEpisodeLoopArePinned) {
-  const ShieldRunOptions options = FastOptions();
+  ShieldRunOptions options = FastOptions();
+  options.shield.action_bounds = shield::ActionBounds::kIgnore;
   domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
   const ShieldRunResult s = RunDoubleIntegratorShield(options, barrier);
   EXPECT_EQ(s.success_episodes, 100);
   EXPECT_EQ(s.steps, 18486);
   EXPECT_EQ(s.interventions, 9643);
   EXPECT_EQ(s.resampled_decisions, 8999);
+  options.shield.action_bounds = shield::ActionBounds::kClip;
+  const ShieldRunResult c = RunDoubleIntegratorShield(options, barrier);
+  EXPECT_EQ(c.success_episodes, 100);
+  EXPECT_EQ(c.steps, 18575);
+  EXPECT_EQ(c.interventions, 9750);
+  EXPECT_EQ(c.resampled_decisions, 9096);
   const ShieldRunResult u = RunDoubleIntegratorShield(options, barrier, /*shielded=*/false);
   EXPECT_EQ(u.dangerous_episodes, 100);  // every episode ends at its crash
   EXPECT_EQ(u.steps, 2010);

@@ -281,9 +281,17 @@ TEST(PolicyEvalTest, EvaluationRejectsUnequalSeedCounts) {
 namespace secure::eval {
 namespace {
 
+shield::ShieldOptions IgnoreTheBox() {
+  shield::ShieldOptions o;
+  o.action_bounds = shield::ActionBounds::kIgnore;
+  return o;
+}
+
 // The counts of EvaluateMethods for a fixed run, recorded before the episode runner took
 // EpisodePolicy, step observers and runner options: the existing path must not change (the
-// numbers of `secure demo` and the experiments depend on it).
+// numbers of `secure demo` and the experiments depend on it). Recorded with the actuator box
+// ignored (as it was then); the shielded counts with the box (clip, the default since
+// 2026-12-03) follow.
 TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   const di::ReachAvoidOptions task;
   di::ReachAvoidEnv env(task);
@@ -294,7 +302,7 @@ TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
   const auto r = EvaluateMethods(
       env, {Method::kAirl, Method::kSecure, Method::kSecureNoResampling, Method::kSecureMyopic},
-      models, shield::ShieldOptions{}, 25, 0x5eed);
+      models, IgnoreTheBox(), 25, 0x5eed);
   const SeedResult& airl = r.at(Method::kAirl);
   EXPECT_EQ(airl.steps, 2883);
   EXPECT_EQ(airl.successes, 25);
@@ -313,6 +321,17 @@ TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   const SeedResult& myopic = r.at(Method::kSecureMyopic);
   EXPECT_EQ(myopic.steps, 3607);
   EXPECT_EQ(myopic.interventions, 1162);
+
+  const auto c = EvaluateMethods(env, {Method::kSecure, Method::kSecureMyopic}, models,
+                                 shield::ShieldOptions{}, 25, 0x5eed);
+  const SeedResult& clipped = c.at(Method::kSecure);
+  EXPECT_EQ(clipped.steps, 4483);
+  EXPECT_EQ(clipped.successes, 25);
+  EXPECT_EQ(clipped.dangerous, 0);
+  EXPECT_EQ(clipped.interventions, 2244);
+  EXPECT_EQ(clipped.resampled_decisions, 2017);
+  EXPECT_EQ(c.at(Method::kSecureMyopic).steps, 3605);
+  EXPECT_EQ(c.at(Method::kSecureMyopic).interventions, 1146);
 }
 
 TEST(EvaluationSeedTest, IsTheTrainingSeedWithTheEvaluationSalt) {
