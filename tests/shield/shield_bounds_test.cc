@@ -23,6 +23,8 @@ namespace secure::shield {
 namespace {
 
 using secure::test::ErrorOf;
+using test::BitEqual;
+using test::FirstRound;
 using test::FunctionBarrier;
 using test::IntegratorDynamics;
 using test::Vec;
@@ -34,21 +36,7 @@ bool InBox(const Eigen::VectorXf& a, const Eigen::VectorXf& low, const Eigen::Ve
   return ((a.array() >= low.array()) && (a.array() <= high.array())).all();
 }
 
-bool BitEqual(const Eigen::VectorXf& a, const Eigen::VectorXf& b) {
-  return a.size() == b.size() &&
-         std::memcmp(a.data(), b.data(), sizeof(float) * static_cast<std::size_t>(a.size())) == 0;
-}
 
-/// The shield's first round of M draws from N(mu, sigma), replicated (iid sampler).
-Eigen::MatrixXf FirstRound(std::uint64_t seed, const Eigen::VectorXf& mu,
-                           const Eigen::VectorXf& sigma, int m) {
-  Rng rng(seed);
-  Eigen::MatrixXf samples(mu.size(), m);
-  for (int c = 0; c < m; ++c)
-    for (Eigen::Index r = 0; r < mu.size(); ++r)
-      samples(r, c) = mu[r] + sigma[r] * static_cast<float>(rng.Normal());
-  return samples;
-}
 
 /// 1-D: x' = x + 0.1 a, h(x) = 1 - x; at x = 0 with dt = 0.1 and k = 1 an action is safe iff
 /// a <= 1.

@@ -31,6 +31,8 @@
 namespace secure::shield {
 namespace {
 
+using test::BitEqual;
+using test::FirstRound;
 using test::IndependentG;
 
 namespace di = domains::double_integrator;
@@ -152,10 +154,6 @@ bool CloseFloatUlps(double a, double b, int ulps) {
          ulps * std::numeric_limits<float>::epsilon() * std::max(std::abs(a), std::abs(b));
 }
 
-bool BitEqual(const Eigen::VectorXf& a, const Eigen::VectorXf& b) {
-  return a.size() == b.size() &&
-         std::memcmp(a.data(), b.data(), sizeof(float) * static_cast<std::size_t>(a.size())) == 0;
-}
 
 bool SameDecision(const Decision& a, const Decision& b) {
   return a.status == b.status && BitEqual(a.action, b.action) &&
@@ -165,16 +163,6 @@ bool SameDecision(const Decision& a, const Decision& b) {
          a.fallback == b.fallback;
 }
 
-/// The shield's first round, drawn outside it (column by column, rows within a column).
-Eigen::MatrixXf FirstRound(std::uint64_t seed, const Eigen::VectorXf& mu,
-                           const Eigen::VectorXf& sigma, int m) {
-  Rng rng(seed);
-  Eigen::MatrixXf samples(mu.size(), m);
-  for (int c = 0; c < m; ++c)
-    for (Eigen::Index r = 0; r < mu.size(); ++r)
-      samples(r, c) = mu[r] + sigma[r] * static_cast<float>(rng.Normal());
-  return samples;
-}
 
 /// A random decision problem of a random system: a state in or near the double integrator's box,
 /// or a Derby observation.

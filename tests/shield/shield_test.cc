@@ -46,6 +46,7 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // Hand-made systems with analytically known safe sets (IntegratorDynamics, FunctionBarrier:
 // tests/shield/shield_test_util.h).
 
+using test::BitEqual;
 using test::FunctionBarrier;
 using test::IndependentG;
 using test::IntegratorDynamics;
@@ -63,10 +64,6 @@ Eigen::MatrixXf DrawRounds(Rng& rng, const Eigen::VectorXf& mu, const Eigen::Vec
   return samples;
 }
 
-bool BitEqual(const Eigen::VectorXf& a, const Eigen::VectorXf& b) {
-  return a.size() == b.size() &&
-         std::memcmp(a.data(), b.data(), sizeof(float) * static_cast<std::size_t>(a.size())) == 0;
-}
 
 /// Index of a column of `samples` equal (bit for bit) to `action`, or -1.
 int ColumnIndex(const Eigen::MatrixXf& samples, const Eigen::VectorXf& action) {

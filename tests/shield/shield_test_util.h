@@ -2,16 +2,37 @@
 // Small systems and helpers shared by the shield tests.
 
 #include <Eigen/Core>
+#include <cstdint>
+#include <cstring>
 #include <functional>
 #include <initializer_list>
 #include <string>
 #include <utility>
 
 #include "secure/cbf/barrier.h"
+#include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/shield/shield.h"
 
 namespace secure::shield::test {
+
+/// Whether two vectors are equal bit for bit (for the same code path reproducing itself).
+inline bool BitEqual(const Eigen::VectorXf& a, const Eigen::VectorXf& b) {
+  return a.size() == b.size() &&
+         std::memcmp(a.data(), b.data(), sizeof(float) * static_cast<std::size_t>(a.size())) == 0;
+}
+
+/// Round 1 of the shield's i.i.d. sampler, replicated: M columns drawn column by column (rows
+/// within a column) from N(mu, sigma) with the shield's generator seeded by `seed`.
+inline Eigen::MatrixXf FirstRound(std::uint64_t seed, const Eigen::VectorXf& mu,
+                                  const Eigen::VectorXf& sigma, int m) {
+  Rng rng(seed);
+  Eigen::MatrixXf samples(mu.size(), m);
+  for (int c = 0; c < m; ++c)
+    for (Eigen::Index r = 0; r < mu.size(); ++r)
+      samples(r, c) = mu[r] + sigma[r] * static_cast<float>(rng.Normal());
+  return samples;
+}
 
 /// x' = x + a * dt in `dim` dimensions (state_dim == action_dim == dim); allocation-free.
 class IntegratorDynamics final : public domains::DynamicsModel {

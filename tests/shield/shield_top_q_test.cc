@@ -20,21 +20,12 @@ namespace secure::shield {
 namespace {
 
 using secure::test::ErrorOf;
+using test::FirstRound;
 using test::FunctionBarrier;
 using test::IntegratorDynamics;
 using test::LinearActionValue;
 using test::Vec;
 
-// Round 1 of the shield's i.i.d. sampler: M columns drawn column by column from N(mu, sigma).
-Eigen::MatrixXf FirstRound(std::uint64_t seed, const Eigen::VectorXf& mu,
-                           const Eigen::VectorXf& sigma, int m) {
-  Rng rng(seed);
-  Eigen::MatrixXf samples(mu.size(), m);
-  for (int c = 0; c < m; ++c)
-    for (Eigen::Index r = 0; r < mu.size(); ++r)
-      samples(r, c) = mu[r] + sigma[r] * static_cast<float>(rng.Normal());
-  return samples;
-}
 
 // The indices of the `keep` columns of largest `q` among `candidates` (ties by index).
 std::vector<int> TopIndices(std::vector<int> candidates, const std::vector<double>& q, int keep) {
