@@ -222,6 +222,7 @@ struct Scenario {
   bool with_backup = false;
   Eigen::VectorXf backup;
   ActionValue* value = nullptr;  // aggregation = top-q's task value
+  Eigen::VectorXf low, high;     // the actuator box (empty: none)
   // Expected of the warm-up decisions:
   bool expect_resampling = false;  // iterations > 1
   bool expect_fallback = false;    // a no-safe-sample decision (fallback != none)
@@ -234,6 +235,7 @@ void ExpectNoAllocations(const Scenario& s, cbf::Barrier& barrier,
                          const std::string& note = "") {
   SCOPED_TRACE(s.name);
   Shield shield(s.options, barrier, dynamics);
+  if (s.low.size() > 0) shield.SetActionBounds(s.low, s.high);
   if (s.with_backup) shield.SetBackupAction(s.backup);
   shield.SetActionValue(s.value);
   for (int i = 0; i < kWarmUp; ++i) {
@@ -347,6 +349,27 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   no_resampling.options.max_iterations = 3;
   no_resampling.expect_fallback = true;
   scenarios.push_back(no_resampling);
+
+  // The actuator box cutting into the decision: mu = (0, -5) lies below it.
+  for (ActionBounds mode : {ActionBounds::kClip, ActionBounds::kReject}) {
+    const std::string bounds = ToString(kActionBoundsNames, mode);
+    Scenario boxed = resampling;
+    boxed.name = "actuator box, " + bounds;
+    boxed.options.action_bounds = mode;
+    boxed.low = Vec({-1.0f, -4.9f});
+    boxed.high = Vec({1.0f, 1.0f});
+    scenarios.push_back(boxed);
+    Scenario boxed_mean = boxed;
+    boxed_mean.name = "actuator box, " + bounds + ", policy-mean";
+    boxed_mean.options.aggregation = Aggregation::kPolicyMean;
+    scenarios.push_back(boxed_mean);
+    Scenario boxed_random = boxed;  // ablation 2's random sample, clipped if rejected
+    boxed_random.name = "actuator box, " + bounds + ", resampling = none";
+    boxed_random.options.resampling = Resampling::kNone;
+    boxed_random.options.max_iterations = 3;
+    boxed_random.expect_fallback = true;
+    scenarios.push_back(boxed_random);
+  }
 
   Scenario cubic = resampling;
   cubic.name = "cubic class-K, time budget";
