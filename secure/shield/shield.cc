@@ -185,6 +185,7 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
   step_scratch_.resize(state_dim_, 1);
   order_.resize(static_cast<std::size_t>(m));
   rejected_.assign(static_cast<std::size_t>(m), 0);
+  applied_.resize(action_dim_, batch);
   low_ = Eigen::VectorXf::Constant(action_dim_, -std::numeric_limits<float>::infinity());
   high_ = Eigen::VectorXf::Constant(action_dim_, std::numeric_limits<float>::infinity());
   if (options_.sampler == Sampler::kQmc) {
@@ -258,7 +259,6 @@ bool Shield::ClipToBox(Eigen::Ref<Eigen::MatrixXf> actions) const {
 
 bool Shield::BoundRound() {
   if (!bounds_active()) return false;
-  if (options_.action_bounds == ActionBounds::kClip) return ClipToBox(samples_);
   const int m = options_.num_samples;
   bool any = false;
   for (int c = 0; c < m; ++c) {
@@ -269,6 +269,14 @@ bool Shield::BoundRound() {
     any = any || !inside;
   }
   return any;
+}
+
+Eigen::Ref<const Eigen::MatrixXf> Shield::Applied(const Eigen::Ref<const Eigen::MatrixXf>& actions) {
+  if (!bounds_active()) return actions;
+  auto out = applied_.leftCols(actions.cols());
+  out = actions;
+  ClipToBox(out);
+  return out;
 }
 
 double Shield::EvaluateH(const Eigen::Ref<const Eigen::VectorXf>& state) {
@@ -345,7 +353,8 @@ void Shield::DrawRound() {
 
 int Shield::ScoreRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
   const int m = options_.num_samples;
-  EvaluateG(state, h_state, samples_, g_.head(m));
+  // Each sample is checked as the actuator applies it (clipped onto the box, when one is set).
+  EvaluateG(state, h_state, Applied(samples_), g_.head(m));
   if (bounds_active() && options_.action_bounds == ActionBounds::kReject) {
     // A sample the actuator cannot apply is never safe, never aggregated, never the fallback.
     for (int i = 0; i < m; ++i)
@@ -357,6 +366,7 @@ int Shield::ScoreRound(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
     if (g_[i] > best_g_) {  // false for NaN
       best_g_ = g_[i];
       best_action_ = samples_.col(i);
+      ClipToBox(best_action_);  // the action its g belongs to
     }
   }
   return num_safe;
@@ -369,10 +379,9 @@ void Shield::AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
   for (int c = 0; c < n; ++c)
     for (int r = 0; r < action_dim_; ++r)
       probes_(r, c) = mu[r] + static_cast<float>(rng_.Uniform(-extent, extent));
-  // Probes look for danger where the actuator can go (they may become the fallback).
-  ClipToBox(probes_);
-  // h(T(s, a_j)) for the probes; their g also competes for the fallback (they are evaluated).
-  EvaluateG(state, decision_.h, probes_, g_.head(n));
+  // h(T(s, a_j)) for the probes as the actuator applies them (clipped onto the box, when one is
+  // set); their g also competes for the fallback (they are evaluated).
+  EvaluateG(state, decision_.h, Applied(probes_), g_.head(n));
   d_sigma_.setZero();
   for (int j = 0; j < n; ++j) {
     const double weight = std::max(0.0, -static_cast<double>(h_next_[j]));  // NaN -> 0
@@ -380,6 +389,7 @@ void Shield::AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
     if (g_[j] > best_g_) {
       best_g_ = g_[j];
       best_action_ = probes_.col(j);
+      ClipToBox(best_action_);
     }
   }
   // d_sigma = |a_unsafe| / ||a_unsafe||_2; isotropic when no probe is unsafe.
@@ -401,6 +411,7 @@ void Shield::Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
     for (int i = 0; i < m; ++i) {
       if (g_[i] >= 0.0 && pick-- == 0) {
         decision_.action = samples_.col(i);
+        ClipToBox(decision_.action);  // its g is that of the clipped action
         decision_.g = g_[i];
         return;
       }
@@ -436,10 +447,11 @@ void Shield::AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, doubl
   one_action_.setZero();
   for (int k = 0; k < count; ++k) one_action_.col(0) += samples_.col(order_[k]);
   one_action_ /= static_cast<float>(count);
-  // The mean of actions in the box lies in it; the clip only guards the last bit of rounding.
-  ClipToBox(one_action_);
   // g_ holds the round's values; evaluating the mean reuses the shared buffers, so keep the
-  // nearest-sample search ahead of it.
+  // nearest-sample search ahead of it. With a box, the mean of the drawn samples is clipped
+  // after the search and checked as applied, and the nearest sample is returned clipped (its g
+  // was evaluated so): where the shield model clips as the actuator does, every decision is
+  // then the one without a box, clipped.
   int nearest = -1;
   float nearest_distance = std::numeric_limits<float>::infinity();
   for (int k = 0; k < count; ++k) {
@@ -451,6 +463,7 @@ void Shield::AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, doubl
     }
   }
   const double nearest_g = g_[nearest];
+  ClipToBox(one_action_);
   EvaluateG(state, h_state, one_action_, one_g_);
   if (one_g_[0] >= 0.0) {
     decision_.action = one_action_.col(0);
@@ -458,6 +471,7 @@ void Shield::AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, doubl
   } else {
     // ... else the sample nearest to the mean.
     decision_.action = samples_.col(nearest);
+    ClipToBox(decision_.action);
     decision_.g = nearest_g;
   }
 }
@@ -529,17 +543,14 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
         !(bounds_active() && rejected_[0])) {
       // The policy's own draw alone first: if it is safe it is the decision, and the other
       // samples need no evaluation. Otherwise the round is scored as a whole, as for kMean.
-      EvaluateG(state, h_state, samples_.leftCols(1), one_g_);
+      EvaluateG(state, h_state, Applied(samples_.leftCols(1)), one_g_);
       if (one_g_[0] >= 0.0) {
         decision_.safe_ratio = 1.0;
         decision_.action = samples_.col(0);
+        decision_.bounded = ClipToBox(decision_.action);  // as applied, and so checked
         decision_.g = one_g_[0];
         decision_.status = Status::kSafe;
         decision_.distance_to_mean = (decision_.action - mu).norm();
-        // Clipped onto the box iff it sits on a face (a Gaussian draw does so with probability 0).
-        decision_.bounded = bounds_active() && ((decision_.action.array() == low_.array()) ||
-                                                (decision_.action.array() == high_.array()))
-                                                   .any();
         decision_.seconds = clock.Seconds();
         return decision_;
       }
@@ -581,8 +592,10 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     // its g, so an unsafe one is never reported as safe.
     const int i = static_cast<int>(rng_.UniformIndex(static_cast<std::uint64_t>(m)));
     decision_.action = samples_.col(i);
+    ClipToBox(decision_.action);  // clip: its g is that of the clipped action
     decision_.g = g_[i];
-    if (bounds_active() && rejected_[static_cast<std::size_t>(i)]) {
+    if (bounds_active() && options_.action_bounds == ActionBounds::kReject &&
+        rejected_[static_cast<std::size_t>(i)]) {
       // Rejected (outside the box): return it clipped, with the g of what is returned.
       one_action_.col(0) = samples_.col(i);
       ClipToBox(one_action_);

@@ -126,8 +126,10 @@ inline constexpr EnumTable<Sampler, 3> kSamplerNames{{
 /// nearest sample, fallback), lies in the box: g is checked on the action the actuator will apply.
 /// Without a box (none set) the option has no effect.
 enum class ActionBounds {
-  kClip,    // each drawn sample (and the policy's mean for policy-mean) is clipped onto the box
-            // before it is evaluated; the mean of clipped samples lies in the box (convexity)
+  kClip,    // each action is checked as the actuator applies it, clipped onto the box (samples,
+            // probes, the policy's mean); the aggregate (the mean of the safe draws) is clipped
+            // and checked, and a returned sample is returned clipped. Where the shield model
+            // clips as the actuator does, a decision is then the unbounded one, clipped
   kReject,  // a drawn sample outside the box counts as unsafe (g = -inf; a truncated Gaussian);
             // the policy's mean outside the box is clipped before policy-mean checks it
   kIgnore,  // the box is not used (earlier releases): the returned action may leave it, and the
@@ -329,9 +331,12 @@ class Shield {
   // their mean if it is safe, else the one of them nearest to it.
   void AggregateMean(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, int count);
   void FinishInvalid();
-  // Keeps the round's samples in the box (bounds_active()): clips them, or sets rejected_[c] for
-  // each one outside it. Returns whether one was outside.
+  // Marks the round's samples outside the box (rejected_[c]; bounds_active()). Returns whether
+  // one was outside.
   bool BoundRound();
+  // `actions` as the actuator applies them: clipped onto the box (a copy in applied_) when
+  // bounds_active(), else `actions` itself.
+  Eigen::Ref<const Eigen::MatrixXf> Applied(const Eigen::Ref<const Eigen::MatrixXf>& actions);
   // Clips the columns of `actions` onto the box (bounds_active()); returns whether one moved.
   bool ClipToBox(Eigen::Ref<Eigen::MatrixXf> actions) const;
   // kSafe after one round, kSafeAfterResampling after more.
@@ -367,7 +372,8 @@ class Shield {
   Eigen::VectorXd q_;             // (M) aggregation = top-q: Q of the round's samples
   Eigen::MatrixXf step_scratch_;  // (state_dim x 1) lookahead_steps > 1: one model step
   std::vector<int> order_;        // (M) indices of the samples being aggregated
-  std::vector<char> rejected_;    // (M) action_bounds = reject: the sample lies outside the box
+  std::vector<char> rejected_;    // (M) the sample lies outside the box (bounds_active())
+  Eigen::MatrixXf applied_;       // (action_dim x max(M, N)) the round's actions, clipped
   // Sampler::kQmc: the first M Sobol points as 64-bit integers, (action_dim x M), column c =
   // point c (built in the constructor; empty for the other samplers).
   Eigen::Matrix<std::uint64_t, Eigen::Dynamic, Eigen::Dynamic> sobol_;

@@ -290,8 +290,8 @@ shield::ShieldOptions IgnoreTheBox() {
 // The counts of EvaluateMethods for a fixed run, recorded before the episode runner took
 // EpisodePolicy, step observers and runner options: the existing path must not change (the
 // numbers of `secure demo` and the experiments depend on it). Recorded with the actuator box
-// ignored (as it was then); the shielded counts with the box (clip, the default since
-// 2026-12-03) follow.
+// ignored (as it was then); with the box (clip, the default since 2026-12-03) the shielded
+// counts are the same: the double integrator's shield model clips as its actuator does.
 TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   const di::ReachAvoidOptions task;
   di::ReachAvoidEnv env(task);
@@ -325,13 +325,13 @@ TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   const auto c = EvaluateMethods(env, {Method::kSecure, Method::kSecureMyopic}, models,
                                  shield::ShieldOptions{}, 25, 0x5eed);
   const SeedResult& clipped = c.at(Method::kSecure);
-  EXPECT_EQ(clipped.steps, 4483);
+  EXPECT_EQ(clipped.steps, 4435);
   EXPECT_EQ(clipped.successes, 25);
   EXPECT_EQ(clipped.dangerous, 0);
-  EXPECT_EQ(clipped.interventions, 2244);
-  EXPECT_EQ(clipped.resampled_decisions, 2017);
-  EXPECT_EQ(c.at(Method::kSecureMyopic).steps, 3605);
-  EXPECT_EQ(c.at(Method::kSecureMyopic).interventions, 1146);
+  EXPECT_EQ(clipped.interventions, 2192);
+  EXPECT_EQ(clipped.resampled_decisions, 1968);
+  EXPECT_EQ(c.at(Method::kSecureMyopic).steps, 3607);
+  EXPECT_EQ(c.at(Method::kSecureMyopic).interventions, 1162);
 }
 
 TEST(EvaluationSeedTest, IsTheTrainingSeedWithTheEvaluationSalt) {

@@ -86,23 +86,57 @@ TEST(ShieldBoundsTest, BuiltinDoubleIntegratorDecisionStaysInsideTheActuatorBox)
   }
 }
 
-TEST(ShieldBoundsTest, ClipAveragesTheClippedSamples) {
+TEST(ShieldBoundsTest, ClipChecksSamplesAsAppliedAndClipsTheirMean) {
   HalfLine sys;
-  const Eigen::VectorXf mu = Vec({0.0f}), sigma = Vec({1.0f});
+  const Eigen::VectorXf mu = Vec({0.6f}), sigma = Vec({1.0f});
   const Eigen::VectorXf low = Vec({-0.5f}), high = Vec({0.5f});
   ShieldOptions options;
   options.seed = 7;
   Shield shield(options, sys.barrier, sys.dynamics);
   shield.SetActionBounds(low, high);
   const Decision& d = shield.Decide(Vec({0.0f}), mu, sigma);
-  // Every clipped sample is safe (a <= 0.5 < 1): one round, the mean of all of them.
-  Eigen::MatrixXf samples = FirstRound(options.seed, mu, sigma, options.num_samples);
-  samples = samples.cwiseMax(-0.5f).cwiseMin(0.5f);
+  // Every sample is safe as applied (clipped: a <= 0.5 < 1), although some drawn ones exceed 1:
+  // one round, the mean of the drawn samples, clipped onto the box.
+  const Eigen::MatrixXf samples = FirstRound(options.seed, mu, sigma, options.num_samples);
+  ASSERT_GT(samples.maxCoeff(), 1.0f);
   EXPECT_EQ(d.status, Status::kSafe);
   EXPECT_EQ(d.safe_ratio, 1.0);
   EXPECT_TRUE(d.bounded);
-  EXPECT_NEAR(d.action[0], samples.rowwise().mean()[0], 1e-6);
+  EXPECT_NEAR(d.action[0], std::clamp(samples.rowwise().mean()[0], -0.5f, 0.5f), 1e-6);
   EXPECT_TRUE(InBox(d.action, low, high));
+}
+
+TEST(ShieldBoundsTest, ClipIsTheUnboundedDecisionClippedWhereTheModelClips) {
+  // The double integrator's shield model clips as its actuator does: g(a) = g(clip(a)), so the
+  // box changes no check, and each decision is the unbounded one clipped (same draws, same g).
+  const di::GroundTruth truth;
+  di::GroundTruthBarrier barrier(truth);
+  di::ClippedDoubleIntegrator model(0.1, 3.0);
+  const Eigen::VectorXf low = Vec({-3.0f, -3.0f}), high = Vec({3.0f, 3.0f});
+  int moved = 0;
+  for (Aggregation aggregation :
+       {Aggregation::kMean, Aggregation::kPolicyMean, Aggregation::kPolicyDraw,
+        Aggregation::kRandomSafe}) {
+    for (std::uint64_t seed = 0; seed < 20; ++seed) {
+      ShieldOptions options;
+      options.seed = seed;
+      options.aggregation = aggregation;
+      Shield free_shield(options, barrier, model);
+      Shield shield(options, barrier, model);
+      shield.SetActionBounds(low, high);
+      const Eigen::VectorXf state = Vec({3.0f + 0.1f * seed, 3.0f, 1.0f, 1.0f});
+      const Eigen::VectorXf mu = Vec({3.0f, 2.5f}), sigma = Vec({2.0f, 2.0f});
+      const Decision free_decision = free_shield.Decide(state, mu, sigma);
+      const Decision& d = shield.Decide(state, mu, sigma);
+      EXPECT_TRUE(BitEqual(d.action, free_decision.action.cwiseMax(low).cwiseMin(high)))
+          << d.action.transpose() << " vs " << free_decision.action.transpose();
+      EXPECT_EQ(d.g, free_decision.g);
+      EXPECT_EQ(d.status, free_decision.status);
+      EXPECT_EQ(d.iterations, free_decision.iterations);
+      if (!InBox(free_decision.action, low, high)) ++moved;
+    }
+  }
+  EXPECT_GT(moved, 0);  // the unbounded shield left the box, and the box brought it back
 }
 
 TEST(ShieldBoundsTest, RejectCountsSamplesOutsideTheBoxAsUnsafe) {
