@@ -4,11 +4,12 @@
 #               then its HTML report (secure report; the run directory is $(BUILD)/demo-run,
 #               made anew by each `make demo`: a run directory's finished seeds are otherwise reused)
 #   make test   every fast unit test of every module, the Python and report tests included
-#               (ctest without the labels slow, long, dispatch and property-random; tests/README.md)
+#               (ctest without the labels slow, long, dispatch, property-random and install;
+#               tests/README.md)
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: demo test test-slow test-ci build bench check clean
+.PHONY: demo test test-slow test-ci test-install build bench check clean
 
 build:
 	SECURE_BUILD_DIR=$(BUILD) scripts/setup.sh
@@ -22,11 +23,16 @@ demo: build
 # experiments), dispatch (the inference and shield tests again on each forced kernel path),
 # property-random (the shield's properties with a fresh RapidCheck seed) and long (10^6 cases).
 test: build
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -LE 'slow|long|dispatch|property-random'
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -LE 'slow|long|dispatch|property-random|install'
 
 # Only the slow tests.
 test-slow: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) -L slow
+
+# `pip install .` into a scratch venv, with --user, and `pip wheel .` (python_pip_install; about
+# 11 minutes the first time: it builds the module in its own CMake directory). Not run by CI.
+test-install: build
+	cd $(BUILD) && ctest --output-on-failure -L install
 
 # What CI runs after `make test` (.ci/run): the slow, dispatch and fresh-seed tests.
 test-ci: build
