@@ -540,7 +540,7 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     const bool round_bounded = BoundRound();
     decision_.iterations = iteration;
     if (iteration == 1 && options_.aggregation == Aggregation::kPolicyDraw &&
-        !(bounds_active() && rejected_[0])) {
+        !(bounds_active() && options_.action_bounds == ActionBounds::kReject && rejected_[0])) {
       // The policy's own draw alone first: if it is safe it is the decision, and the other
       // samples need no evaluation. Otherwise the round is scored as a whole, as for kMean.
       EvaluateG(state, h_state, Applied(samples_.leftCols(1)), one_g_);

@@ -117,14 +117,16 @@ TEST(ShieldBoundsTest, ClipIsTheUnboundedDecisionClippedWhereTheModelClips) {
   for (Aggregation aggregation :
        {Aggregation::kMean, Aggregation::kPolicyMean, Aggregation::kPolicyDraw,
         Aggregation::kRandomSafe}) {
-    for (std::uint64_t seed = 0; seed < 20; ++seed) {
+    for (std::uint64_t seed = 0; seed < 40; ++seed) {
       ShieldOptions options;
       options.seed = seed;
       options.aggregation = aggregation;
       Shield free_shield(options, barrier, model);
       Shield shield(options, barrier, model);
       shield.SetActionBounds(low, high);
-      const Eigen::VectorXf state = Vec({3.0f + 0.1f * seed, 3.0f, 1.0f, 1.0f});
+      // Near the obstacle (draws beyond the box often unsafe) and far from it (often safe).
+      const Eigen::VectorXf state = seed < 20 ? Vec({3.0f + 0.1f * seed, 3.0f, 1.0f, 1.0f})
+                                              : Vec({0.5f + 0.05f * seed, 1.0f, 0.0f, 0.0f});
       const Eigen::VectorXf mu = Vec({3.0f, 2.5f}), sigma = Vec({2.0f, 2.0f});
       const Decision free_decision = free_shield.Decide(state, mu, sigma);
       const Decision& d = shield.Decide(state, mu, sigma);
