@@ -217,19 +217,16 @@ TEST(DoubleIntegratorShieldRunTest, BarrierOfTheWrongDimensionIsAnError) {
 // does (the box changes no check, and the environment clipped the decisions before).
 TEST(DoubleIntegratorShieldRunTest, ResultsOfTheFormerEpisodeLoopArePinned) {
   ShieldRunOptions options = FastOptions();
-  options.shield.action_bounds = shield::ActionBounds::kIgnore;
   domains::double_integrator::GroundTruthBarrier barrier(options.task.truth);
-  const ShieldRunResult s = RunDoubleIntegratorShield(options, barrier);
-  EXPECT_EQ(s.success_episodes, 100);
-  EXPECT_EQ(s.steps, 18486);
-  EXPECT_EQ(s.interventions, 9643);
-  EXPECT_EQ(s.resampled_decisions, 8999);
-  options.shield.action_bounds = shield::ActionBounds::kClip;
-  const ShieldRunResult c = RunDoubleIntegratorShield(options, barrier);
-  EXPECT_EQ(c.success_episodes, 100);
-  EXPECT_EQ(c.steps, 18486);
-  EXPECT_EQ(c.interventions, 9643);
-  EXPECT_EQ(c.resampled_decisions, 8999);
+  for (shield::ActionBounds bounds : {shield::ActionBounds::kIgnore, shield::ActionBounds::kClip}) {
+    SCOPED_TRACE(ToString(shield::kActionBoundsNames, bounds));
+    options.shield.action_bounds = bounds;
+    const ShieldRunResult s = RunDoubleIntegratorShield(options, barrier);
+    EXPECT_EQ(s.success_episodes, 100);
+    EXPECT_EQ(s.steps, 18486);
+    EXPECT_EQ(s.interventions, 9643);
+    EXPECT_EQ(s.resampled_decisions, 8999);
+  }
   const ShieldRunResult u = RunDoubleIntegratorShield(options, barrier, /*shielded=*/false);
   EXPECT_EQ(u.dangerous_episodes, 100);  // every episode ends at its crash
   EXPECT_EQ(u.steps, 2010);

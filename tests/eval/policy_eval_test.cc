@@ -300,38 +300,30 @@ TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   models.bc = &pd;
   models.airl = &pd;
   models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
-  const auto r = EvaluateMethods(
-      env, {Method::kAirl, Method::kSecure, Method::kSecureNoResampling, Method::kSecureMyopic},
-      models, IgnoreTheBox(), 25, 0x5eed);
-  const SeedResult& airl = r.at(Method::kAirl);
-  EXPECT_EQ(airl.steps, 2883);
-  EXPECT_EQ(airl.successes, 25);
-  EXPECT_EQ(airl.dangerous, 25);
-  EXPECT_EQ(airl.collision_events, 679);  // the episodes go on through the obstacle
-  const SeedResult& secure = r.at(Method::kSecure);
-  EXPECT_EQ(secure.steps, 4435);
-  EXPECT_EQ(secure.successes, 25);
-  EXPECT_EQ(secure.dangerous, 0);
-  EXPECT_EQ(secure.interventions, 2192);
-  EXPECT_EQ(secure.resampled_decisions, 1968);
-  const SeedResult& no_resampling = r.at(Method::kSecureNoResampling);
-  EXPECT_EQ(no_resampling.steps, 2679);
-  EXPECT_EQ(no_resampling.collision_events, 670);
-  EXPECT_EQ(no_resampling.no_safe_action_decisions, 724);
-  const SeedResult& myopic = r.at(Method::kSecureMyopic);
-  EXPECT_EQ(myopic.steps, 3607);
-  EXPECT_EQ(myopic.interventions, 1162);
-
-  const auto c = EvaluateMethods(env, {Method::kSecure, Method::kSecureMyopic}, models,
-                                 shield::ShieldOptions{}, 25, 0x5eed);
-  const SeedResult& clipped = c.at(Method::kSecure);
-  EXPECT_EQ(clipped.steps, 4435);
-  EXPECT_EQ(clipped.successes, 25);
-  EXPECT_EQ(clipped.dangerous, 0);
-  EXPECT_EQ(clipped.interventions, 2192);
-  EXPECT_EQ(clipped.resampled_decisions, 1968);
-  EXPECT_EQ(c.at(Method::kSecureMyopic).steps, 3607);
-  EXPECT_EQ(c.at(Method::kSecureMyopic).interventions, 1162);
+  for (const shield::ShieldOptions& options : {IgnoreTheBox(), shield::ShieldOptions{}}) {
+    SCOPED_TRACE(options.ToJson().dump());
+    const auto r = EvaluateMethods(
+        env, {Method::kAirl, Method::kSecure, Method::kSecureNoResampling, Method::kSecureMyopic},
+        models, options, 25, 0x5eed);
+    const SeedResult& airl = r.at(Method::kAirl);
+    EXPECT_EQ(airl.steps, 2883);
+    EXPECT_EQ(airl.successes, 25);
+    EXPECT_EQ(airl.dangerous, 25);
+    EXPECT_EQ(airl.collision_events, 679);  // the episodes go on through the obstacle
+    const SeedResult& secure = r.at(Method::kSecure);
+    EXPECT_EQ(secure.steps, 4435);
+    EXPECT_EQ(secure.successes, 25);
+    EXPECT_EQ(secure.dangerous, 0);
+    EXPECT_EQ(secure.interventions, 2192);
+    EXPECT_EQ(secure.resampled_decisions, 1968);
+    const SeedResult& no_resampling = r.at(Method::kSecureNoResampling);
+    EXPECT_EQ(no_resampling.steps, 2679);
+    EXPECT_EQ(no_resampling.collision_events, 670);
+    EXPECT_EQ(no_resampling.no_safe_action_decisions, 724);
+    const SeedResult& myopic = r.at(Method::kSecureMyopic);
+    EXPECT_EQ(myopic.steps, 3607);
+    EXPECT_EQ(myopic.interventions, 1162);
+  }
 }
 
 TEST(EvaluationSeedTest, IsTheTrainingSeedWithTheEvaluationSalt) {
