@@ -639,6 +639,49 @@ BENCHMARK_CAPTURE(BM_TopQDecision, DI_NoResampling, Net::kDoubleIntegrator, Regi
     ->ArgsProduct({{32, 128}, {0, 1}})
     ->Unit(benchmark::kMicrosecond);
 
+/// What an actuator box adds to a decision: the same case without a box (arg 0), with
+/// action_bounds clip (1) and reject (2), the box mu +- sigma (about a third of the draws leave it
+/// in each component, a heavier cut than the domains' boxes make). Where the rows use the same
+/// rounds (iterations), the difference of their p50 is the box's cost: a copy and clip of each
+/// round's actions, one pass marking those outside.
+void BM_BoundedDecision(benchmark::State& st, Net net, Regime regime) {
+  Eigen::setNbThreads(1);
+  const int m = static_cast<int>(st.range(0));
+  const int mode = static_cast<int>(st.range(1));
+  Case c = MakeCase(net, regime, m);
+  if (mode == 2) c.options.action_bounds = shield::ActionBounds::kReject;
+  shield::Shield shield(c.options, *c.barrier, *c.dynamics);
+  if (mode > 0) shield.SetActionBounds(c.mu - c.sigma, c.mu + c.sigma);
+  LatencyLog log;
+  long decisions = 0, bounded = 0, iterations = 0;
+  for (auto _ : st) {
+    const Clock::time_point t0 = Clock::now();
+    const shield::Decision& d = shield.Decide(c.state, c.mu, c.sigma);
+    const Clock::time_point t1 = Clock::now();
+    benchmark::DoNotOptimize(d.action.data());
+    log.Add(MicrosecondsBetween(t0, t1));
+    ++decisions;
+    bounded += d.bounded ? 1 : 0;
+    iterations += d.iterations;
+  }
+  st.counters["p50_us"] = log.Percentile(50.0);
+  st.counters["p99_us"] = log.Percentile(99.0);
+  st.counters["bounded_fraction"] = static_cast<double>(bounded) / std::max(1L, decisions);
+  // A box can also change the decision itself (more rounds where it cuts off the safe actions):
+  // compare rows with equal iterations for the box's own cost.
+  st.counters["iterations"] = static_cast<double>(iterations) / std::max(1L, decisions);
+  st.SetLabel(c.label + (mode == 0 ? ", no box" : mode == 1 ? ", box clip" : ", box reject"));
+}
+BENCHMARK_CAPTURE(BM_BoundedDecision, Panda_NoResampling, Net::kPanda, Regime::kNoResampling)
+    ->ArgNames({"M", "box"})
+    ->ArgsProduct({{64}, {0, 1, 2}})
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_BoundedDecision, DI_NoResampling, Net::kDoubleIntegrator,
+                  Regime::kNoResampling)
+    ->ArgNames({"M", "box"})
+    ->ArgsProduct({{64}, {0, 1, 2}})
+    ->Unit(benchmark::kMicrosecond);
+
 }  // namespace
 }  // namespace secure::bench
 #endif  // SECURE_SHIELD_BENCH_CASES_ONLY
