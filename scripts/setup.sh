@@ -26,6 +26,9 @@ set -euo pipefail
 #   libboost-dev                Boost.CRC (model file checksums); Boost.Math (statistics)
 #   libmujoco-dev libqhull-dev  MuJoCo for the Panda domain (its CMake config needs qhull)
 #   libosmesa6-dev              software OpenGL (OSMesa): the Panda domain's offscreen renderer
+#   libcairo2-dev fonts-dejavu-core
+#                               `secure render`'s overlay (h, the shield's status, a plot of h) drawn
+#                               into the frames (secure/eval/overlay.cc), in DejaVu Sans Mono
 #   ffmpeg                      `secure render`: encodes rendered episodes as MP4 (libx264); its tests
 #   libgtest-dev libgmock-dev   unit tests
 #   librapidcheck-dev           property-based tests
@@ -48,7 +51,7 @@ PACKAGES=(
   libeigen3-dev libxsmm-dev libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libboost-dev libboost-math-dev
   libhdf5-dev pkgconf
   libmujoco-dev libqhull-dev libosmesa6-dev
-  ffmpeg
+  ffmpeg libcairo2-dev fonts-dejavu-core
   libgtest-dev libgmock-dev librapidcheck-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy python3-pytest
   python3-pip python3-venv python3-setuptools python3-wheel mypy

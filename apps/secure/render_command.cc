@@ -13,12 +13,26 @@
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
 #include "secure/eval/policy_eval.h"
+#include "secure/eval/overlay.h"
 #include "secure/eval/render.h"
 #include "secure/eval/video.h"
 #include "secure/experiments/experiment.h"
 
 namespace secure::cli {
 namespace {
+
+eval::OverlayStep OverlayStepOf(const eval::FrameInfo& info) {
+  eval::OverlayStep step;
+  step.step = info.step;
+  step.h = info.h;
+  if (info.decision != nullptr) {
+    step.status = ToString(shield::kStatusNames, info.decision->status);
+    step.intervened = info.decision->intervened;
+  }
+  step.collided = info.collided;
+  step.reached_goal = info.reached_goal;
+  return step;
+}
 
 struct RenderCommand {
   std::string domain, method, run_dir, policy_path, barrier_path, airl_reward_path, out, frames_dir;
@@ -29,6 +43,7 @@ struct RenderCommand {
   ShieldFlags shield_flags;
   const Config* config = nullptr;
   bool json = false;
+  bool no_overlay = false, no_panel = false;
 
   void Register(CLI::App& app) {
     CLI::App* cmd = app.add_subcommand(
@@ -72,6 +87,11 @@ struct RenderCommand {
     cmd->add_option("--height", video.height, "frame height in pixels (even)")
         ->capture_default_str();
     cmd->add_option("--fps", video.fps, "frames per second of the video")->capture_default_str();
+    cmd->add_flag("--no-overlay", no_overlay,
+                  "draw the frames as the domain renders them: without the overlay of the step, "
+                  "h(s), the shield's status, interventions (orange border) and collisions (red), "
+                  "and the plot of h over the episode at the bottom");
+    cmd->add_flag("--no-panel", no_panel, "the overlay without the plot of h at the bottom");
     shield_flags.Add(cmd, &shield, /*domain_preset=*/true);  // `secure domains NAME` lists it
     cmd->add_flag("--json", json, "print the result as JSON");
     cmd->callback([this] { Run(); });
@@ -112,10 +132,17 @@ struct RenderCommand {
     if (!frames_dir.empty()) CreateDirectories(frames_dir);
     std::optional<eval::VideoWriter> writer;
     if (!out.empty()) writer.emplace(out, video);
+    eval::OverlayOptions overlay_options;
+    overlay_options.title = ToString(eval::kMethodNames, m) + ", seed " + std::to_string(seed) +
+                            ", episode " + std::to_string(episode);
+    overlay_options.max_steps = env->max_steps();
+    overlay_options.panel = !no_panel;
+    eval::EpisodeOverlay overlay(overlay_options);
     long index = 0;
-    const eval::RenderedEpisode r =
-        eval::RenderEpisode(*env, m, models.models(), shield_options, eval::EvaluationSeed(seed),
-                            episode, video.width, video.height, [&](const domains::Frame& frame) {
+    const eval::RenderedEpisode r = eval::RenderEpisode(
+        *env, m, models.models(), shield_options, eval::EvaluationSeed(seed), episode, video.width,
+        video.height, [&](domains::Frame& frame, const eval::FrameInfo& info) {
+                              if (!no_overlay) overlay.Draw(OverlayStepOf(info), frame);
                               if (!frames_dir.empty()) {
                                 char name[32];
                                 std::snprintf(name, sizeof name, "/frame-%06ld.ppm", index);

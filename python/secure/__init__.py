@@ -43,6 +43,7 @@ from ._secure import (  # noqa: F401
     Decision,
     Demonstrations,
     Dynamics,
+    Overlay,
     Policy,
     Rng,
     Shield,
@@ -56,6 +57,7 @@ from ._secure import (  # noqa: F401
     train_barrier,
     train_car_barrier,
     train_bc,
+    VideoWriter,
 )
 from ._secure import EnvCore  # noqa: F401  (the C++ half of secure.Env)
 from .env import Env, env_id, gymnasium_installed, make_env, register_gymnasium  # noqa: F401
@@ -64,8 +66,8 @@ if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one i
     register_gymnasium()
 
 __all__ = [
-    "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Policy",
-    "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
+    "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Overlay",
+    "Policy", "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
     "gymnasium_installed", "make_env", "register_gymnasium", "run_episodes", "train_airl",
-    "train_barrier", "train_bc", "train_car_barrier",
+    "train_barrier", "train_bc", "train_car_barrier", "VideoWriter",
 ]

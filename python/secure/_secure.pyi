@@ -428,3 +428,55 @@ def generate_data(domain: str, seed: int = 0, profile: str = 'quick', **kwargs: 
     (M, d), 'demonstrations' (secure.Demonstrations)}; profile 'quick' (default) is small.
     """
     ...
+
+class Overlay:
+    """The overlay `secure render` draws into an episode's frames: a band at the top with the title, the
+    step, h(s) and the shield's status for the action that led to the state; an orange border where
+    the shield intervened and a red one where it found no safe action or the state is dangerous; and a
+    panel at the bottom plotting h over the episode so far (h = 0 dashed, interventions as orange
+    ticks, collisions as red dots). Draw the frames of one episode in order; a step at or below the
+    last one drawn starts a new episode.
+
+        overlay = secure.Overlay(title="SECURE", max_steps=env.max_steps)
+        frame = overlay.draw(env.render(), step=t, h=d.h, status=d.status, intervened=d.intervened)
+    """
+    def __init__(self, title: str = '', max_steps: int = 0, panel: bool = True) -> None:
+        """title: the band's first words; max_steps: the panel's time axis (at least); panel: draw the plot of h."""
+        ...
+    def draw(self, frame: NDArray[numpy.uint8], *, step: int, h: Optional[float] = None, status: str = '', intervened: bool = False, collided: bool = False, reached_goal: bool = False) -> NDArray[numpy.uint8]:
+        """A copy of `frame` ((height, width, 3) uint8, at least 64 x 48) with the overlay for this step: h of the state shown (None: unknown), the shield's status for the last action ('' unshielded, else a Decision.status)."""
+        ...
+    def reset(self) -> None:
+        """Forget the plotted history (a new episode)."""
+        ...
+
+class VideoWriter:
+    """Frames to an MP4 video (H.264 through the ffmpeg program, as `secure render --out`): the file
+    appears only when finish() succeeds; until then an existing file at `path` is left as it was. As a
+    context manager it finishes on a normal exit and discards the video on an exception.
+
+        with secure.VideoWriter("episode.mp4", 640, 480, fps=20) as video:
+            video.write(frame)  # (480, 640, 3) uint8
+    """
+    def __init__(self, path: str, width: int, height: int, fps: int = 20) -> None:
+        """Starts ffmpeg. width and height even; fps 1 to 1000. Raises ValueError naming what is wrong (e.g. ffmpeg not found, `path` a directory)."""
+        ...
+    def write(self, frame: NDArray[numpy.uint8]) -> None:
+        """Encodes one (height, width, 3) uint8 frame of the video's size."""
+        ...
+    def finish(self) -> None:
+        """Ends the stream and installs the video at `path`."""
+        ...
+    def discard(self) -> None:
+        """Stops without writing the video (the scratch file is removed)."""
+        ...
+    @property
+    def frames(self) -> int:
+        """Frames written so far."""
+        ...
+    @property
+    def finished(self) -> bool:
+        """finish() or discard() was called."""
+        ...
+    def __enter__(self) -> VideoWriter: ...
+    def __exit__(self, exc_type: Optional[Any], exc_value: Optional[Any], traceback: Optional[Any]) -> bool: ...

@@ -194,6 +194,7 @@ void RegisterDynamics(py::module_& m);
 void RegisterShield(py::module_& m);
 void RegisterPolicy(py::module_& m);
 void RegisterEnvironment(py::module_& m);
+void RegisterRender(py::module_& m);
 
 }  // namespace secure::python
 

@@ -14,4 +14,5 @@ PYBIND11_MODULE(_secure, m) {
   RegisterDynamics(m);
   RegisterShield(m);
   RegisterEnvironment(m);
+  RegisterRender(m);
 }

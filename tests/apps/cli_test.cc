@@ -1470,7 +1470,8 @@ TEST(CliTest, RenderOfADomainThatCannotRenderIsAnError) {
   const Result help = RunCli("render --help");
   EXPECT_EQ(help.exit_code, 0);
   for (const char* flag : {"--domain", "--method", "--run", "--seed", "--policy", "--barrier",
-                           "--episode", "--out", "--frames-dir", "--width", "--height", "--fps"}) {
+                           "--episode", "--out", "--frames-dir", "--width", "--height", "--fps",
+                           "--no-overlay", "--no-panel"}) {
     EXPECT_HAS(help.out, flag);
   }
 }

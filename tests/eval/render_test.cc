@@ -131,6 +131,54 @@ TEST(RenderEpisodeTest, DrawsTheEpisodeTheEvaluationPlays) {
   EXPECT_TRUE(saw_dangerous);  // the unshielded straight path crosses the obstacle
 }
 
+// What each frame shows (for the overlay): the step, h of the state shown from the method's
+// barrier (unshielded methods too), the decision that led there (shielded only), the outcome.
+TEST(RenderEpisodeTest, FrameInfoDescribesTheStateShown) {
+  const di::ReachAvoidOptions task;
+  const policy::GaussianPolicy pd = test::PdPolicy(task, 0.4);
+  SeedModels models;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
+  di::GroundTruthBarrier truth(task.truth);
+  for (Method method : {Method::kAirl, Method::kSecure}) {
+    SCOPED_TRACE(ToString(kMethodNames, method));
+    RenderableEnv env(std::make_unique<di::ReachAvoidEnv>(task));
+    long expected_step = 0, decisions = 0, interventions = 0;
+    bool collided = false;
+    const RenderedEpisode r = RenderEpisode(
+        env, method, models, shield::ShieldOptions{}, EvaluationSeed(5), 3, 6, 4,
+        [&](domains::Frame& frame, const FrameInfo& info) {
+          EXPECT_EQ(info.step, expected_step++);
+          const Eigen::VectorXf s = Decode(frame, 4);
+          Eigen::VectorXf h(1);
+          truth.Evaluate(s, h);
+          ASSERT_TRUE(info.h.has_value());
+          EXPECT_NEAR(*info.h, h[0], 1e-6);
+          if (info.step == 0 || method == Method::kAirl) {
+            EXPECT_EQ(info.decision, nullptr);
+          } else {
+            ASSERT_NE(info.decision, nullptr);
+            ++decisions;
+            interventions += info.decision->intervened;
+          }
+          collided = collided || info.collided;
+          frame.rgb[0] = 1;  // the callback may draw into the frame
+        });
+    EXPECT_EQ(expected_step, r.frames);
+    EXPECT_EQ(collided, r.dangerous);
+    if (method == Method::kSecure) {
+      EXPECT_EQ(decisions, r.steps);
+      EXPECT_GT(interventions, 0);  // the straight path needs the shield
+    }
+  }
+  // Without a barrier, h is unknown.
+  SeedModels no_barrier;
+  no_barrier.airl = &pd;
+  RenderableEnv env(std::make_unique<di::ReachAvoidEnv>(task));
+  RenderEpisode(env, Method::kAirl, no_barrier, shield::ShieldOptions{}, 1, 0, 6, 4,
+                [](domains::Frame&, const FrameInfo& info) { EXPECT_FALSE(info.h.has_value()); });
+}
+
 TEST(RenderEpisodeTest, AnEnvironmentThatCannotRenderIsAnError) {
   const di::ReachAvoidOptions task;
   di::ReachAvoidEnv env(task);
