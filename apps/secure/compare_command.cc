@@ -228,7 +228,11 @@ struct CompareCommand {
               << Fixed(100 * mean_a, 1) << " | " << Fixed(100 * mean_b, 1) << " | "
               << Fixed(100 * r.difference, 1) << " | [" << Fixed(100 * lo, 1) << ", "
               << Fixed(100 * hi, 1) << "] | " << Fixed(r.p_value, 3) << " | "
-              << (equivalent ? "yes" : "no") << " |\n";
+              << (equivalent ? "yes" : "no")
+              << (r.se > 0 ? ""
+                  : r.difference == 0 ? " (identical on every seed)"
+                                      : " (the same difference on every seed)")
+              << " |\n";
       }
       const auto finite = [](double v) {
         return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();

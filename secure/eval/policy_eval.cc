@@ -489,10 +489,19 @@ std::string Evaluation::Table() const {
         << "; dangerous Mann-Whitney U = " << Number(c["dangerous_mann_whitney"]["u"].get<double>())
         << ", p = " << Number(c["dangerous_mann_whitney"]["p_value"].get<double>())
         << "; success TOST (bound " << Percent(options_.tost_bound)
-        << " points): difference " << Percent(tost["difference"].get<double>())
-        << " points, p = " << Number(tost["p_value"].get<double>()) << " ("
-        << (tost["p_value"].get<double>() < options_.alpha ? "equivalent" : "not shown equivalent")
-        << " at alpha " << options_.alpha << ")\n";
+        << " points): difference " << Percent(tost["difference"].get<double>()) << " points, ";
+    if (!(tost["se"].get<double>() > 0)) {
+      // Both methods' success is the same on every seed (e.g. 0 % against 0 %): the test's
+      // standard error is 0 and its p-value says nothing about equivalence.
+      out << "not informative: each method's success is constant over the seeds ("
+          << Percent(methods_.at(Method::kSecure).success_rate.mean) << " % and "
+          << Percent(methods_.at(Method::kAirl).success_rate.mean) << " %)\n";
+    } else {
+      out << "p = " << Number(tost["p_value"].get<double>()) << " ("
+          << (tost["p_value"].get<double>() < options_.alpha ? "equivalent"
+                                                             : "not shown equivalent")
+          << " at alpha " << options_.alpha << ")\n";
+    }
   }
   if (comparisons_.contains("ablations")) {
     const nlohmann::json& a = comparisons_["ablations"];

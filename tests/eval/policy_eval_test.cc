@@ -250,6 +250,21 @@ TEST(PolicyEvalTest, EvaluationSummarisesSeedsAndComparesSecureWithAirl) {
   EXPECT_HAS(table, "equivalent");
 }
 
+// 0 % success on every seed for both methods (a quick run): TOST's standard error is 0 and its
+// p-value 0, which says nothing; the table must not call that "equivalent".
+TEST(PolicyEvalTest, ConstantSuccessOnBothSidesIsNotCalledEquivalent) {
+  Evaluation evaluation;
+  for (long k = 0; k < 3; ++k) {
+    evaluation.Add(Method::kAirl, Synthetic(0, 10 + k));
+    evaluation.Add(Method::kSecure, Synthetic(0, k));
+  }
+  evaluation.Finish();
+  const std::string table = evaluation.Table();
+  EXPECT_HAS(table, "not informative: each method's success is constant over the seeds (0.0 % "
+                    "and 0.0 %)");
+  EXPECT_EQ(table.find("equivalent"), std::string::npos) << table;
+}
+
 TEST(PolicyEvalTest, AblationsAreComparedWithKruskalWallisAndDunn) {
   Evaluation evaluation;
   for (long k = 0; k < 4; ++k) {

@@ -288,8 +288,17 @@ def tests_table(evaluation):
             t = sva.get(key) or {}
             rows.append(("SECURE vs AIRL", what, "U = %s" % num(t.get("u")), fmt_p(t.get("p_value"))))
         t = sva.get("success_tost") or {}
-        rows.append(("SECURE vs AIRL", "success, TOST (Welch), bound %s" % num(t.get("bound")),
-                     "difference = %s" % num(t.get("difference")), fmt_p(t.get("p_value"))))
+        test = "success, TOST (Welch), bound %s" % num(t.get("bound"))
+        se = t.get("se")
+        if isinstance(se, (int, float)) and not isinstance(se, bool) and not se > 0:
+            # Both methods' success is the same on every seed (e.g. 0 % against 0 %): the
+            # standard error is 0 and the p-value says nothing about equivalence.
+            rows.append(("SECURE vs AIRL", test, "not informative: each method's success is "
+                         "constant over the seeds (difference %s)" % num(t.get("difference")),
+                         "n/a"))
+        else:
+            rows.append(("SECURE vs AIRL", test, "difference = %s" % num(t.get("difference")),
+                         fmt_p(t.get("p_value"))))
     abl = comp.get("ablations")
     if isinstance(abl, dict):
         group = [METHOD_LABELS.get(m, m) for m in abl.get("methods", [])]
@@ -363,6 +372,27 @@ CURVE_COLUMNS = ["train_nll", "validation_nll", "action_mse", "discriminator_los
 SKIPPED_COLUMNS = {"env_steps", "episodes", "seconds", "iteration", "epoch"}
 
 
+def clip_first_epochs(ax, ys):
+    """A loss that starts far above where it settles (BC's negative log-likelihood starts near
+    100 and ends near -3) flattens the rest of the curve: zoom the y axis to the values after the
+    first tenth of the curve, with a note, when the first tenth reaches more than twice as far."""
+    rest = [y[len(y) // 10 + 1:] for y in ys if len(y) >= 10]
+    rest = [r[np.isfinite(r)] for r in rest]
+    rest = [r for r in rest if r.size]
+    if not rest:
+        return
+    lo = min(float(r.min()) for r in rest)
+    hi = max(float(r.max()) for r in rest)
+    all_hi = max(float(np.nanmax(y)) for y in ys if np.isfinite(y).any())
+    all_lo = min(float(np.nanmin(y)) for y in ys if np.isfinite(y).any())
+    span = max(hi - lo, 1e-12)
+    if (all_hi - all_lo) > 2.0 * span * 1.1:
+        pad = 0.08 * span
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.text(0.98, 0.95, "first epochs clipped", transform=ax.transAxes, ha="right",
+                va="top", fontsize=8, color="0.4")
+
+
 def curves_figure(page, run_dir):
     seeds = seed_dirs(run_dir)
     panels = []  # (title, column, [(seed, x, y)])
@@ -388,18 +418,23 @@ def curves_figure(page, run_dir):
     panels = panels[:12]
     cols = min(3, len(panels))
     rows = (len(panels) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.9 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 3.1 * rows), squeeze=False)
     for ax, (title, xcol, lines) in zip(axes.flat, panels):
         for s, x, y in lines:
             ax.plot(x, y, linewidth=1, label=s)
-        ax.set_title(title, fontsize=9)
-        ax.set_xlabel(xcol, fontsize=8)
-        ax.tick_params(labelsize=7)
+        label, _, metric = title.partition(": ")
+        ax.set_title(label, fontsize=10)
+        ax.set_xlabel(xcol, fontsize=9)
+        ax.set_ylabel(metric, fontsize=9)
+        ax.tick_params(labelsize=9)
         ax.grid(alpha=0.3)
+        clip_first_epochs(ax, [y for _, _, y in lines])
     for ax in list(axes.flat)[len(panels):]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=9, loc="lower center", ncol=min(10, len(labels)),
+               frameon=False)
+    fig.tight_layout(rect=(0, 0.045 * (3 / rows) ** 0.5, 1, 1))
     page.figure(fig, "learning_curves", "Learning curves per seed, from the run's "
                 "<code>seed-&lt;k&gt;/*_curve.csv</code> files (one line per seed).")
 
@@ -433,28 +468,41 @@ def barrier_training_figure(page, result):
         return
     variants = list(data)
     metrics = sorted({m for v in data.values() for m in v})
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(variants) * max(1, len(metrics)) / 2 + 2),
-                                    3.8))
-    width = 0.8 / len(metrics)
+    # A dot per class and split with its spread over seeds, on an axis zoomed to the values
+    # (accuracies sit near 100 %, where bars from 0 show nothing), the legend below the plot.
+    fig, ax = plt.subplots(figsize=(7.0, 1.2 + 0.45 * len(variants) * len(metrics)))
     cmap = plt.get_cmap("tab10")
+    lows = []
     for k, metric in enumerate(metrics):
-        vals = [data[v].get(metric, []) for v in variants]
-        means = [np.mean(x) if x else float("nan") for x in vals]
-        stds = [np.std(x, ddof=1) if len(x) > 1 else 0.0 for x in vals]
-        ax.bar(np.arange(len(variants)) + (k - (len(metrics) - 1) / 2) * width, means, width,
-               yerr=stds, capsize=3, color=cmap(k), edgecolor="black", linewidth=0.5,
-               label=metric)
-    ax.set_xticks(np.arange(len(variants)))
-    ax.set_xticklabels(variants, fontsize=8)
-    ax.set_ylabel("accuracy (%)")
-    ax.set_ylim(0, 115)
-    ax.legend(fontsize=7, ncol=min(4, len(metrics)), loc="upper center")
-    ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
+        for i, v in enumerate(variants):
+            vals = data[v].get(metric, [])
+            if not vals:
+                continue
+            y = i * (len(metrics) + 1) + k
+            mean, lo, hi = np.mean(vals), np.min(vals), np.max(vals)
+            lows.append(lo)
+            ax.plot([lo, hi], [y, y], color=cmap(k), linewidth=2, alpha=0.5)
+            ax.plot([mean], [y], "o", color=cmap(k), markersize=6,
+                    label=metric if i == 0 else None)
+            ax.annotate("%.1f" % mean, (hi, y), xytext=(4, -3), textcoords="offset points",
+                        fontsize=8)
+    ax.set_yticks([i * (len(metrics) + 1) + (len(metrics) - 1) / 2 for i in range(len(variants))])
+    ax.set_yticklabels(variants, fontsize=9)
+    ax.invert_yaxis()
+    left = max(0.0, min(lows) - 2.0) if lows else 0.0
+    ax.set_xlim(left, 100.8)
+    ax.set_xlabel("accuracy (%): mean (dot), min to max over seeds (line)", fontsize=9)
+    ax.tick_params(labelsize=9)
+    ax.grid(axis="x", alpha=0.3)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, ncol=min(4, len(metrics)), loc="lower center",
+               frameon=False)
+    fig.tight_layout(rect=(0, 0.6 / fig.get_figheight(), 1, 1))
     page.figure(fig, "barrier_training", "The barrier's classification accuracy on its safe and "
                 "near-dangerous states at the end of training, per barrier-data variant (the "
                 "trainer records no per-epoch curve; <code>experiment.seeds[k].barriers"
-                ".&lt;variant&gt;.training</code>), mean &plusmn; std over seeds.")
+                ".&lt;variant&gt;.training</code>): the mean over seeds as a dot, the range as a "
+                "line, on an axis zoomed to the values.")
 
 
 def variants_figure(page, result):
