@@ -15,6 +15,7 @@
 // seeds with index = k (mod N), writing their task files into --out; `merge` assembles them.
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -423,15 +424,47 @@ struct MergeCommand {
     cmd->callback([this] { Run(); });
   }
 
+  // The shards' seed-K directories (models, learning curves) as symbolic links in `target`, so
+  // that the merged run directory is one that `secure report` draws completely. A name that
+  // exists in `target` already is left alone. Returns the number of links made.
+  int LinkSeedDirectories(const std::string& target) const {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    const fs::path target_canonical = fs::canonical(target, ec);
+    int linked = 0;
+    for (const std::string& dir : dirs) {
+      const fs::path canonical = fs::canonical(dir, ec);
+      if (ec || canonical == target_canonical) continue;
+      for (const auto& entry : fs::directory_iterator(canonical)) {
+        const std::string name = entry.path().filename().string();
+        if (name.rfind("seed-", 0) != 0 || !entry.is_directory()) continue;
+        const fs::path link = fs::path(target) / name;
+        if (fs::exists(fs::symlink_status(link))) continue;
+        fs::create_directory_symlink(entry.path(), link, ec);
+        SECURE_CHECK(!ec, "merge: cannot link " << link.string() << " -> "
+                                                 << entry.path().string() << ": "
+                                                 << ec.message());
+        ++linked;
+      }
+    }
+    return linked;
+  }
+
   void Run() {
     const std::string target = out.empty() ? dirs.front() : out;
     CreateDirectories(target);
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
+    const int linked = LinkSeedDirectories(target);
     std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
               << ToString(experiments::kExperimentKindNames, result.kind) << " on " << result.domain
               << " from " << dirs.size() << " director" << (dirs.size() == 1 ? "y" : "ies")
-              << ", wrote " << target << "/result.json\n";
+              << ", wrote " << target << "/result.json";
+    if (linked > 0)
+      std::cerr << " and linked " << linked << " seed director" << (linked == 1 ? "y" : "ies")
+                << " of the shards into it (seed-K -> SHARD/seed-K: the models and curves "
+                   "`secure report` draws)";
+    std::cerr << "\n";
     PrintResult(result, json, "experiment merge");
   }
 };

@@ -192,7 +192,18 @@ TEST_F(ShardTest, MergeNamesMissingDuplicateAndForeignTasks) {
                  "SLURM_ARRAY_TASK_ID=5 SLURM_ARRAY_TASK_COUNT=2 SLURM_ARRAY_TASK_MIN=4");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err.rfind("shard 1/2 (from SLURM_ARRAY_TASK_ID-MIN/COUNT)", 0), 0u) << r.err;
-  ASSERT_EQ(Run("experiment merge " + a + " " + b + " " + a).exit_code, 0);  // a twice: once
+  r = Run("experiment merge " + a + " " + b + " " + a);  // a twice: once
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // The merged directory (a) links the other shard's seed directory, so that it holds every
+  // seed's models and curves for `secure report`; merging again reads that seed once.
+  EXPECT_HAS(r.err, "linked 1 seed directory");
+  EXPECT_TRUE(fs::is_symlink(dir_ / "a" / "seed-1"));
+  EXPECT_TRUE(fs::equivalent(dir_ / "a" / "seed-1", dir_ / "b" / "seed-1"));
+  EXPECT_FALSE(fs::is_symlink(dir_ / "a" / "seed-0"));
+  r = Run("experiment merge " + a + " " + b);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err.find("linked"), std::string::npos) << r.err;
+  fs::remove(dir_ / "a" / "seed-1");
   // Missing: only one shard's directory.
   r = Run("experiment merge " + b);
   EXPECT_EQ(r.exit_code, 1);
