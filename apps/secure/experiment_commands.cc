@@ -32,7 +32,6 @@
 #include "secure/common/progress.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
-#include "secure/experiments/run_lock.h"
 #include "secure/experiments/user_study.h"
 
 namespace secure::cli {
@@ -372,8 +371,6 @@ struct ExperimentCommand {
     options.Validate();
     d->CheckExperiment(options);
     CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
-    // Another run writing there fails before any output too (the run then holds the lock).
-    if (!out.empty()) experiments::RunDirectoryLock probe(out, options.shard, options.shards);
     if (!where.source.empty())
       std::cerr << "shard " << where.index << "/" << where.count << " (from " << where.source
                 << "): ";

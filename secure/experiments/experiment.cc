@@ -29,7 +29,6 @@
 #include "secure/common/yaml_fields.h"
 #include "secure/common/yaml_value.h"
 #include "secure/experiments/internal/seed_runner.h"
-#include "secure/experiments/run_lock.h"
 #include "secure/nn/torch_threads.h"
 
 namespace secure::experiments {
@@ -1380,8 +1379,6 @@ ExperimentResult RunExperimentWithProgress(ExperimentKind kind, const Domain& do
   SECURE_CHECK(o.shards == 1, "RunExperiment runs every seed (shards = "
                                   << o.shards << "): use RunExperimentShard and MergeExperiment");
   const std::vector<eval::Method> methods = CheckRun(kind, domain, o);
-  std::optional<RunDirectoryLock> lock;  // one run at a time writes into output_dir
-  if (!o.output_dir.empty()) lock.emplace(o.output_dir, 0, 1);
   const Stopwatch clock;
   Progress progress(&line, o.verbose);
   nn::SetTorchThreads(1);  // parallelism comes from the seeds; 1 is fastest for small nets
@@ -1405,7 +1402,6 @@ ShardReport RunExperimentShard(ExperimentKind kind, const Domain& domain,
   SECURE_CHECK_FIELD(!o.output_dir.empty(), kOptions, "output_dir", "(empty)",
                      "a directory: a shard writes its seeds' task files there");
   const std::vector<eval::Method> methods = CheckRun(kind, domain, o);
-  const RunDirectoryLock lock(o.output_dir, o.shard, o.shards);  // shards share, not twice
   const Stopwatch clock;
   ProgressLine line(out, /*live=*/false);
   Progress progress(&line, o.verbose);

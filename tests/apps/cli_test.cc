@@ -1,8 +1,6 @@
 // End-to-end tests of the `secure` command-line tool: run the real binary, check exit codes,
 // messages and --json documents.
 #include <gtest/gtest.h>
-#include <fcntl.h>
-#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -1066,24 +1064,6 @@ TEST(CliHardeningTest, ABrokenSectionBreaksOnlyTheCommandsThatUseIt) {
   EXPECT_EQ(RunCli("--version --config " + garbage).exit_code, 0);
   r = RunCli("shield run --domain double-integrator --barrier ground-truth --config " + garbage);
   ExpectOneErrorLine(r, "invalid YAML");
-}
-
-// Two runs into one --out: the second fails at once naming the holder (the run directory's lock,
-// secure/experiments/run_lock.h), and writes nothing there.
-TEST(CliHardeningTest, ASecondRunIntoTheSameDirectoryFailsNamingTheHolder) {
-  const fs::path dir = TempDir() / "locked-run";
-  fs::create_directories(dir);
-  const int fd = ::open((dir / ".secure-lock").c_str(), O_RDWR | O_CREAT, 0644);
-  ASSERT_GE(fd, 0);
-  ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
-  const std::string pid = std::to_string(::getpid()) + "\n";
-  ASSERT_EQ(::write(fd, pid.data(), pid.size()), static_cast<ssize_t>(pid.size()));
-  const Result r = RunCli("demo --quick --seeds 1 --episodes 1 --out " + dir.string());
-  ExpectOneErrorLine(r, "another run is writing to " + dir.string() + " (PID " +
-                            std::to_string(::getpid()));
-  EXPECT_FALSE(fs::exists(dir / "demos.csv"));
-  EXPECT_FALSE(fs::exists(dir / "seed-0"));
-  ::close(fd);
 }
 
 TEST(CliHardeningTest, InvalidValuesAreRejected) {
