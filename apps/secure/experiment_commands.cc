@@ -18,7 +18,6 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
-#include <set>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -264,7 +263,6 @@ struct ExperimentCommand {
   CLI::Option* repair_option = nullptr;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
-  CLI::Option* methods_option = nullptr;
   CLI::Option* episodes_option = nullptr;
 
   CLI::App* Register(CLI::App& parent, const Config& cfg, const std::string& name,
@@ -296,7 +294,7 @@ struct ExperimentCommand {
     cmd->add_option("--barrier", barrier,
                     "flat (an MLP on the whole state) or per-obstacle (alias per-car: one MLP "
                     "per obstacle, the minimum over those in range) (default: the domain's)");
-    methods_option = cmd->add_option("--methods", methods,
+    cmd->add_option("--methods", methods,
                     "comma-separated subset of bc, airl, secure, secure-random-safe, "
                     "secure-no-resampling, bc+shield, secure-myopic, joint (default: the "
                     "experiment's)");
@@ -336,7 +334,7 @@ struct ExperimentCommand {
     if (yaml.IsMap()) options.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
     if (seeds_option->count() > 0) options.seeds = seeds;
     if (episodes_option->count() > 0) options.episodes = episodes;
-    if (methods_option->count() > 0) options.methods = eval::ParseMethods(methods);  // '' too
+    if (!methods.empty()) options.methods = eval::ParseMethods(methods);
     if (closed_loop_option->count() > 0) {
       CheckRange("--closed-loop", closed_loop_candidates, 1, 64);
       options.closed_loop.enabled = true;
@@ -458,12 +456,9 @@ struct MergeCommand {
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
     const int linked = LinkSeedDirectories(target);
-    std::set<std::filesystem::path> canonical;  // a directory given twice counts once
-    for (const std::string& dir : dirs) canonical.insert(std::filesystem::canonical(dir));
-    const std::size_t distinct = canonical.size();
     std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
               << ToString(experiments::kExperimentKindNames, result.kind) << " on " << result.domain
-              << " from " << distinct << " director" << (distinct == 1 ? "y" : "ies")
+              << " from " << dirs.size() << " director" << (dirs.size() == 1 ? "y" : "ies")
               << ", wrote " << target << "/result.json";
     if (linked > 0)
       std::cerr << " and linked " << linked << " seed director" << (linked == 1 ? "y" : "ies")
@@ -543,7 +538,7 @@ struct UserStudyCommand {
     config->Check();
     if (participants_option->count() > 0) CheckRange("--participants", participants, 2, 1000);
     if (episodes_option->count() > 0) CheckRange("--episodes", episodes, 1, 100000);
-    CheckRange("--threads", threads, 1, kMaxThreads);
+    CheckRange("--threads", threads, 1, 1024);
     const std::vector<double> spreads =
         spread.empty() ? std::vector<double>{1.0} : ParseSpreads(spread);
     const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();

@@ -14,9 +14,6 @@ inline constexpr long kMaxSeeds = 10'000;
 inline constexpr long kMaxStates = 100'000'000;
 /// Width of a hidden layer of a trained network (a width-w layer holds w x w weights).
 inline constexpr int kMaxLayerWidth = 10'000;
-/// Worker threads of one run (seeds, jobs). More threads than cores only queue; the cap makes a
-/// typo ("--threads 100000000") an error instead of a run that claims that many.
-inline constexpr int kMaxThreads = 1024;
 /// Actions the shield samples or probes per round (its buffers hold this many).
 inline constexpr int kMaxShieldSamples = 1'000'000;
 

@@ -9,7 +9,6 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
-#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -1097,13 +1096,7 @@ void ExperimentOptions::Validate() const {
                      "in [1, " << kMaxSeeds << "]");
   SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, kOptions, "episodes", episodes,
                      "in [1, " << kMaxEpisodes << "]");
-  SECURE_CHECK_FIELD(threads > 0 && threads <= kMaxThreads, kOptions, "threads", threads,
-                     "in [1, " << kMaxThreads << "]");
-  // Seeds first_seed, ..., first_seed + seeds - 1 without wrapping past 2^64 - 1 to seed 0.
-  SECURE_CHECK_FIELD(first_seed <= std::numeric_limits<std::uint64_t>::max() -
-                                       static_cast<std::uint64_t>(seeds - 1),
-                     kOptions, "first_seed", first_seed,
-                     "at most 2^64 - seeds (" << seeds << " seeds from it would wrap to 0)");
+  SECURE_CHECK_FIELD(threads > 0, kOptions, "threads", threads, "> 0");
   SECURE_CHECK_FIELD(shards >= 1, kOptions, "shards", shards, ">= 1");
   SECURE_CHECK_FIELD(shard >= 0 && shard < shards, kOptions, "shard", shard,
                      "in [0, shards - 1] (shards = " << shards << ")");

@@ -192,9 +192,8 @@ TEST_F(ShardTest, MergeNamesMissingDuplicateAndForeignTasks) {
                  "SLURM_ARRAY_TASK_ID=5 SLURM_ARRAY_TASK_COUNT=2 SLURM_ARRAY_TASK_MIN=4");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err.rfind("shard 1/2 (from SLURM_ARRAY_TASK_ID-MIN/COUNT)", 0), 0u) << r.err;
-  r = Run("experiment merge " + a + " " + b + " " + a + " " + a + "/.");  // a thrice: once
+  r = Run("experiment merge " + a + " " + b + " " + a);  // a twice: once
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_HAS(r.err, "from 2 directories");
   // The merged directory (a) links the other shard's seed directory, so that it holds every
   // seed's models and curves for `secure report`; merging again reads that seed once.
   EXPECT_HAS(r.err, "linked 1 seed directory");
