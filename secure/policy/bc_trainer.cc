@@ -235,14 +235,9 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   best.observation_features = demos.state_features;
   for (const int row : rows) best.input_features.push_back(demos.state_features[row]);
   best.action_features = demos.action_features;
-  // The summary without its wall-clock time, the options without where the curve went and the
-  // verbosity (run control, which does not change the model): same seed and data, same model
-  // file bytes, wherever the run writes.
-  nlohmann::json recorded_options = options.ToJson();
-  recorded_options.erase("curve_path");
-  recorded_options.erase("verbose");
+  // The summary without its wall-clock time: same seed and data, same model file bytes.
   best.provenance = {{"trainer", "secure::policy::TrainBc (Gaussian maximum likelihood)"},
-                     {"options", recorded_options},
+                     {"options", options.ToJson()},
                      {"summary", nn::WithoutTiming(s.ToJson())},
                      {"demonstrations",
                       {{"source", demos.source},
