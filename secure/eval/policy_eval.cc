@@ -536,12 +536,18 @@ std::string Evaluation::Table() const {
     out << "\n" << name << " vs SECURE: dangerous Mann-Whitney U = "
         << Number(c["dangerous_mann_whitney"]["u"].get<double>())
         << ", p = " << Number(c["dangerous_mann_whitney"]["p_value"].get<double>())
-        << "; success TOST (bound " << Percent(options_.tost_bound)
-        << " points): difference " << Percent(tost["difference"].get<double>())
-        << " points, p = " << Number(tost["p_value"].get<double>()) << " ("
-        << (tost["p_value"].get<double>() < options_.alpha ? "equivalent" : "not shown equivalent")
-        << " at alpha " << options_.alpha << "); the CBF-QP projection decided " << decided
-        << " of " << tried << " decisions\n";
+        << "; success TOST (bound " << Percent(options_.tost_bound) << " points): ";
+    if (!(tost["se"].get<double>() > 0)) {
+      // Success constant over the seeds on both sides (e.g. 100 % and 100 %): no test.
+      out << "not informative (each method's success is constant over the seeds)";
+    } else {
+      out << "difference " << Percent(tost["difference"].get<double>())
+          << " points, p = " << Number(tost["p_value"].get<double>()) << " ("
+          << (tost["p_value"].get<double>() < options_.alpha ? "equivalent"
+                                                             : "not shown equivalent")
+          << " at alpha " << options_.alpha << ")";
+    }
+    out << "; the CBF-QP projection decided " << decided << " of " << tried << " decisions\n";
   }
   if (comparisons_.contains("ablations")) {
     const nlohmann::json& a = comparisons_["ablations"];
