@@ -209,6 +209,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
   resampling = ToString(shield::kResamplingNames, so->resampling);
   sampler = ToString(shield::kSamplerNames, so->sampler);
   action_bounds = ToString(shield::kActionBoundsNames, so->action_bounds);
+  proposal = ToString(shield::kProposalNames, so->proposal);
   using Copy = std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>;
   // The default shown: the general one, or "preset" where the chosen domain's preset applies.
   auto track = [this, domain_preset](CLI::Option* option, Copy copy) {
@@ -252,6 +253,20 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
                         "(samples outside count unsafe) | ignore (decisions may leave it)")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(action_bounds));
+  track(cmd->add_option("--proposal", proposal,
+                        "none | qp (the CBF-QP projection of the mean first, Algorithms 1-2 if "
+                        "its exact g < 0) | qp-only (the CBF-QP filter alone)")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(proposal));
+  track(cmd->add_option("--qp-iterations", so->qp_iterations,
+                        "proposal: linearisations per decision (re-linearised at a rejected "
+                        "projection)")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(qp_iterations));
+  track(cmd->add_option("--qp-margin", so->qp_margin,
+                        "proposal: the projection asks the linearised g >= this margin")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(qp_margin));
   track(cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(max_iterations));
@@ -278,6 +293,7 @@ void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
   so->resampling = FromString(shield::kResamplingNames, resampling, "--resampling");
   so->sampler = FromString(shield::kSamplerNames, sampler, "--sampler");
   so->action_bounds = FromString(shield::kActionBoundsNames, action_bounds, "--action-bounds");
+  so->proposal = FromString(shield::kProposalNames, proposal, "--proposal");
 }
 
 void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,

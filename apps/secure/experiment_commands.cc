@@ -296,7 +296,7 @@ struct ExperimentCommand {
                     "per obstacle, the minimum over those in range) (default: the domain's)");
     cmd->add_option("--methods", methods,
                     "comma-separated subset of bc, airl, secure, secure-random-safe, "
-                    "secure-no-resampling, bc+shield, secure-myopic, joint (default: the "
+                    "secure-no-resampling, bc+shield, secure-myopic, joint, cbf-qp, secure-qp (default: the "
                     "experiment's)");
     cmd->add_option("--out", out,
                     "directory for the data, per-seed models and learning curves, result.json")

@@ -292,7 +292,11 @@ class Decision:
         ...
     @property
     def fallback(self) -> str:
-        """none | best_sample | backup_action | random_sample"""
+        """none | best_sample | backup_action | random_sample | qp_projection"""
+        ...
+    @property
+    def qp(self) -> str:
+        """the CBF-QP projection (proposal='qp' or 'qp-only'): not_tried | accepted | rejected | infeasible"""
         ...
     @property
     def seconds(self) -> float: ...
@@ -308,7 +312,9 @@ class Shield:
     fields of shield::ShieldOptions (num_samples=64, safe_ratio=0.1, dt=0.1, class_k='linear',
     class_k_gain=1.0, aggregation='mean', resampling='adaptive', num_probes=64, probe_extent=1.0,
     sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
-    'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore')).
+    'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore'),
+    proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
+    alone), qp_iterations=1, qp_margin=0).
     The actuator box: action_low / action_high (arrays of action_dim; -inf / inf where unbounded),
     else the box of the environment a builtin model (Dynamics.builtin, env.dynamics) came from, else
     none. With a box every returned action lies in it: samples are clipped onto it

@@ -38,6 +38,19 @@ class Barrier {
   void EvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
                      Eigen::Ref<Eigen::VectorXf> h);
 
+  /// h(s) (N) and its gradient with respect to the state, gradients (state_dim x N) = dh/ds, for
+  /// every column of `states` (the CBF-QP filter and the shield's `proposal: qp` linearise with
+  /// it). The learned barriers compute it analytically (analytic_gradient()): the MLP's backward
+  /// pass; the per-obstacle minimum passes the gradient of its active (arg-min, first on ties)
+  /// entry, and a state at the cap gets 0. Any other barrier gets central finite differences of
+  /// Evaluate, step 1e-3 max(1, |s_i|) per row (its buffers are sized at the first call; no
+  /// allocation after it). h is Evaluate's up to float rounding (the analytic path runs Eigen
+  /// products). @throws secure::Error on wrong shapes.
+  void EvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                        Eigen::Ref<Eigen::VectorXf> h, Eigen::Ref<Eigen::MatrixXf> gradients);
+  /// Whether EvaluateGradient is analytic (false: finite differences).
+  virtual bool analytic_gradient() const { return false; }
+
  protected:
   /// Called with checked dimensions.
   virtual void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
@@ -47,10 +60,16 @@ class Barrier {
                                Eigen::Ref<Eigen::VectorXf> h) {
     DoEvaluate(states, h);
   }
+  /// Called with checked dimensions; the default is central finite differences of DoEvaluate.
+  virtual void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                  Eigen::Ref<Eigen::VectorXf> h,
+                                  Eigen::Ref<Eigen::MatrixXf> gradients);
 
  private:
   void CheckShapes(const Eigen::Ref<const Eigen::MatrixXf>& states,
                    const Eigen::Ref<Eigen::VectorXf>& h) const;
+  Eigen::MatrixXf fd_states_;  // (state_dim x 2 state_dim + 1) finite differences, one state
+  Eigen::VectorXf fd_h_;
 };
 
 /// The row of each of `wanted` (names, in order) among `available` (the first row of that name).
@@ -76,12 +95,17 @@ class SelectRows final : public Barrier {
   int state_dim() const override { return state_dim_; }
   /// The inner description with the selection ("barrier_mlp 9-64-1 tanh on 9 of 18 state rows").
   std::string Describe() const override;
+  /// The inner barrier's (its gradient is scattered to the selected rows, 0 elsewhere).
+  bool analytic_gradient() const override { return inner_->analytic_gradient(); }
 
  protected:
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                   Eigen::Ref<Eigen::VectorXf> h) override;
   void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
                        Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h,
+                          Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
   void Gathered(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
@@ -90,6 +114,7 @@ class SelectRows final : public Barrier {
   int state_dim_;
   std::vector<int> rows_;
   Eigen::MatrixXf buffer_;  // (rows_.size() x chunk)
+  Eigen::MatrixXf gradient_buffer_;  // (rows_.size() x chunk), sized at the first gradient
 };
 
 }  // namespace secure::cbf

@@ -1,5 +1,6 @@
 #include "secure/cbf/barrier_net.h"
 
+#include <algorithm>
 #include <sstream>
 
 #include "secure/common/error.h"
@@ -88,6 +89,7 @@ std::unique_ptr<Barrier> BarrierNet::MakeEvaluatorFor(
 BarrierNetEvaluator::BarrierNetEvaluator(const BarrierNet& net, int chunk)
     : mlp_(net.mlp, net.normalizer),
       workspace_(mlp_.MakeWorkspace(chunk)),
+      gradient_workspace_(mlp_.MakeGradientWorkspace(std::min(chunk, kGradientChunk))),
       description_(DescribeSpec(net.mlp.spec)) {
   net.Validate();
 }
@@ -101,6 +103,18 @@ void BarrierNetEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& st
     // h is a column vector; the MLP writes a (1 x m) row: map the same memory as a row.
     Eigen::Map<Eigen::RowVectorXf> row(h.data() + first, m);
     mlp_.Forward(states.middleCols(first, m), workspace_, row);
+  }
+}
+
+void BarrierNetEvaluator::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                             Eigen::Ref<Eigen::VectorXf> h,
+                                             Eigen::Ref<Eigen::MatrixXf> gradients) {
+  const Eigen::Index n = states.cols();
+  const Eigen::Index chunk = gradient_workspace_.max_batch();
+  for (Eigen::Index first = 0; first < n; first += chunk) {
+    const Eigen::Index m = std::min(chunk, n - first);
+    mlp_.ForwardGradient(states.middleCols(first, m), gradient_workspace_, h.segment(first, m),
+                         gradients.middleCols(first, m));
   }
 }
 

@@ -59,16 +59,23 @@ struct BarrierNet {
 class BarrierNetEvaluator final : public Barrier {
  public:
   BarrierNetEvaluator(const BarrierNet& net, int chunk);
+  /// States per backward pass of EvaluateGradient (larger batches go in chunks).
+  static constexpr int kGradientChunk = 64;
   int state_dim() const override { return mlp_.input_dim(); }
   std::string Describe() const override { return description_; }
+  bool analytic_gradient() const override { return true; }
 
  protected:
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                   Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h,
+                          Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
   nn::InferenceMlp mlp_;
   nn::InferenceMlp::Workspace workspace_;
+  nn::InferenceMlp::GradientWorkspace gradient_workspace_;  // kGradientChunk states
   std::string description_;
 };
 

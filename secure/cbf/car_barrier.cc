@@ -1,5 +1,6 @@
 #include "secure/cbf/car_barrier.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -331,6 +332,13 @@ CarBarrierEvaluator::CarBarrierEvaluator(const CarBarrierNet& net, int max_state
   count_.resize(static_cast<std::size_t>(max_states));
   in_range_.resize(static_cast<std::size_t>(entries));
   description_ = net.Describe();
+  const int gradient_chunk = std::min(max_states, kGradientChunk);
+  gradient_workspace_ = mlp_.MakeGradientWorkspace(gradient_chunk);
+  active_.resize(static_cast<std::size_t>(gradient_chunk));
+  entry_car_.resize(static_cast<std::size_t>(gradient_chunk) * layout_.num_obstacles);
+  active_features_.resize(net.input.feature_dim(), gradient_chunk);
+  active_h_.resize(gradient_chunk);
+  active_gradients_.resize(net.input.feature_dim(), gradient_chunk);
 }
 
 void CarBarrierEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
@@ -392,6 +400,85 @@ void CarBarrierEvaluator::EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>
         if (x < v || std::isnan(x)) v = std::isnan(v) ? v : x;
       }
       h[first + i] = v;
+    }
+  }
+}
+
+void CarBarrierEvaluator::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                             Eigen::Ref<Eigen::VectorXf> h,
+                                             Eigen::Ref<Eigen::MatrixXf> gradients) {
+  // h(s) = min(cap, min_j h_j(x_j(s))): the gradient of the active entry (the first car of
+  // least h_j below the cap), 0 at the cap. Per chunk: the forward over every in-range car
+  // (EvaluateChunks' work) picks the active car of each state; one backward pass over those.
+  const Eigen::Index n = states.cols();
+  const int k = layout_.num_obstacles;
+  const Eigen::Index chunk = static_cast<Eigen::Index>(active_.size());
+  gradients.setZero();
+  for (Eigen::Index first = 0; first < n; first += chunk) {
+    const Eigen::Index m = std::min(chunk, n - first);
+    Eigen::Index c = 0;
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const float* s = states.col(first + i).data();
+      int count = 0;
+      for (int j = 0; j < k; ++j) {
+        const float* p = s + layout_.PositionIndex(j);
+        const float dx = p[0], dy = p[1];
+        const float d = std::sqrt(dx * dx + dy * dy + eps_);
+        if (d > big_r_) continue;
+        float* f = features_.col(c).data();
+        f[0] = dx;
+        f[1] = dy;
+        f[2] = d - r_;
+        if (use_velocity_) {
+          const float* v = s + layout_.VelocityIndex(j);
+          f[3] = v[0];
+          f[4] = v[1];
+        }
+        entry_car_[static_cast<std::size_t>(c)] = j;
+        ++c;
+        ++count;
+      }
+      count_[static_cast<std::size_t>(i)] = count;
+    }
+    if (c > 0) {
+      Eigen::Map<Eigen::RowVectorXf> out(entry_h_.data(), c);
+      mlp_.Forward(features_.leftCols(c), workspace_, out);
+    }
+    // The active entry of each state (as EvaluateChunks' reduction: NaN propagates).
+    Eigen::Index e = 0, active = 0;
+    for (Eigen::Index i = 0; i < m; ++i) {
+      float v = cap_;
+      int arg = -1;
+      for (int q = 0; q < count_[static_cast<std::size_t>(i)]; ++q, ++e) {
+        const float x = entry_h_[e];
+        if ((x < v || std::isnan(x)) && !std::isnan(v)) {
+          v = x;
+          arg = static_cast<int>(e);
+        }
+      }
+      h[first + i] = v;
+      active_[static_cast<std::size_t>(i)] = arg;
+      if (arg >= 0) active_features_.col(active++) = features_.col(arg);
+    }
+    if (active == 0) continue;
+    mlp_.ForwardGradient(active_features_.leftCols(active), gradient_workspace_,
+                         active_h_.head(active), active_gradients_.leftCols(active));
+    // Chain rule through the features: d (d - r) / d (dx, dy) = (dx, dy) / d.
+    Eigen::Index a = 0;
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const int arg = active_[static_cast<std::size_t>(i)];
+      if (arg < 0) continue;
+      const int j = entry_car_[static_cast<std::size_t>(arg)];
+      const float dx = features_(0, arg), dy = features_(1, arg);
+      const float d = std::sqrt(dx * dx + dy * dy + eps_);
+      const auto g = active_gradients_.col(a++);
+      auto out = gradients.col(first + i);
+      out[layout_.PositionIndex(j)] = g[0] + g[2] * dx / d;
+      out[layout_.PositionIndex(j) + 1] = g[1] + g[2] * dy / d;
+      if (use_velocity_) {
+        out[layout_.VelocityIndex(j)] = g[3];
+        out[layout_.VelocityIndex(j) + 1] = g[4];
+      }
     }
   }
 }

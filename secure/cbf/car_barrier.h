@@ -164,12 +164,19 @@ class CarBarrierEvaluator final : public Barrier {
   /// Cars run through the network in the last chunk evaluated: those in range, or every car
   /// after EvaluateDense (diagnostics, benchmarks).
   long last_entries() const { return last_entries_; }
+  bool analytic_gradient() const override { return true; }
+  /// States per backward pass of EvaluateGradient: the forward over every in-range car finds
+  /// each state's active (arg-min) car, then one backward pass runs over those cars only.
+  static constexpr int kGradientChunk = 64;
 
  protected:
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                   Eigen::Ref<Eigen::VectorXf> h) override;
   void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
                        Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h,
+                          Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
   void EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>& states,
@@ -186,6 +193,13 @@ class CarBarrierEvaluator final : public Barrier {
   std::vector<char> in_range_;  // per gathered entry of a dense chunk (unused otherwise)
   long last_entries_ = 0;
   std::string description_;
+  // EvaluateGradient: each state's active car (-1: at the cap), its features and gradients.
+  nn::InferenceMlp::GradientWorkspace gradient_workspace_;
+  std::vector<int> active_;              // kGradientChunk: the active entry, -1 at the cap
+  std::vector<int> entry_car_;           // kGradientChunk * num_obstacles: each entry's car
+  Eigen::MatrixXf active_features_;      // feature_dim x kGradientChunk
+  Eigen::VectorXf active_h_;             // kGradientChunk
+  Eigen::MatrixXf active_gradients_;     // feature_dim x kGradientChunk
 };
 
 }  // namespace secure::cbf

@@ -39,6 +39,8 @@ shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOption
     options.class_k = shield::ClassK::kLinear;
     options.class_k_gain = 1.0 / options.dt;
   }
+  if (method == Method::kCbfQp) options.proposal = shield::Proposal::kQpOnly;
+  if (method == Method::kSecureQp) options.proposal = shield::Proposal::kQp;
   return options;
 }
 
@@ -56,7 +58,7 @@ std::vector<Method> ParseMethods(const std::string& list) {
 
 // ---------------------------------------------------------------------------------------------
 nlohmann::json SeedResult::ToJson() const {
-  return {{"episodes", episodes},
+  nlohmann::json json = {{"episodes", episodes},
           {"successes", successes},
           {"dangerous", dangerous},
           {"success_rate", success_rate()},
@@ -74,6 +76,13 @@ nlohmann::json SeedResult::ToJson() const {
           {"latency_us", latency_us.ToJson()},
           {"reference_forward_latency_us", reference_forward_latency_us},
           {"seconds", seconds}};
+  // Only where a projection was tried, so that every other method's records keep their bytes.
+  if (qp_tried > 0) {
+    json["qp_tried"] = qp_tried;
+    json["qp_decisions"] = qp_decisions;
+    json["qp_rejected"] = qp_rejected;
+  }
+  return json;
 }
 
 void EpisodePolicy::Sample(const Eigen::Ref<const Eigen::VectorXf>& observation, Rng& rng,
@@ -166,6 +175,14 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
           case shield::Status::kNoSafeAction: ++result.no_safe_action_decisions; break;
           case shield::Status::kInvalidInput: ++result.invalid_input_decisions; break;
           case shield::Status::kSafe: break;
+        }
+        if (d.qp != shield::QpOutcome::kNotTried) {
+          ++result.qp_tried;
+          if (d.qp == shield::QpOutcome::kAccepted) {
+            ++result.qp_decisions;
+          } else {
+            ++result.qp_rejected;
+          }
         }
       } else {
         policy.Sample(observation_, rng, action_);
@@ -398,6 +415,18 @@ void Evaluation::Finish() {
         {"success_tost", stats::TostWelch(s_success, a_success, options_.tost_bound).ToJson()},
     };
   }
+  // The other safety filters (issue 37) against SECURE: the same tests as SECURE vs AIRL.
+  for (Method m : {Method::kCbfQp, Method::kSecureQp}) {
+    const auto other = methods_.find(m);
+    if (secure == methods_.end() || other == methods_.end() || seeds < 2) continue;
+    const std::vector<double> o_success = Successes(other->second);
+    const std::vector<double> s_success = Successes(secure->second);
+    comparisons_[std::string(ToString(kMethodNames, m)) + "_vs_secure"] = {
+        {"success_mann_whitney", MannWhitneyJson(o_success, s_success)},
+        {"dangerous_mann_whitney", MannWhitneyJson(Dangers(other->second), Dangers(secure->second))},
+        {"success_tost", stats::TostWelch(o_success, s_success, options_.tost_bound).ToJson()},
+    };
+  }
   // Figure 9: SECURE and its two ablations, Kruskal–Wallis and Dunn on each metric.
   std::vector<Method> group_methods;
   for (Method m : {Method::kSecure, Method::kSecureRandomSafe, Method::kSecureNoResampling}) {
@@ -502,6 +531,32 @@ std::string Evaluation::Table() const {
                                                              : "not shown equivalent")
           << " at alpha " << options_.alpha << ")\n";
     }
+  }
+  for (Method m : {Method::kCbfQp, Method::kSecureQp}) {
+    const std::string name = ToString(kMethodNames, m);
+    if (!comparisons_.contains(name + "_vs_secure")) continue;
+    const nlohmann::json& c = comparisons_[name + "_vs_secure"];
+    const nlohmann::json& tost = c["success_tost"];
+    long tried = 0, decided = 0;
+    for (const SeedResult& r : methods_.at(m).per_seed) {
+      tried += r.qp_tried;
+      decided += r.qp_decisions;
+    }
+    out << "\n" << name << " vs SECURE: dangerous Mann-Whitney U = "
+        << Number(c["dangerous_mann_whitney"]["u"].get<double>())
+        << ", p = " << Number(c["dangerous_mann_whitney"]["p_value"].get<double>())
+        << "; success TOST (bound " << Percent(options_.tost_bound) << " points): ";
+    if (!(tost["se"].get<double>() > 0)) {
+      // Success constant over the seeds on both sides (e.g. 100 % and 100 %): no test.
+      out << "not informative (each method's success is constant over the seeds)";
+    } else {
+      out << "difference " << Percent(tost["difference"].get<double>())
+          << " points, p = " << Number(tost["p_value"].get<double>()) << " ("
+          << (tost["p_value"].get<double>() < options_.alpha ? "equivalent"
+                                                             : "not shown equivalent")
+          << " at alpha " << options_.alpha << ")";
+    }
+    out << "; the CBF-QP projection decided " << decided << " of " << tried << " decisions\n";
   }
   if (comparisons_.contains("ablations")) {
     const nlohmann::json& a = comparisons_["ablations"];

@@ -15,6 +15,11 @@
 //                         alpha dt = 1, the released code's setting; paper Section 4.2, R3)
 //   joint                 the joint-optimisation baseline (paper Section 4.1): a policy trained
 //                         with the barrier's derivative condition as an extra loss, unshielded
+//   cbf-qp                AIRL policy + the CBF-QP filter on the learned barrier (proposal
+//                         qp-only: the mean projected onto the linearised CBF half-space and the
+//                         action box, checked with the exact g; no sampling)
+//   secure-qp             SECURE with the gradient-first shield (proposal qp: the CBF-QP's
+//                         projection when its exact g >= 0, else Algorithms 1-2 unchanged)
 // Unshielded methods sample a ~ N(mu(o), sigma) as the authors' evaluation does; shielded ones
 // pass (mu, sigma) to the shield and apply its action.
 //
@@ -62,8 +67,10 @@ enum class Method {
   kBcShield,
   kSecureMyopic,
   kJoint,
+  kCbfQp,
+  kSecureQp,
 };
-inline constexpr EnumTable<Method, 8> kMethodNames{{
+inline constexpr EnumTable<Method, 10> kMethodNames{{
     {Method::kBc, "bc"},
     {Method::kAirl, "airl"},
     {Method::kSecure, "secure"},
@@ -72,6 +79,8 @@ inline constexpr EnumTable<Method, 8> kMethodNames{{
     {Method::kBcShield, "bc+shield"},
     {Method::kSecureMyopic, "secure-myopic"},
     {Method::kJoint, "joint"},
+    {Method::kCbfQp, "cbf-qp"},
+    {Method::kSecureQp, "secure-qp"},
 }};
 
 /// The methods of the double-integrator pipeline (Table 3 and Figure 9), in table order; the
@@ -103,6 +112,9 @@ struct SeedResult {
   long no_safe_action_decisions = 0;
   long invalid_input_decisions = 0;
   double mean_iterations = 0.0;      // sampling rounds per decision
+  long qp_tried = 0;      // decisions that tried the CBF-QP projection (proposal qp, qp-only)
+  long qp_decisions = 0;  // ... that it made (QpOutcome::kAccepted)
+  long qp_rejected = 0;   // ... whose projection had an exact g < 0 (rejected or infeasible)
   LatencySummary latency_us;         // decision latency (shielded) or policy query (unshielded)
   // Shielded methods: one forward of kReferenceBatch states through this seed's barrier with
   // nothing skipped (cbf::Barrier::EvaluateDense: the per-obstacle barrier evaluates every

@@ -661,6 +661,9 @@ eval::SeedResult SeedResultFromJson(const nlohmann::json& j) {
   r.no_safe_action_decisions = j.at("no_safe_action_decisions").get<long>();
   r.invalid_input_decisions = j.at("invalid_input_decisions").get<long>();
   r.mean_iterations = Number(j, "mean_iterations");
+  r.qp_tried = static_cast<long>(Number(j, "qp_tried"));
+  r.qp_decisions = static_cast<long>(Number(j, "qp_decisions"));
+  r.qp_rejected = static_cast<long>(Number(j, "qp_rejected"));
   const nlohmann::json& l = j.at("latency_us");
   r.latency_us.count = l.at("count").get<long>();
   r.latency_us.p50 = Number(l, "p50");

@@ -236,3 +236,91 @@ void InferenceMlp::ForwardLibxsmm(const Eigen::Ref<const Eigen::MatrixXf>& input
 }
 
 }  // namespace secure::nn
+
+namespace secure::nn {
+
+InferenceMlp::GradientWorkspace InferenceMlp::MakeGradientWorkspace(int max_batch) const {
+  SECURE_CHECK(max_batch > 0,
+               "InferenceMlp::MakeGradientWorkspace: max_batch = " << max_batch << ", must be > 0");
+  GradientWorkspace ws;
+  ws.max_batch_ = max_batch;
+  for (int width : spec_.hidden) ws.activations_.emplace_back(width, max_batch);
+  ws.delta_a_.resize(max_width_, max_batch);
+  ws.delta_b_.resize(max_width_, max_batch);
+  return ws;
+}
+
+void InferenceMlp::ForwardGradient(const Eigen::Ref<const Eigen::MatrixXf>& inputs,
+                                   GradientWorkspace& workspace,
+                                   Eigen::Ref<Eigen::VectorXf> values,
+                                   Eigen::Ref<Eigen::MatrixXf> gradients) const {
+  const Eigen::Index n = inputs.cols();
+  SECURE_CHECK(!layers_.empty(), "InferenceMlp::ForwardGradient: network is empty");
+  SECURE_CHECK(spec_.output_dim == 1, "InferenceMlp::ForwardGradient: the network has "
+                                          << spec_.output_dim
+                                          << " outputs; the gradient needs exactly 1");
+  SECURE_CHECK(inputs.rows() == spec_.input_dim, "InferenceMlp::ForwardGradient: inputs have "
+                                                     << inputs.rows() << " rows, expected "
+                                                     << spec_.input_dim);
+  SECURE_CHECK(values.size() == n && gradients.rows() == spec_.input_dim && gradients.cols() == n,
+               "InferenceMlp::ForwardGradient: values has "
+                   << values.size() << " entries and gradients is " << gradients.rows() << " x "
+                   << gradients.cols() << " for " << n << " inputs of dimension "
+                   << spec_.input_dim);
+  SECURE_CHECK(n <= workspace.max_batch_ &&
+                   workspace.activations_.size() == spec_.hidden.size(),
+               "InferenceMlp::ForwardGradient: batch of "
+                   << n << " exceeds the gradient workspace's max_batch " << workspace.max_batch_
+                   << " (or the workspace belongs to another network)");
+  const bool relu = spec_.activation == Activation::kRelu;
+  const std::size_t last = layers_.size() - 1;
+  // Forward, keeping every hidden layer's activations y_l = act(W_l y_{l-1} + b_l).
+  for (std::size_t l = 0; l < last; ++l) {
+    const DenseLayer& layer = layers_[l];
+    auto y = workspace.activations_[l].leftCols(n);
+    if (l == 0) {
+      y.noalias() = layer.weight * inputs;
+    } else {
+      y.noalias() = layer.weight * workspace.activations_[l - 1].leftCols(n);
+    }
+    BiasActivation(y, layer.bias, relu);
+  }
+  const DenseLayer& head = layers_[last];
+  Eigen::Map<Eigen::RowVectorXf> row(values.data(), n);
+  if (last == 0) {
+    row.noalias() = head.weight * inputs;
+  } else {
+    row.noalias() = head.weight * workspace.activations_[last - 1].leftCols(n);
+  }
+  row.array() += head.bias[0];
+  if (last == 0) {
+    // A linear network: the gradient is the (folded) weight row, the same for every input.
+    gradients = head.weight.transpose().replicate(1, n);
+    return;
+  }
+  // Backward: delta_{last-1} = W_head^T (1 x width)^T for every column, times act'(z); then
+  // delta_{l-1} = (W_l^T delta_l) * act'(z_{l-1}); finally d out / d input = W_0^T delta_0.
+  Eigen::MatrixXf* delta = &workspace.delta_a_;
+  Eigen::MatrixXf* next = &workspace.delta_b_;
+  for (std::size_t l = last; l-- > 0;) {
+    const int width = spec_.hidden[l];
+    auto d = delta->topLeftCorner(width, n);
+    if (l + 1 == last) {
+      d = head.weight.transpose().replicate(1, n);
+    } else {
+      d.noalias() = layers_[l + 1].weight.transpose() *
+                    next->topLeftCorner(layers_[l + 1].weight.rows(), n);
+    }
+    const auto y = workspace.activations_[l].leftCols(n);
+    if (relu) {
+      d.array() = (y.array() > 0.0f).select(d.array(), 0.0f);
+    } else {
+      d.array() *= 1.0f - y.array().square();
+    }
+    std::swap(delta, next);
+  }
+  // `next` now holds delta_0 (width_0 x n).
+  gradients.noalias() = layers_[0].weight.transpose() * next->topLeftCorner(spec_.hidden[0], n);
+}
+
+}  // namespace secure::nn

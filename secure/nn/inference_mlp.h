@@ -63,6 +63,21 @@ class InferenceMlp {
     Eigen::MatrixXf x_;      // contiguous copy of strided inputs (input_dim x max_batch)
   };
 
+  /// The buffers of ForwardGradient for batches of up to max_batch() samples: every hidden
+  /// layer's activations (kept for the backward pass) and two back-propagated blocks. Separate
+  /// from Workspace, so Forward's buffers and results are untouched by the gradient path.
+  class GradientWorkspace {
+   public:
+    GradientWorkspace() = default;
+    int max_batch() const { return max_batch_; }
+
+   private:
+    friend class InferenceMlp;
+    int max_batch_ = 0;
+    std::vector<Eigen::MatrixXf> activations_;  // per hidden layer (width x max_batch)
+    Eigen::MatrixXf delta_a_, delta_b_;         // ping-pong (max_width x max_batch)
+  };
+
   InferenceMlp() = default;
   /// Folds `normalizer` into the first layer: W' = W diag(1/scale), b' = b - W' mean.
   /// @throws secure::Error for kLibxsmm when LIBXSMM cannot generate a kernel on this CPU.
@@ -83,6 +98,21 @@ class InferenceMlp {
 
   /// A workspace for batches of up to `max_batch` samples.
   Workspace MakeWorkspace(int max_batch) const;
+
+  /// A gradient workspace for batches of up to `max_batch` samples.
+  GradientWorkspace MakeGradientWorkspace(int max_batch) const;
+
+  /// For a network with one output: values (N) = MLP(inputs (input_dim x N)) and gradients
+  /// (input_dim x N) = d MLP / d input of every column, analytically (a forward pass that keeps
+  /// each hidden layer's activations, then the backward pass: delta = W^T delta, times tanh'
+  /// = 1 - y^2 or ReLU' = [y > 0], whose value at 0 is taken as 0, as LibTorch does). The input
+  /// normalisation is folded into the first layer, so the gradient is with respect to the raw
+  /// input. Eigen products on either backend, so `values` can differ from Forward()'s by float
+  /// rounding (~1e-6 relative). No allocation. N <= workspace.max_batch().
+  /// @throws secure::Error if output_dim != 1 or the dimensions do not match.
+  void ForwardGradient(const Eigen::Ref<const Eigen::MatrixXf>& inputs,
+                       GradientWorkspace& workspace, Eigen::Ref<Eigen::VectorXf> values,
+                       Eigen::Ref<Eigen::MatrixXf> gradients) const;
 
   /// outputs (output_dim x N) = MLP(inputs (input_dim x N)). N <= workspace.max_batch().
   /// @throws secure::Error if the dimensions do not match.

@@ -12,11 +12,16 @@
 #include "secure/common/option_check.h"
 #include "secure/common/timer.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/shield/qp.h"
 
 namespace secure::shield {
 namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+// The CBF-QP's allowance for float rounding in g, per unit of (1 + |h(s)|) / dt: g's float h
+// values are good to a few ulps, about 1e-6 of |h|; 1e-4 is far above that and far below any g
+// that matters.
+constexpr double kQpRoundingMargin = 1e-4;
 
 // The inverse normal CDF in double precision throughout (Boost.Math's default policy promotes
 // double to long double internally, which costs x87 arithmetic for no gain at float output).
@@ -70,6 +75,15 @@ void ShieldOptions::Validate() const {
                      "ShieldOptions", "top_q_fraction", top_q_fraction, "in (0, 1]");
   SECURE_CHECK_FIELD(lookahead_steps >= 1 && lookahead_steps <= kMaxLookaheadSteps, "ShieldOptions",
                      "lookahead_steps", lookahead_steps, "in [1, " << kMaxLookaheadSteps << "]");
+  SECURE_CHECK_FIELD(qp_iterations >= 1 && qp_iterations <= kMaxQpIterations, "ShieldOptions",
+                     "qp_iterations", qp_iterations, "in [1, " << kMaxQpIterations << "]");
+  SECURE_CHECK_FIELD(std::isfinite(qp_margin) && qp_margin >= 0, "ShieldOptions", "qp_margin",
+                     qp_margin, ">= 0");
+  SECURE_CHECK(proposal == Proposal::kNone || lookahead_steps == 1,
+               "ShieldOptions::proposal = " << ToString(kProposalNames, proposal)
+                                            << " linearises the one-step condition: it needs "
+                                               "lookahead_steps = 1, not "
+                                            << lookahead_steps);
 }
 
 void ShieldOptions::Validate(int action_dim) const {
@@ -101,6 +115,11 @@ nlohmann::json ShieldOptions::ToJson() const {
   // directories compare them).
   if (aggregation == Aggregation::kTopQ) json["top_q_fraction"] = top_q_fraction;
   if (lookahead_steps != 1) json["lookahead_steps"] = lookahead_steps;
+  if (proposal != Proposal::kNone) {
+    json["proposal"] = ToString(kProposalNames, proposal);
+    json["qp_iterations"] = qp_iterations;
+    json["qp_margin"] = qp_margin;
+  }
   return json;
 }
 
@@ -123,13 +142,16 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("top_q_fraction", &top_q_fraction)
       .Field("lookahead_steps", &lookahead_steps)
       .Enum("action_bounds", &action_bounds, kActionBoundsNames)
+      .Enum("proposal", &proposal, kProposalNames)
+      .Field("qp_iterations", &qp_iterations)
+      .Field("qp_margin", &qp_margin)
       .Apply(node, source);
 }
 
 nlohmann::json Decision::ToJson() const {
   nlohmann::json a = nlohmann::json::array();
   for (Eigen::Index i = 0; i < action.size(); ++i) a.push_back(action[i]);
-  return {{"status", ToString(kStatusNames, status)},
+  nlohmann::json json = {{"status", ToString(kStatusNames, status)},
           {"action", a},
           {"g", g},
           {"h", h},
@@ -140,6 +162,8 @@ nlohmann::json Decision::ToJson() const {
           {"bounded", bounded},
           {"fallback", ToString(kFallbackNames, fallback)},
           {"seconds", seconds}};
+  if (qp != QpOutcome::kNotTried) json["qp"] = ToString(kQpOutcomeNames, qp);
+  return json;
 }
 
 double ClassKValue(const ShieldOptions& options, double h) {
@@ -186,6 +210,19 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
   order_.resize(static_cast<std::size_t>(m));
   rejected_.assign(static_cast<std::size_t>(m), 0);
   applied_.resize(action_dim_, batch);
+  if (options_.proposal != Proposal::kNone) {
+    qp_actions_.resize(action_dim_, 2 * action_dim_ + 1);
+    qp_next_.resize(state_dim_, 2 * action_dim_ + 1);
+    qp_h_.resize(1);
+    qp_gradient_.resize(state_dim_, 1);
+    qp_jacobian_.resize(state_dim_, action_dim_);
+    qp_normal_.resize(action_dim_);
+    qp_mu_.resize(action_dim_);
+    qp_low_.resize(action_dim_);
+    qp_high_.resize(action_dim_);
+    qp_solution_.resize(action_dim_);
+    qp_scratch_.reserve(static_cast<std::size_t>(2 * action_dim_));
+  }
   low_ = Eigen::VectorXf::Constant(action_dim_, -std::numeric_limits<float>::infinity());
   high_ = Eigen::VectorXf::Constant(action_dim_, std::numeric_limits<float>::infinity());
   if (options_.sampler == Sampler::kQmc) {
@@ -318,6 +355,96 @@ void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
   for (int step = 0; step < options_.lookahead_steps; ++step)
     bound -= options_.dt * ClassKValue(options_, bound);
   for (Eigen::Index i = 0; i < k; ++i) g[i] = (static_cast<double>(h_next_[i]) - bound) * inv_dt;
+}
+
+bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
+                       const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state) {
+  const int n = action_dim_;
+  const double inv_dt = 1.0 / options_.dt;
+  const double alpha = ClassKValue(options_, h_state);
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int r = 0; r < n; ++r) {
+    qp_mu_[r] = mu[r];
+    qp_low_[r] = bounds_active() ? static_cast<double>(low_[r]) : -inf;
+    qp_high_[r] = bounds_active() ? static_cast<double>(high_[r]) : inf;
+  }
+  // The first linearisation point: mu as the actuator applies it.
+  qp_actions_.col(0) = mu;
+  if (ClipToBox(qp_actions_.leftCols(1))) decision_.bounded = true;
+  for (int round = 0; round < options_.qp_iterations; ++round) {
+    // The point and its 2n neighbours (central differences of T in each action, inside the
+    // box: one-sided at a face), then grad h at the predicted state T(s, a0).
+    for (int r = 0; r < n; ++r) {
+      const float a0 = qp_actions_(r, 0);
+      const float step = 1e-2f * std::max(1.0f, std::abs(a0));
+      qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
+      qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
+      qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
+      qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
+    }
+    dynamics_.Step(state, qp_actions_, qp_next_);
+    barrier_.EvaluateGradient(qp_next_.leftCols(1), qp_h_, qp_gradient_);
+    // g at the point, as linearised: g0 = (h(T(s, a0)) - h(s)) / dt + alpha(h(s)).
+    const double g0 = (static_cast<double>(qp_h_[0]) - h_state) * inv_dt + alpha;
+    if (round == 0 && g0 >= options_.qp_margin) {
+      // mu satisfies the condition: the QP's answer is mu itself (clipped), checked exactly.
+      one_action_.col(0) = qp_actions_.col(0);
+      EvaluateG(state, h_state, one_action_, one_g_);
+      if (one_g_[0] >= 0.0) {
+        decision_.action = one_action_.col(0);
+        decision_.g = one_g_[0];
+        decision_.qp = QpOutcome::kAccepted;
+        return true;
+      }
+    }
+    decision_.intervened = true;  // the policy's mean failed the condition
+    for (int r = 0; r < n; ++r) {
+      const double width =
+          static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
+      if (width > 0) {
+        qp_jacobian_.col(r) =
+            (qp_next_.col(1 + 2 * r).cast<double>() - qp_next_.col(2 + 2 * r).cast<double>()) /
+            width;
+      } else {
+        qp_jacobian_.col(r).setZero();  // a box of zero width in this action
+      }
+    }
+    // g(a) ~ g0 + c . (a - a0) with c = J^T grad h / dt: the half-space c . a >= c . a0 - g0 +
+    // margin, where the margin adds to qp_margin what float rounding of h costs g (a projection
+    // exactly on the linearised boundary would otherwise fail the exact check half the time).
+    for (int r = 0; r < n; ++r) {  // a loop: Eigen would cast the gradient into a temporary
+      double dot = 0.0;
+      for (int i = 0; i < state_dim_; ++i)
+        dot += qp_jacobian_(i, r) * static_cast<double>(qp_gradient_(i, 0));
+      qp_normal_[r] = dot * inv_dt;
+    }
+    const double rounding = kQpRoundingMargin * (1.0 + std::abs(h_state)) * inv_dt;
+    double offset = options_.qp_margin + rounding - g0;
+    for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
+    QpResult result;
+    if (qp_normal_.allFinite() && std::isfinite(offset)) {
+      result = ProjectOntoHalfSpaceAndBox(qp_mu_, qp_normal_, offset, qp_low_, qp_high_,
+                                          qp_solution_, qp_scratch_);
+    } else {
+      // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
+      result.status = QpStatus::kInfeasible;
+      for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
+    }
+    one_action_.col(0) = qp_solution_.cast<float>();
+    ClipToBox(one_action_);  // rounding to float stays in the box
+    EvaluateG(state, h_state, one_action_, one_g_);
+    decision_.action = one_action_.col(0);
+    decision_.g = one_g_[0];
+    if (one_g_[0] >= 0.0) {
+      decision_.qp = QpOutcome::kAccepted;
+      return true;
+    }
+    decision_.qp =
+        result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
+    // Re-linearise at the projection (qp_iterations > 1).
+    qp_actions_.col(0) = one_action_.col(0);
+  }
+  return false;
 }
 
 void Shield::DrawRound() {
@@ -511,6 +638,7 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
   decision_.distance_to_mean = 0.0;
   decision_.bounded = false;
   decision_.fallback = Fallback::kNone;
+  decision_.qp = QpOutcome::kNotTried;
 
   // NaN/Inf anywhere: report it, return a finite action, check nothing.
   if (!state.allFinite() || !mu.allFinite() || !sigma.allFinite() || (sigma.array() < 0).any()) {
@@ -524,6 +652,28 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     FinishInvalid();
     decision_.seconds = clock.Seconds();
     return decision_;
+  }
+
+  if (options_.proposal != Proposal::kNone) {
+    // The CBF-QP projection of mu first: the decision if its exact g >= 0.
+    if (ProposeQp(state, mu, h_state)) {
+      decision_.status = Status::kSafe;
+      decision_.safe_ratio = 1.0;
+      decision_.distance_to_mean = (decision_.action - mu).norm();
+      decision_.seconds = clock.Seconds();
+      return decision_;
+    }
+    if (options_.proposal == Proposal::kQpOnly) {
+      // The CBF-QP filter alone: its projection, reported unsafe.
+      decision_.status = Status::kNoSafeAction;
+      decision_.fallback = Fallback::kQpProjection;
+      decision_.distance_to_mean = (decision_.action - mu).norm();
+      decision_.seconds = clock.Seconds();
+      return decision_;
+    }
+    // Algorithms 1-2, unchanged (the projection drew no random numbers).
+    decision_.intervened = false;
+    decision_.bounded = false;
   }
 
   mu_ = mu;

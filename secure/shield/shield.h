@@ -141,6 +141,42 @@ inline constexpr EnumTable<ActionBounds, 3> kActionBoundsNames{{
     {ActionBounds::kIgnore, "ignore"},
 }};
 
+/// Whether a decision first tries the CBF-QP's projection of the policy's mean (docs/SHIELD.md,
+/// "CBF-QP and the gradient-first shield"). The projection linearises g at mu, with the barrier's
+/// gradient at the predicted state s+ = T(s, mu) and the model's action Jacobian J at mu (central
+/// differences of T, exact up to rounding for a model affine in the action):
+///   g(a) ~ g(mu) + (grad h(s+) . J (a - mu)) / dt >= 0,
+/// solves min ||a - mu||^2 over that half-space and the actuator box (qp.h), and checks the
+/// result with the exact g (the shield model and the barrier, as every sample is checked).
+enum class Proposal {
+  kNone,    // Algorithms 1-2 only (the paper)
+  kQp,      // gradient-first: the projection is the decision when its exact g >= 0, otherwise
+            // Algorithms 1-2 run unchanged (Decision::qp says which path decided)
+  kQpOnly,  // the CBF-QP filter alone (method cbf-qp): the projection is the decision; when its
+            // exact g < 0 (the linearisation misled it, or the half-space misses the box) the
+            // status is kNoSafeAction with Fallback::kQpProjection. No sampling
+};
+inline constexpr EnumTable<Proposal, 3> kProposalNames{{
+    {Proposal::kNone, "none"},
+    {Proposal::kQp, "qp"},
+    {Proposal::kQpOnly, "qp-only"},
+}};
+
+/// What the CBF-QP projection of a decision did (Decision::qp).
+enum class QpOutcome {
+  kNotTried,    // proposal = none, or the input was invalid
+  kAccepted,    // its exact g >= 0: it is the decision
+  kRejected,    // its exact g < 0: the linearisation misled it
+  kInfeasible,  // the linearised half-space misses the box (the QP returned the box point of
+                // largest linearised g); its exact g < 0
+};
+inline constexpr EnumTable<QpOutcome, 4> kQpOutcomeNames{{
+    {QpOutcome::kNotTried, "not_tried"},
+    {QpOutcome::kAccepted, "accepted"},
+    {QpOutcome::kRejected, "rejected"},
+    {QpOutcome::kInfeasible, "infeasible"},
+}};
+
 /// The largest action dimension Sampler::kQmc supports (Boost.Random's Sobol tables).
 int MaxQmcDimension();
 
@@ -153,6 +189,8 @@ double QmcNormal(std::uint64_t word);
 
 /// The largest ShieldOptions::lookahead_steps.
 inline constexpr int kMaxLookaheadSteps = 100;
+/// The largest ShieldOptions::qp_iterations.
+inline constexpr int kMaxQpIterations = 10;
 
 struct ShieldOptions {
   int num_samples = 64;     // M: actions drawn per iteration
@@ -180,6 +218,16 @@ struct ShieldOptions {
   int lookahead_steps = 1;
   // What the actuator box does to the samples (ActionBounds; used only when a box is set).
   ActionBounds action_bounds = ActionBounds::kClip;
+  // Whether the CBF-QP's projection of mu is tried first (Proposal; needs lookahead_steps = 1).
+  Proposal proposal = Proposal::kNone;
+  // Linearisations per decision: when the projection's exact g < 0, re-linearise at it and
+  // project mu again, up to this many times in all (1: the textbook CBF-QP).
+  int qp_iterations = 1;
+  // The linearised condition the projection asks for is g >= qp_margin (>= 0, in g's units): a
+  // buffer against the linearisation's error on a curved barrier or model. (A fixed 1e-4 (1 +
+  // |h(s)|) / dt is always added, against float rounding.) The exact check is g >= 0 whatever
+  // the margin.
+  double qp_margin = 0.0;
 
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
@@ -213,12 +261,14 @@ enum class Fallback {
   kBestSample,    // the evaluated sample with the largest g
   kBackupAction,  // the caller's backup action (its g was larger)
   kRandomSample,  // ablation 2's random sample of the last batch
+  kQpProjection,  // proposal = qp-only: the CBF-QP's projection, whose exact g < 0
 };
-inline constexpr EnumTable<Fallback, 4> kFallbackNames{{
+inline constexpr EnumTable<Fallback, 5> kFallbackNames{{
     {Fallback::kNone, "none"},
     {Fallback::kBestSample, "best_sample"},
     {Fallback::kBackupAction, "backup_action"},
     {Fallback::kRandomSample, "random_sample"},
+    {Fallback::kQpProjection, "qp_projection"},
 }};
 
 /// The outcome of one decision, with diagnostics. Owned by the Shield and overwritten by the
@@ -235,6 +285,7 @@ struct Decision {
   bool bounded = false;  // the actuator box cut into this decision: the policy's mean (policy-mean)
                          // or a drawn sample lay outside it and was clipped or rejected
   Fallback fallback = Fallback::kNone;
+  QpOutcome qp = QpOutcome::kNotTried;  // the CBF-QP projection (proposal qp, qp-only)
   double seconds = 0.0;  // wall time of the decision
 
   bool safe() const { return status == Status::kSafe || status == Status::kSafeAfterResampling; }
@@ -337,6 +388,10 @@ class Shield {
   // `actions` as the actuator applies them: clipped onto the box (a copy in applied_) when
   // bounds_active(), else `actions` itself.
   Eigen::Ref<const Eigen::MatrixXf> Applied(const Eigen::Ref<const Eigen::MatrixXf>& actions);
+  // The CBF-QP projection of mu (proposal != none) into decision_ (action, g, qp); returns whether
+  // its exact g >= 0. h_state = h(s), finite.
+  bool ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
+                 const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state);
   // Clips the columns of `actions` onto the box (bounds_active()); returns whether one moved.
   bool ClipToBox(Eigen::Ref<Eigen::MatrixXf> actions) const;
   // kSafe after one round, kSafeAfterResampling after more.
@@ -377,6 +432,16 @@ class Shield {
   // Sampler::kQmc: the first M Sobol points as 64-bit integers, (action_dim x M), column c =
   // point c (built in the constructor; empty for the other samplers).
   Eigen::Matrix<std::uint64_t, Eigen::Dynamic, Eigen::Dynamic> sobol_;
+  // proposal != none: the linearisation point, its 2 action_dim neighbours for the model's
+  // Jacobian (central differences) and their next states; h and grad h at the predicted state;
+  // the Jacobian, the half-space's normal and the projection (sized in the constructor).
+  Eigen::MatrixXf qp_actions_;    // (action_dim x 2 action_dim + 1)
+  Eigen::MatrixXf qp_next_;       // (state_dim x 2 action_dim + 1)
+  Eigen::VectorXf qp_h_;          // (1)
+  Eigen::MatrixXf qp_gradient_;   // (state_dim x 1)
+  Eigen::MatrixXd qp_jacobian_;   // (state_dim x action_dim)
+  Eigen::VectorXd qp_normal_, qp_mu_, qp_low_, qp_high_, qp_solution_;  // (action_dim)
+  std::vector<double> qp_scratch_;  // (4 action_dim + 2) the QP's breakpoints
 };
 
 }  // namespace secure::shield

@@ -533,5 +533,57 @@ TEST(EpisodeRunnerTest, APolicyWhoseSigmaDoesNotFitIsAnError) {
              "the policy's sigma has 3 values, expected 2");
 }
 
+// The CBF-QP filter and the gradient-first shield: the proposal, nothing else; on the double
+// integrator with its ground truth the filter keeps the PD policy out of the obstacle as SECURE
+// does, and the seed records count what the projection decided.
+TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
+  shield::ShieldOptions base;
+  base.num_samples = 32;
+  shield::ShieldOptions expected = base;
+  expected.proposal = shield::Proposal::kQpOnly;
+  EXPECT_EQ(ShieldOptionsFor(Method::kCbfQp, base).ToJson(), expected.ToJson());
+  expected.proposal = shield::Proposal::kQp;
+  EXPECT_EQ(ShieldOptionsFor(Method::kSecureQp, base).ToJson(), expected.ToJson());
+  EXPECT_EQ(ParseMethods("cbf-qp,secure-qp"),
+            (std::vector<Method>{Method::kCbfQp, Method::kSecureQp}));
+  EXPECT_TRUE(IsShielded(Method::kCbfQp) && IsShielded(Method::kSecureQp));
+
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  SeedModels models;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
+  const auto results = EvaluateMethods(env, {Method::kSecure, Method::kCbfQp, Method::kSecureQp},
+                                       models, shield::ShieldOptions{}, 20, 7);
+  for (Method m : {Method::kCbfQp, Method::kSecureQp}) {
+    const SeedResult& r = results.at(m);
+    EXPECT_EQ(r.qp_tried, r.decisions) << ToString(kMethodNames, m);
+    EXPECT_GT(r.qp_decisions, r.decisions / 2) << ToString(kMethodNames, m);
+    EXPECT_EQ(r.qp_decisions + r.qp_rejected, r.qp_tried);
+    EXPECT_EQ(r.ToJson()["qp_decisions"], r.qp_decisions);
+  }
+  EXPECT_EQ(results.at(Method::kSecureQp).dangerous, 0);
+  EXPECT_EQ(results.at(Method::kSecure).qp_tried, 0);
+  EXPECT_FALSE(results.at(Method::kSecure).ToJson().contains("qp_tried"));
+  // The sampling fallback keeps the gradient-first shield's decisions safe where the projection
+  // fails: no decision without a safe action beyond SECURE's.
+  EXPECT_LE(results.at(Method::kSecureQp).no_safe_action_decisions,
+            results.at(Method::kSecure).no_safe_action_decisions);
+
+  Evaluation evaluation;
+  const std::vector<long> success = {80, 85, 78, 90, 83};
+  for (std::size_t k = 0; k < 5; ++k) {
+    evaluation.Add(Method::kSecure, Synthetic(success[k], 1));
+    evaluation.Add(Method::kCbfQp, Synthetic(success[k] - 2, long(k)));
+    evaluation.Add(Method::kSecureQp, Synthetic(success[k] + 1, 1));
+  }
+  evaluation.Finish();
+  const nlohmann::json j = evaluation.ToJson();
+  EXPECT_TRUE(j["comparisons"].contains("cbf-qp_vs_secure"));
+  EXPECT_TRUE(j["comparisons"]["secure-qp_vs_secure"].contains("dangerous_mann_whitney"));
+  EXPECT_HAS(evaluation.Table(), "secure-qp vs SECURE: dangerous Mann-Whitney U");
+}
+
 }  // namespace
 }  // namespace secure::eval

@@ -194,6 +194,16 @@ class TiltedBarrier final : public cbf::Barrier {
     inner_.Evaluate(states, h);
     for (Eigen::Index i = 0; i < states.cols(); ++i) h[i] += slope_ * (states(row_, i) - offset_);
   }
+  // The inner barrier's gradient (analytic for the learned ones), tilted.
+  void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h,
+                          Eigen::Ref<Eigen::MatrixXf> gradients) override {
+    inner_.EvaluateGradient(states, h, gradients);
+    for (Eigen::Index i = 0; i < states.cols(); ++i) {
+      h[i] += slope_ * (states(row_, i) - offset_);
+      gradients(row_, i) += slope_;
+    }
+  }
 
  private:
   cbf::Barrier& inner_;
@@ -245,6 +255,11 @@ void ExpectNoAllocations(const Scenario& s, cbf::Barrier& barrier,
       ASSERT_EQ(d.status, Status::kInvalidInput);
     } else {
       ASSERT_NE(d.status, Status::kInvalidInput);
+    }
+    if (s.options.proposal != Proposal::kNone) {
+      // The CBF-QP projection was tried; it decided (no sampling round) or sampling followed.
+      if (!s.expect_invalid) ASSERT_NE(d.qp, QpOutcome::kNotTried) << d.ToJson().dump();
+      continue;
     }
     if (s.expect_resampling) {
       ASSERT_GT(d.iterations, 1) << d.ToJson().dump();
@@ -377,6 +392,28 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   cubic.options.time_budget_us = 1e6;
   scenarios.push_back(cubic);
 
+  // The CBF-QP projection first (proposal qp: sampling follows a rejected one) or alone
+  // (qp-only), with a safe and an unsafe mean, with and without the box; re-linearised too.
+  for (Proposal proposal : {Proposal::kQp, Proposal::kQpOnly}) {
+    const std::string name = "proposal " + std::string(ToString(kProposalNames, proposal));
+    Scenario safe = none;
+    safe.name = name + ", safe mean";
+    safe.options.proposal = proposal;
+    scenarios.push_back(safe);
+    Scenario unsafe = resampling;
+    unsafe.name = name + ", unsafe mean";
+    unsafe.options.proposal = proposal;
+    unsafe.options.qp_iterations = 3;
+    unsafe.expect_resampling = false;
+    scenarios.push_back(unsafe);
+    Scenario boxed = unsafe;
+    boxed.name = name + ", unsafe mean, actuator box";
+    boxed.low = Vec({-1.0f, -4.9f});
+    boxed.high = Vec({1.0f, 1.0f});
+    boxed.options.qp_margin = 0.5;
+    scenarios.push_back(boxed);
+  }
+
   // Every path again with the other samplers (odd M for the antithetic one: an unpaired column).
   const std::size_t iid_count = scenarios.size();
   for (Sampler sampler : {Sampler::kAntithetic, Sampler::kQmc}) {
@@ -496,6 +533,12 @@ TEST(ShieldAllocTest, PandaSizedLearnedBarrierDecisionsDoNotAllocate) {
     other.options.sampler = sampler;
     ExpectNoAllocations(other, barrier, dynamics, 50, note);
   }
+  // The gradient-first shield: the projection (the MLP's backward pass at one state), then
+  // Algorithms 1-2 if it is rejected.
+  Scenario qp = s;
+  qp.name += ", proposal qp";
+  qp.options.proposal = Proposal::kQp;
+  ExpectNoAllocations(qp, barrier, dynamics, 50, note);
 }
 
 // Top-q with AIRL's task value (policy::AirlActionValue: the reward and shaping MLPs on the
@@ -551,6 +594,12 @@ TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
   s.expect_resampling = true;
   const domains::derby::DerbyShieldModel model(0.1, 3.0, 3);
   ExpectNoAllocations(s, barrier, model, 300);
+  for (Proposal proposal : {Proposal::kQp, Proposal::kQpOnly}) {
+    Scenario qp = s;
+    qp.name += ", proposal " + std::string(ToString(kProposalNames, proposal));
+    qp.options.proposal = proposal;
+    ExpectNoAllocations(qp, barrier, model, 300);
+  }
   s.name += ", sampler = qmc";
   s.options.sampler = Sampler::kQmc;
   ExpectNoAllocations(s, barrier, model, 300);

@@ -1,0 +1,118 @@
+#include "secure/shield/qp.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "secure/common/error.h"
+
+namespace secure::shield {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// c . clip(mu + lambda c) for lambda >= 0 (finite).
+double Phi(const Eigen::Ref<const Eigen::VectorXd>& mu, const Eigen::Ref<const Eigen::VectorXd>& c,
+           const Eigen::Ref<const Eigen::VectorXd>& low,
+           const Eigen::Ref<const Eigen::VectorXd>& high, double lambda) {
+  double phi = 0.0;
+  for (Eigen::Index i = 0; i < mu.size(); ++i) {
+    if (c[i] == 0.0) continue;
+    phi += c[i] * std::clamp(mu[i] + lambda * c[i], low[i], high[i]);
+  }
+  return phi;
+}
+
+// d phi / d lambda just after lambda: the sum of c_i^2 over the coordinates strictly inside (or
+// moving into) their interval.
+double Slope(const Eigen::Ref<const Eigen::VectorXd>& mu, const Eigen::Ref<const Eigen::VectorXd>& c,
+             const Eigen::Ref<const Eigen::VectorXd>& low,
+             const Eigen::Ref<const Eigen::VectorXd>& high, double lambda) {
+  double slope = 0.0;
+  for (Eigen::Index i = 0; i < mu.size(); ++i) {
+    if (c[i] == 0.0) continue;
+    const double x = mu[i] + lambda * c[i];
+    // Moving up (c > 0) it grows while below high and at or above low; down symmetric.
+    const bool free = c[i] > 0 ? (x >= low[i] && x < high[i]) : (x <= high[i] && x > low[i]);
+    if (free) slope += c[i] * c[i];
+  }
+  return slope;
+}
+
+}  // namespace
+
+QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
+                                    const Eigen::Ref<const Eigen::VectorXd>& c, double d,
+                                    const Eigen::Ref<const Eigen::VectorXd>& low,
+                                    const Eigen::Ref<const Eigen::VectorXd>& high,
+                                    Eigen::Ref<Eigen::VectorXd> a, std::vector<double>& scratch) {
+  const Eigen::Index n = mu.size();
+  SECURE_CHECK(c.size() == n && low.size() == n && high.size() == n && a.size() == n,
+               "ProjectOntoHalfSpaceAndBox: sizes " << n << ", " << c.size() << ", " << low.size()
+                                                    << ", " << high.size() << ", " << a.size()
+                                                    << " differ");
+  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
+               "ProjectOntoHalfSpaceAndBox: mu, c and d must be finite");
+  for (Eigen::Index i = 0; i < n; ++i)
+    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
+                 "ProjectOntoHalfSpaceAndBox: box [" << low[i] << ", " << high[i] << "] of "
+                                                     << "coordinate " << i
+                                                     << ": need low <= high, no NaN");
+  QpResult result;
+  // lambda = 0: the box projection of mu, if it satisfies the half-space.
+  if (Phi(mu, c, low, high, 0.0) >= d) {
+    for (Eigen::Index i = 0; i < n; ++i) a[i] = std::clamp(mu[i], low[i], high[i]);
+    return result;
+  }
+  // The supremum of phi: each coordinate at the end of its interval in c's direction.
+  double sup = 0.0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (c[i] > 0) sup += c[i] * high[i];
+    if (c[i] < 0) sup += c[i] * low[i];
+  }
+  if (sup < d) {  // +inf never is; NaN cannot occur (bounds are not NaN, c finite)
+    for (Eigen::Index i = 0; i < n; ++i) {
+      a[i] = c[i] > 0 ? high[i] : c[i] < 0 ? low[i] : std::clamp(mu[i], low[i], high[i]);
+    }
+    result.status = QpStatus::kInfeasible;
+    result.multiplier = kInf;
+    return result;
+  }
+  // The breakpoints: where mu_i + lambda c_i reaches low_i or high_i, for lambda > 0.
+  scratch.clear();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (c[i] == 0.0) continue;
+    for (const double bound : {low[i], high[i]}) {
+      if (!std::isfinite(bound)) continue;
+      const double lambda = (bound - mu[i]) / c[i];
+      if (lambda > 0 && std::isfinite(lambda)) scratch.push_back(lambda);
+    }
+  }
+  std::sort(scratch.begin(), scratch.end());
+  // Walk the segments [lo, hi] of phi's linear pieces until phi(hi) >= d; the root is in it.
+  double lo = 0.0, phi_lo = Phi(mu, c, low, high, 0.0);
+  double lambda = kInf;
+  for (const double hi : scratch) {
+    if (hi <= lo) continue;
+    const double phi_hi = Phi(mu, c, low, high, hi);
+    if (phi_hi >= d) {
+      // Linear between lo and hi.
+      lambda = phi_hi > phi_lo ? lo + (d - phi_lo) * (hi - lo) / (phi_hi - phi_lo) : hi;
+      lambda = std::clamp(lambda, lo, hi);
+      break;
+    }
+    lo = hi;
+    phi_lo = phi_hi;
+  }
+  if (!std::isfinite(lambda)) {
+    // Past the last breakpoint phi keeps growing (an unbounded side) at a constant slope.
+    const double slope = Slope(mu, c, low, high, lo);
+    SECURE_INTERNAL_CHECK(slope > 0, "ProjectOntoHalfSpaceAndBox: phi stalls below its supremum");
+    lambda = lo + (d - phi_lo) / slope;
+  }
+  for (Eigen::Index i = 0; i < n; ++i) a[i] = std::clamp(mu[i] + lambda * c[i], low[i], high[i]);
+  result.multiplier = lambda;
+  return result;
+}
+
+}  // namespace secure::shield

@@ -1,0 +1,161 @@
+// The CBF-QP's projection (qp.h) against a brute-force grid on random half-spaces and boxes
+// (RapidCheck, with the fixed seed every ctest run of shield_test uses), and its special cases.
+
+#include "secure/shield/qp.h"
+
+#include <gtest/gtest.h>
+#include <rapidcheck.h>
+#include <rapidcheck/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "tests/test_util.h"
+
+namespace secure::shield {
+namespace {
+
+using secure::test::ErrorOf;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+rc::Gen<double> UniformIn(double lo, double hi) {
+  return rc::gen::map(rc::gen::inRange<int>(0, 10001),
+                      [lo, hi](int i) { return lo + (hi - lo) * (i / 10000.0); });
+}
+
+Eigen::VectorXd RandomVector(int n, double lo, double hi) {
+  Eigen::VectorXd v(n);
+  for (int i = 0; i < n; ++i) v[i] = *UniformIn(lo, hi);
+  return v;
+}
+
+QpResult Solve(const Eigen::VectorXd& mu, const Eigen::VectorXd& c, double d,
+               const Eigen::VectorXd& low, const Eigen::VectorXd& high, Eigen::VectorXd* a) {
+  std::vector<double> scratch;
+  scratch.reserve(static_cast<std::size_t>(2 * mu.size()));
+  a->resize(mu.size());
+  return ProjectOntoHalfSpaceAndBox(mu, c, d, low, high, *a, scratch);
+}
+
+// In 1 to 3 dimensions: the answer lies in the box and the half-space, every grid point of the
+// box (`steps` per axis) that satisfies the half-space is no closer to mu, and infeasibility is reported exactly when no point of the box satisfies
+// the half-space (the box's maximiser of c . a decides, the grid holds the corners).
+RC_GTEST_PROP(QpProperty, MatchesABruteForceGrid, ()) {
+  const int n = *rc::gen::inRange(1, 4);
+  const Eigen::VectorXd low = RandomVector(n, -3, 0);
+  Eigen::VectorXd high = low;
+  for (int i = 0; i < n; ++i) high[i] += *UniformIn(0.0, 4.0);  // width 0 allowed
+  const Eigen::VectorXd mu = RandomVector(n, -5, 5);
+  Eigen::VectorXd c = RandomVector(n, -2, 2);
+  if (*rc::gen::inRange(0, 5) == 0) c[*rc::gen::inRange(0, n)] = 0.0;  // an axis c ignores
+  const double d = *UniformIn(-6, 6);
+  Eigen::VectorXd a;
+  const QpResult result = Solve(mu, c, d, low, high, &a);
+  // In the box always.
+  for (int i = 0; i < n; ++i) RC_ASSERT(a[i] >= low[i] && a[i] <= high[i]);
+  double box_max = 0.0;
+  for (int i = 0; i < n; ++i) box_max += c[i] > 0 ? c[i] * high[i] : c[i] * low[i];
+  if (result.status == QpStatus::kInfeasible) {
+    RC_ASSERT(box_max < d);
+    RC_ASSERT(std::abs(c.dot(a) - box_max) <= 1e-9 * (1 + std::abs(box_max)));
+    return;
+  }
+  RC_ASSERT(box_max >= d);
+  RC_ASSERT(c.dot(a) >= d - 1e-9 * (1 + std::abs(d)));
+  const double best = (a - mu).squaredNorm();
+  // The grid: no feasible point is closer than the answer (up to rounding).
+  const int steps = n == 1 ? 2001 : n == 2 ? 201 : 41;
+  Eigen::VectorXi index = Eigen::VectorXi::Zero(n);
+  double grid_best = kInf;
+  for (;;) {
+    Eigen::VectorXd p(n);
+    for (int i = 0; i < n; ++i) p[i] = low[i] + (high[i] - low[i]) * index[i] / (steps - 1);
+    if (c.dot(p) >= d) {
+      const double dist = (p - mu).squaredNorm();
+      RC_ASSERT(dist >= best - 1e-9 * (1 + best));
+      grid_best = std::min(grid_best, dist);
+    }
+    int k = 0;
+    while (k < n && ++index[k] == steps) index[k++] = 0;
+    if (k == n) break;
+  }
+  // Together with its feasibility: optimal among the grid's points (and no grid point of the
+  // half-space is missed: the box's corners are grid points).
+  RC_ASSERT(!std::isfinite(grid_best) || grid_best >= best - 1e-9 * (1 + best));
+}
+
+// Unbounded sides (infinite box bounds) and the plain projection onto a half-space.
+RC_GTEST_PROP(QpProperty, WithoutABoxIsTheHalfSpaceProjection, ()) {
+  const int n = *rc::gen::inRange(1, 6);
+  const Eigen::VectorXd mu = RandomVector(n, -5, 5);
+  Eigen::VectorXd c = RandomVector(n, -2, 2);
+  c[0] += c[0] >= 0 ? 0.1 : -0.1;  // c != 0
+  const double d = *UniformIn(-6, 6);
+  const Eigen::VectorXd low = Eigen::VectorXd::Constant(n, -kInf);
+  const Eigen::VectorXd high = Eigen::VectorXd::Constant(n, kInf);
+  Eigen::VectorXd a;
+  const QpResult result = Solve(mu, c, d, low, high, &a);
+  RC_ASSERT(result.status == QpStatus::kOptimal);
+  const double violation = std::max(0.0, d - c.dot(mu));
+  const Eigen::VectorXd expected = mu + violation / c.squaredNorm() * c;
+  RC_ASSERT((a - expected).norm() <= 1e-9 * (1 + expected.norm()));
+}
+
+TEST(QpTest, AFeasibleMeanIsReturnedClipped) {
+  Eigen::VectorXd a;
+  const QpResult r = Solve(Eigen::Vector2d(3, 0.5), Eigen::Vector2d(1, 0), -10,
+                           Eigen::Vector2d(-1, -1), Eigen::Vector2d(1, 1), &a);
+  EXPECT_EQ(r.status, QpStatus::kOptimal);
+  EXPECT_EQ(r.multiplier, 0.0);
+  EXPECT_EQ(a, Eigen::Vector2d(1, 0.5));
+}
+
+TEST(QpTest, TheMultiplierCrossesABreakpoint) {
+  // mu = (0, 0), c = (1, 1), d = 1.5, box [-1, 0.5] x [-1, 2]: a = (lambda, lambda) until x hits
+  // 0.5 at lambda = 0.5 (c . a = 1), then only y moves: y = 1.
+  Eigen::VectorXd a;
+  const QpResult r = Solve(Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 1), 1.5,
+                           Eigen::Vector2d(-1, -1), Eigen::Vector2d(0.5, 2), &a);
+  EXPECT_EQ(r.status, QpStatus::kOptimal);
+  EXPECT_NEAR(a[0], 0.5, 1e-12);
+  EXPECT_NEAR(a[1], 1.0, 1e-12);
+  EXPECT_NEAR(r.multiplier, 1.0, 1e-12);
+}
+
+TEST(QpTest, InfeasibleGivesTheBoxMaximiser) {
+  Eigen::VectorXd a;
+  const QpResult r = Solve(Eigen::Vector3d(0, 0, 0.25), Eigen::Vector3d(1, -1, 0), 5,
+                           Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1), &a);
+  EXPECT_EQ(r.status, QpStatus::kInfeasible);
+  EXPECT_TRUE(std::isinf(r.multiplier));
+  EXPECT_EQ(a, Eigen::Vector3d(1, -1, 0.25));
+  // c = 0: feasible iff d <= 0.
+  EXPECT_EQ(Solve(Eigen::Vector2d(2, 0), Eigen::Vector2d::Zero(), 0.5, Eigen::Vector2d(-1, -1),
+                  Eigen::Vector2d(1, 1), &a)
+                .status,
+            QpStatus::kInfeasible);
+  EXPECT_EQ(a, Eigen::Vector2d(1, 0));
+  EXPECT_EQ(Solve(Eigen::Vector2d(2, 0), Eigen::Vector2d::Zero(), -0.5, Eigen::Vector2d(-1, -1),
+                  Eigen::Vector2d(1, 1), &a)
+                .status,
+            QpStatus::kOptimal);
+}
+
+TEST(QpTest, BadInputIsRejected) {
+  Eigen::VectorXd a;
+  EXPECT_HAS(ErrorOf([&] {
+               Solve(Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 1), 0, Eigen::Vector2d(1, -1),
+                     Eigen::Vector2d(0, 1), &a);
+             }),
+             "box [1, 0] of coordinate 0: need low <= high");
+  EXPECT_HAS(ErrorOf([&] {
+               Solve(Eigen::Vector2d(0, std::nan("")), Eigen::Vector2d(1, 1), 0,
+                     Eigen::Vector2d(-1, -1), Eigen::Vector2d(1, 1), &a);
+             }),
+             "mu, c and d must be finite");
+}
+
+}  // namespace
+}  // namespace secure::shield

@@ -1,0 +1,308 @@
+// The CBF-QP projection in the shield (ShieldOptions::proposal): the gradient-first mode (qp) and
+// the CBF-QP filter alone (qp-only). Properties with RapidCheck over the double integrator (its
+// ground truth, whose gradient is by finite differences, and a random barrier network) and Derby
+// (a random per-car barrier and its shield model); exact cases on an integrator.
+
+#include "domains/double_integrator/ground_truth_barrier.h"
+#include "secure/shield/shield.h"
+#include "tests/shield/shield_test_util.h"
+
+#include <gtest/gtest.h>
+#include <rapidcheck.h>
+#include <rapidcheck/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+
+#include "domains/derby/derby.h"
+#include "domains/derby/domain.h"
+#include "domains/double_integrator/double_integrator.h"
+#include "secure/cbf/barrier_net.h"
+#include "secure/cbf/car_barrier.h"
+#include "secure/common/rng.h"
+#include "secure/nn/mlp.h"
+#include "tests/test_util.h"
+
+namespace secure::shield {
+namespace {
+
+using secure::test::ErrorOf;
+using test::BitEqual;
+using test::FunctionBarrier;
+using test::IntegratorDynamics;
+using test::Vec;
+
+namespace di = domains::double_integrator;
+namespace derby = domains::derby;
+
+rc::Gen<double> UniformIn(double lo, double hi) {
+  return rc::gen::map(rc::gen::inRange<int>(0, 100001),
+                      [lo, hi](int i) { return lo + (hi - lo) * (i / 100000.0); });
+}
+
+Eigen::VectorXf RandomVector(int n, double lo, double hi) {
+  Eigen::VectorXf v(n);
+  for (int i = 0; i < n; ++i) v[i] = static_cast<float>(*UniformIn(lo, hi));
+  return v;
+}
+
+struct System {
+  std::unique_ptr<cbf::BarrierNet> net;
+  std::unique_ptr<cbf::CarBarrierNet> car_net;
+  std::unique_ptr<cbf::Barrier> barrier, barrier2, independent;
+  std::unique_ptr<domains::DynamicsModel> dynamics;
+  Eigen::VectorXf state;
+  bool learned = false;
+};
+
+System RandomSystem() {
+  System s;
+  const int kind = *rc::gen::inRange(0, 3);
+  const auto seed = *rc::gen::arbitrary<std::uint64_t>();
+  if (kind == 0 || kind == 1) {
+    s.dynamics = std::make_unique<di::Dynamics>(0.1);
+    s.state.resize(4);
+    s.state.head(2) = RandomVector(2, -1.0, 11.0);
+    s.state.tail(2) = RandomVector(2, -2.0, 2.0);
+    if (kind == 0) {
+      s.barrier = std::make_unique<di::GroundTruthBarrier>(di::GroundTruth{});
+      s.barrier2 = std::make_unique<di::GroundTruthBarrier>(di::GroundTruth{});
+      s.independent = std::make_unique<di::GroundTruthBarrier>(di::GroundTruth{});
+    } else {
+      s.net = std::make_unique<cbf::BarrierNet>();
+      s.net->mlp = nn::RandomMlpParams({4, {16, 16}, 1, nn::Activation::kTanh}, seed);
+      s.net->normalizer = nn::Normalizer::Identity(4);
+      s.net->features = di::StateFeatures();
+      s.barrier = s.net->MakeEvaluator(256);
+      s.barrier2 = s.net->MakeEvaluator(256);
+      s.independent = s.net->MakeEvaluator(256);
+      s.learned = true;
+    }
+  } else {
+    s.car_net = std::make_unique<cbf::CarBarrierNet>();
+    s.car_net->input.layout = derby::ObstacleLayoutOfObservation();
+    s.car_net->input.use_velocity = (seed & 1) != 0;
+    const int f = s.car_net->input.feature_dim();
+    s.car_net->mlp = nn::RandomMlpParams({f, {16, 8}, 1, nn::Activation::kRelu}, seed);
+    s.car_net->normalizer = nn::Normalizer::Identity(f);
+    s.barrier = s.car_net->MakeEvaluator(256);
+    s.barrier2 = s.car_net->MakeEvaluator(256);
+    s.independent = s.car_net->MakeEvaluator(256);
+    const derby::DerbyOptions task;
+    s.dynamics = std::make_unique<derby::DerbyShieldModel>(task.dt, task.accel_bound,
+                                                           task.lookahead_steps);
+    derby::DerbyEnv env;
+    Rng rng(seed);
+    s.state.resize(env.observation_dim());
+    env.Reset(rng, s.state);
+    s.learned = true;
+  }
+  return s;
+}
+
+ShieldOptions RandomOptions() {
+  ShieldOptions o;
+  o.num_samples = *rc::gen::inRange(8, 65);
+  o.class_k_gain = *UniformIn(0.1, 5.0);
+  o.aggregation = *rc::gen::element(Aggregation::kMean, Aggregation::kPolicyMean);
+  o.max_iterations = *rc::gen::inRange(1, 6);
+  o.seed = *rc::gen::arbitrary<std::uint64_t>();
+  o.qp_iterations = *rc::gen::inRange(1, 4);
+  o.qp_margin = *rc::gen::element(0.0, 0.1);
+  o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
+  return o;
+}
+
+double Tolerance(bool learned, double g) {
+  // A learned barrier evaluated alone vs in a batch differs by float rounding (see the shield's
+  // property test): g agrees to about 1e-4 at dt = 0.1.
+  return learned ? 1e-4 * std::max(1.0, std::abs(g)) : 1e-9;
+}
+
+double IndependentG(System& s, const ShieldOptions& o, const Eigen::VectorXf& action) {
+  return test::IndependentG(*s.independent, *s.dynamics, o, s.state, action);
+}
+
+// The gradient-first shield either decides by the projection, which then satisfies the exact
+// CBF condition, or runs Algorithms 1-2 unchanged: its decision is then the sampling shield's, bit
+// for bit. So it never returns an action with g < 0 where the sampling shield finds a safe one,
+// and it says so in its status whenever it returns one with g < 0.
+RC_GTEST_PROP(QpShieldProperty, GradientFirstIsTheProjectionOrTheSamplingShieldsDecision, ()) {
+  System s = RandomSystem();
+  ShieldOptions o = RandomOptions();
+  const Eigen::VectorXf mu = RandomVector(2, -5, 5), sigma = RandomVector(2, 0.05, 2.0);
+  const bool boxed = *rc::gen::arbitrary<bool>();
+  ShieldOptions sampling = o;
+  o.proposal = Proposal::kQp;
+  Shield first(o, *s.barrier, *s.dynamics);
+  Shield plain(sampling, *s.barrier2, *s.dynamics);
+  if (boxed) {
+    first.SetActionBounds(Vec({-3, -3}), Vec({3, 3}));
+    plain.SetActionBounds(Vec({-3, -3}), Vec({3, 3}));
+  }
+  const Decision& d = first.Decide(s.state, mu, sigma);
+  RC_TAG(ToString(kQpOutcomeNames, d.qp));
+  RC_ASSERT(d.qp != QpOutcome::kNotTried);
+  RC_ASSERT(d.action.allFinite());
+  if (boxed) RC_ASSERT((d.action.array().abs() <= 3.0f).all());
+  if (d.qp == QpOutcome::kAccepted) {
+    RC_ASSERT(d.status == Status::kSafe);
+    RC_ASSERT(d.iterations == 0);
+    const double g = IndependentG(s, o, d.action);
+    RC_LOG() << d.ToJson().dump() << " independent g " << g << "\n";
+    RC_ASSERT(g >= -Tolerance(s.learned, g));
+    RC_ASSERT(std::abs(g - d.g) <= Tolerance(s.learned, g));
+    return;
+  }
+  const Decision& e = plain.Decide(s.state, mu, sigma);
+  RC_LOG() << d.ToJson().dump() << "\n" << e.ToJson().dump() << "\n";
+  RC_ASSERT(d.status == e.status);
+  RC_ASSERT(BitEqual(d.action, e.action));
+  RC_ASSERT(d.g == e.g || (std::isnan(d.g) && std::isnan(e.g)));
+  RC_ASSERT(d.iterations == e.iterations && d.fallback == e.fallback);
+  RC_ASSERT(d.intervened == e.intervened && d.bounded == e.bounded);
+}
+
+// The CBF-QP filter alone: safe exactly when the projection's exact g >= 0; otherwise it says
+// so (no_safe_action, fallback qp_projection, outcome rejected or infeasible).
+RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
+  System s = RandomSystem();
+  ShieldOptions o = RandomOptions();
+  o.proposal = Proposal::kQpOnly;
+  const Eigen::VectorXf mu = RandomVector(2, -5, 5), sigma = RandomVector(2, 0.05, 2.0);
+  Shield shield(o, *s.barrier, *s.dynamics);
+  shield.SetActionBounds(Vec({-3, -3}), Vec({3, 3}));
+  const Decision& d = shield.Decide(s.state, mu, sigma);
+  RC_TAG(ToString(kQpOutcomeNames, d.qp));
+  RC_ASSERT(d.iterations == 0);
+  RC_ASSERT((d.action.array().abs() <= 3.0f).all());
+  const double g = IndependentG(s, o, d.action);
+  RC_LOG() << d.ToJson().dump() << " independent g " << g << "\n";
+  RC_ASSERT(std::abs(g - d.g) <= Tolerance(s.learned, g));
+  if (d.safe()) {
+    RC_ASSERT(d.qp == QpOutcome::kAccepted && d.fallback == Fallback::kNone);
+    RC_ASSERT(d.g >= 0.0);
+  } else {
+    RC_ASSERT(d.status == Status::kNoSafeAction);
+    RC_ASSERT(d.fallback == Fallback::kQpProjection);
+    RC_ASSERT(d.qp == QpOutcome::kRejected || d.qp == QpOutcome::kInfeasible);
+    RC_ASSERT(d.g < 0.0);
+  }
+}
+
+// h(s) = w . s + b with an integrator: the linearisation is exact, so the filter returns the
+// closed-form projection of mu onto {g >= 0}, and mu itself where mu is safe.
+TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
+  const Eigen::Vector2f w(1.0f, -2.0f);
+  FunctionBarrier barrier(2, "linear", [&](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    return static_cast<double>(w.dot(s)) + 0.5;
+  });
+  const IntegratorDynamics dynamics(2, 0.1);  // s' = s + 0.1 a
+  ShieldOptions o;
+  o.proposal = Proposal::kQpOnly;
+  o.dt = 0.1;
+  o.class_k_gain = 2.0;
+  Shield shield(o, barrier, dynamics);
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f});  // h = 0.2 - 0.6 + 0.5 = 0.1
+  // g(a) = w . a + alpha(h) = w . a + 0.2: safe iff a0 - 2 a1 >= -0.2.
+  const Eigen::VectorXf unsafe_mu = Vec({-1.0f, 1.0f});  // w . mu = -3
+  const Decision& d = shield.Decide(state, unsafe_mu, Vec({0.1f, 0.1f}));
+  EXPECT_EQ(d.status, Status::kSafe) << d.ToJson().dump();
+  EXPECT_EQ(d.qp, QpOutcome::kAccepted);
+  EXPECT_TRUE(d.intervened);
+  EXPECT_EQ(d.iterations, 0);
+  // mu + (0.2 - (-3 + 0.2)) ... the projection: mu + (-0.2 - w . mu) / |w|^2 w.
+  const Eigen::Vector2f expected = unsafe_mu + (-0.2f - w.dot(unsafe_mu)) / w.squaredNorm() * w;
+  EXPECT_NEAR(d.action[0], expected[0], 1e-3);
+  EXPECT_NEAR(d.action[1], expected[1], 1e-3);
+  EXPECT_NEAR(d.g, 0.0, 1e-2);  // the rounding allowance: 1e-4 (1 + h) / dt = 1.1e-3
+  EXPECT_GE(d.g, 0.0);
+
+  const Eigen::VectorXf safe_mu = Vec({1.0f, 0.0f});
+  const Decision& e = shield.Decide(state, safe_mu, Vec({0.1f, 0.1f}));
+  EXPECT_EQ(e.status, Status::kSafe);
+  EXPECT_EQ(e.qp, QpOutcome::kAccepted);
+  EXPECT_FALSE(e.intervened);
+  EXPECT_TRUE(BitEqual(e.action, safe_mu));
+  EXPECT_EQ(e.distance_to_mean, 0.0);
+
+  // A box the half-space misses: infeasible, the box point of largest g, reported unsafe.
+  shield.SetActionBounds(Vec({-1.0f, 0.5f}), Vec({-0.5f, 1.0f}));  // w . a <= -1.5
+  const Decision& f = shield.Decide(state, unsafe_mu, Vec({0.1f, 0.1f}));
+  EXPECT_EQ(f.status, Status::kNoSafeAction);
+  EXPECT_EQ(f.qp, QpOutcome::kInfeasible);
+  EXPECT_EQ(f.fallback, Fallback::kQpProjection);
+  EXPECT_TRUE(BitEqual(f.action, Vec({-0.5f, 0.5f})));
+  EXPECT_NEAR(f.g, -1.5 + 0.2, 1e-4);
+  EXPECT_EQ(f.ToJson()["qp"], "infeasible");
+}
+
+// A curved barrier (a disc, h concave): the tangent plane overestimates h, so the textbook
+// projection lands just outside the safe set and the exact check rejects it; re-linearising at
+// the projection (qp_iterations) or a margin recovers a safe action.
+TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
+  FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    return 1.0 - static_cast<double>(s.squaredNorm());
+  });
+  const IntegratorDynamics dynamics(2, 0.1);
+  ShieldOptions o;
+  o.proposal = Proposal::kQpOnly;
+  o.class_k_gain = 1.0;
+  const Eigen::VectorXf state = Vec({0.0f, 0.9f});
+  const Eigen::VectorXf mu = Vec({3.0f, 3.0f});  // outward and sideways
+  {
+    Shield shield(o, barrier, dynamics);
+    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+    EXPECT_EQ(d.qp, QpOutcome::kRejected) << d.ToJson().dump();
+    EXPECT_EQ(d.status, Status::kNoSafeAction);
+    EXPECT_EQ(d.fallback, Fallback::kQpProjection);
+    EXPECT_LT(d.g, 0.0);
+  }
+  o.qp_iterations = 4;
+  {
+    Shield shield(o, barrier, dynamics);
+    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+    EXPECT_EQ(d.qp, QpOutcome::kAccepted) << d.ToJson().dump();
+    EXPECT_GE(d.g, 0.0);
+  }
+  // The gradient-first shield falls back to sampling, which finds a safe action.
+  o.proposal = Proposal::kQp;
+  o.qp_iterations = 1;
+  {
+    Shield shield(o, barrier, dynamics);
+    const Decision& d = shield.Decide(state, mu, Vec({0.5f, 0.5f}));
+    EXPECT_EQ(d.qp, QpOutcome::kRejected) << d.ToJson().dump();
+    EXPECT_TRUE(d.safe()) << d.ToJson().dump();
+    EXPECT_GE(d.iterations, 1);
+  }
+}
+
+TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
+  ShieldOptions o;
+  EXPECT_FALSE(o.ToJson().contains("proposal"));  // run directories keep their identity
+  o.proposal = Proposal::kQp;
+  EXPECT_EQ(o.ToJson()["proposal"], "qp");
+  EXPECT_EQ(o.ToJson()["qp_iterations"], 1);
+  o.lookahead_steps = 2;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "it needs lookahead_steps = 1, not 2");
+  o.lookahead_steps = 1;
+  o.qp_iterations = 0;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_iterations = 0");
+  o.qp_iterations = 1;
+  o.qp_margin = -1;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_margin = -1");
+  ShieldOptions y;
+  y.ApplyYaml(YAML::Load("{proposal: qp-only, qp_iterations: 3, qp_margin: 0.25}"), "s.yaml");
+  EXPECT_EQ(y.proposal, Proposal::kQpOnly);
+  EXPECT_EQ(y.qp_iterations, 3);
+  EXPECT_EQ(y.qp_margin, 0.25);
+  EXPECT_HAS(ErrorOf([&] { y.ApplyYaml(YAML::Load("{proposal: newton}"), "s.yaml"); }),
+             "newton");
+  Decision d;
+  EXPECT_FALSE(d.ToJson().contains("qp"));
+}
+
+}  // namespace
+}  // namespace secure::shield
