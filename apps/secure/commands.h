@@ -8,6 +8,8 @@ namespace secure::cli {
 void RegisterCbfCommands(CLI::App& app, const Config& config);
 /// secure cbf check (cbf_check_command.cc), registered by RegisterCbfCommands.
 void RegisterCbfCheckCommand(CLI::App& cbf, const Config& config);
+/// secure cbf query / cbf label (cbf_query_command.cc), registered by RegisterCbfCommands.
+void RegisterCbfQueryCommands(CLI::App& cbf, const Config& config);
 /// secure shield run.
 void RegisterShieldCommands(CLI::App& app, const Config& config);
 /// secure demos generate, secure policy train, secure eval.

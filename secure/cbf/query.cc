@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <sstream>
 #include <limits>
 #include <numeric>
 
@@ -233,6 +235,52 @@ QueryResult SelectQueries(const std::vector<Barrier*>& barriers,
   options.Validate();
   SECURE_CHECK(pool.cols() >= 1 && pool.rows() >= 1, "query: the pool is empty");
   return SelectQueriesFromValues(EvaluatePool(barriers, pool), pool, options);
+}
+
+bool HasLabelColumn(const std::string& path) {
+  if (data::IsHdf5Path(path)) return false;
+  std::ifstream in(path);
+  SECURE_CHECK(in.good(), path << ": cannot open the labelled states");
+  std::string header, cell;
+  std::getline(in, header);
+  std::stringstream cells(header);
+  while (std::getline(cells, cell, ',')) {
+    while (!cell.empty() && (cell.back() == '\r' || cell.back() == ' ')) cell.pop_back();
+    if (cell == kLabelColumn) return true;
+  }
+  return false;
+}
+
+LabelledStates ReadLabelledStates(const std::string& path,
+                                  const std::vector<std::string>& features) {
+  std::vector<std::string> select = features;
+  select.push_back(kLabelColumn);
+  const data::NumericTable t = data::ReadCsv(path, select);
+  const long d = static_cast<long>(features.size());
+  std::vector<long> safe, near;
+  LabelledStates r;
+  for (long i = 0; i < t.values.cols(); ++i) {
+    const double label = t.values(d, i);
+    if (label == 1)
+      safe.push_back(i);
+    else if (label == 0)
+      near.push_back(i);
+    else if (label == -1)
+      ++r.skipped;
+    else
+      SECURE_THROW(path << ":" << t.lines[static_cast<std::size_t>(i)] << ": label = " << label
+                        << ", must be 1 (safe), 0 (near-dangerous) or -1 (not labelled)");
+  }
+  const auto take = [&](const std::vector<long>& cols, data::StateSet* set, const char* what) {
+    set->source = path + " (" + what + ")";
+    set->features = features;
+    set->states.resize(d, static_cast<long>(cols.size()));
+    for (std::size_t j = 0; j < cols.size(); ++j)
+      set->states.col(static_cast<long>(j)) = t.values.col(cols[j]).head(d).cast<float>();
+  };
+  take(safe, &r.safe, "label 1");
+  take(near, &r.near_dangerous, "label 0");
+  return r;
 }
 
 }  // namespace secure::cbf

@@ -30,6 +30,7 @@
 
 #include "secure/cbf/barrier.h"
 #include "secure/common/enum_strings.h"
+#include "secure/data/data.h"
 
 namespace secure::cbf {
 
@@ -82,5 +83,24 @@ QueryResult SelectQueriesFromValues(const Eigen::Ref<const Eigen::MatrixXf>& h_v
 /// The per-feature scale diversity measures distances in: the standard deviation of each pool row
 /// (1 where a row is constant).
 Eigen::VectorXf PoolScale(const Eigen::Ref<const Eigen::MatrixXf>& pool);
+
+/// The column of a labelled query file (`secure cbf query` output after labelling; `secure cbf
+/// label`): 1 safe, 0 near-dangerous, -1 not labelled (the row is skipped).
+inline constexpr const char* kLabelColumn = "label";
+
+/// States of a labelled query file, by label.
+struct LabelledStates {
+  data::StateSet safe, near_dangerous;
+  long skipped = 0;  // rows labelled -1
+};
+
+/// Whether the CSV at `path` has a `label` column (its header names one). HDF5: false.
+bool HasLabelColumn(const std::string& path);
+
+/// Reads a labelled CSV: the `features` columns (by name) and `label`, each row into safe (1) or
+/// near_dangerous (0), skipping -1. @throws secure::Error naming the file, line and value for any
+/// other label, and as data::ReadCsv.
+LabelledStates ReadLabelledStates(const std::string& path,
+                                  const std::vector<std::string>& features);
 
 }  // namespace secure::cbf
