@@ -22,6 +22,9 @@ void RegisterConvertCommand(CLI::App& demos);
 void RegisterRenderCommand(CLI::App& app, const Config& config);
 /// secure demo; secure experiment KIND --domain NAME (and the derby-* aliases).
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
+/// secure experiment label-efficiency (label_efficiency_command.cc), registered by
+/// RegisterExperimentCommands.
+void RegisterLabelEfficiencyCommand(CLI::App& experiment);
 /// secure report RUN_DIR (report_command.cc): the run's HTML report (tools/report/report.py).
 void RegisterReportCommand(CLI::App& app);
 /// secure domains [NAME] (domains_command.cc): the registered domains, their capabilities, and

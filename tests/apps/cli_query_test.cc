@@ -190,5 +190,43 @@ TEST(CliQueryTest, ErrorsAreOneLine) {
                      "bad_label.csv:3: label = 2, must be 1 (safe), 0 (near-dangerous) or -1");
 }
 
+// The quick label-efficiency run (slow label): the same curves on 1 or 2 threads, from a resumed
+// directory, and from two shards merged by an unsharded rerun; a job file of another experiment
+// is an error naming it.
+TEST(CliQueryTest, LabelEfficiencyQuickIsDeterministicResumesAndMergesShards) {
+  const std::string base =
+      "experiment label-efficiency --domain double-integrator --quick --strategies "
+      "random,margin,disagreement --json";
+  const auto curves = [](const CliResult& r) {
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    nlohmann::json c = nlohmann::json::parse(r.out)["curves"];
+    for (auto& x : c) x.erase("seconds");
+    return c;
+  };
+  const nlohmann::json one = curves(RunCli(base + " --threads 1 --out " + P("le1")));
+  ASSERT_EQ(one.size(), 6u);  // 2 seeds x 3 strategies
+  for (const auto& c : one) {
+    ASSERT_EQ(c["points"].size(), 3u);  // rounds 0, 1, 2
+    EXPECT_EQ(c["points"][2]["labels"], 30);
+    EXPECT_GE(c["points"][0]["over_conservative"].get<double>(), 0.0);
+    EXPECT_GE(c["points"][2]["dangerous"].get<double>(), 0.0);
+  }
+  // Every strategy starts from the same labels.
+  EXPECT_EQ(one[0]["points"][0], one[1]["points"][0]);
+  EXPECT_EQ(curves(RunCli(base + " --threads 2 --out " + P("le2"))), one);
+  EXPECT_EQ(curves(RunCli(base + " --threads 1 --out " + P("le1"))), one);  // reused
+  EXPECT_TRUE(std::filesystem::exists(P("le1/curves.csv")));
+  ASSERT_EQ(RunCli(base + " --shard 0/2 --out " + P("le3")).exit_code, 0);
+  EXPECT_FALSE(std::filesystem::exists(P("le3/result.json")));
+  ASSERT_EQ(RunCli(base + " --shard 1/2 --out " + P("le3")).exit_code, 0);
+  EXPECT_EQ(curves(RunCli(base + " --out " + P("le3"))), one);
+  // (after the run's banner line on stderr)
+  const CliResult other = RunCli(base + " --k 9 --out " + P("le1"));
+  EXPECT_EQ(other.exit_code, 1);
+  EXPECT_HAS(other.err, "secure: error: " + P("le1") +
+                            "/seed-0/random.json: a job file of another label-efficiency "
+                            "experiment");
+}
+
 }  // namespace
 }  // namespace secure::test
