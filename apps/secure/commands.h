@@ -24,7 +24,7 @@ void RegisterRenderCommand(CLI::App& app, const Config& config);
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
 /// secure experiment label-efficiency (label_efficiency_command.cc), registered by
 /// RegisterExperimentCommands.
-void RegisterLabelEfficiencyCommand(CLI::App& experiment);
+void RegisterLabelEfficiencyCommand(CLI::App& experiment, const Config& config);
 /// secure report RUN_DIR (report_command.cc): the run's HTML report (tools/report/report.py).
 void RegisterReportCommand(CLI::App& app);
 /// secure domains [NAME] (domains_command.cc): the registered domains, their capabilities, and

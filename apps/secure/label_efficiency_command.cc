@@ -1,5 +1,7 @@
 // secure experiment label-efficiency --domain NAME: how many labels SECURE needs, and which to ask
 // for (experiments/label_efficiency.h).
+#include <yaml-cpp/yaml.h>
+
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -25,7 +27,10 @@ struct LabelEfficiencyCommand {
   double radius = -1;
   std::uint64_t first_seed = 0;
 
-  void Register(CLI::App& parent) {
+  const Config* config = nullptr;
+
+  void Register(CLI::App& parent, const Config& cfg) {
+    config = &cfg;
     CLI::App* cmd = parent.add_subcommand(
         "label-efficiency",
         "Active label queries: from a few random labels, R rounds of k queries per strategy, "
@@ -34,6 +39,7 @@ struct LabelEfficiencyCommand {
         "against labels used. Domains with a labeller: " +
             experiments::DomainRegistry::Global().ListOffering(
                 [](const experiments::Domain& d) { return d.HasLabeller(); }));
+    AddConfigFlag(cmd, cfg);  // its `trainer:` section: the barrier trainer's options
     cmd->add_option("--domain", domain, "the domain")->required();
     cmd->add_flag("--quick", quick, "the small profile (2 seeds, 2 rounds of 10, small pool)");
     cmd->add_option("--strategies", strategies,
@@ -71,6 +77,9 @@ struct LabelEfficiencyCommand {
                                        << ")");
     experiments::LabelEfficiencyOptions o = experiments::LabelEfficiencyOptions::For(
         *d, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
+    config->Check();
+    const YAML::Node trainer = config->Section("trainer");
+    if (trainer.IsMap()) o.trainer.ApplyYaml(trainer, config->path + " [trainer]");
     if (!strategies.empty()) {
       o.strategies.clear();
       std::stringstream in(strategies);
@@ -118,9 +127,9 @@ struct LabelEfficiencyCommand {
 
 }  // namespace
 
-void RegisterLabelEfficiencyCommand(CLI::App& experiment) {
+void RegisterLabelEfficiencyCommand(CLI::App& experiment, const Config& config) {
   static LabelEfficiencyCommand command;
-  command.Register(experiment);
+  command.Register(experiment, config);
 }
 
 }  // namespace secure::cli

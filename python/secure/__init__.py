@@ -51,6 +51,8 @@ from ._secure import (  # noqa: F401
     domains,
     episode_seed,
     generate_data,
+    label,
+    query,
     run_episodes,
     train_airl,
     train_barrier,
@@ -66,6 +68,7 @@ if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one i
 __all__ = [
     "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Policy",
     "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
-    "gymnasium_installed", "make_env", "register_gymnasium", "run_episodes", "train_airl",
+    "gymnasium_installed", "label", "make_env", "query", "register_gymnasium", "run_episodes",
+    "train_airl",
     "train_barrier", "train_bc", "train_car_barrier",
 ]
