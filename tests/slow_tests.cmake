@@ -25,6 +25,7 @@ set(SECURE_SLOW_TESTS
   apps       CliTest.KitchenCuttingRunsTheMethodComparisonAndItsLabelCheck
   apps       CliTest.UserStudyQuickPrintsTheConditionsBesideThePapersRatings
   apps       CliTest.DemoQuickPrintsTheResultDocument
+  apps       CliQueryTest.LabelEfficiencyQuickIsDeterministicResumesAndMergesShards
 )
 if(NOT SECURE_SLOW_TESTS_LIST_ONLY)
   list(LENGTH SECURE_SLOW_TESTS _n)

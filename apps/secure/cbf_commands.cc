@@ -13,6 +13,7 @@
 #include "secure/cbf/barrier_check.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/barrier_trainer.h"
+#include "secure/cbf/query.h"
 #include "secure/cbf/validation.h"
 #include "secure/common/error.h"
 #include "secure/common/progress.h"
@@ -183,7 +184,9 @@ struct TrainCommand {
                     "model's accuracy on it, in [0, 1)")
         ->capture_default_str();
     cmd->add_option("--augment-from", augment_from,
-                    "a `cbf check` CSV: its states join the near-dangerous training states");
+                    "a `cbf check` CSV (its states join the near-dangerous training states), or "
+                    "a labelled `cbf query` CSV (its `label` column: 1 safe, 0 near-dangerous, "
+                    "-1 skipped)");
     trainer_flags.Add(cmd, FromFilesDefaults());
     cmd->add_flag("--no-early-stopping", no_early_stopping,
                   "train for every --epochs (as --patience 0); the best epoch's weights are kept "
@@ -249,11 +252,22 @@ struct TrainCommand {
       std::tie(nd, nd_test) = data::SplitStateSet(nd, test_fraction, rng);
     }
     long augmented = 0;  // after the test split: the test set stays the original data
+    const auto append = [](data::StateSet* to, const data::StateSet& extra) {
+      const long n = to->size();
+      to->states.conservativeResize(Eigen::NoChange, n + extra.size());
+      to->states.rightCols(extra.size()) = extra.states;
+    };
     if (!augment_from.empty()) {
-      const data::StateSet extra = cbf::ReadCheckStates(augment_from, nd.features);
-      augmented = extra.size();
-      nd.states.conservativeResize(Eigen::NoChange, nd.size() + augmented);
-      nd.states.rightCols(augmented) = extra.states;
+      if (cbf::HasLabelColumn(augment_from)) {  // labelled queries (cbf query, cbf label)
+        const cbf::LabelledStates extra = cbf::ReadLabelledStates(augment_from, nd.features);
+        augmented = extra.safe.size() + extra.near_dangerous.size();
+        append(&safe, extra.safe);
+        append(&nd, extra.near_dangerous);
+      } else {  // a check CSV: every row near-dangerous
+        const data::StateSet extra = cbf::ReadCheckStates(augment_from, nd.features);
+        augmented = extra.size();
+        append(&nd, extra);
+      }
     }
     cbf::BarrierTrainingSummary summary;
     ProgressLine line(&std::cerr, ProgressIsLive(progress));
@@ -544,6 +558,7 @@ void RegisterCbfCommands(CLI::App& app, const Config& config) {
                   "integrator): learn a CBF from states labelled by the ground truth over seeds, "
                   "validate it on the domain's grid (the double integrator's: 9M states)");
   RegisterCbfCheckCommand(*cbf, config);
+  RegisterCbfQueryCommands(*cbf, config);
 }
 
 }  // namespace secure::cli

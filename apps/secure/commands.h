@@ -8,6 +8,8 @@ namespace secure::cli {
 void RegisterCbfCommands(CLI::App& app, const Config& config);
 /// secure cbf check (cbf_check_command.cc), registered by RegisterCbfCommands.
 void RegisterCbfCheckCommand(CLI::App& cbf, const Config& config);
+/// secure cbf query / cbf label (cbf_query_command.cc), registered by RegisterCbfCommands.
+void RegisterCbfQueryCommands(CLI::App& cbf, const Config& config);
 /// secure shield run.
 void RegisterShieldCommands(CLI::App& app, const Config& config);
 /// secure demos generate, secure policy train, secure eval.
@@ -20,6 +22,9 @@ void RegisterConvertCommand(CLI::App& demos);
 void RegisterRenderCommand(CLI::App& app, const Config& config);
 /// secure demo; secure experiment KIND --domain NAME (and the derby-* aliases).
 void RegisterExperimentCommands(CLI::App& app, const Config& config);
+/// secure experiment label-efficiency (label_efficiency_command.cc), registered by
+/// RegisterExperimentCommands.
+void RegisterLabelEfficiencyCommand(CLI::App& experiment, const Config& config);
 /// secure report RUN_DIR (report_command.cc): the run's HTML report (tools/report/report.py).
 void RegisterReportCommand(CLI::App& app);
 /// secure domains [NAME] (domains_command.cc): the registered domains, their capabilities, and

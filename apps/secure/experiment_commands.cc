@@ -631,6 +631,7 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config) {
   }
   merge.Register(*cmd);
   user_study.Register(*cmd, config);
+  RegisterLabelEfficiencyCommand(*cmd, config);
 }
 
 }  // namespace secure::cli

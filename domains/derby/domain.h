@@ -55,6 +55,14 @@ class DerbyDomain final : public experiments::Domain {
       const data::StateSet& near_dangerous,
       std::unique_ptr<DynamicsModel>* dynamics) const override;
 
+  /// The labeller (labeller.cc): near-dangerous iff the nearest observed car is within
+  /// LabelDistance() (max of near_dangerous.rho, 0.14) of the ego. Query pool: the default.
+  bool HasLabeller() const override { return true; }
+  std::vector<int> Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         std::uint64_t seed) const override;
+  std::string LabellerDescription() const override;
+  double LabelDistance() const;
+
   const DerbyDomainOptions& options() const { return options_; }
   DerbyDomainOptions& mutable_options() { return options_; }
 

@@ -7,6 +7,7 @@
 #include "domains/double_integrator/shield_run.h"
 #include "domains/double_integrator/table1.h"
 #include "secure/common/error.h"
+#include <string>
 
 namespace secure::domains::double_integrator {
 
@@ -57,9 +58,15 @@ experiments::ShieldRunReport DoubleIntegratorDomain::RunShield(
   o.policy_sigma = request.policy_sigma;
   o.shield = request.shield;
   o.shield.dt = o.task.dt;  // the shield looks ahead exactly one control period
+  o.record_states = request.record_states;
   o.Validate();
   const eval::ShieldRunResult result = eval::RunDoubleIntegratorShield(o, barrier, request.shielded);
-  return {result.ToJson(), result.Table()};
+  experiments::ShieldRunReport report{result.ToJson(), result.Table(), {}};
+  report.visited.source = "states visited by the shielded run (seed " +
+                          std::to_string(request.seed) + ")";
+  report.visited.features = StateFeatures();
+  report.visited.states = result.visited;
+  return report;
 }
 
 }  // namespace secure::domains::double_integrator

@@ -75,6 +75,14 @@ class DoubleIntegratorDomain final : public experiments::Domain {
   experiments::ShieldRunReport RunShield(const experiments::ShieldRunRequest& request,
                                          cbf::Barrier& barrier) const override;
 
+  /// The labeller (labeller.cc): the ground truth, h*(s) >= 0 safe, no noise. The query pool:
+  /// uniform in the validation box (StateBox), from the stream seed ^ a salt.
+  bool HasLabeller() const override { return true; }
+  std::vector<int> Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         std::uint64_t seed) const override;
+  std::string LabellerDescription() const override;
+  data::StateSet SampleQueryPool(long count, std::uint64_t seed) const override;
+
   /// The barrier check (MakeDoubleIntegratorCheckProblem below). Held-out states: `count` safe
   /// (h* >= 0) and `count` unsafe (h* < 0) states drawn uniformly from the validation box
   /// (StateBox) by the ground truth of task.truth, from the stream data_seed ^ a salt (the

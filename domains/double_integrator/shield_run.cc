@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <optional>
 #include <sstream>
+#include <vector>
 
 #include "domains/double_integrator/reach_avoid.h"
 #include "secure/common/error.h"
@@ -28,11 +29,17 @@ std::uint64_t ShieldRunEpisodeSeed(std::uint64_t seed, long episode) {
 // the decisions that fell back to the braking backup action.
 class GroundTruthCounter final : public StepObserver {
  public:
-  GroundTruthCounter(const di::ReachAvoidEnv& env, ShieldRunResult& result)
-      : env_(env), truth_(env.options().truth), result_(result) {}
+  GroundTruthCounter(const di::ReachAvoidEnv& env, ShieldRunResult& result, long record = 0)
+      : env_(env), truth_(env.options().truth), result_(result), record_(record) {}
+  // The recorded states (4 x n).
+  Eigen::MatrixXf Visited() const {
+    return Eigen::Map<const Eigen::MatrixXf>(visited_.data(), 4,
+                                             static_cast<long>(visited_.size() / 4));
+  }
   void OnEpisodeStart(long, const Eigen::VectorXf&) override { left_safe_set_ = false; }
   void OnStep(const StepView& step) override {
     const Eigen::Vector4f& s = env_.state();
+    if (static_cast<long>(visited_.size()) < 4 * record_) visited_.insert(visited_.end(), s.data(), s.data() + 4);
     if (truth_.H(s[0], s[1], s[2], s[3]) < 0.0) {
       ++result_.unsafe_state_steps;
       left_safe_set_ = true;
@@ -48,6 +55,8 @@ class GroundTruthCounter final : public StepObserver {
   const di::ReachAvoidEnv& env_;
   const di::GroundTruth& truth_;
   ShieldRunResult& result_;
+  long record_ = 0;
+  std::vector<float> visited_;
   bool left_safe_set_ = false;
 };
 
@@ -82,6 +91,8 @@ void ShieldRunOptions::Validate() const {
   SECURE_CHECK_FIELD(std::isfinite(policy_sigma) && policy_sigma >= 0, "ShieldRunOptions",
                      "policy_sigma", policy_sigma, ">= 0");
   shield.Validate();
+  SECURE_CHECK_FIELD(record_states >= 0 && record_states <= kMaxStates, "ShieldRunOptions",
+                     "record_states", record_states, "in [0, " << kMaxStates << "]");
   SECURE_CHECK_FIELD(
       shield.dt == task.dt, "ShieldRunOptions", "shield.dt", shield.dt,
       "equal to task.dt = " << task.dt << " (the shield looks one environment step ahead)");
@@ -182,7 +193,7 @@ ShieldRunResult RunDoubleIntegratorShield(const ShieldRunOptions& options, cbf::
   result.shielded = shielded;
   result.barrier = shielded ? barrier.Describe() : "none";
   result.options = options;
-  GroundTruthCounter counter(env, result);
+  GroundTruthCounter counter(env, result, options.record_states);
   EpisodeRunnerOptions runner_options;
   runner_options.stop_on_collision = true;  // entering the obstacle is a crash
   runner_options.episode_seed = &ShieldRunEpisodeSeed;
@@ -204,6 +215,7 @@ ShieldRunResult RunDoubleIntegratorShield(const ShieldRunOptions& options, cbf::
   result.invalid_input_decisions = r.invalid_input_decisions;
   // Unshielded there is no decision to time (the runner times the policy's sample).
   if (shielded) result.latency_us = r.latency_us;
+  result.visited = counter.Visited();
   result.seconds = clock.Seconds();
   return result;
 }

@@ -85,6 +85,10 @@ struct ShieldRunOptions {
   // from this seed; episode i uses its own stream derived from (seed, i).
   std::uint64_t seed = 0;
 
+  // Keep the state of every step, up to this many, in ShieldRunResult::visited (0: none; the
+  // shield-relevant label queries' pool). Not in ToJson: it changes no number.
+  long record_states = 0;
+
   /// Throws secure::Error naming the field ("ShieldRunOptions::episodes = 0, must be > 0";
   /// the task's fields as "ReachAvoidOptions::goal_radius = 0, must be > 0").
   void Validate() const;
@@ -111,6 +115,7 @@ class PdEpisodePolicy final : public EpisodePolicy {
 
 struct ShieldRunResult {
   bool shielded = true;
+  Eigen::MatrixXf visited;  // (4 x n) the first options.record_states states the run visited
   std::string barrier;  // Describe() of the barrier, or "none" unshielded
 
   long episodes = 0;

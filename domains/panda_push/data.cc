@@ -580,4 +580,30 @@ LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet&
   return r;
 }
 
+std::vector<int> LabelStates(const PandaPushOptions& task,
+                             const Eigen::Ref<const Eigen::MatrixXf>& states,
+                             const LabelCheckOptions& options) {
+  SECURE_CHECK(states.rows() == kObservationDim, "panda-push labeller: states have "
+                                                     << states.rows()
+                                                     << " features, expected 18 (the observation)");
+  PandaPushSim sim(task);
+  Eigen::VectorXf o(kObservationDim);
+  std::vector<int> labels(static_cast<std::size_t>(states.cols()));
+  for (long i = 0; i < states.cols(); ++i) {
+    int label = 1;
+    switch (Continue(sim, task, states.col(i), options, o)) {
+      case Continuation::kUnreachable:
+        label = -1;
+        break;
+      case Continuation::kToppled:
+        label = 0;
+        break;
+      case Continuation::kStayedUp:
+        break;
+    }
+    labels[static_cast<std::size_t>(i)] = label;
+  }
+  return labels;
+}
+
 }  // namespace secure::domains::panda_push

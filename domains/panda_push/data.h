@@ -223,4 +223,11 @@ struct LabelCheckResult {
 LabelCheckResult CheckLabels(const PandaPushOptions& task, const data::StateSet& set,
                              const LabelCheckOptions& options);
 
+/// Per state, what CheckLabels' continuation gives: 0 (near-dangerous) if it topples the block,
+/// 1 (safe) if the block stays up, -1 if the arm cannot reach the state. Every column of `states`
+/// (observations; options.max_states is not applied). Deterministic.
+std::vector<int> LabelStates(const PandaPushOptions& task,
+                             const Eigen::Ref<const Eigen::MatrixXf>& states,
+                             const LabelCheckOptions& options);
+
 }  // namespace secure::domains::panda_push

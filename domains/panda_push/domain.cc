@@ -135,6 +135,12 @@ std::string PandaPushDomain::LabelCheckDescription() const {
   return s.str();
 }
 
+std::vector<int> PandaPushDomain::Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                       std::uint64_t) const {
+  options_.Validate();
+  return LabelStates(options_.task, states, ContinuationOptions());
+}
+
 std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64_t data_seed,
                                                                      long max_states) const {
   options_.Validate();

@@ -62,6 +62,16 @@ class PandaPushDomain final : public experiments::Domain {
                                                       long max_states) const override;
   std::string LabelCheckDescription() const override;
 
+  /// The labeller: the label check's physics per state (LabelStates in data.h): near-dangerous
+  /// if continuing the state's motion topples the block, -1 where the arm cannot reach. Query
+  /// pool: the default (the generated safe and near-dangerous states).
+  bool HasLabeller() const override { return true; }
+  std::vector<int> Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         std::uint64_t seed) const override;
+  std::string LabellerDescription() const override {
+    return "the label check's physics (secure demos check-labels): " + LabelCheckDescription();
+  }
+
   /// The barrier check (cbf/barrier_check.h):
   ///  - held-out states: our generators (data.h) on new demonstrations, drawn from the stream
   ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1): `count` safe

@@ -52,6 +52,8 @@ from ._secure import (  # noqa: F401
     domains,
     episode_seed,
     generate_data,
+    label,
+    query,
     run_episodes,
     train_airl,
     train_barrier,
@@ -68,6 +70,6 @@ if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one i
 __all__ = [
     "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Overlay",
     "Policy", "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
-    "gymnasium_installed", "make_env", "register_gymnasium", "run_episodes", "train_airl",
-    "train_barrier", "train_bc", "train_car_barrier", "VideoWriter",
+    "gymnasium_installed", "label", "make_env", "query", "register_gymnasium", "run_episodes",
+    "train_airl", "train_barrier", "train_bc", "train_car_barrier", "VideoWriter",
 ]

@@ -486,3 +486,22 @@ class VideoWriter:
         ...
     def __enter__(self) -> VideoWriter: ...
     def __exit__(self, exc_type: Optional[Any], exc_value: Optional[Any], traceback: Optional[Any]) -> bool: ...
+def query(barriers: Union[Barrier, Sequence[Barrier], None], pool: ArrayLike, k: int = 50, strategy: str = 'margin', radius: float = 0.0, seed: int = 0) -> Tuple[NDArray[numpy.int64], Dict[str, Any]]:
+    """Active label queries: the k states of `pool` (an (N, d) array of unlabelled candidates) a person
+    should label next, best first, as (indices (k,) int64, {"score", "h", "spread", "strategy"}).
+    strategy: "margin" (smallest |h|; one barrier), "disagreement" (largest spread of h over two or
+    more barriers), "shield-relevant" (margin; give it states a shielded run visited), "diversity"
+    (greedy k-centre over features normalised by the pool's standard deviation; no barrier needed)
+    or "random" (seeded). radius > 0: no two chosen states closer than it (normalised features), with
+    any strategy; fewer than k come back if the pool has no room. Raises ValueError on bad input.
+    Releases the GIL.
+    """
+    ...
+
+def label(domain: str, states: ArrayLike, seed: int = 0) -> NDArray[numpy.int32]:
+    """A domain's simulated person labels states (an (N, observation_dim) array): 1 safe, 0
+    near-dangerous, -1 cannot say, as an (N,) int32 array. Domains with a labeller: the double
+    integrator (its ground truth), derby (nearest car within 0.14), panda-push (the label check's
+    physics). Raises ValueError for a domain without one.
+    """
+    ...

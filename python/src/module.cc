@@ -1,6 +1,10 @@
 // The extension module secure._secure (the package python/secure/ re-exports it).
 #include "python/src/common.h"
 
+namespace secure::python {
+void RegisterQuery(py::module_& m);  // query.cc: secure.query, secure.label
+}  // namespace secure::python
+
 PYBIND11_MODULE(_secure, m) {
   using namespace secure::python;
   m.doc() = "SECURE: learned control barrier functions and the CBF shield (C++ library binding)";
@@ -15,4 +19,5 @@ PYBIND11_MODULE(_secure, m) {
   RegisterShield(m);
   RegisterEnvironment(m);
   RegisterRender(m);
+  RegisterQuery(m);
 }

@@ -129,11 +129,13 @@ struct ShieldRunRequest {
   double policy_sigma = 0.3;  // the nominal policy's noise per action component
   shield::ShieldOptions shield;
   bool shielded = true;       // false: the policy's draws are applied unchecked (the baseline)
+  long record_states = 0;     // keep up to this many visited states in ShieldRunReport::visited
 };
 /// What a shield run reports: its JSON document and a Markdown table.
 struct ShieldRunReport {
   nlohmann::json json;
   std::string table;
+  data::StateSet visited;  // with record_states > 0: states the run visited (observation features)
 };
 
 class Population {
@@ -257,6 +259,22 @@ class Domain {
   virtual std::optional<PaperGroundTruthStudy> PaperGroundTruthReference() const {
     return std::nullopt;
   }
+
+  // The labeller (optional): a simulated person who labels states as the domain's person would
+  // (active label queries: `secure cbf label`, `secure experiment label-efficiency`).
+  /// Whether Label works.
+  virtual bool HasLabeller() const { return false; }
+  /// The label of each column of `states` (the domain's observation features): 1 safe, 0
+  /// near-dangerous, -1 the person cannot say (e.g. out of the arm's reach). Deterministic for
+  /// `seed` (label noise, where the person has some). Only if HasLabeller().
+  virtual std::vector<int> Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                 std::uint64_t seed) const;
+  /// Who labels and by what rule, in one sentence (for reports). Only if HasLabeller().
+  virtual std::string LabellerDescription() const { return ""; }
+  /// `count` unlabelled candidate states for queries (the domain's observation features),
+  /// deterministic for `seed`. Default: the safe and near-dangerous states of GenerateData(seed),
+  /// shuffled, the first `count` (fewer if there are fewer).
+  virtual data::StateSet SampleQueryPool(long count, std::uint64_t seed) const;
 
   // The shield run (optional): the closed-loop check of the shield with the domain's nominal
   // policy (`secure shield run`).

@@ -1,0 +1,135 @@
+// secure experiment label-efficiency --domain NAME: how many labels SECURE needs, and which to ask
+// for (experiments/label_efficiency.h).
+#include <yaml-cpp/yaml.h>
+
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cli_common.h"
+#include "commands.h"
+#include "secure/cbf/query.h"
+#include "secure/common/error.h"
+#include "secure/common/filesystem.h"
+#include "secure/experiments/domain.h"
+#include "secure/experiments/label_efficiency.h"
+
+namespace secure::cli {
+namespace {
+
+struct LabelEfficiencyCommand {
+  std::string domain, strategies, out, shard;
+  bool quick = false, json = false;
+  int seeds = 0, rounds = -1, threads = 2;
+  long k = 0, initial_labels = 0, pool = 0, episodes = -1, final_episodes = -1;
+  double radius = -1;
+  std::uint64_t first_seed = 0;
+
+  const Config* config = nullptr;
+
+  void Register(CLI::App& parent, const Config& cfg) {
+    config = &cfg;
+    CLI::App* cmd = parent.add_subcommand(
+        "label-efficiency",
+        "Active label queries: from a few random labels, R rounds of k queries per strategy, "
+        "labelled by the domain's simulated person, retraining each round; Table 1's errors "
+        "(with a ground truth) and closed-loop dangerous / success rates (with a shield run) "
+        "against labels used. Domains with a labeller: " +
+            experiments::DomainRegistry::Global().ListOffering(
+                [](const experiments::Domain& d) { return d.HasLabeller(); }));
+    AddConfigFlag(cmd, cfg);  // its `trainer:` section: the barrier trainer's options
+    cmd->add_option("--domain", domain, "the domain")->required();
+    cmd->add_flag("--quick", quick, "the small profile (2 seeds, 2 rounds of 10, small pool)");
+    cmd->add_option("--strategies", strategies,
+                    "comma-separated: random, margin, disagreement, diversity, shield-relevant "
+                    "(default: all)");
+    cmd->add_option("--seeds", seeds, "seeds (default 5; quick 2)");
+    AddSeedOption(cmd, "--first-seed", &first_seed, "seed i is first-seed + i");
+    cmd->add_option("--rounds", rounds, "query rounds (default 8; quick 2)");
+    cmd->add_option("--k", k, "queries per round (default 20; quick 10)");
+    cmd->add_option("--initial-labels", initial_labels, "random labels to start from (default 20)");
+    cmd->add_option("--pool", pool, "unlabelled candidate states per seed (default 20000)");
+    cmd->add_option("--radius", radius, "diversity radius of every strategy's batch but random's");
+    cmd->add_option("--episodes", episodes, "closed-loop episodes per round (default 20)");
+    cmd->add_option("--final-episodes", final_episodes,
+                    "closed-loop episodes at the last round (default 100)");
+    cmd->add_option("--threads", threads, "parallel jobs (seed x strategy)")->capture_default_str();
+    cmd->add_option("--shard", shard, "k/N: run the seeds with index = k mod N (no result.json); "
+                                      "an unsharded rerun into the same --out merges");
+    cmd->add_option("--out", out, "run directory (job files, result.json, curves.csv); a rerun "
+                                  "resumes")
+        ->transform(DirectoryPath());
+    cmd->add_flag("--json", json, "print the result document");
+    cmd->callback([this] { Run(); });
+  }
+
+  void Run() {
+    const std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
+        domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
+    SECURE_CHECK(d->HasLabeller(), "experiment label-efficiency: the "
+                                       << domain << " domain has no labeller (domains with one: "
+                                       << experiments::DomainRegistry::Global().ListOffering(
+                                              [](const experiments::Domain& x) {
+                                                return x.HasLabeller();
+                                              })
+                                       << ")");
+    experiments::LabelEfficiencyOptions o = experiments::LabelEfficiencyOptions::For(
+        *d, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
+    config->Check();
+    const YAML::Node trainer = config->Section("trainer");
+    if (trainer.IsMap()) o.trainer.ApplyYaml(trainer, config->path + " [trainer]");
+    if (!strategies.empty()) {
+      o.strategies.clear();
+      std::stringstream in(strategies);
+      for (std::string item; std::getline(in, item, ',');)
+        o.strategies.push_back(FromString(cbf::kQueryStrategyNames, item, "--strategies"));
+    }
+    if (seeds > 0) o.seeds = seeds;
+    o.first_seed = first_seed;
+    if (rounds >= 0) o.rounds = rounds;
+    if (k > 0) o.k = k;
+    if (initial_labels > 0) o.initial_labels = initial_labels;
+    if (pool > 0) o.pool = pool;
+    if (radius >= 0) o.radius = radius;
+    if (episodes >= 0) o.episodes = episodes;
+    if (final_episodes >= 0) o.final_episodes = final_episodes;
+    o.threads = threads;
+    o.output_dir = out;
+    if (!shard.empty()) {
+      int a = -1, b = 0;
+      char slash = 0, extra = 0;
+      std::istringstream s(shard);
+      SECURE_CHECK((s >> a >> slash >> b) && slash == '/' && !(s >> extra) && b >= 1 && a >= 0 &&
+                       a < b,
+                   "--shard '" << shard << "': expected k/N with 0 <= k < N");
+      o.shard_index = a;
+      o.shard_count = b;
+    }
+    o.Validate();
+    CreateDirectories(out);
+    std::cerr << "secure experiment label-efficiency on " << d->name() << ": " << o.seeds
+              << " seeds x " << o.strategies.size() << " strategies, " << o.initial_labels
+              << " initial labels + " << o.rounds << " rounds x " << o.k << ", on " << o.threads
+              << " threads" << (out.empty() ? "" : ", writing to " + out) << "\n";
+    const experiments::LabelEfficiencyResult r =
+        experiments::RunLabelEfficiency(*d, o, &std::cerr);
+    if (json) {
+      nlohmann::json j = r.ToJson();
+      j["command"] = "experiment label-efficiency";
+      PrintJson(j);
+    } else {
+      std::cout << r.Table() << "\nTotal " << r.seconds << " s.\n";
+    }
+  }
+};
+
+}  // namespace
+
+void RegisterLabelEfficiencyCommand(CLI::App& experiment, const Config& config) {
+  static LabelEfficiencyCommand command;
+  command.Register(experiment, config);
+}
+
+}  // namespace secure::cli

@@ -1,0 +1,37 @@
+// The labeller capability's defaults (Domain::Label, Domain::SampleQueryPool; domain.h).
+#include <algorithm>
+#include <numeric>
+
+#include "secure/common/error.h"
+#include "secure/common/rng.h"
+#include "secure/experiments/domain.h"
+
+namespace secure::experiments {
+
+std::vector<int> Domain::Label(const Eigen::Ref<const Eigen::MatrixXf>&, std::uint64_t) const {
+  SECURE_THROW("the " << name() << " domain has no labeller (a simulated person who labels "
+                         "states; domains with one: those whose Domain::HasLabeller() is true)");
+}
+
+data::StateSet Domain::SampleQueryPool(long count, std::uint64_t seed) const {
+  SECURE_CHECK(count >= 1, "query pool: count = " << count << ", must be >= 1");
+  const DomainData d = GenerateData(seed);
+  const long n = d.safe.size() + d.near_dangerous.size();
+  std::vector<long> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), 0L);
+  Rng rng(seed ^ 0x9001'0000'0000'0000ULL);
+  Shuffle(order.begin(), order.end(), rng);
+  order.resize(static_cast<std::size_t>(std::min(n, count)));
+  data::StateSet pool;
+  pool.source = "the " + name() + " query pool (data seed " + std::to_string(seed) + ")";
+  pool.features = d.safe.features;
+  pool.states.resize(d.safe.dim(), static_cast<long>(order.size()));
+  for (std::size_t j = 0; j < order.size(); ++j) {
+    const long i = order[j];
+    pool.states.col(static_cast<long>(j)) =
+        i < d.safe.size() ? d.safe.states.col(i) : d.near_dangerous.states.col(i - d.safe.size());
+  }
+  return pool;
+}
+
+}  // namespace secure::experiments
