@@ -30,4 +30,7 @@ void RegisterDomainsCommand(CLI::App& app);
 void RegisterCompareCommand(CLI::App& app);
 /// secure dynamics train | validate | collect (dynamics_commands.cc): a learned dynamics ensemble.
 void RegisterDynamicsCommands(CLI::App& app, const Config& config);
+/// secure experiment model-source (model_source_command.cc), registered by RegisterDynamicsCommands
+/// under the `experiment` command.
+void RegisterModelSourceCommand(CLI::App& experiment, const Config& config);
 }  // namespace secure::cli

@@ -430,6 +430,8 @@ void RegisterDynamicsCommands(CLI::App& app, const Config& config) {
   train.Register(*cmd, config);
   validate.Register(*cmd);
   collect.Register(*cmd, config);
+  // `secure experiment model-source` (RegisterExperimentCommands made `experiment` first).
+  RegisterModelSourceCommand(*app.get_subcommand("experiment"), config);
 }
 
 }  // namespace secure::cli
