@@ -47,10 +47,10 @@ void ResolveFeatures(const std::string& domain, const std::string& state_flag,
                "transitions' columns)");
 }
 
-}  // namespace
 
-/// A feature's group for the error tables: digit runs replaced by '*' ("car3_dx" -> "car*_dx",
-/// "q[4]" -> "q[*]"); features of one group are summarised together.
+/// A feature's group for the error tables: digit runs replaced by '*', and a trailing axis letter
+/// x, y or z too ("car3_dx" -> "car*_d*", "ee_vz" -> "ee_v*", "x" -> "*", "q[4]" -> "q[*]");
+/// features of one group are summarised together.
 std::string FeatureGroup(const std::string& feature) {
   std::string out;
   for (std::size_t i = 0; i < feature.size(); ++i) {
@@ -60,6 +60,13 @@ std::string FeatureGroup(const std::string& feature) {
       out += feature[i];
     }
   }
+  const char last = out.empty() ? '\0' : out.back();
+  const char before = out.size() >= 2 ? out[out.size() - 2] : '_';
+  // An axis: x/y/z alone, after '_', or after a one-letter quantity (vx, dx, wz).
+  const bool axis = (last == 'x' || last == 'y' || last == 'z') &&
+                    (out.size() == 1 || before == '_' || out.size() == 2 ||
+                     (out.size() >= 3 && out[out.size() - 3] == '_'));
+  if (axis) out.back() = '*';
   return out;
 }
 
@@ -170,8 +177,6 @@ DynamicsErrors ScoreDynamics(const dynamics::EnsembleDynamics& model,
   }
   return e;
 }
-
-namespace {
 
 dynamics::Transitions ReadAll(const std::string& list, const std::vector<std::string>& states,
                               const std::vector<std::string>& actions) {
