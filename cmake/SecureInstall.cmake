@@ -9,7 +9,7 @@
 #   find_package(secure REQUIRED)
 #   target_link_libraries(app PRIVATE secure::inference)   # or secure::shield, secure::policy, ...
 #
-# Not installed: everything that links LibTorch (nn_torch, cbf_train, policy_train, experiments
+# Not installed: everything that links LibTorch (nn_torch, cbf_train, dynamics_train, policy_train, experiments
 # and the domain plug-ins, which register experiments::Domain objects), MuJoCo (panda_push), the
 # evaluation harness and the CLI. The exported targets carry their usage requirements
 # (-march=native when SECURE_NATIVE_ARCH, EIGEN_STACK_ALLOCATION_LIMIT, C++17) to the consumer,
@@ -19,12 +19,13 @@
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
-set(SECURE_INSTALL_MODULES common nn data domains cbf shield policy)
+set(SECURE_INSTALL_MODULES common nn data domains cbf dynamics shield policy)
 
-# secure::inference: everything a shielded controller needs (barrier, shield, Gaussian policy).
+# secure::inference: everything a shielded controller needs (barrier, shield, Gaussian policy,
+# a learned dynamics ensemble as the shield model).
 add_library(secure_inference INTERFACE)
 add_library(secure::inference ALIAS secure_inference)
-target_link_libraries(secure_inference INTERFACE secure::shield secure::policy)
+target_link_libraries(secure_inference INTERFACE secure::shield secure::policy secure::dynamics)
 set_target_properties(secure_inference PROPERTIES EXPORT_NAME inference)
 
 # C++17 for the consumer too (the project sets CMAKE_CXX_STANDARD, which does not propagate).

@@ -33,4 +33,9 @@ void RegisterDomainsCommand(CLI::App& app);
 /// secure compare A.json B.json (compare_command.cc): two `secure eval --json` results of the same
 /// episodes, paired by seed (TOST of the rates, latencies).
 void RegisterCompareCommand(CLI::App& app);
+/// secure dynamics train | validate | collect (dynamics_commands.cc): a learned dynamics ensemble.
+void RegisterDynamicsCommands(CLI::App& app, const Config& config);
+/// secure experiment model-source (model_source_command.cc), registered by RegisterDynamicsCommands
+/// under the `experiment` command.
+void RegisterModelSourceCommand(CLI::App& experiment, const Config& config);
 }  // namespace secure::cli

@@ -2,7 +2,11 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <memory>
+
 #include "secure/common/error.h"
+#include "secure/dynamics/learned_environment.h"
 #include "secure/nn/model_file.h"
 
 namespace secure::cli {
@@ -87,6 +91,16 @@ shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain, con
     options.ApplyYaml(yaml["shield"], config.path + " [" + section + "] [shield]");
   flags.OverlayGiven(*parsed, &options);
   return options;
+}
+
+std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
+    std::unique_ptr<domains::Environment> env, const std::string& path,
+    const shield::ShieldOptions& shield) {
+  auto model = std::make_shared<const dynamics::EnsembleDynamics>(
+      dynamics::EnsembleDynamics::Load(path));
+  return std::make_unique<dynamics::LearnedModelEnvironment>(
+      std::move(env), std::move(model), path,
+      std::max(shield.num_samples, shield.num_probes));
 }
 
 }  // namespace secure::cli

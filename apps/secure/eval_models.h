@@ -66,4 +66,12 @@ class SeedModelSet {
 shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain, const Config& config,
                                           const ShieldFlags& flags, shield::ShieldOptions* parsed);
 
+/// `env` with the learned dynamics model at `path` as its shield model
+/// (dynamics::LearnedModelEnvironment), sized for the shield's batches (max(M, N)): `secure eval
+/// --dynamics`. @throws secure::Error naming the file on a bad model or features that are not
+/// the environment's.
+std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
+    std::unique_ptr<domains::Environment> env, const std::string& path,
+    const shield::ShieldOptions& shield);
+
 }  // namespace secure::cli

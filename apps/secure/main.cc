@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterReportCommand(app);
     secure::cli::RegisterCompareCommand(app);
     secure::cli::RegisterDomainsCommand(app);
+    secure::cli::RegisterDynamicsCommands(app, config);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // --help and --version end parsing with exit code 0: CLI11 prints them. Every other parse

@@ -306,7 +306,7 @@ struct PolicyTrainCommand {
 // ------------------------------------------------------------------------------------------
 struct EvalCommand {
   std::string domain, run_dir, airl_path, bc_path, joint_path, barrier_path, airl_reward_path,
-      methods;
+      methods, dynamics_path;
   int seeds = 10;
   long episodes = 100;
   std::uint64_t first_seed = 0;
@@ -345,6 +345,9 @@ struct EvalCommand {
                     "has one (instead of / overriding --run)");
     cmd->add_option("--methods", methods, "comma-separated methods (default: those whose models "
                                           "are given)");
+    cmd->add_option("--dynamics", dynamics_path,
+                    "a learned dynamics model (`secure dynamics train`) as the shield model, "
+                    "pessimistic over its members, instead of the domain's");
     cmd->add_option("--seeds", seeds,
                     "evaluation seeds (with --run: the number of seed-<k> directories used)")
         ->capture_default_str();
@@ -383,7 +386,10 @@ struct EvalCommand {
       }
       if (!joint_path.empty()) list.push_back(eval::Method::kJoint);
     }
-    const std::unique_ptr<domains::Environment> env = d->MakeEnvironment();
+    const std::unique_ptr<domains::Environment> env =
+        dynamics_path.empty()
+            ? d->MakeEnvironment()
+            : MakeLearnedModelEnvironment(d->MakeEnvironment(), dynamics_path, shield_options);
     eval::Evaluation evaluation(eval::EvaluationOptions{tost_bound, 0.05});
     for (int k = 0; k < seeds; ++k) {
       const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(k);
@@ -406,6 +412,7 @@ struct EvalCommand {
       r["config"] = config->path;
       r["models"] = {{"airl", airl_path}, {"bc", bc_path}, {"joint", joint_path},
                      {"barrier", barrier_path}};
+      if (!dynamics_path.empty()) r["models"]["dynamics"] = dynamics_path;
       r["first_seed"] = first_seed;
       r["seeds_evaluated"] = seeds;
       r["episodes"] = episodes;

@@ -11,6 +11,8 @@
 #include <sstream>
 
 #include "domains/franka/mujoco_model.h"
+#include "secure/dynamics/ensemble.h"
+#include "secure/dynamics/learned_environment.h"
 #include "domains/franka/offscreen_renderer.h"
 #include "domains/franka/panda_arm.h"
 #include "secure/common/error.h"
@@ -312,8 +314,12 @@ double PandaPushSim::TargetDistance() const {
 
 void PandaPushShieldModelOptions::Validate() const {
   const char* o = "PandaPushShieldModelOptions";
-  SECURE_CHECK_FIELD(kind == "approximate" || kind == "rollout", o, "kind", kind,
-                     "approximate or rollout");
+  SECURE_CHECK_FIELD(kind == "approximate" || kind == "rollout" || kind == "learned", o, "kind",
+                     kind, "approximate, rollout or learned");
+  SECURE_CHECK_FIELD(kind == "learned" || path.empty(), o, "path", path,
+                     "empty unless kind = learned");
+  SECURE_CHECK_FIELD(kind != "learned" || !path.empty(), o, "path", "''",
+                     "a learned dynamics model file (`secure dynamics train`) with kind = learned");
   SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
                      ">= 0");
   SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
@@ -323,10 +329,12 @@ void PandaPushShieldModelOptions::Validate() const {
 }
 
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
-  return {{"kind", kind},
-          {"position_gain", position_gain},
-          {"velocity_gain", velocity_gain},
-          {"contact_range", contact_range}};
+  nlohmann::json j = {{"kind", kind},
+                      {"position_gain", position_gain},
+                      {"velocity_gain", velocity_gain},
+                      {"contact_range", contact_range}};
+  if (kind == "learned") j["path"] = path;
+  return j;
 }
 
 void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -335,6 +343,7 @@ void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::s
       .Field("position_gain", &position_gain)
       .Field("velocity_gain", &velocity_gain)
       .Field("contact_range", &contact_range)
+      .Field("path", &path)
       .Apply(node, source);
 }
 
@@ -405,10 +414,20 @@ PandaPushEnv::PandaPushEnv(const PandaPushOptions& options,
     : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {
   if (shield_model.kind == "rollout")
     rollout_model_ = std::make_unique<PandaPushRolloutModel>(sim_);
+  if (shield_model.kind == "learned") {
+    // A learned ensemble (secure/dynamics): the evaluation pairs it with a barrier pessimistic
+    // over its members (dynamics::ForShieldModel).
+    auto model = std::make_shared<const dynamics::EnsembleDynamics>(
+        dynamics::EnsembleDynamics::Load(shield_model.path));
+    dynamics::CheckModelFeatures(*model, panda_push::ObservationFeatures(),
+                                 panda_push::ActionFeatures(), shield_model.path);
+    learned_model_ = std::make_unique<dynamics::EnsembleModel>(std::move(model));
+  }
 }
 
 const DynamicsModel& PandaPushEnv::ShieldModel() const {
   if (rollout_model_ != nullptr) return *rollout_model_;
+  if (learned_model_ != nullptr) return *learned_model_;
   return shield_model_;
 }
 

@@ -51,6 +51,10 @@ namespace secure::domains::franka {
 class OffscreenRenderer;
 }
 
+namespace secure::dynamics {
+class EnsembleModel;
+}  // namespace secure::dynamics
+
 namespace secure::domains::panda_push {
 
 constexpr int kObservationDim = 18;
@@ -162,7 +166,8 @@ class PandaPushSim {
 /// bound on what a perfect model gives the shield, at the cost of one simulated control period
 /// per sampled action (the gains then play no part).
 struct PandaPushShieldModelOptions {
-  std::string kind = "approximate";  // approximate | rollout
+  std::string kind = "approximate";  // approximate | rollout | learned
+  std::string path;                  // kind = learned: a `secure dynamics train` model file
   double position_gain = 0.05;
   double velocity_gain = 1.25;
   double contact_range = 0.15;
@@ -265,6 +270,7 @@ class PandaPushEnv final : public Environment {
   PandaPushShieldModelOptions shield_model_options_;
   PandaPushShieldModel shield_model_;
   std::unique_ptr<PandaPushRolloutModel> rollout_model_;  // kind = rollout
+  std::unique_ptr<dynamics::EnsembleModel> learned_model_;  // kind = learned
   bool toppled_ = false;
   std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };

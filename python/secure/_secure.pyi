@@ -234,6 +234,8 @@ class Dynamics:
     """A dynamics model T(s, a) the shield looks one step ahead with. Made by
       Dynamics.builtin(domain, **domain_options)  a domain's shield model (secure.domains())
       Dynamics.linear(A, B)                        next = A s + B a
+      Dynamics.learned(path)                       a learned ensemble (`secure dynamics train`);
+                                                   a Shield on it is pessimistic over the members
       Dynamics.from_callable(fn, state_dim, action_dim)
                                                    fn(state (d,), actions (M, n)) -> (M, d)
       env.dynamics                                 the shield model of an environment
@@ -241,6 +243,14 @@ class Dynamics:
     @staticmethod
     def linear(A: ArrayLike, B: ArrayLike) -> Dynamics:
         """next = A s + B a; A is (d, d), B is (d, n) (copied)."""
+        ...
+    @staticmethod
+    def learned(path: str, max_batch: int = 1024) -> Dynamics:
+        """A learned dynamics ensemble from its model file (`secure dynamics train`): step() gives the
+        members' mean; a Shield on it scores an action by the minimum over the members of h(s+), so the
+        ensemble's disagreement makes the shield careful. max_batch bounds the actions per step (the
+        shield's max(num_samples, num_probes)). Inference only (no LibTorch).
+        """
         ...
     @staticmethod
     def from_callable(fn: Callable[[NDArray[numpy.float32], NDArray[numpy.float32]], ArrayLike], state_dim: int, action_dim: int, name: str = 'python dynamics') -> Dynamics:

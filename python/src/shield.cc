@@ -5,6 +5,7 @@
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/domains/linear_dynamics.h"
+#include "secure/dynamics/ensemble.h"
 #include "secure/shield/shield.h"
 
 namespace secure::python {
@@ -69,6 +70,18 @@ std::shared_ptr<Dynamics> Linear(ArrayLike a, ArrayLike b) {
   return d;
 }
 
+std::shared_ptr<Dynamics> Learned(const std::string& path, int max_batch) {
+  auto ensemble = std::make_shared<const dynamics::EnsembleDynamics>(
+      dynamics::EnsembleDynamics::Load(path));
+  auto model = std::make_shared<const dynamics::EnsembleModel>(ensemble, max_batch);
+  auto d = std::make_shared<Dynamics>();
+  d->model = model.get();
+  d->owner = model;
+  d->kind = "learned";
+  d->state_features = ensemble->state_features;
+  return d;
+}
+
 std::shared_ptr<Dynamics> FromCallable(DynamicsFunction fn, int state_dim, int action_dim,
                                        const std::string& name) {
   if (!PyCallable_Check(fn.ptr()))
@@ -121,6 +134,8 @@ class Shield {
     // The shield's own evaluator (it owns scratch memory), reading the barrier's features by
     // name from the model's states where the model names them.
     evaluator_ = EvaluatorOn(*barrier_, dynamics_->state_features);
+    // A learned ensemble: h(s+) is the minimum over its members (secure/dynamics/README.md).
+    evaluator_ = dynamics::ForShieldModel(std::move(evaluator_), *dynamics_->model);
     shield_ = std::make_unique<shield::Shield>(options, *evaluator_, *dynamics_->model);
     // The actuator box: the one given, else the builtin model's environment's, else none.
     if (action_low.is_none() != action_high.is_none())
@@ -228,11 +243,18 @@ void RegisterDynamics(py::module_& m) {
 A dynamics model T(s, a) the shield looks one step ahead with. Made by
   Dynamics.builtin(domain, **domain_options)  a domain's shield model (secure.domains())
   Dynamics.linear(A, B)                        next = A s + B a
+  Dynamics.learned(path)                       a learned ensemble (`secure dynamics train`);
+                                               a Shield on it is pessimistic over the members
   Dynamics.from_callable(fn, state_dim, action_dim)
                                                fn(state (d,), actions (M, n)) -> (M, d)
   env.dynamics                                 the shield model of an environment)doc")
       .def_static("linear", &Linear, py::arg("A"), py::arg("B"),
                   "next = A s + B a; A is (d, d), B is (d, n) (copied).")
+      .def_static("learned", &Learned, py::arg("path"), py::arg("max_batch") = 1024, R"doc(
+A learned dynamics ensemble from its model file (`secure dynamics train`): step() gives the
+members' mean; a Shield on it scores an action by the minimum over the members of h(s+), so the
+ensemble's disagreement makes the shield careful. max_batch bounds the actions per step (the
+shield's max(num_samples, num_probes)). Inference only (no LibTorch).)doc")
       .def_static("from_callable", &FromCallable, py::arg("fn"), py::arg("state_dim"),
                   py::arg("action_dim"), py::arg("name") = "python dynamics", R"doc(
 A model written in Python: fn(state, actions) gets a (state_dim,) float32 array and an

@@ -9,6 +9,7 @@
 #include "secure/common/strings.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
+#include "secure/dynamics/ensemble.h"
 
 namespace secure::eval {
 
@@ -276,9 +277,12 @@ SeedResult RunMethod(EpisodeRunner& runner, Method method, const SeedModels& mod
   if (!IsShielded(method)) return runner.Run(evaluator, nullptr, episodes, seed, observer);
   SECURE_CHECK(models.make_barrier != nullptr,
                "method '" << name << "' needs a barrier, and none was given");
-  std::unique_ptr<cbf::Barrier> barrier = models.make_barrier();
-  const shield::ShieldOptions options = ShieldOptionsFor(method, shield_options);
   const domains::Environment& env = runner.environment();
+  // A learned ensemble as the shield model makes the barrier pessimistic over its members
+  // (secure/dynamics/README.md); any other model leaves the barrier as it is.
+  std::unique_ptr<cbf::Barrier> barrier =
+      dynamics::ForShieldModel(models.make_barrier(), env.ShieldModel());
+  const shield::ShieldOptions options = ShieldOptionsFor(method, shield_options);
   shield::Shield shield(options, *barrier, env.ShieldModel());
   shield.SetActionBounds(env);
   std::optional<policy::AirlActionValue> value;

@@ -12,6 +12,8 @@
 #include "domains/panda_push/domain.h"
 #include "domains/panda_push/panda_push.h"
 #include "secure/common/error.h"
+#include "secure/dynamics/ensemble.h"
+#include "secure/nn/mlp.h"
 #include "tests/test_util.h"
 
 namespace secure::domains::panda_push {
@@ -591,3 +593,38 @@ TEST(PandaPushRender, FramesShowTheSceneWithTheBlock) {
 
 }  // namespace
 }  // namespace secure::domains::panda_push
+
+// shield_model: {kind: learned, path: FILE}: the environment's shield model is the learned
+// ensemble (secure/dynamics); a model of other features, or no path, is refused naming the file.
+class PandaPushLearnedModel : public secure::test::TempDirTest {};
+TEST_F(PandaPushLearnedModel, TheConfigSelectsALearnedEnsemble) {
+  using namespace secure;
+  namespace pp = secure::domains::panda_push;
+  dynamics::EnsembleDynamics e;
+  e.state_features = pp::ObservationFeatures();
+  e.action_features = pp::ActionFeatures();
+  const int in = pp::kObservationDim + pp::kActionDim;
+  for (int k = 0; k < 2; ++k)
+    e.members.push_back(nn::RandomMlpParams(
+        nn::MlpSpec{in, {8}, pp::kObservationDim, nn::Activation::kTanh}, 3 + k));
+  e.input = nn::Normalizer::Identity(in);
+  e.delta = nn::Normalizer::Identity(pp::kObservationDim);
+  const std::string path = PathOf("panda.model");
+  e.Save(path);
+  pp::PandaPushShieldModelOptions options;
+  options.kind = "learned";
+  options.path = path;
+  const pp::PandaPushEnv env(pp::PandaPushOptions{}, options);
+  EXPECT_HAS(env.ShieldModel().Describe(), "ensemble of 2");
+  EXPECT_FALSE(env.ShieldModelIsExact());
+  EXPECT_HAS(env.Clone()->ShieldModel().Describe(), "ensemble of 2");
+  EXPECT_EQ(options.ToJson()["path"], path);
+
+  e.state_features.back() = "other";
+  e.Save(PathOf("other.model"));
+  options.path = PathOf("other.model");
+  EXPECT_HAS(test::ErrorOf([&] { pp::PandaPushEnv bad(pp::PandaPushOptions{}, options); }),
+             "other.model: the learned dynamics predicts 18 features");
+  options.path.clear();
+  EXPECT_HAS(test::ErrorOf([&] { options.Validate(); }), "PandaPushShieldModelOptions::path");
+}

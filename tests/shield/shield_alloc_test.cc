@@ -30,6 +30,7 @@
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
+#include "secure/dynamics/ensemble.h"
 #include "secure/nn/mlp.h"
 #include "secure/policy/airl_reward.h"
 
@@ -603,6 +604,51 @@ TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
   s.name += ", sampler = qmc";
   s.options.sampler = Sampler::kQmc;
   ExpectNoAllocations(s, barrier, model, 300);
+}
+
+
+// The learned dynamics (secure/dynamics): a K = 5 ensemble as the shield model and the barrier
+// wrapped pessimistically (min over the members' next states, one forward over K M columns), at
+// Panda size (9-D states and actions, M = 128, members 18-64-64-9): no allocation per decision,
+// in a round without resampling and in one with resampling (probes included).
+TEST(ShieldAllocTest, LearnedDynamicsEnsembleDecisionsDoNotAllocate) {
+  auto ensemble = std::make_shared<dynamics::EnsembleDynamics>();
+  for (int i = 0; i < 9; ++i) {
+    ensemble->state_features.push_back("s" + std::to_string(i));
+    ensemble->action_features.push_back("a" + std::to_string(i));
+  }
+  for (int k = 0; k < 5; ++k)
+    ensemble->members.push_back(
+        nn::RandomMlpParams(nn::MlpSpec{18, {64, 64}, 9, nn::Activation::kTanh}, 40 + k));
+  ensemble->input = nn::Normalizer::Identity(18);
+  ensemble->delta = nn::Normalizer::Identity(9);
+  ensemble->delta.scale.setConstant(0.02f);
+  const dynamics::EnsembleModel model(ensemble, 128);
+  const cbf::BarrierNet net = MakeNet(9, {64, 64}, 13);
+  Scenario s;
+  s.state = Eigen::VectorXf::LinSpaced(9, -0.5f, 0.5f);
+  s.mu = Eigen::VectorXf::Constant(9, 0.2f);
+  s.sigma = Eigen::VectorXf::Constant(9, 0.3f);
+  s.options.num_samples = 128;
+  {
+    // h far above 0 everywhere: every sample safe, one round.
+    const std::unique_ptr<cbf::Barrier> evaluator = net.MakeEvaluator();
+    dynamics::PessimisticBarrier barrier(
+        std::make_unique<TiltedBarrier>(*evaluator, 0, 1.0f, -1000.0f), model);
+    s.name = "learned ensemble K = 5, M = 128, safe";
+    ExpectNoAllocations(s, barrier, model, 200);
+  }
+  {
+    // Steeply tilted through the state: about half the samples unsafe, so resampling runs.
+    const std::unique_ptr<cbf::Barrier> evaluator = net.MakeEvaluator();
+    dynamics::PessimisticBarrier barrier(
+        std::make_unique<TiltedBarrier>(*evaluator, 0, -1000.0f, s.state[0]), model);
+    s.name = "learned ensemble K = 5, M = 128, resampling";
+    s.options.safe_ratio = 0.99;
+    s.options.max_iterations = 3;
+    s.expect_resampling = true;
+    ExpectNoAllocations(s, barrier, model, 100);
+  }
 }
 
 }  // namespace

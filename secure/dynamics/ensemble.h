@@ -1,0 +1,150 @@
+#pragma once
+// A learned one-step dynamics model: an ensemble of K small MLPs, each predicting the observation
+// change Δs = s' − s from (s, a) (issue 36). The shield uses it where no hand-written model
+// exists, pessimistically: g(a) takes the minimum over members of h(member's s⁺)
+// (PessimisticBarrier below).
+//
+//   EnsembleDynamics    immutable plain data (features, K MLPs, the input and Δs normalisers);
+//                       Save / Load in the model file format (nn/model_file.h, kind
+//                       "dynamics_ensemble", feature names and checksum). Trained by
+//                       dynamics::TrainDynamics (trainer.h, LibTorch), evaluated without it.
+//   EnsembleModel       a domains::DynamicsModel over it (one per thread / shield): K
+//                       InferenceMlp forwards (LIBXSMM) per Step, no allocation. Step() writes the
+//                       members' mean; the K predictions of the last Step stay available.
+//   PessimisticBarrier  a cbf::Barrier around the shield's barrier: evaluated on the next states
+//                       the EnsembleModel just wrote, it returns min_k h(s⁺_k) (one inner forward
+//                       over K·M columns); on any other states (h(s), the look-ahead's chained
+//                       steps) the inner h. So the shield itself is unchanged.
+//
+// The member networks see the normalised input x' = ((s, a) − mean) / scale and predict the
+// normalised change y = (Δs − delta.mean) / delta.scale; s' = s + delta.mean + delta.scale ⊙ y.
+
+#include <Eigen/Core>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "secure/cbf/barrier.h"
+#include "secure/domains/dynamics.h"
+#include "secure/nn/inference_mlp.h"
+#include "secure/nn/mlp.h"
+
+namespace secure::dynamics {
+
+inline constexpr const char* kEnsembleModelKind = "dynamics_ensemble";
+/// The largest ensemble (members) and the largest batch of actions an EnsembleModel takes.
+inline constexpr int kMaxMembers = 64;
+inline constexpr int kMaxBatch = 4096;
+
+struct EnsembleDynamics {
+  std::vector<std::string> state_features;   // the rows of s (and of s')
+  std::vector<std::string> action_features;  // the rows of a
+  std::vector<nn::MlpParams> members;        // (state + action) -> ... -> state, each
+  nn::Normalizer input;                      // over (s, a) stacked
+  nn::Normalizer delta;                      // over Δs
+  nlohmann::json provenance = nlohmann::json::object();
+
+  int state_dim() const { return static_cast<int>(state_features.size()); }
+  int action_dim() const { return static_cast<int>(action_features.size()); }
+  int num_members() const { return static_cast<int>(members.size()); }
+
+  /// Checks shapes, names and finiteness; `what` prefixes the message (the file name).
+  void Validate(const std::string& what) const;
+  void Save(const std::string& path) const;
+  /// @throws secure::Error naming the file on a wrong kind, missing field or bad shape.
+  static EnsembleDynamics Load(const std::string& path);
+
+  /// Member k's next states for a batch (state_dim x N states, action_dim x N actions), in
+  /// double precision column by column: slow, the reference for tests and `dynamics validate`.
+  Eigen::MatrixXd ReferenceNext(int member, const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                const Eigen::Ref<const Eigen::MatrixXf>& actions) const;
+};
+
+class EnsembleModel final : public domains::DynamicsModel {
+ public:
+  /// Buffers for batches of up to `max_batch` actions (the shield's max(M, N)).
+  /// @throws secure::Error if max_batch is outside [1, kMaxBatch] or the model is invalid.
+  explicit EnsembleModel(std::shared_ptr<const EnsembleDynamics> model, int max_batch = 1024,
+                         nn::MatmulBackend backend = nn::MatmulBackend::kAuto);
+
+  int state_dim() const override { return model_->state_dim(); }
+  int action_dim() const override { return model_->action_dim(); }
+  std::string Describe() const override;
+  int num_members() const { return model_->num_members(); }
+  int max_batch() const { return max_batch_; }
+  const EnsembleDynamics& model() const { return *model_; }
+  const std::shared_ptr<const EnsembleDynamics>& shared_model() const { return model_; }
+
+  /// members (state_dim x K·M): member k's next states in columns [k M, (k + 1) M).
+  /// @throws secure::Error on wrong dimensions or M > max_batch().
+  void StepMembers(const Eigen::Ref<const Eigen::VectorXf>& state,
+                   const Eigen::Ref<const Eigen::MatrixXf>& actions,
+                   Eigen::Ref<Eigen::MatrixXf> members) const;
+
+  /// Whether `states` are the next states the last Step() wrote (the same buffer, size and
+  /// values): then last_members() holds the K predictions behind them.
+  bool IsLastStep(const Eigen::Ref<const Eigen::MatrixXf>& states) const;
+  /// The K predictions of the last Step(): (state_dim x K·M), member k in columns [k M, (k+1) M).
+  Eigen::Ref<const Eigen::MatrixXf> last_members() const {
+    return members_.leftCols(static_cast<Eigen::Index>(last_cols_) * num_members());
+  }
+
+ protected:
+  /// next_states = the members' mean.
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
+
+ private:
+  // All K predictions into members_ (columns [k M, (k + 1) M)).
+  void Predict(const Eigen::Ref<const Eigen::VectorXf>& state,
+               const Eigen::Ref<const Eigen::MatrixXf>& actions) const;
+
+  std::shared_ptr<const EnsembleDynamics> model_;
+  std::vector<nn::InferenceMlp> nets_;
+  int max_batch_;
+  Eigen::VectorXf delta_mean_, delta_scale_;
+  // Scratch (mutable: Step is const by the DynamicsModel interface; one thread per object).
+  mutable std::vector<nn::InferenceMlp::Workspace> workspaces_;
+  mutable Eigen::MatrixXf inputs_;   // (state + action) x max_batch
+  mutable Eigen::MatrixXf outputs_;  // state x max_batch
+  mutable Eigen::MatrixXf members_;  // state x (K max_batch)
+  mutable Eigen::VectorXf offset_;  // delta.mean + s
+  mutable Eigen::MatrixXf mean_;     // state x max_batch: the last Step's output, as written
+  mutable const float* last_data_ = nullptr;
+  mutable Eigen::Index last_cols_ = 0, last_stride_ = 0;
+};
+
+/// h(s⁺) pessimistic over the ensemble: on the next states `model` last wrote, min over members
+/// of inner h(member's s⁺); on other states, inner h. The inner barrier sees K·M columns at once.
+class PessimisticBarrier final : public cbf::Barrier {
+ public:
+  /// `model` must outlive this barrier; `inner` reads model.state_dim() rows.
+  /// @throws secure::Error if the state dimensions differ.
+  PessimisticBarrier(std::unique_ptr<cbf::Barrier> inner, const EnsembleModel& model);
+  int state_dim() const override { return inner_->state_dim(); }
+  std::string Describe() const override;
+  cbf::Barrier& inner() { return *inner_; }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                       Eigen::Ref<Eigen::VectorXf> h) override;
+
+ private:
+  void EvaluateMin(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
+                   bool dense);
+  std::unique_ptr<cbf::Barrier> inner_;
+  const EnsembleModel& model_;
+  Eigen::VectorXf h_members_;  // (K max_batch)
+};
+
+/// The barrier a shield over `dynamics` should use: `barrier` wrapped in a PessimisticBarrier
+/// when `dynamics` is an EnsembleModel, else `barrier` itself. (The evaluation harness and the
+/// Python module call this where they pair a barrier with an environment's shield model.)
+std::unique_ptr<cbf::Barrier> ForShieldModel(std::unique_ptr<cbf::Barrier> barrier,
+                                             const domains::DynamicsModel& dynamics);
+
+}  // namespace secure::dynamics

@@ -1,0 +1,319 @@
+// The learned dynamics ensemble (secure/dynamics): model file, batched inference against the
+// reference, training (a linear system, determinism), the pessimistic barrier, transitions files.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <string>
+
+#include "secure/common/rng.h"
+#include "secure/dynamics/ensemble.h"
+#include "secure/dynamics/learned_environment.h"
+#include "secure/dynamics/trainer.h"
+#include "secure/dynamics/transitions.h"
+#include "secure/nn/mlp.h"
+#include "secure/shield/shield.h"
+#include "tests/test_util.h"
+
+namespace secure::dynamics {
+namespace {
+
+// A random ensemble: K members (s, a) -> Δs with hidden layers, small output layers.
+EnsembleDynamics RandomEnsemble(int d, int a, int k, std::vector<int> hidden, unsigned seed) {
+  EnsembleDynamics e;
+  for (int i = 0; i < d; ++i) e.state_features.push_back("s" + std::to_string(i));
+  for (int i = 0; i < a; ++i) e.action_features.push_back("a" + std::to_string(i));
+  for (int m = 0; m < k; ++m) {
+    nn::MlpParams p = nn::RandomMlpParams(nn::MlpSpec{d + a, hidden, d, nn::Activation::kTanh},
+                                          seed + 17 * m);
+    e.members.push_back(p);
+  }
+  e.input = nn::Normalizer::Identity(d + a);
+  e.input.mean.setConstant(0.1f);
+  e.input.scale.setConstant(2.0f);
+  e.delta = nn::Normalizer::Identity(d);
+  e.delta.scale.setConstant(0.05f);
+  e.delta.mean.setConstant(0.01f);
+  e.provenance = {{"test", true}};
+  return e;
+}
+
+// h(s) = c . s + b.
+class LinearBarrier final : public cbf::Barrier {
+ public:
+  LinearBarrier(Eigen::VectorXf c, float b) : c_(std::move(c)), b_(b) {}
+  int state_dim() const override { return static_cast<int>(c_.size()); }
+  std::string Describe() const override { return "linear"; }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
+    h = (c_.transpose() * states).transpose().array() + b_;
+  }
+
+ private:
+  Eigen::VectorXf c_;
+  float b_;
+};
+
+class DynamicsTest : public test::TempDirTest {};
+
+TEST_F(DynamicsTest, ModelFileRoundTripsAndStepMatchesTheReference) {
+  const EnsembleDynamics e = RandomEnsemble(4, 2, 3, {16, 16}, 5);
+  const std::string path = PathOf("dyn.model");
+  e.Save(path);
+  const EnsembleDynamics back = EnsembleDynamics::Load(path);
+  EXPECT_EQ(back.state_features, e.state_features);
+  EXPECT_EQ(back.action_features, e.action_features);
+  ASSERT_EQ(back.num_members(), 3);
+  for (int k = 0; k < 3; ++k)
+    for (std::size_t l = 0; l < e.members[k].layers.size(); ++l) {
+      EXPECT_EQ(back.members[k].layers[l].weight, e.members[k].layers[l].weight);
+      EXPECT_EQ(back.members[k].layers[l].bias, e.members[k].layers[l].bias);
+    }
+  EXPECT_EQ(back.input.scale, e.input.scale);
+  EXPECT_EQ(back.delta.mean, e.delta.mean);
+  EXPECT_EQ(back.provenance, e.provenance);
+  // Saving what was read gives the same bytes.
+  back.Save(PathOf("again.model"));
+  std::ifstream f1(path, std::ios::binary), f2(PathOf("again.model"), std::ios::binary);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(f1), {}),
+            std::string(std::istreambuf_iterator<char>(f2), {}));
+
+  // Step = mean of the members; StepMembers = each member; both against the double reference.
+  auto shared = std::make_shared<const EnsembleDynamics>(back);
+  const EnsembleModel model(shared, 64);
+  Rng rng(3);
+  Eigen::VectorXf s(4);
+  for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(rng.Normal());
+  Eigen::MatrixXf actions(2, 40);
+  for (Eigen::Index j = 0; j < actions.size(); ++j) actions(j) = static_cast<float>(rng.Normal());
+  Eigen::MatrixXf next(4, 40), members(4, 120);
+  model.Step(s, actions, next);
+  model.StepMembers(s, actions, members);
+  Eigen::MatrixXd mean = Eigen::MatrixXd::Zero(4, 40);
+  const Eigen::MatrixXf states = s.replicate(1, 40);
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::MatrixXd ref = back.ReferenceNext(k, states, actions);
+    mean += ref / 3.0;
+    EXPECT_LT((members.middleCols(40 * k, 40).cast<double>() - ref).cwiseAbs().maxCoeff(), 1e-5)
+        << "member " << k;
+  }
+  EXPECT_LT((next.cast<double>() - mean).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_HAS(model.Describe(), "ensemble of 3");
+}
+
+TEST_F(DynamicsTest, LoadRejectsAnotherKindAndACorruptFile) {
+  const std::string path = PathOf("dyn.model");
+  RandomEnsemble(2, 1, 2, {8}, 1).Save(path);
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  bytes[bytes.size() / 2] ^= 0x5a;
+  const std::string bad = Write("bad.model", bytes);
+  EXPECT_HAS(test::ErrorOf([&] { EnsembleDynamics::Load(bad); }), "bad.model");
+  EXPECT_HAS(test::ErrorOf([&] { EnsembleDynamics::Load(PathOf("none.model")); }), "none.model");
+}
+
+// s' = A s + B a: an ensemble of linear members (no hidden layer) learns it to within 1e-3 on
+// held-out states; with hidden layers the error is small too.
+TEST_F(DynamicsTest, LearnsALinearSystemToWithin1e3) {
+  Eigen::Matrix2f a;
+  a << 1.0f, 0.1f, -0.05f, 0.98f;
+  Eigen::Vector2f b(0.0f, 0.1f);
+  auto make = [&](long n, std::uint64_t seed) {
+    Transitions t;
+    t.source = "linear";
+    t.state_features = {"x", "v"};
+    t.action_features = {"u"};
+    t.states.resize(2, n);
+    t.actions.resize(1, n);
+    Rng rng(seed);
+    for (long j = 0; j < n; ++j) {
+      t.states(0, j) = static_cast<float>(rng.Uniform(-2, 2));
+      t.states(1, j) = static_cast<float>(rng.Uniform(-1, 1));
+      t.actions(0, j) = static_cast<float>(rng.Uniform(-3, 3));
+      t.lines.push_back(j + 2);
+    }
+    t.next_states = a * t.states + b * t.actions;
+    return t;
+  };
+  const Transitions train = make(2000, 1), held_out = make(500, 2);
+  DynamicsTrainerOptions o;
+  o.members = 2;
+  o.hidden = {};
+  o.epochs = 150;
+  o.batch_size = 32;
+  o.learning_rate = 1e-2;
+  o.final_learning_rate = 1e-4;
+  o.seed = 4;
+  DynamicsTrainingSummary summary;
+  const EnsembleDynamics e = TrainDynamics(o, train, &summary);
+  EXPECT_EQ(summary.train_transitions + summary.validation_transitions, 2000);
+  const EnsembleModel model(std::make_shared<const EnsembleDynamics>(e), 1);
+  double worst = 0.0;
+  Eigen::MatrixXf next(2, 1);
+  for (long j = 0; j < held_out.size(); ++j) {
+    model.Step(held_out.states.col(j), held_out.actions.col(j), next);
+    worst = std::max(worst, double((next.col(0) - held_out.next_states.col(j)).cwiseAbs().maxCoeff()));
+  }
+  EXPECT_LT(worst, 1e-3);
+
+  // Same seed, same data: the same model bytes (the summary in the file has no timing).
+  e.Save(PathOf("one.model"));
+  TrainDynamics(o, train).Save(PathOf("two.model"));
+  std::ifstream f1(PathOf("one.model"), std::ios::binary), f2(PathOf("two.model"), std::ios::binary);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(f1), {}),
+            std::string(std::istreambuf_iterator<char>(f2), {}));
+
+  // A small tanh network gets close as well (relative to the change's spread).
+  o.hidden = {32};
+  o.members = 1;
+  o.epochs = 60;
+  const EnsembleModel mlp(std::make_shared<const EnsembleDynamics>(TrainDynamics(o, train)), 1);
+  double err = 0.0;
+  for (long j = 0; j < held_out.size(); ++j) {
+    mlp.Step(held_out.states.col(j), held_out.actions.col(j), next);
+    err = std::max(err, double((next.col(0) - held_out.next_states.col(j)).cwiseAbs().maxCoeff()));
+  }
+  EXPECT_LT(err, 2e-2);
+}
+
+// min over members is never above any member's h, equals one of them, and other states get the
+// inner barrier unchanged.
+TEST_F(DynamicsTest, PessimisticBarrierIsTheMinimumOverMembers) {
+  auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(4, 2, 5, {32, 32}, 9));
+  const EnsembleModel model(shared, 128);
+  Eigen::VectorXf c(4);
+  c << 1.0f, -2.0f, 0.5f, 3.0f;
+  PessimisticBarrier pessimistic(std::make_unique<LinearBarrier>(c, 0.2f), model);
+  LinearBarrier plain(c, 0.2f);
+  Rng rng(11);
+  for (int trial = 0; trial < 20; ++trial) {
+    const int m = 1 + trial * 6;
+    Eigen::VectorXf s(4);
+    for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(rng.Normal());
+    Eigen::MatrixXf actions(2, m);
+    for (Eigen::Index j = 0; j < actions.size(); ++j)
+      actions(j) = static_cast<float>(3 * rng.Normal());
+    Eigen::MatrixXf next(4, m), members(4, 5 * m);
+    model.StepMembers(s, actions, members);
+    model.Step(s, actions, next);
+    Eigen::VectorXf h(m), hk(5 * m), h_mean(m);
+    pessimistic.Evaluate(next, h);
+    plain.Evaluate(members, hk);
+    plain.Evaluate(next, h_mean);
+    for (int i = 0; i < m; ++i) {
+      float lowest = std::numeric_limits<float>::infinity();
+      for (int k = 0; k < 5; ++k) {
+        EXPECT_LE(h[i], hk[k * m + i]) << "member " << k << " column " << i;
+        lowest = std::min(lowest, hk[k * m + i]);
+      }
+      EXPECT_EQ(h[i], lowest);
+      EXPECT_LE(h[i], h_mean[i] + 1e-5f);  // h linear: the mean's h is the members' mean
+    }
+    // A copy of the same values in another buffer is not the last step: the inner h.
+    const Eigen::MatrixXf copy = next;
+    Eigen::VectorXf h_copy(m);
+    pessimistic.Evaluate(copy, h_copy);
+    EXPECT_EQ(h_copy, h_mean);
+  }
+  // In the shield: g of the pessimistic barrier is g of the worst member.
+  shield::ShieldOptions options;
+  options.num_samples = 32;
+  shield::Shield sh(options, pessimistic, model);
+  Eigen::VectorXf s = Eigen::VectorXf::Constant(4, 0.3f);
+  Eigen::MatrixXf actions = Eigen::MatrixXf::Random(2, 16);
+  Eigen::VectorXd g(16);
+  const double h_s = sh.EvaluateH(s);
+  Eigen::VectorXf h_plain(1);
+  plain.Evaluate(Eigen::MatrixXf(s), h_plain);
+  EXPECT_FLOAT_EQ(static_cast<float>(h_s), h_plain[0]);
+  sh.EvaluateG(s, h_s, actions, g);
+  Eigen::MatrixXf members(4, 80);
+  model.StepMembers(s, actions, members);
+  Eigen::VectorXf hk(80);
+  plain.Evaluate(members, hk);
+  for (int i = 0; i < 16; ++i) {
+    double worst = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 5; ++k) worst = std::min(worst, double(hk[k * 16 + i]));
+    EXPECT_NEAR(g[i], (worst - h_s) / options.dt + options.class_k_gain * h_s, 1e-4);
+  }
+}
+
+TEST_F(DynamicsTest, ForShieldModelWrapsOnlyAnEnsemble) {
+  auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(2, 1, 2, {8}, 2));
+  const EnsembleModel model(shared, 8);
+  auto wrapped = ForShieldModel(std::make_unique<LinearBarrier>(Eigen::Vector2f(1, 1), 0), model);
+  EXPECT_NE(dynamic_cast<PessimisticBarrier*>(wrapped.get()), nullptr);
+  EXPECT_HAS(wrapped->Describe(), "min over the 2 members");
+  Eigen::MatrixXf big(1, 9);
+  Eigen::MatrixXf out(2, 9);
+  EXPECT_HAS(test::ErrorOf([&] { model.Step(Eigen::Vector2f(0, 0), big.setZero(), out); }),
+             "exceeds the model's max_batch 8");
+}
+
+TEST_F(DynamicsTest, ReadsTriplesAndTrajectories) {
+  const std::string triples = Write("t.csv",
+                                    "x,v,u,next_x,next_v,extra\n"
+                                    "0,1,0.5,0.1,1.05,7\n"
+                                    "1,0,-1,1,-0.1,7\n");
+  const Transitions t = ReadTransitions(triples, {"x", "v"}, {"u"});
+  ASSERT_EQ(t.size(), 2);
+  EXPECT_FLOAT_EQ(t.next_states(1, 0), 1.05f);
+  EXPECT_FLOAT_EQ(t.actions(0, 1), -1.0f);
+  EXPECT_TRUE(t.run_begin.empty());
+  const std::string demos = Write("demos.csv",
+                                  "episode,step,x,v,u\n"
+                                  "0,0,0,0,1\n0,1,0,0.1,1\n0,2,0.01,0.2,1\n"
+                                  "1,0,5,5,0\n1,1,5,5,0\n");
+  const Transitions d = ReadTransitions(demos, {"x", "v"}, {"u"});
+  ASSERT_EQ(d.size(), 3);  // 2 + 1
+  EXPECT_FLOAT_EQ(d.next_states(1, 1), 0.2f);
+  EXPECT_EQ(d.lines[2], 5);  // episode 1's first row is line 5
+  EXPECT_EQ(d.run_begin, (std::vector<long>{0, 2, 3}));
+  // Round trip as triples.
+  WriteTransitions(PathOf("out.csv"), d);
+  const Transitions back = ReadTransitions(PathOf("out.csv"), {"x", "v"}, {"u"});
+  EXPECT_EQ(back.states, d.states);
+  EXPECT_EQ(back.next_states, d.next_states);
+}
+
+TEST_F(DynamicsTest, BadInputsGiveOneLineNamingFileAndRow) {
+  const std::string nan = Write("nan.csv", "x,u,next_x\n0,1,2\n1,nan,3\n");
+  const std::string m1 = test::ErrorOf([&] { ReadTransitions(nan, {"x"}, {"u"}); });
+  EXPECT_HAS(m1, "nan.csv:3");
+  EXPECT_EQ(m1.find('\n'), std::string::npos);
+  const std::string inf = Write("inf.csv", "x,u,next_x\n0,1,2\n1,2,1e300\n");
+  const std::string m2 = test::ErrorOf([&] { ReadTransitions(inf, {"x"}, {"u"}); });
+  EXPECT_HAS(m2, "inf.csv:3");
+  const std::string names = Write("names.csv", "y,u,next_y\n0,1,2\n");
+  const std::string m3 = test::ErrorOf([&] { ReadTransitions(names, {"x"}, {"u"}); });
+  EXPECT_HAS(m3, "names.csv");
+  EXPECT_HAS(m3, "next_x");
+  const std::string wrong_action = Write("act.csv", "x,w,next_x\n0,1,2\n");
+  EXPECT_HAS(test::ErrorOf([&] { ReadTransitions(wrong_action, {"x"}, {"u"}); }), "'u'");
+  const std::string few = Write("few.csv", "x,u,next_x\n0,1,2\n1,1,2\n");
+  const Transitions t = ReadTransitions(few, {"x"}, {"u"});
+  const std::string m4 = test::ErrorOf([&] { TrainDynamics(DynamicsTrainerOptions{}, t); });
+  EXPECT_HAS(m4, "few.csv: 2 transitions, need at least 20");
+  DynamicsTrainerOptions o;
+  o.members = 0;
+  EXPECT_HAS(test::ErrorOf([&] { o.Validate(); }), "DynamicsTrainerOptions::members = 0");
+}
+
+TEST_F(DynamicsTest, LearnedModelEnvironmentChecksFeatures) {
+  const EnsembleDynamics e = RandomEnsemble(2, 1, 2, {8}, 2);
+  EXPECT_NO_THROW(CheckModelFeatures(e, {"s0", "s1"}, {"a0"}, "m.model"));
+  const std::string m = test::ErrorOf([&] { CheckModelFeatures(e, {"s0", "x"}, {"a0"}, "m.model"); });
+  EXPECT_HAS(m, "m.model: the learned dynamics predicts 2 features (s0, s1)");
+  EXPECT_HAS(test::ErrorOf([&] { CheckModelFeatures(e, {"s0", "s1"}, {"b"}, "m.model"); }),
+             "reads 1 actions (a0)");
+}
+
+}  // namespace
+}  // namespace secure::dynamics
