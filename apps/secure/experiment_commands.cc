@@ -28,6 +28,7 @@
 #include "secure/common/enum_strings.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/progress.h"
+#include "secure/common/run_lock.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/user_study.h"
@@ -368,6 +369,9 @@ struct ExperimentCommand {
     options.Validate();
     d->CheckExperiment(options);
     CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
+    // One run per directory (shards of one experiment share it): a second one fails at once.
+    std::optional<RunDirectoryLock> lock;
+    if (!out.empty()) lock.emplace(out, sharded ? where.index : 0, sharded ? where.count : 1);
     if (!where.source.empty())
       std::cerr << "shard " << where.index << "/" << where.count << " (from " << where.source
                 << "): ";
@@ -426,6 +430,7 @@ struct MergeCommand {
   void Run() {
     const std::string target = out.empty() ? dirs.front() : out;
     CreateDirectories(target);
+    const RunDirectoryLock lock(target);  // not while a run (or a shard) still writes there
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
     std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
@@ -538,6 +543,8 @@ struct UserStudyCommand {
     d->Validate();
     options.Validate();
     CreateDirectories(out);
+    std::optional<RunDirectoryLock> lock;
+    if (!out.empty()) lock.emplace(out);
     std::cerr << "secure experiment user-study on " << d->name() << ": " << options.participants
               << " participants x " << options.episodes << " episodes x 4 conditions, "
               << spreads.size() << " spread(s), on " << options.threads << " threads"

@@ -2,7 +2,11 @@
 // `secure: error:` line and exit code 1, at once (each run is under `timeout`: a hang fails the
 // test instead of blocking it).
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -117,6 +121,51 @@ TEST(CliHostileTest, InputsOverTheSizeLimitFailAndTheFlagRaisesIt) {
   EXPECT_EQ(r.exit_code, 0) << r.err;
   r = RunSecure("--max-input-bytes lots " + TrainArgs(safe, safe, dir / "m.model"));
   ExpectOneErrorLine(r, "--max-input-bytes = 'lots', expected a positive integer");
+}
+
+}  // namespace
+
+namespace {
+
+// Holds the run directory's lock in a child process (as a running experiment does) until
+// killed; returns its PID once the lock is held.
+pid_t HoldLock(const fs::path& dir) {
+  int ready[2];
+  EXPECT_EQ(::pipe(ready), 0);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int fd = ::open((dir / ".lock").c_str(), O_RDWR | O_CREAT, 0666);
+    ::flock(fd, LOCK_EX);
+    const std::string me = std::to_string(::getpid()) + "\n";
+    [[maybe_unused]] ssize_t n = ::pwrite(fd, me.data(), me.size(), 0);
+    n = ::write(ready[1], "x", 1);
+    for (;;) ::pause();
+  }
+  char c;
+  EXPECT_EQ(::read(ready[0], &c, 1), 1);
+  ::close(ready[0]);
+  ::close(ready[1]);
+  return pid;
+}
+
+TEST(CliHostileTest, ASecondRunIntoALockedDirectoryFailsNamingTheHolder) {
+  const fs::path dir = Dir("locked");
+  const pid_t holder = HoldLock(dir);
+  CliResult r = RunSecure("experiment method-comparison --domain double-integrator --quick --out " +
+                          dir.string());
+  ExpectOneErrorLine(r, "run directory '" + dir.string() + "' is in use by another run (process " +
+                            std::to_string(holder));
+  r = RunSecure("experiment merge " + dir.string());
+  ExpectOneErrorLine(r, "(process " + std::to_string(holder));
+  // SIGKILL: the kernel drops the lock; the file it leaves does not block the next run (merge
+  // gets past the lock to its own complaint about the empty directory).
+  ::kill(holder, SIGKILL);
+  ::waitpid(holder, nullptr, 0);
+  ASSERT_TRUE(fs::exists(dir / ".lock"));
+  r = RunSecure("experiment merge " + dir.string());
+  EXPECT_EQ(r.err.find("in use by another run"), std::string::npos) << r.err;
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_FALSE(fs::exists(dir / ".lock")) << "a finished run leaves its lock file";
 }
 
 }  // namespace
