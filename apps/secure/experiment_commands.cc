@@ -13,8 +13,10 @@
 // `secure eval --json`); --quick is the domain's small profile, used by the tests.
 // --shard k/N (or, without it, a SLURM array element's or an mpirun rank's place) runs only the
 // seeds with index = k (mod N), writing their task files into --out; `merge` assembles them.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -433,9 +435,17 @@ struct MergeCommand {
     const RunDirectoryLock lock(target);  // not while a run (or a shard) still writes there
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
+    // Directories named twice (SH0 ./SH0) count once, as the merge reads them once.
+    std::vector<std::filesystem::path> distinct;
+    for (const std::string& d : dirs) {
+      std::error_code ec;
+      const std::filesystem::path c = std::filesystem::canonical(d, ec);
+      if (std::find(distinct.begin(), distinct.end(), c) == distinct.end()) distinct.push_back(c);
+    }
     std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
               << ToString(experiments::kExperimentKindNames, result.kind) << " on " << result.domain
-              << " from " << dirs.size() << " director" << (dirs.size() == 1 ? "y" : "ies")
+              << " from " << distinct.size() << " director"
+              << (distinct.size() == 1 ? "y" : "ies")
               << ", wrote " << target << "/result.json\n";
     PrintResult(result, json, "experiment merge");
   }

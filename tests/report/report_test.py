@@ -13,6 +13,7 @@ barrier picture and the trajectories are required too), CHROMIUM (default `chrom
 """
 import base64
 import io
+import json
 import os
 import re
 import shutil
@@ -161,7 +162,27 @@ def main():
     os.makedirs(other)
     with open(os.path.join(other, "result.json"), "w") as f:
         f.write('{"a": 1}')
-    for path, named, what in ((os.path.join(WORK, "missing"), "missing", "no such directory"),
+    # Numbers the page would show, checked: no method, a rate as a string, a rate of 7.
+    with open(os.path.join(run_dir, "result.json")) as f:
+        good = json.load(f)
+    edited = {}
+    for name, change in (("no_methods", lambda r: r.update(methods={})),
+                         ("string_rate", lambda r: r["methods"]["bc"]["success_rate"].update(
+                             mean="0.5")),
+                         ("rate_7", lambda r: r["methods"]["bc"]["success_rate"]["per_seed"]
+                          .__setitem__(0, 7.0))):
+        d = os.path.join(WORK, name)
+        os.makedirs(d)
+        r = json.loads(json.dumps(good))
+        change(r)
+        with open(os.path.join(d, "result.json"), "w") as f:
+            json.dump(r, f)
+        edited[name] = d
+    for path, named, what in ((edited["no_methods"], "result.json", "holds no method"),
+                              (edited["string_rate"], "success_rate.mean' = \"0.5\"",
+                               "must be a rate in [0, 1]"),
+                              (edited["rate_7"], "per_seed[0]' = 7.0", "must be a rate"),
+                              (os.path.join(WORK, "missing"), "missing", "no such directory"),
                               (not_dir, not_dir, "not a directory"),
                               (empty, os.path.join(empty, "result.json"), "missing"),
                               (bad, os.path.join(bad, "result.json"), "malformed JSON"),

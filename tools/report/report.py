@@ -131,6 +131,28 @@ def load_run(run_dir):
     if not isinstance(result.get("methods"), dict) and not isinstance(result.get("variants"),
                                                                        dict):
         raise ReportError("%s: neither 'methods' nor 'variants': no evaluation to report" % path)
+    # The numbers the page shows, checked (issue 34: an empty 'methods', rates given as strings
+    # or outside [0, 1] made a page of nonsense).
+    groups = [("methods", result.get("methods"))] if isinstance(result.get("methods"), dict) \
+        else [("variants.%s.methods" % k, v.get("methods") if isinstance(v, dict) else None)
+              for k, v in result["variants"].items()]
+    for where, methods in groups:
+        if not isinstance(methods, dict) or not methods:
+            raise ReportError("%s: '%s' holds no method" % (path, where))
+        for name, m in methods.items():
+            if not isinstance(m, dict):
+                raise ReportError("%s: '%s.%s' is not an object" % (path, where, name))
+            for rate in ("success_rate", "dangerous_rate"):
+                r = m.get(rate)
+                if not isinstance(r, dict):
+                    raise ReportError("%s: '%s.%s.%s' is missing" % (path, where, name, rate))
+                values = [("mean", r.get("mean"))] + [
+                    ("per_seed[%d]" % i, v) for i, v in enumerate(r.get("per_seed") or [])]
+                for key, v in values:
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or \
+                            not 0.0 <= v <= 1.0:
+                        raise ReportError("%s: '%s.%s.%s.%s' = %s, must be a rate in [0, 1]"
+                                          % (path, where, name, rate, key, json.dumps(v)))
     return result
 
 
