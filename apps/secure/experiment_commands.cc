@@ -265,6 +265,7 @@ struct ExperimentCommand {
   CLI::Option* repair_option = nullptr;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
+  CLI::Option* methods_option = nullptr;
   CLI::Option* episodes_option = nullptr;
 
   CLI::App* Register(CLI::App& parent, const Config& cfg, const std::string& name,
@@ -296,7 +297,7 @@ struct ExperimentCommand {
     cmd->add_option("--barrier", barrier,
                     "flat (an MLP on the whole state) or per-obstacle (alias per-car: one MLP "
                     "per obstacle, the minimum over those in range) (default: the domain's)");
-    cmd->add_option("--methods", methods,
+    methods_option = cmd->add_option("--methods", methods,
                     "comma-separated subset of bc, airl, secure, secure-random-safe, "
                     "secure-no-resampling, bc+shield, secure-myopic, joint (default: the "
                     "experiment's)");
@@ -336,6 +337,10 @@ struct ExperimentCommand {
     if (yaml.IsMap()) options.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
     if (seeds_option->count() > 0) options.seeds = seeds;
     if (episodes_option->count() > 0) options.episodes = episodes;
+    // An empty --methods '' is an error, not the defaults (issue 34).
+    SECURE_CHECK(methods_option->count() == 0 || !methods.empty(),
+                 "--methods is empty: give at least one method (or leave the flag out for the "
+                 "experiment's)");
     if (!methods.empty()) options.methods = eval::ParseMethods(methods);
     if (closed_loop_option->count() > 0) {
       CheckRange("--closed-loop", closed_loop_candidates, 1, 64);

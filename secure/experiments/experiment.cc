@@ -11,6 +11,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -1145,7 +1146,16 @@ void ExperimentOptions::Validate() const {
                      "in [1, " << kMaxSeeds << "]");
   SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, kOptions, "episodes", episodes,
                      "in [1, " << kMaxEpisodes << "]");
-  SECURE_CHECK_FIELD(threads > 0, kOptions, "threads", threads, "> 0");
+  // Seeds run in parallel, one worker each: more workers than seeds only idle, and 10^8 of
+  // them "ran" (issue 34). 1024 as the user study's --threads.
+  SECURE_CHECK_FIELD(threads > 0 && threads <= 1024, kOptions, "threads", threads,
+                     "in [1, 1024]");
+  // The last seed, first_seed + seeds - 1, must not wrap around to 0.
+  SECURE_CHECK_FIELD(first_seed <= std::numeric_limits<std::uint64_t>::max() -
+                                       static_cast<std::uint64_t>(seeds - 1),
+                     kOptions, "first_seed", first_seed,
+                     "at most 2^64 - seeds (the last seed, first_seed + seeds - 1 with seeds = "
+                         << seeds << ", must not wrap around)");
   SECURE_CHECK_FIELD(shards >= 1, kOptions, "shards", shards, ">= 1");
   SECURE_CHECK_FIELD(shard >= 0 && shard < shards, kOptions, "shard", shard,
                      "in [0, shards - 1] (shards = " << shards << ")");

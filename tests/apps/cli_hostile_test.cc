@@ -169,3 +169,20 @@ TEST(CliHostileTest, ASecondRunIntoALockedDirectoryFailsNamingTheHolder) {
 }
 
 }  // namespace
+
+namespace {
+
+// Issue 34, "silent nonsense": each of these ran (or ran the defaults) and exited 0.
+TEST(CliHostileTest, NonsenseExperimentFlagsAreErrors) {
+  const fs::path dir = Dir("nonsense");
+  const std::string base = "experiment method-comparison --domain double-integrator --quick --out " +
+                           dir.string() + " ";
+  ExpectOneErrorLine(RunSecure(base + "--threads 100000000"),
+                     "threads = 100000000, must be in [1, 1024]");
+  ExpectOneErrorLine(RunSecure(base + "--first-seed 18446744073709551615 --seeds 2"),
+                     "first_seed = 18446744073709551615, must be at most 2^64 - seeds");
+  ExpectOneErrorLine(RunSecure(base + "--methods ''"), "--methods is empty");
+  EXPECT_FALSE(fs::exists(dir / "result.json"));
+}
+
+}  // namespace
