@@ -244,6 +244,22 @@ class Reader {
                        << static_cast<double>(dims[0]) * static_cast<double>(width) * 8.0
                        << " bytes (as doubles), over the input limit of " << limit
                        << " bytes (raise it with SECURE_MAX_INPUT_BYTES or --max-input-bytes)");
+    // A chunked dataset's chunk is allocated whole by H5Dread, whatever the dataset's size: its
+    // declared size is checked too (the HDF5 fuzzer found a file whose chunk made a small read
+    // allocate 2.5 GB).
+    Handle plist(H5Dget_create_plist(dataset.get()), H5Pclose);
+    if (plist.ok() && H5Pget_layout(plist.get()) == H5D_CHUNKED) {
+      hsize_t chunk[H5S_MAX_RANK] = {};
+      const int chunk_rank = H5Pget_chunk(plist.get(), H5S_MAX_RANK, chunk);
+      const std::size_t element = type.ok() ? H5Tget_size(type.get()) : 8;
+      long double bytes = static_cast<long double>(std::max<std::size_t>(element, 8));
+      for (int i = 0; i < chunk_rank; ++i) bytes *= static_cast<long double>(chunk[i]);
+      SECURE_CHECK(chunk_rank >= 0 && bytes <= static_cast<long double>(limit),
+                   path_ << ": " << where << ": its chunks declare "
+                         << static_cast<double>(bytes) << " bytes each, over the input limit of "
+                         << limit << " bytes (raise it with SECURE_MAX_INPUT_BYTES or "
+                            "--max-input-bytes)");
+    }
     *rows = static_cast<long>(dims[0]);
     *cols = static_cast<long>(width);
     return dataset;
