@@ -1,5 +1,7 @@
 #include "cli_common.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -65,6 +67,8 @@ namespace {
 YAML::Node LoadConfig(const std::string& path) {
   // A regular file of bounded size (a FIFO would block, /dev/zero never end), nested no deeper
   // than the parser can take, and at most so many nodes with aliases expanded (input_limits.h).
+  if (::access(path.c_str(), F_OK) != 0)
+    SECURE_THROW("cannot open config file '" << path << "': " << std::strerror(errno));
   CheckRegularInputFile(path);
   const std::string text = ReadFile(path);
   CheckYamlTextDepth(text, path);
