@@ -16,6 +16,7 @@ import argparse
 import math
 import os
 import random
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -44,6 +45,7 @@ def child(seconds, seed):
 
     rng = random.Random(seed)
     tmp = tempfile.mkdtemp(prefix="secure_pyfuzz_")
+    os.chdir(tmp)  # a drawn string used as a path (save("derby")) lands here, not in the tree
     fifo = os.path.join(tmp, "fifo")
     os.mkfifo(fifo)
     zero = os.path.join(tmp, "zero.model")
@@ -235,7 +237,8 @@ def child(seconds, seed):
         calls += 1
     print(f"done: {calls} calls over {len(targets)} targets in {seconds:g} s (seed {seed}); "
           f"outcomes {dict(sorted(outcomes.items()))}", flush=True)
-    os.remove(fifo)
+    os.chdir("/")
+    shutil.rmtree(tmp, ignore_errors=True)
 
 
 # ------------------------------------------------------------------------------------------------
