@@ -1,5 +1,7 @@
 #include "cli_common.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -14,6 +16,9 @@
 #include "secure/common/progress.h"
 #include "secure/common/strings.h"
 #include "secure/common/yaml_keys.h"
+#include "secure/common/yaml_limits.h"
+#include "secure/common/input_limits.h"
+#include "secure/common/atomic_file.h"
 #include "secure/common/yaml_value.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
@@ -60,15 +65,20 @@ namespace {
 
 // Loads and checks the file; throws secure::Error naming the file (and the line where known).
 YAML::Node LoadConfig(const std::string& path) {
-  CheckNotADirectory(path);
+  // A regular file of bounded size (a FIFO would block, /dev/zero never end), nested no deeper
+  // than the parser can take, and at most so many nodes with aliases expanded (input_limits.h).
+  if (::access(path.c_str(), F_OK) != 0)
+    SECURE_THROW("cannot open config file '" << path << "': " << std::strerror(errno));
+  CheckRegularInputFile(path);
+  const std::string text = ReadFile(path);
+  CheckYamlTextDepth(text, path);
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    SECURE_THROW("cannot open config file '" << path << "': " << std::strerror(errno));
+    root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
     SECURE_THROW(path << ": invalid YAML: " << Excerpt(e.what()));
   }
+  CheckYamlLimits(root, path);
   SECURE_CHECK(!root || root.IsMap(), path << ": the config file must be a mapping of sections");
   if (!root) return root;
   CheckNoDuplicateKeys(root, path);

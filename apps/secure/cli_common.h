@@ -104,6 +104,10 @@ void CheckRange(const std::string& name, long value, long lo, long hi);
 /// of every error.
 int ReportError(const std::string& message);
 
+/// The global flags --max-input-bytes and --max-config-nodes (input_limit_flags.cc): scanned
+/// from argv and applied at once (before the config file is read), and declared on `app`.
+void AddInputLimitFlags(CLI::App& app, int argc, char** argv);
+
 /// Flags that set options of the domain's task (its `task:` keys of the same names: the double
 /// integrator's --obstacle X,Y, --radius, --gamma, --accel-bound, ...), and the domain's
 /// ground-truth config section (Domain::GroundTruthSection, e.g. `double_integrator:`; its keys

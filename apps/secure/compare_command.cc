@@ -79,6 +79,11 @@ std::vector<double> PerSeed(const EvalFile& f, const std::string& method, const 
     SECURE_CHECK(v.is_number() && std::isfinite(v.get<double>()),
                  f.path << ": field '" << where << "per_seed' holds " << v.dump()
                         << ", must be a finite number");
+    // A rate (issue 34: per-seed rates of 7.0 and -3.0 gave "200.0 %").
+    SECURE_CHECK(metric.size() < 5 || metric.compare(metric.size() - 5, 5, "_rate") != 0 ||
+                     (v.get<double>() >= 0.0 && v.get<double>() <= 1.0),
+                 f.path << ": field '" << where << "per_seed' holds " << v.dump()
+                        << ", must be a rate in [0, 1]");
     out.push_back(v.get<double>());
   }
   return out;

@@ -13,6 +13,7 @@
 // `secure eval --json`); --quick is the domain's small profile, used by the tests.
 // --shard k/N (or, without it, a SLURM array element's or an mpirun rank's place) runs only the
 // seeds with index = k (mod N), writing their task files into --out; `merge` assembles them.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -29,6 +30,7 @@
 #include "secure/common/enum_strings.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/progress.h"
+#include "secure/common/run_lock.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/user_study.h"
@@ -263,6 +265,7 @@ struct ExperimentCommand {
   CLI::Option* repair_option = nullptr;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
+  CLI::Option* methods_option = nullptr;
   CLI::Option* episodes_option = nullptr;
 
   CLI::App* Register(CLI::App& parent, const Config& cfg, const std::string& name,
@@ -294,7 +297,7 @@ struct ExperimentCommand {
     cmd->add_option("--barrier", barrier,
                     "flat (an MLP on the whole state) or per-obstacle (alias per-car: one MLP "
                     "per obstacle, the minimum over those in range) (default: the domain's)");
-    cmd->add_option("--methods", methods,
+    methods_option = cmd->add_option("--methods", methods,
                     "comma-separated subset of bc, airl, secure, secure-random-safe, "
                     "secure-no-resampling, bc+shield, secure-myopic, joint, cbf-qp, secure-qp (default: the "
                     "experiment's)");
@@ -334,6 +337,10 @@ struct ExperimentCommand {
     if (yaml.IsMap()) options.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
     if (seeds_option->count() > 0) options.seeds = seeds;
     if (episodes_option->count() > 0) options.episodes = episodes;
+    // An empty --methods '' is an error, not the defaults (issue 34).
+    SECURE_CHECK(methods_option->count() == 0 || !methods.empty(),
+                 "--methods is empty: give at least one method (or leave the flag out for the "
+                 "experiment's)");
     if (!methods.empty()) options.methods = eval::ParseMethods(methods);
     if (closed_loop_option->count() > 0) {
       CheckRange("--closed-loop", closed_loop_candidates, 1, 64);
@@ -369,6 +376,9 @@ struct ExperimentCommand {
     options.Validate();
     d->CheckExperiment(options);
     CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
+    // One run per directory (shards of one experiment share it): a second one fails at once.
+    std::optional<RunDirectoryLock> lock;
+    if (!out.empty()) lock.emplace(out, sharded ? where.index : 0, sharded ? where.count : 1);
     if (!where.source.empty())
       std::cerr << "shard " << where.index << "/" << where.count << " (from " << where.source
                 << "): ";
@@ -453,18 +463,28 @@ struct MergeCommand {
   void Run() {
     const std::string target = out.empty() ? dirs.front() : out;
     CreateDirectories(target);
+    const RunDirectoryLock lock(target);  // not while a run (or a shard) still writes there
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
     const int linked = LinkSeedDirectories(target);
+    // Directories named twice (SH0 ./SH0) count once, as the merge reads them once.
+    std::vector<std::filesystem::path> distinct;
+    for (const std::string& d : dirs) {
+      std::error_code ec;
+      const std::filesystem::path c = std::filesystem::canonical(d, ec);
+      if (std::find(distinct.begin(), distinct.end(), c) == distinct.end()) distinct.push_back(c);
+    }
     std::cerr << "secure experiment merge: " << result.options.seeds << " seeds of "
               << ToString(experiments::kExperimentKindNames, result.kind) << " on " << result.domain
-              << " from " << dirs.size() << " director" << (dirs.size() == 1 ? "y" : "ies")
+              << " from " << distinct.size() << " director"
+              << (distinct.size() == 1 ? "y" : "ies")
               << ", wrote " << target << "/result.json";
     if (linked > 0)
       std::cerr << " and linked " << linked << " seed director" << (linked == 1 ? "y" : "ies")
                 << " of the shards into it (seed-K -> SHARD/seed-K: the models and curves "
                    "`secure report` draws)";
-    std::cerr << "\n";
+    std::cerr << "
+";
     PrintResult(result, json, "experiment merge");
   }
 };
@@ -571,6 +591,8 @@ struct UserStudyCommand {
     d->Validate();
     options.Validate();
     CreateDirectories(out);
+    std::optional<RunDirectoryLock> lock;
+    if (!out.empty()) lock.emplace(out);
     std::cerr << "secure experiment user-study on " << d->name() << ": " << options.participants
               << " participants x " << options.episodes << " episodes x 4 conditions, "
               << spreads.size() << " spread(s), on " << options.threads << " threads"

@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   try {
     // The domain plug-ins first: the commands list them, and the config's sections include theirs.
     secure::plugins::RegisterBuiltinDomains(secure::experiments::DomainRegistry::Global());
+    secure::cli::AddInputLimitFlags(app, argc, argv);  // before anything is read
     const secure::cli::Config config = secure::cli::PreScanConfig(argc, argv);
     secure::cli::RegisterCbfCommands(app, config);
     secure::cli::RegisterShieldCommands(app, config);

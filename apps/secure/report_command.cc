@@ -8,13 +8,18 @@
 //   SECURE_REPORT_SCRIPT      the script       (default <source>/tools/report/report.py)
 //   SECURE_REPORT_PYTHON      the interpreter  (default /usr/bin/python3)
 //   SECURE_REPORT_PYTHONPATH  prepended to PYTHONPATH (default <build>/python: `import secure`)
+#include <fcntl.h>
 #include <spawn.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <sys/wait.h>
 
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <iostream>
+#include <sstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -23,6 +28,7 @@
 #include "commands.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/input_limits.h"
 
 extern char** environ;
 
@@ -74,6 +80,23 @@ void CheckRunDirectory(const std::string& run_dir) {
                path << ": neither 'methods' nor 'variants': no evaluation to report");
 }
 
+// The page's path must be writable as WriteFileAtomically writes, checked before the (slow)
+// script runs: not a directory, socket or block device; a FIFO must have a reader.
+void CheckOutputTarget(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return;  // a new file (or a dangling link): the writer's
+  if (S_ISREG(st.st_mode) || S_ISCHR(st.st_mode)) return;
+  if (S_ISFIFO(st.st_mode)) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+    SECURE_CHECK(fd >= 0 || errno != ENXIO,
+                 "cannot write '" << path << "': it is a FIFO that no process has open for reading");
+    if (fd >= 0) ::close(fd);
+    return;
+  }
+  SECURE_THROW("cannot write '" << path << "': it is " << FileTypeName(st.st_mode)
+                                << ", not a regular file");
+}
+
 struct ReportCommand {
   std::string run_dir, out;
 
@@ -89,11 +112,19 @@ struct ReportCommand {
                                       << " does not exist (set SECURE_REPORT_SCRIPT to "
                                          "tools/report/report.py of the source tree)");
 
-    std::vector<std::string> args = {python, script, run_dir};
-    if (!out.empty()) {
-      args.push_back("--out");
-      args.push_back(out);
-    }
+    // The page goes through the C++ writer (WriteFileAtomically: directories and reader-less
+    // FIFOs refused, symlinks written through, devices never replaced, modes kept, no temporary
+    // left behind): the script writes it to a scratch file, and its messages to another.
+    const std::string page = out.empty() ? (std::filesystem::path(run_dir) / "report.html").string()
+                                         : out;
+    CheckOutputTarget(page);
+    const std::string scratch_base =
+        (std::filesystem::temp_directory_path(ec) / ("secure-report-" + std::to_string(::getpid())))
+            .string();
+    const ScratchFile scratch(scratch_base + ".html");
+    const ScratchFile messages(scratch_base + ".err");
+    std::vector<std::string> args = {python, script, run_dir, "--out", page, "--write-to",
+                                     scratch.path()};
     std::vector<char*> argv;
     for (std::string& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -117,9 +148,13 @@ struct ReportCommand {
     for (std::string& e : env) envp.push_back(e.data());
     envp.push_back(nullptr);
 
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 2, messages.path().c_str(), O_WRONLY | O_TRUNC, 0);
     pid_t pid = 0;
     const int spawned =
-        ::posix_spawnp(&pid, python.c_str(), nullptr, nullptr, argv.data(), envp.data());
+        ::posix_spawnp(&pid, python.c_str(), &actions, nullptr, argv.data(), envp.data());
+    posix_spawn_file_actions_destroy(&actions);
     SECURE_CHECK(spawned == 0, "cannot run the report's Python " << python << ": "
                                                                  << std::strerror(spawned)
                                                                  << " (set SECURE_REPORT_PYTHON)");
@@ -127,12 +162,25 @@ struct ReportCommand {
     while (::waitpid(pid, &status, 0) < 0) {
       SECURE_CHECK(errno == EINTR, "waiting for " << python << ": " << std::strerror(errno));
     }
-    SECURE_CHECK(WIFEXITED(status) && WEXITSTATUS(status) == 0,
-                 "the report script " << script << " failed ("
-                                      << (WIFEXITED(status)
-                                              ? "exit code " + std::to_string(WEXITSTATUS(status))
-                                              : "signal " + std::to_string(WTERMSIG(status)))
-                                      << "; its message is above)");
+    const std::string said = ReadFile(messages.path());
+    if (!(WIFEXITED(status) && WEXITSTATUS(status) == 0)) {
+      // One line: the script's own error (without its prefix), else its last line.
+      std::string line;
+      std::istringstream lines(said);
+      for (std::string l; std::getline(lines, l);)
+        if (l.find_first_not_of(" \t") != std::string::npos) line = l;
+      const std::string prefix = "secure report: error: ";
+      if (line.rfind(prefix, 0) == 0) SECURE_THROW(line.substr(prefix.size()));
+      SECURE_THROW("the report script " << script << " failed ("
+                                        << (WIFEXITED(status)
+                                                ? "exit code " +
+                                                      std::to_string(WEXITSTATUS(status))
+                                                : "signal " + std::to_string(WTERMSIG(status)))
+                                        << (line.empty() ? std::string() : "): " + line)
+                                        << (line.empty() ? ")" : ""));
+    }
+    std::cerr << said;  // warnings of a run that succeeded
+    WriteFileAtomically(page, ReadFile(scratch.path()));
   }
 };
 

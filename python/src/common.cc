@@ -5,12 +5,14 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <new>
 #include <sstream>
 
 #include "secure/common/build_info.h"
 #include "secure/common/error.h"
+#include "secure/common/input_limits.h"
 #include "secure/common/rng.h"
 #include "secure/eval/policy_eval.h"
 
@@ -24,6 +26,11 @@ std::string ShapeOf(const py::array& a) {
   for (py::ssize_t k = 0; k < a.ndim(); ++k) out << (k ? ", " : "") << a.shape(k);
   out << (a.ndim() == 1 ? ",)" : ")");
   return out.str();
+}
+
+// repr() bounded in length and depth (reprlib): a message never expands a huge or cyclic value.
+std::string ShortRepr(py::handle obj) {
+  return py::str(py::module_::import("reprlib").attr("repr")(obj));
 }
 
 std::string TypeName(py::handle obj) {
@@ -43,6 +50,24 @@ FloatArray AsFloat32(py::handle obj, const std::string& what) {
     throw py::type_error(what + ": dtype " + std::string(py::str(array.dtype())) +
                          " is not a real number type (use float32; float64 and integer arrays "
                          "are converted)");
+  }
+  // A float64 (or wider) value beyond float32's range would become inf in the copy and be
+  // reported as "inf": name it as given.
+  if (kind == 'f' && array.itemsize() > 4) {
+    using Doubles = py::array_t<double, py::array::c_style | py::array::forcecast>;
+    const Doubles d = Doubles::ensure(array);
+    if (d) {
+      const double* v = d.data();
+      for (py::ssize_t k = 0; k < d.size(); ++k) {
+        if (std::isfinite(v[k]) && std::abs(v[k]) > std::numeric_limits<float>::max()) {
+          std::ostringstream out;
+          out.precision(17);
+          out << what << ": value " << v[k] << " (flat index " << k
+              << ") is outside float32's range (|x| <= 3.4028235e+38)";
+          throw py::value_error(out.str());
+        }
+      }
+    }
   }
   // float32 and C-contiguous: the same object, no copy. Otherwise a converted copy.
   FloatArray out = FloatArray::ensure(array);
@@ -109,7 +134,42 @@ py::array_t<float> StatesToNumpy(const Eigen::Ref<const Eigen::MatrixXf>& m) {
   return out;
 }
 
+namespace {
+
+// The walk of ToYaml: at most max_config_nodes values and max_config_depth levels (the limits of
+// a config file, secure/common/input_limits.h), so that a list that contains itself or nine
+// levels of shared references (9^9 values) fail at once instead of recursing without end.
+struct YamlWalk {
+  long nodes = 0;
+  int depth = 0;
+  const InputLimits limits = GetInputLimits();
+};
+
+YAML::Node ToYamlIn(py::handle obj, const std::string& where, YamlWalk& walk);
+
+}  // namespace
+
 YAML::Node ToYaml(py::handle obj, const std::string& where) {
+  YamlWalk walk;
+  return ToYamlIn(obj, where, walk);
+}
+
+namespace {
+
+YAML::Node ToYamlIn(py::handle obj, const std::string& where, YamlWalk& walk) {
+  if (++walk.nodes > walk.limits.max_config_nodes)
+    throw py::value_error(where + ": more than " + std::to_string(walk.limits.max_config_nodes) +
+                          " nodes in the options (nested or shared lists/dicts; raise the limit "
+                          "with SECURE_MAX_CONFIG_NODES)");
+  if (walk.depth > walk.limits.max_config_depth)
+    throw py::value_error(where + ": options nested more than " +
+                          std::to_string(walk.limits.max_config_depth) +
+                          " levels deep (a list or dict that contains itself?)");
+  struct Deeper {
+    YamlWalk& w;
+    explicit Deeper(YamlWalk& walk) : w(walk) { ++w.depth; }
+    ~Deeper() { --w.depth; }
+  } deeper(walk);
   if (obj.is_none()) return YAML::Node(YAML::NodeType::Null);
   if (py::isinstance<py::bool_>(obj)) return YAML::Node(obj.cast<bool>() ? "true" : "false");
   if (py::isinstance<py::dict>(obj)) {
@@ -117,9 +177,9 @@ YAML::Node ToYaml(py::handle obj, const std::string& where) {
     for (const auto& item : obj.cast<py::dict>()) {
       if (!py::isinstance<py::str>(item.first))
         throw py::type_error(where + ": option names must be strings, got " +
-                             std::string(py::repr(item.first)));
+                             ShortRepr(item.first));
       const std::string key = item.first.cast<std::string>();
-      node[key] = ToYaml(item.second, where + " [" + key + "]");
+      node[key] = ToYamlIn(item.second, walk.depth < 8 ? where + " [" + key + "]" : where, walk);
     }
     return node;
   }
@@ -129,7 +189,7 @@ YAML::Node ToYaml(py::handle obj, const std::string& where) {
     YAML::Node node(YAML::NodeType::Sequence);
     py::object seq = py::isinstance<py::array>(obj) ? obj.attr("tolist")()
                                                     : py::reinterpret_borrow<py::object>(obj);
-    for (py::handle item : seq) node.push_back(ToYaml(item, where));
+    for (py::handle item : seq) node.push_back(ToYamlIn(item, where, walk));
     return node;
   }
   // Numbers (Python or NumPy scalars): integers as integers, others by repr (all digits).
@@ -142,6 +202,8 @@ YAML::Node ToYaml(py::handle obj, const std::string& where) {
                        std::string(py::str(py::type::handle_of(obj).attr("__name__"))) +
                        " as an option (use numbers, strings, booleans, lists or dicts)");
 }
+
+}  // namespace
 
 py::object ToPython(const nlohmann::json& j) {
   switch (j.type()) {
@@ -187,12 +249,19 @@ std::vector<std::string> FeatureNames(py::handle names, int dim, const std::stri
     out = names.cast<std::vector<std::string>>();
   } catch (const py::cast_error&) {
     throw py::type_error(what + ": expected a sequence of str, got " +
-                         std::string(py::repr(names)));
+                         ShortRepr(names));
   }
   if (static_cast<int>(out.size()) != dim) {
     throw py::value_error(what + ": " + std::to_string(out.size()) + " names for " +
                           std::to_string(dim) + " columns");
   }
+  // As the CLI: a model reads its columns by name, so a name twice could not be used.
+  for (std::size_t i = 0; i < out.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (out[i] == out[j])
+        throw py::value_error(what + ": duplicate name '" + out[i] + "' (columns " +
+                              std::to_string(j) + " and " + std::to_string(i) +
+                              "); every column needs its own name");
   return out;
 }
 
@@ -248,7 +317,7 @@ void CheckOptionTypes(py::handle options, const nlohmann::json& defaults,
         break;
     }
     if (expected != nullptr) {
-      throw py::type_error(source + ": option '" + key + "' = " + std::string(py::repr(v)) +
+      throw py::type_error(source + ": option '" + key + "' = " + ShortRepr(v) +
                            " (" + TypeName(v) + "), expected " + expected);
     }
   }

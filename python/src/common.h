@@ -25,11 +25,14 @@
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
+#include "secure/common/rng.h"
+#include "secure/data/data.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
 #include "secure/experiments/domain.h"
 #include "secure/policy/airl_reward.h"
 #include "secure/shield/shield.h"
+#include "python/src/guard.h"
 
 namespace secure::python {
 
@@ -167,7 +170,8 @@ struct Dynamics {
   bool python = false;
   // Held while the model steps (models keep scratch memory: one caller at a time). Shields lock
   // it after their own lock; an environment locks it while it steps (its model may be its own).
-  std::mutex mutex;
+  // Locking it again from the thread holding it (a callback stepping its own model) raises.
+  GuardedMutex mutex{"secure.Dynamics"};
 };
 
 /// A domain from the registry with its options for a profile ("full" | "quick") and the keyword
@@ -197,6 +201,15 @@ void RegisterEnvironment(py::module_& m);
 void RegisterRender(py::module_& m);
 
 }  // namespace secure::python
+
+// Objects made without __init__ are a TypeError, not a crash (guard.h); Shield, Policy and
+// EnvCore, defined in their own files, install the same check there.
+SECURE_PYTHON_CHECK_INITIALISED(secure::Rng);
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::Barrier);
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::Dynamics);
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::AirlReward);
+SECURE_PYTHON_CHECK_INITIALISED(secure::shield::Decision);
+SECURE_PYTHON_CHECK_INITIALISED(secure::data::TrajectorySet);
 
 namespace pybind11::detail {
 template <typename Name>

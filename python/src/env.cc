@@ -51,7 +51,7 @@ class Env {
   ResetResult Reset(std::optional<std::uint64_t> seed) {
     if (seed) rng_.Seed(*seed);
     {
-      std::lock_guard<std::mutex> lock(dynamics_->mutex);
+      std::lock_guard<GuardedMutex> lock(dynamics_->mutex);
       env_->Reset(rng_, observation_);
     }
     steps_ = 0;
@@ -64,7 +64,7 @@ class Env {
     const Eigen::VectorXf a = Vector(action, env_->action_dim(), "action");
     domains::StepOutcome outcome;
     {
-      std::lock_guard<std::mutex> lock(dynamics_->mutex);
+      std::lock_guard<GuardedMutex> lock(dynamics_->mutex);
       outcome = env_->Step(a, observation_);
     }
     ++steps_;
@@ -90,7 +90,7 @@ class Env {
                  "render size = " << width << " x " << height << ", must be positive");
     {
       py::gil_scoped_release release;
-      std::lock_guard<std::mutex> lock(dynamics_->mutex);
+      std::lock_guard<GuardedMutex> lock(dynamics_->mutex);
       env_->Render(width, height, &frame_);
     }
     SECURE_CHECK(frame_.width == width && frame_.height == height &&
@@ -136,6 +136,9 @@ class Env {
 };
 
 }  // namespace
+}  // namespace secure::python
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::Env);
+namespace secure::python {
 
 std::shared_ptr<const domains::Environment> EnvironmentOf(py::handle env) {
   if (py::isinstance<py::str>(env)) {

@@ -2,6 +2,7 @@
 #include <optional>
 
 #include "python/src/common.h"
+#include "python/src/guard.h"
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
@@ -31,6 +32,8 @@ data::TrajectorySet DemosFromArrays(ArrayLike states, ArrayLike actions, Optiona
       FeatureNames(state_features, static_cast<int>(s.map.rows()), "s", "state_features");
   d.action_features =
       FeatureNames(action_features, static_cast<int>(a.map.rows()), "a", "action_features");
+  CheckFinite(s.map, false, "states", "states");
+  CheckFinite(a.map, false, "actions", "actions");
   d.states = s.map;
   d.actions = a.map;
   d.episode_begin.push_back(0);
@@ -55,6 +58,7 @@ class Policy {
 
   py::array_t<float> Mean(ArrayLike observation) {
     const StatesArg o = States(observation, model_->observation_dim(), "observation");
+    CheckFinite(o.map, o.one, "observation", "observations");
     Eigen::MatrixXf mu(model_->action_dim(), o.map.cols());
     {
       py::gil_scoped_release release;
@@ -71,10 +75,16 @@ class Policy {
 
   py::array_t<float> Sample(ArrayLike observation, RngOrSeed rng) {
     const Eigen::VectorXf o = Vector(observation, model_->observation_dim(), "observation");
+    CheckFinite(o, true, "observation", "observations");
     if (!py::isinstance<Rng>(rng) &&
         (py::isinstance<py::bool_>(rng) || !py::isinstance<py::int_>(rng))) {
       throw py::type_error("rng: expected a secure.Rng or an int seed, got " +
-                           std::string(py::repr(rng)));
+                           std::string(py::str(py::module_::import("reprlib").attr("repr")(rng))));
+    }
+    if (!py::isinstance<Rng>(rng) &&
+        (rng < py::int_(0) || rng >= py::int_(1).attr("__lshift__")(64))) {
+      throw py::value_error("rng: seed " + std::string(py::str(py::module_::import("reprlib").attr("repr")(rng))) +
+                            " is out of range, expected a secure.Rng or an int in [0, 2**64)");
     }
     Eigen::VectorXf a(model_->action_dim());
     std::lock_guard<std::mutex> lock(mutex_);
@@ -90,6 +100,8 @@ class Policy {
   double LogProb(ArrayLike observation, ArrayLike action) {
     const Eigen::VectorXf o = Vector(observation, model_->observation_dim(), "observation");
     const Eigen::VectorXf a = Vector(action, model_->action_dim(), "action");
+    CheckFinite(o, true, "observation", "observations");
+    CheckFinite(a, true, "action", "actions");
     std::lock_guard<std::mutex> lock(mutex_);
     return evaluator_.LogProb(o, a);
   }
@@ -111,6 +123,9 @@ Options OptionsFrom(const py::kwargs& kwargs, const std::string& source) {
 }
 
 }  // namespace
+}  // namespace secure::python
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::Policy);
+namespace secure::python {
 
 void RegisterPolicy(py::module_& m) {
   py::class_<data::TrajectorySet>(m, "Demonstrations", R"doc(
@@ -297,6 +312,7 @@ with with_reward=True (policy, summary, secure.AirlReward). Releases the GIL.)do
       [](EnvOrName env, std::shared_ptr<Policy> policy, std::shared_ptr<Barrier> barrier,
          long episodes, std::uint64_t seed, bool stop_on_collision,
          std::shared_ptr<AirlReward> task_value, py::kwargs shield_options) -> JsonDict {
+        Required(policy, "run_episodes: policy", "a secure.Policy");
         const std::unique_ptr<domains::Environment> e = EnvironmentOf(env)->Clone();
         const shield::ShieldOptions options = ShieldOptionsFrom(shield_options);
         const bool top_q = options.aggregation == shield::Aggregation::kTopQ;

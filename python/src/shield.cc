@@ -1,7 +1,9 @@
 // secure.Dynamics (built-in by domain, linear, Python callable), secure.Shield, secure.Decision.
+#include <cmath>
 #include <cstring>
 
 #include "python/src/common.h"
+#include "python/src/guard.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/domains/linear_dynamics.h"
@@ -49,6 +51,15 @@ class CallableDynamics final : public domains::DynamicsModel {
                             "), expected (" + std::to_string(m) + ", " +
                             std::to_string(state_dim_) + ") for " + std::to_string(m) + " actions");
     }
+    // A NaN or inf next state would make every g NaN, and the shield would fall back silently
+    // (issue 34): the callback's error, naming it and the entry.
+    for (py::ssize_t j = 0; j < m; ++j)
+      for (py::ssize_t i = 0; i < state_dim_; ++i)
+        if (!std::isfinite(*r.data(j, i)))
+          throw py::value_error(name_ + ": returned next states[" + std::to_string(j) + ", " +
+                                std::to_string(i) + "] = " + std::to_string(*r.data(j, i)) +
+                                ", which is not finite (the dynamics callback must return "
+                                "finite next states)");
     for (py::ssize_t j = 0; j < m; ++j)
       std::memcpy(next_states.col(j).data(), r.data(j, 0), sizeof(float) * state_dim_);
   }
@@ -101,7 +112,7 @@ py::array_t<float> Step(Dynamics& d, ArrayLike state, ArrayLike actions) {
   Eigen::MatrixXf next(d.model->state_dim(), a.map.cols());
   {
     py::gil_scoped_release release;
-    std::lock_guard<std::mutex> lock(d.mutex);
+    std::lock_guard<GuardedMutex> lock(d.mutex);
     d.model->Step(s, a.map, next);
   }
   return StatesToNumpy(next);
@@ -131,6 +142,8 @@ class Shield {
          const shield::ShieldOptions& options, std::shared_ptr<AirlReward> task_value,
          py::handle action_low, py::handle action_high)
       : barrier_(std::move(barrier)), dynamics_(std::move(dynamics)) {
+    Required(barrier_, "Shield: barrier", "a secure.Barrier");
+    Required(dynamics_, "Shield: dynamics", "a secure.Dynamics");
     // The shield's own evaluator (it owns scratch memory), reading the barrier's features by
     // name from the model's states where the model names them.
     evaluator_ = EvaluatorOn(*barrier_, dynamics_->state_features);
@@ -172,15 +185,15 @@ class Shield {
     // Without the GIL, then the lock (in this order: a Python dynamics model re-acquires the GIL
     // inside Decide, so no thread may wait for the lock while holding it).
     py::gil_scoped_release release;
-    std::lock_guard<std::mutex> lock(mutex_);
-    std::lock_guard<std::mutex> model_lock(dynamics_->mutex);
+    std::lock_guard<GuardedMutex> lock(mutex_);
+    std::lock_guard<GuardedMutex> model_lock(dynamics_->mutex);
     return shield_->Decide(s, m, sg);
   }
 
   double EvaluateH(ArrayLike state) {
     const Eigen::VectorXf s = Vector(state, shield_->state_dim(), "state");
     py::gil_scoped_release release;
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<GuardedMutex> lock(mutex_);
     return shield_->EvaluateH(s);
   }
 
@@ -195,8 +208,8 @@ class Shield {
     py::array_t<double> g(a.map.cols());
     Eigen::Map<Eigen::VectorXd> out(g.mutable_data(), a.map.cols());
     py::gil_scoped_release release;
-    std::lock_guard<std::mutex> lock(mutex_);
-    std::lock_guard<std::mutex> model_lock(dynamics_->mutex);
+    std::lock_guard<GuardedMutex> lock(mutex_);
+    std::lock_guard<GuardedMutex> model_lock(dynamics_->mutex);
     shield_->EvaluateG(s, shield_->EvaluateH(s), a.map, out);
     return g;
   }
@@ -204,18 +217,18 @@ class Shield {
   void SetBackup(OptionalArrayLike action) {
     if (action.is_none()) {
       py::gil_scoped_release release;  // never wait for the lock holding the GIL (see Decide)
-      std::lock_guard<std::mutex> lock(mutex_);
+      std::lock_guard<GuardedMutex> lock(mutex_);
       shield_->ClearBackupAction();
       return;
     }
     const Eigen::VectorXf a = Vector(action, shield_->action_dim(), "backup_action");
     py::gil_scoped_release release;
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<GuardedMutex> lock(mutex_);
     shield_->SetBackupAction(a);
   }
   void Seed(std::uint64_t seed) {
     py::gil_scoped_release release;
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<GuardedMutex> lock(mutex_);
     shield_->Seed(seed);
   }
   OptionalArray Bound(bool high) const {
@@ -233,10 +246,13 @@ class Shield {
   std::shared_ptr<AirlReward> task_value_;
   std::unique_ptr<policy::AirlActionValue> value_;
   std::unique_ptr<shield::Shield> shield_;
-  std::mutex mutex_;
+  GuardedMutex mutex_{"secure.Shield"};
 };
 
 }  // namespace
+}  // namespace secure::python
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::Shield);
+namespace secure::python {
 
 void RegisterDynamics(py::module_& m) {
   py::class_<Dynamics, std::shared_ptr<Dynamics>>(m, "Dynamics", R"doc(

@@ -13,6 +13,7 @@
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/input_limits.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
@@ -688,6 +689,7 @@ CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamic
 
 data::StateSet ReadCheckStates(const std::string& path, const std::vector<std::string>& features) {
   // A check without counterexamples writes a header-only file: that adds no states.
+  CheckRegularInputFile(path);  // no FIFO, no device, within the input limit
   std::ifstream in(path);
   SECURE_CHECK(in.good(), path << ": cannot open the check CSV");
   std::string header, line;

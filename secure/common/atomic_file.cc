@@ -1,4 +1,5 @@
 #include "secure/common/atomic_file.h"
+#include "secure/common/input_limits.h"
 
 #include <dirent.h>
 #include <fcntl.h>
@@ -454,12 +455,24 @@ ScratchFile::~ScratchFile() {
 }
 
 std::string ReadFile(const std::string& path) {
+  // Only a regular file of bounded size (input_limits.h): a FIFO without a writer would block
+  // here, a directory read as empty, and /dev/zero (or a file that grows) never end.
+  CheckRegularInputFile(path);
+  const std::uint64_t limit = GetInputLimits().max_input_bytes;
   std::ifstream in(path, std::ios::binary);
   SECURE_CHECK(in.good(), "cannot open '" << path << "': " << std::strerror(errno));
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
+  std::string out;
+  char buffer[1 << 16];
+  while (in.read(buffer, sizeof buffer) || in.gcount() > 0) {
+    out.append(buffer, static_cast<std::size_t>(in.gcount()));
+    SECURE_CHECK(out.size() <= limit, "cannot read '" << path << "': more than the input limit of "
+                                                      << limit
+                                                      << " bytes (it grew while being read; "
+                                                         "raise the limit with "
+                                                         "SECURE_MAX_INPUT_BYTES)");
+  }
   SECURE_CHECK(!in.bad(), "cannot read '" << path << "'");
-  return buffer.str();
+  return out;
 }
 
 }  // namespace secure

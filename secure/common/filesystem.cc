@@ -17,6 +17,12 @@ void CreateDirectories(const std::string& path) {
   fs::create_directories(p, ec);
   if (!ec && fs::is_directory(p)) return;
   // Say why: an existing non-directory at the path or at one of its parents, or the OS's reason.
+  if (fs::is_symlink(fs::symlink_status(p, ec)) && !fs::exists(fs::status(p, ec))) {
+    SECURE_THROW("cannot create directory '" << path
+                                             << "': it is a dangling symbolic link (to '"
+                                             << fs::read_symlink(p, ec).string()
+                                             << "', which does not exist)");
+  }
   if (fs::exists(fs::symlink_status(p, ec)) && !fs::is_directory(p, ec)) {
     SECURE_THROW("cannot create directory '" << path << "': File exists (not a directory)");
   }

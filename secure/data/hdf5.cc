@@ -26,6 +26,7 @@
 #include <Eigen/Core>
 
 #include "secure/common/atomic_file.h"
+#include "secure/common/input_limits.h"
 #include "secure/common/error.h"
 #include "secure/common/excerpt.h"
 #include "secure/common/filesystem.h"
@@ -137,8 +138,7 @@ struct Column {
 class Reader {
  public:
   explicit Reader(std::string path) : path_(std::move(path)) {
-    CheckNotADirectory(path_);
-    image_ = ReadFile(path_);
+    image_ = ReadFile(path_);  // a regular file within the input limit (input_limits.h)
     SECURE_CHECK(HasSignature(), path_ << ": not an HDF5 file (no HDF5 signature)");
     Handle fapl(H5Pcreate(H5P_FILE_ACCESS), H5Pclose);
     SECURE_CHECK(fapl.ok() && H5Pset_fapl_core(fapl.get(), 1 << 16, 0) >= 0 &&
@@ -234,9 +234,32 @@ class Reader {
     const hsize_t width = rank == 2 ? dims[1] : 1;
     SECURE_CHECK(width >= 1, path_ << ": " << where << ": shape " << shape
                                    << " has no columns, expected (T,) or (T, k) with k >= 1");
-    constexpr hsize_t kMaxValues = hsize_t{1} << 40;
-    SECURE_CHECK(dims[0] <= kMaxValues / width,
-                 path_ << ": " << where << ": shape " << shape << " is too large");
+    // The declared size, checked before anything is allocated for it (issue 34: a 10 KB file
+    // can declare a chunked, never-written dataset of 2e9 rows): its values read as doubles,
+    // with every dataset read before it, within the input limit (input_limits.h).
+    const std::uint64_t limit = GetInputLimits().max_input_bytes;
+    const std::uint64_t max_values = limit / sizeof(double);
+    SECURE_CHECK(dims[0] <= max_values / width,
+                 path_ << ": " << where << ": shape " << shape << " declares "
+                       << static_cast<double>(dims[0]) * static_cast<double>(width) * 8.0
+                       << " bytes (as doubles), over the input limit of " << limit
+                       << " bytes (raise it with SECURE_MAX_INPUT_BYTES or --max-input-bytes)");
+    // A chunked dataset's chunk is allocated whole by H5Dread, whatever the dataset's size: its
+    // declared size is checked too (the HDF5 fuzzer found a file whose chunk made a small read
+    // allocate 2.5 GB).
+    Handle plist(H5Dget_create_plist(dataset.get()), H5Pclose);
+    if (plist.ok() && H5Pget_layout(plist.get()) == H5D_CHUNKED) {
+      hsize_t chunk[H5S_MAX_RANK] = {};
+      const int chunk_rank = H5Pget_chunk(plist.get(), H5S_MAX_RANK, chunk);
+      const std::size_t element = type.ok() ? H5Tget_size(type.get()) : 8;
+      long double bytes = static_cast<long double>(std::max<std::size_t>(element, 8));
+      for (int i = 0; i < chunk_rank; ++i) bytes *= static_cast<long double>(chunk[i]);
+      SECURE_CHECK(chunk_rank >= 0 && bytes <= static_cast<long double>(limit),
+                   path_ << ": " << where << ": its chunks declare "
+                         << static_cast<double>(bytes) << " bytes each, over the input limit of "
+                         << limit << " bytes (raise it with SECURE_MAX_INPUT_BYTES or "
+                            "--max-input-bytes)");
+    }
     *rows = static_cast<long>(dims[0]);
     *cols = static_cast<long>(width);
     return dataset;
@@ -246,6 +269,15 @@ class Reader {
   Table ReadFloatDataset(hid_t loc, const std::string& name, const std::string& where) const {
     Table t;
     const Handle dataset = OpenFloatDataset(loc, name, where, &t.rows, &t.cols);
+    // And all datasets read from this file together (many small declared datasets).
+    const std::uint64_t limit = GetInputLimits().max_input_bytes;
+    const std::uint64_t values = static_cast<std::uint64_t>(t.rows * t.cols);
+    SECURE_CHECK(declared_values_ + values <= limit / sizeof(double),
+                 path_ << ": " << where << ": " << values * sizeof(double) << " more bytes after "
+                       << declared_values_ * sizeof(double)
+                       << " of other datasets, over the input limit of " << limit
+                       << " bytes (raise it with SECURE_MAX_INPUT_BYTES or --max-input-bytes)");
+    declared_values_ += values;
     t.values.resize(static_cast<std::size_t>(t.rows * t.cols));
     if (!t.values.empty()) {
       SECURE_CHECK(
@@ -439,6 +471,7 @@ class Reader {
   }
 
  private:
+  mutable std::uint64_t declared_values_ = 0;  // values of the datasets read so far
   bool HasSignature() const {
     static constexpr std::string_view kSignature("\x89HDF\r\n\x1a\n", 8);
     // The superblock is at 0 or, after a user block, at 512, 1024, 2048, ...

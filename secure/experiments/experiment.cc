@@ -1,5 +1,7 @@
 #include "secure/experiments/experiment.h"
 
+#include <boost/crc.hpp>
+
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -9,6 +11,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -738,6 +741,20 @@ nlohmann::json ExperimentIdentity(const ExperimentResult& r) {
         {"near_dangerous_states", r.near_dangerous_states}}}};
 }
 
+// A task file's checksum (issue 34: an edited successes = 99 of 3 episodes gave "841.7 %"):
+// "crc32:" + the CRC-32 of the compact JSON of every other field. It catches edits and damage,
+// not a forger who recomputes it.
+std::string TaskChecksum(const nlohmann::json& task) {
+  nlohmann::json content = task;
+  content.erase("checksum");
+  boost::crc_32_type crc;
+  const std::string text = content.dump();
+  crc.process_bytes(text.data(), text.size());
+  char hex[9];
+  std::snprintf(hex, sizeof hex, "%08x", static_cast<unsigned>(crc.checksum()));
+  return std::string("crc32:") + hex;
+}
+
 nlohmann::json TaskJson(const nlohmann::json& identity, std::uint64_t seed, int threads,
                         double data_seconds, const SeedOutcome& outcome) {
   nlohmann::json results = nlohmann::json::array();
@@ -747,12 +764,14 @@ nlohmann::json TaskJson(const nlohmann::json& identity, std::uint64_t seed, int 
       methods[ToString(eval::kMethodNames, method)] = SeedResultJson(r);
     results.push_back(std::move(methods));
   }
-  return {{"experiment", identity},
-          {"seed", seed},
-          {"threads", threads},
-          {"data_seconds", data_seconds},
-          {"results", std::move(results)},
-          {"summary", outcome.summary}};
+  nlohmann::json task = {{"experiment", identity},
+                         {"seed", seed},
+                         {"threads", threads},
+                         {"data_seconds", data_seconds},
+                         {"results", std::move(results)},
+                         {"summary", outcome.summary}};
+  task["checksum"] = TaskChecksum(task);
+  return task;
 }
 
 // A task file's content (parsed); an error naming the file if it is not one.
@@ -768,6 +787,14 @@ nlohmann::json ReadTaskFile(const std::string& path) {
                    j["seed"].is_number_unsigned() && j["results"].is_array(),
                path << ": not a task file (expected an object with experiment, seed, results and "
                        "summary); remove it to recompute the seed");
+  SECURE_CHECK(j.contains("checksum") && j["checksum"].is_string(),
+               path << ": no checksum (a task file of an older version, or edited); remove it to "
+                       "recompute the seed");
+  const std::string want = TaskChecksum(j);
+  SECURE_CHECK(j["checksum"].get<std::string>() == want,
+               path << ": checksum " << j["checksum"].get<std::string>() << " does not match its "
+                    << "content (" << want << "): the file was edited or damaged; remove it to "
+                    << "recompute the seed");
   return j;
 }
 
@@ -786,6 +813,29 @@ SeedOutcome OutcomeFromTask(const nlohmann::json& task, const std::string& path,
     }
   } catch (const nlohmann::json::exception& e) {
     SECURE_THROW(path << ": malformed results (" << e.what() << ")");
+  }
+  // Counts in range: a rate is a count of episodes (or decisions) over episodes (decisions).
+  for (std::size_t v = 0; v < outcome.results.size(); ++v) {
+    for (const auto& [method, r] : outcome.results[v]) {
+      const std::string where = path + ": results[" + std::to_string(v) + "]." +
+                                std::string(ToString(eval::kMethodNames, method));
+      SECURE_CHECK(r.episodes >= 0, where << ".episodes = " << r.episodes << ", must be >= 0");
+      for (const auto& [name, count] : {std::pair<const char*, long>{"successes", r.successes},
+                                        {"dangerous", r.dangerous}})
+        SECURE_CHECK(count >= 0 && count <= r.episodes,
+                     where << "." << name << " = " << count << ", must be in [0, episodes = "
+                           << r.episodes << "]");
+      for (const auto& [name, count] :
+           {std::pair<const char*, long>{"interventions", r.interventions},
+            {"resampled_decisions", r.resampled_decisions},
+            {"no_safe_action_decisions", r.no_safe_action_decisions},
+            {"invalid_input_decisions", r.invalid_input_decisions}})
+        SECURE_CHECK(count >= 0 && count <= r.decisions,
+                     where << "." << name << " = " << count << ", must be in [0, decisions = "
+                           << r.decisions << "]");
+      SECURE_CHECK(r.steps >= 0 && r.decisions >= 0 && r.collision_events >= 0,
+                   where << ": negative steps, decisions or collision events");
+    }
   }
   outcome.summary = task["summary"];
   return outcome;
@@ -1099,7 +1149,16 @@ void ExperimentOptions::Validate() const {
                      "in [1, " << kMaxSeeds << "]");
   SECURE_CHECK_FIELD(episodes > 0 && episodes <= kMaxEpisodes, kOptions, "episodes", episodes,
                      "in [1, " << kMaxEpisodes << "]");
-  SECURE_CHECK_FIELD(threads > 0, kOptions, "threads", threads, "> 0");
+  // Seeds run in parallel, one worker each: more workers than seeds only idle, and 10^8 of
+  // them "ran" (issue 34). 1024 as the user study's --threads.
+  SECURE_CHECK_FIELD(threads > 0 && threads <= 1024, kOptions, "threads", threads,
+                     "in [1, 1024]");
+  // The last seed, first_seed + seeds - 1, must not wrap around to 0.
+  SECURE_CHECK_FIELD(first_seed <= std::numeric_limits<std::uint64_t>::max() -
+                                       static_cast<std::uint64_t>(seeds - 1),
+                     kOptions, "first_seed", first_seed,
+                     "at most 2^64 - seeds (the last seed, first_seed + seeds - 1 with seeds = "
+                         << seeds << ", must not wrap around)");
   SECURE_CHECK_FIELD(shards >= 1, kOptions, "shards", shards, ">= 1");
   SECURE_CHECK_FIELD(shard >= 0 && shard < shards, kOptions, "shard", shard,
                      "in [0, shards - 1] (shards = " << shards << ")");

@@ -22,6 +22,15 @@
 namespace secure::policy {
 namespace {
 
+// The options as the model file records them: without where the curve went and verbosity, which
+// do not change the model (issue 34: the same experiment under two --out names gave different
+// model bytes).
+nlohmann::json ModelFileOptions(const BcOptions& o) {
+  nlohmann::json j = o.ToJson();
+  for (const char* key : {"curve_path", "verbose"}) j.erase(key);
+  return j;
+}
+
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 struct Split {
@@ -237,7 +246,7 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   best.action_features = demos.action_features;
   // The summary without its wall-clock time: same seed and data, same model file bytes.
   best.provenance = {{"trainer", "secure::policy::TrainBc (Gaussian maximum likelihood)"},
-                     {"options", options.ToJson()},
+                     {"options", ModelFileOptions(options)},
                      {"summary", nn::WithoutTiming(s.ToJson())},
                      {"demonstrations",
                       {{"source", demos.source},

@@ -964,6 +964,16 @@ TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
                                   "\"derby\"}") +
                             " " + iid),
                      "old.json: no field 'first_seed'");
+  {  // Edited rates out of [0, 1] (issue 34: 7.0 and -3.0 gave "200.0 %").
+    std::ifstream in(iid);
+    nlohmann::json edited = nlohmann::json::parse(in);
+    for (auto& [method, m] : edited["methods"].items()) {
+      for (auto& v : m["success_rate"]["per_seed"]) v = 7.0;
+      break;
+    }
+    ExpectOneErrorLine(RunCli("compare " + Write("edited.json", edited.dump()) + " " + iid),
+                       "per_seed' holds 7.0, must be a rate in [0, 1]");
+  }
   ExpectOneErrorLine(RunCli("compare " + qmc + " " + iid + " --tost-bound 0"),
                      "--tost-bound = 0, must be in (0, 1)");
 

@@ -14,6 +14,7 @@
 
 #include "secure/common/atomic_file.h"
 #include "secure/common/error.h"
+#include "secure/common/input_limits.h"
 #include "secure/data/data.h"
 #include "tests/data/hdf5_test_file.h"
 #include "tests/test_util.h"
@@ -509,6 +510,46 @@ TEST_F(Hdf5Test, WriterRejectsWhatWouldNotReadBack) {
   ExpectContainsAll(ErrorOf([&] { WriteTrajectories(PathOf("x.h5"), set); }),
                     {"x.h5", "feature 'pos[2]', row 4", "not finite"});
   EXPECT_FALSE(std::filesystem::exists(PathOf("x.h5")));
+}
+
+// Issue 34: a 10 KB file declaring a (2e9,) dataset (chunked, never written) and num_samples =
+// 2e9 made `demos convert` allocate 16 GB. The declared size is checked before anything is read.
+TEST_F(Hdf5Test, ADeclaredSizeOverTheInputLimitFailsBeforeAllocating) {
+  const std::string path = PathOf("bomb.h5");
+  {
+    Hdf5TestFile f(path);
+    f.Unwritten("data/demo_0/obs/pos", {2'000'000'000});
+    f.Unwritten("data/demo_0/actions", {2'000'000'000, 2});
+    f.IntAttribute("data/demo_0", "num_samples", 2'000'000'000);
+  }
+  EXPECT_LT(std::filesystem::file_size(path), 100'000u);
+  const std::string message = ErrorOf([&] { ReadTrajectories(path, {}, {}); });
+  ExpectContainsAll(message, {path, "data/demo_0/obs/pos", "(2000000000,)", "declares",
+                              "over the input limit of 4294967296 bytes",
+                              "SECURE_MAX_INPUT_BYTES"});
+  const std::string states = ErrorOf([&] { ReadStateSet(path, {}); });
+  EXPECT_NE(states.find("over the input limit"), std::string::npos) << states;
+}
+
+TEST_F(Hdf5Test, ManySmallDatasetsCountTogetherAgainstTheLimit) {
+  const std::string path = PathOf("many.h5");
+  {
+    Hdf5TestFile f(path);
+    for (const char* demo : {"data/demo_0", "data/demo_1"}) {
+      f.Unwritten(std::string(demo) + "/obs/pos", {1000});
+      f.Unwritten(std::string(demo) + "/actions", {1000, 2});
+    }
+  }
+  ASSERT_LT(std::filesystem::file_size(path), 30'000u);
+  const InputLimits saved = GetInputLimits();
+  InputLimits limits = saved;
+  // Demo 0's datasets (1000 x (1 + 2) doubles = 24000 bytes) fit, demo 1's do not.
+  limits.max_input_bytes = 30'000;
+  SetInputLimits(limits);
+  const std::string message = ErrorOf([&] { ReadTrajectories(path, {}, {}); });
+  SetInputLimits(saved);
+  ExpectContainsAll(message, {path, "data/demo_1", "over the input limit of 30000 bytes"});
+  EXPECT_EQ(ReadTrajectories(path, {}, {}).num_steps(), 2000);
 }
 
 }  // namespace

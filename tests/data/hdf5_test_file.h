@@ -11,6 +11,7 @@
 //
 // Intermediate groups are created as needed.
 
+#include <algorithm>
 #include <hdf5.h>
 
 #include <gtest/gtest.h>
@@ -85,6 +86,22 @@ class Hdf5TestFile {
     }
     Floats(demo + "/actions", {hsize_t(steps), 2}, a);
     IntAttribute(demo, "num_samples", steps);
+  }
+
+  // A chunked float64 dataset of shape `dims` whose data are never written: a few KB on disk
+  // whatever the declared shape (the memory bomb of issue 34).
+  void Unwritten(const std::string& path, const std::vector<hsize_t>& dims) {
+    const hid_t space = H5Screate_simple(int(dims.size()), dims.data(), nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    std::vector<hsize_t> chunk(dims.size(), 1);
+    chunk[0] = std::min<hsize_t>(1024, dims[0]);
+    H5Pset_chunk(dcpl, int(chunk.size()), chunk.data());
+    const hid_t d = H5Dcreate2(file_, path.c_str(), H5T_IEEE_F64LE, space, lcpl_, dcpl,
+                               H5P_DEFAULT);
+    EXPECT_GE(d, 0) << path;
+    H5Dclose(d);
+    H5Pclose(dcpl);
+    H5Sclose(space);
   }
 
  private:

@@ -183,6 +183,22 @@ TEST(BcTest, HoldsOutWholeEpisodesForValidation) {
 
 class BcFileTest : public secure::test::TempDirTest {};
 
+// Issue 34: bc.model recorded the curve's path, so one experiment under two --out names gave
+// different model bytes.
+TEST_F(BcFileTest, TheModelsBytesDoNotDependOnWhereTheCurveGoes) {
+  BcOptions o = FastBc();
+  o.epochs = 3;
+  std::string bytes[2];
+  for (int k = 0; k < 2; ++k) {
+    o.curve_path = PathOf(k == 0 ? "a/curve.csv" : "somewhere/else/curve.csv");
+    o.verbose = k == 1;
+    TrainBc(o, LinearDemos(10, 20, 3), nullptr).Save(PathOf("m" + std::to_string(k)));
+    bytes[k] = ReadFile(PathOf("m" + std::to_string(k)));
+  }
+  EXPECT_TRUE(bytes[0] == bytes[1]);
+  EXPECT_EQ(bytes[0].find("curve"), std::string::npos);
+}
+
 TEST_F(BcFileTest, WritesTheLearningCurve) {
   BcOptions o = FastBc();
   o.epochs = 7;

@@ -192,7 +192,27 @@ def main():
     os.makedirs(other)
     with open(os.path.join(other, "result.json"), "w") as f:
         f.write('{"a": 1}')
-    for path, named, what in ((os.path.join(WORK, "missing"), "missing", "no such directory"),
+    # Numbers the page would show, checked: no method, a rate as a string, a rate of 7.
+    with open(os.path.join(run_dir, "result.json")) as f:
+        good = json.load(f)
+    edited = {}
+    for name, change in (("no_methods", lambda r: r.update(methods={})),
+                         ("string_rate", lambda r: r["methods"]["bc"]["success_rate"].update(
+                             mean="0.5")),
+                         ("rate_7", lambda r: r["methods"]["bc"]["success_rate"]["per_seed"]
+                          .__setitem__(0, 7.0))):
+        d = os.path.join(WORK, name)
+        os.makedirs(d)
+        r = json.loads(json.dumps(good))
+        change(r)
+        with open(os.path.join(d, "result.json"), "w") as f:
+            json.dump(r, f)
+        edited[name] = d
+    for path, named, what in ((edited["no_methods"], "result.json", "holds no method"),
+                              (edited["string_rate"], "success_rate.mean' = \"0.5\"",
+                               "must be a rate in [0, 1]"),
+                              (edited["rate_7"], "per_seed[0]' = 7.0", "must be a rate"),
+                              (os.path.join(WORK, "missing"), "missing", "no such directory"),
                               (not_dir, not_dir, "not a directory"),
                               (empty, os.path.join(empty, "result.json"), "missing"),
                               (bad, os.path.join(bad, "result.json"), "malformed JSON"),
@@ -204,6 +224,62 @@ def main():
               "%s: expected one line naming %s (%s), got %r" % (path, named, what, r.stderr))
         check(not os.path.exists(os.path.join(path, "report.html")),
               "%s: a page was written for a bad run directory" % path)
+
+    output_rules(run_dir)
+
+
+def output_rules(run_dir):
+    """The page is written as every C++ writer writes (issue 34): through `secure report` (its
+    C++ writer) and by the script run alone (its own copy of the rules)."""
+    import glob
+    import stat as st
+    out = os.path.join(WORK, "outputs")
+    os.makedirs(out)
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools",
+                          "report", "report.py")
+    for tag, command in (("cli", [CLI, "report", run_dir, "--out"]),
+                         ("script", [sys.executable, script, run_dir, "--out"])):
+        d = os.path.join(out, tag)
+        os.makedirs(os.path.join(d, "a_directory"))
+        os.mkfifo(os.path.join(d, "fifo"))
+        os.symlink("/dev/null", os.path.join(d, "null.html"))
+        with open(os.path.join(d, "target.html"), "w") as f:
+            f.write("old")
+        os.symlink("target.html", os.path.join(d, "link.html"))
+        with open(os.path.join(d, "private.html"), "w") as f:
+            f.write("old")
+        os.chmod(os.path.join(d, "private.html"), 0o640)
+        for name, want in (("a_directory", "it is a directory, not a regular file"),
+                           ("fifo", "no process has open for reading")):
+            try:
+                r = subprocess.run(command + [os.path.join(d, name)], capture_output=True,
+                                   text=True, timeout=120)
+            except subprocess.TimeoutExpired:
+                check(False, "%s --out %s: hangs" % (tag, name))
+                continue
+            lines = r.stderr.strip().splitlines()
+            check(r.returncode == 1 and len(lines) == 1 and want in lines[0] and
+                  os.path.join(d, name) in lines[0],
+                  "%s --out %s: expected exit 1 and one line with %r, got %d %r"
+                  % (tag, name, want, r.returncode, r.stderr))
+            if tag == "cli":
+                check(lines[0].startswith("secure: error: ") if lines else False,
+                      "%s --out %s: not a 'secure: error:' line: %r" % (tag, name, r.stderr))
+        check(os.path.isdir(os.path.join(d, "a_directory")) and
+              not os.listdir(os.path.join(d, "a_directory")), "%s: the directory changed" % tag)
+        check(st.S_ISFIFO(os.lstat(os.path.join(d, "fifo")).st_mode), "%s: the FIFO is gone" % tag)
+        for name in ("null.html", "link.html", "private.html"):
+            r = run(command + [os.path.join(d, name)])
+            check(r.returncode == 0, "%s --out %s failed: %s" % (tag, name, r.stderr[-2000:]))
+        check(os.path.islink(os.path.join(d, "null.html")) and
+              st.S_ISCHR(os.stat("/dev/null").st_mode), "%s: /dev/null through a link" % tag)
+        check(os.path.islink(os.path.join(d, "link.html")), "%s: the symlink was replaced" % tag)
+        with open(os.path.join(d, "target.html"), encoding="utf-8") as f:
+            check(f.read().startswith("<!DOCTYPE html>"), "%s: not written through the link" % tag)
+        check(st.S_IMODE(os.stat(os.path.join(d, "private.html")).st_mode) == 0o640,
+              "%s: the page's mode 0640 was not kept" % tag)
+        left = glob.glob(os.path.join(d, "*.tmp-*")) + glob.glob(os.path.join(d, "*", "*.tmp-*"))
+        check(not left, "%s: temporary files left behind: %s" % (tag, left))
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ import json
 import math
 import os
 import re
+import stat
 import sys
 
 import matplotlib
@@ -130,6 +131,28 @@ def load_run(run_dir):
     if not isinstance(result.get("methods"), dict) and not isinstance(result.get("variants"),
                                                                        dict):
         raise ReportError("%s: neither 'methods' nor 'variants': no evaluation to report" % path)
+    # The numbers the page shows, checked (issue 34: an empty 'methods', rates given as strings
+    # or outside [0, 1] made a page of nonsense).
+    groups = [("methods", result.get("methods"))] if isinstance(result.get("methods"), dict) \
+        else [("variants.%s.methods" % k, v.get("methods") if isinstance(v, dict) else None)
+              for k, v in result["variants"].items()]
+    for where, methods in groups:
+        if not isinstance(methods, dict) or not methods:
+            raise ReportError("%s: '%s' holds no method" % (path, where))
+        for name, m in methods.items():
+            if not isinstance(m, dict):
+                raise ReportError("%s: '%s.%s' is not an object" % (path, where, name))
+            for rate in ("success_rate", "dangerous_rate"):
+                r = m.get(rate)
+                if not isinstance(r, dict):
+                    raise ReportError("%s: '%s.%s.%s' is missing" % (path, where, name, rate))
+                values = [("mean", r.get("mean"))] + [
+                    ("per_seed[%d]" % i, v) for i, v in enumerate(r.get("per_seed") or [])]
+                for key, v in values:
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or \
+                            not 0.0 <= v <= 1.0:
+                        raise ReportError("%s: '%s.%s.%s.%s' = %s, must be a rate in [0, 1]"
+                                          % (path, where, name, rate, key, json.dumps(v)))
     return result
 
 
@@ -188,8 +211,9 @@ class Page:
         fig.savefig(buf, format="png", dpi=100)
         plt.close(fig)
         data = buf.getvalue()
-        with open(os.path.join(self.fig_dir, name + ".png"), "wb") as f:
-            f.write(data)
+        if self.fig_dir is not None:
+            with open(os.path.join(self.fig_dir, name + ".png"), "wb") as f:
+                f.write(data)
         self.figures.append(name + ".png")
         self.parts.append(
             '<figure><img id="fig-%s" alt="%s" src="data:image/png;base64,%s">'
@@ -1025,17 +1049,109 @@ figcaption, .note { font-size: 0.85em; color: #555; }
 """
 
 
-def build_report(run_dir, out_path):
+# ---------------------------------------------------------------------------------------------
+# Writing the page: the rules of the C++ writers (secure/common/atomic_file.h). `secure report`
+# hands the page to the C++ writer itself (--write-to); these are for the script run alone.
+
+
+def output_kind(path):
+    """What `path` is, following symlinks: None (does not exist), "file", "device", "fifo";
+    a directory, a socket or a block device is a ReportError (nothing touched)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        raise ReportError("cannot write '%s': %s" % (path, e.strerror))
+    if stat.S_ISREG(st.st_mode):
+        return "file"
+    if stat.S_ISCHR(st.st_mode):
+        return "device"
+    if stat.S_ISFIFO(st.st_mode):
+        return "fifo"
+    what = "a directory" if stat.S_ISDIR(st.st_mode) else \
+        "a socket" if stat.S_ISSOCK(st.st_mode) else "a block device" \
+        if stat.S_ISBLK(st.st_mode) else "not a regular file"
+    raise ReportError("cannot write '%s': it is %s, not a regular file" % (path, what))
+
+
+def open_fifo_for_writing(path):
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError as e:
+        if e.errno == 6:  # ENXIO
+            raise ReportError("cannot write '%s': a FIFO that no process has open for reading"
+                              % path)
+        raise ReportError("cannot write '%s': %s" % (path, e.strerror))
+    os.set_blocking(fd, True)
+    return fd
+
+
+def write_output(path, text):
+    """Writes the page as every C++ writer does: a regular file atomically (temporary + fsync +
+    rename, its mode kept), through symlinks to their target, a device or a FIFO (with a reader)
+    directly; a directory refused. No temporary is left behind on failure."""
+    data = text.encode("utf-8")
+    kind = output_kind(path)
+    if kind in ("device", "fifo"):
+        try:
+            fd = open_fifo_for_writing(path) if kind == "fifo" else os.open(path, os.O_WRONLY)
+            with os.fdopen(fd, "wb", buffering=0) as f:
+                view = memoryview(data)
+                while view:
+                    view = view[f.write(view):]
+        except OSError as e:
+            raise ReportError("cannot write '%s': %s" % (path, e.strerror))
+        return
+    target = os.path.realpath(path)
+    if kind == "file":
+        mode = os.stat(target).st_mode & 0o7777
+    else:
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    tmp = "%s.tmp-%d" % (target, os.getpid())
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(tmp, mode)
+            os.replace(tmp, target)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise
+    except OSError as e:
+        raise ReportError("cannot write '%s': %s" % (path, e.strerror or e))
+
+
+def build_report(run_dir, out_path, write_to=None):
     result = load_run(run_dir)
     exp = result["experiment"]
     domain = str(exp.get("domain", "?"))
     kind = str(exp.get("kind", "?"))
-    fig_dir = os.path.splitext(out_path)[0] + "_figures"
-    os.makedirs(fig_dir, exist_ok=True)
-    for name in FIGURE_NAMES:  # a figure this run does not get must not survive from an old one
-        old = os.path.join(fig_dir, name + ".png")
-        if os.path.isfile(old):
-            os.remove(old)
+    # The output first (a directory or a FIFO without a reader fails before any work); figure
+    # files next to a page that is a file, not next to a device or a FIFO (they are embedded).
+    out_kind = output_kind(out_path)
+    if out_kind == "fifo" and write_to is None:
+        os.close(open_fifo_for_writing(out_path))
+    fig_dir = None
+    if out_kind in (None, "file"):
+        fig_dir = os.path.splitext(out_path)[0] + "_figures"
+        try:
+            os.makedirs(fig_dir, exist_ok=True)
+        except OSError as e:
+            raise ReportError("cannot create the figures' directory '%s': %s"
+                              % (fig_dir, e.strerror))
+        for name in FIGURE_NAMES:  # a figure this run does not get must not survive
+            old = os.path.join(fig_dir, name + ".png")
+            if os.path.isfile(old):
+                os.remove(old)
     page = Page(fig_dir)
     opts = exp.get("options") or {}
     seeds = opts.get("seeds", len(exp.get("seeds") or []))
@@ -1083,10 +1199,11 @@ def build_report(run_dir, out_path):
     doc = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>SECURE report: %s on %s"
            "</title><style>%s</style></head><body>\n%s\n</body></html>\n"
            % (html.escape(kind), html.escape(domain), STYLE, "\n".join(page.parts)))
-    tmp = out_path + ".tmp-%d" % os.getpid()
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(doc)
-    os.replace(tmp, out_path)
+    if write_to is not None:  # `secure report`: its C++ writer installs the page
+        with open(write_to, "w", encoding="utf-8") as f:
+            f.write(doc)
+    else:
+        write_output(out_path, doc)
     return page.figures
 
 
@@ -1094,12 +1211,20 @@ def main(argv):
     parser = argparse.ArgumentParser(prog="secure report", description=__doc__.split("\n")[0])
     parser.add_argument("run_dir")
     parser.add_argument("--out", help="the HTML file (default RUN_DIR/report.html)")
+    parser.add_argument("--write-to", help=argparse.SUPPRESS)  # secure report's scratch file
     args = parser.parse_args(argv)
     out = args.out or os.path.join(args.run_dir, "report.html")
     try:
-        figures = build_report(args.run_dir, out)
+        figures = build_report(args.run_dir, out, args.write_to)
     except ReportError as e:
         print("secure report: error: %s" % e, file=sys.stderr)
+        return 1
+    except OSError as e:  # a full disk, a vanished file: one line naming it
+        print("secure report: error: %s%s" % ("'%s': " % e.filename if e.filename else "",
+                                              e.strerror or e), file=sys.stderr)
+        return 1
+    except Exception as e:  # noqa: BLE001 (one line, never a traceback)
+        print("secure report: error: %s: %s" % (type(e).__name__, e), file=sys.stderr)
         return 1
     print("report: %s (%d figures in %s)" % (out, len(figures),
                                            os.path.splitext(out)[0] + "_figures"))

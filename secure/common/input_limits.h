@@ -1,0 +1,47 @@
+#pragma once
+// Resource limits on what the program reads (issue 34): no small input may exhaust memory or
+// hang a command. Each limit is stated here, with its default, and can be raised: by an
+// environment variable (read once, at the first use) or by a program calling SetInputLimits (the
+// CLI's global flags --max-input-bytes, --max-config-nodes). tests/README.md lists them.
+//
+//   input file size      SECURE_MAX_INPUT_BYTES    4 GiB    every file read (CSV, model files,
+//                                                           HDF5, task.json, result.json)
+//   HDF5 declared data   (the same limit)                   a dataset's declared bytes, checked
+//                                                           before any read allocates them
+//   config nodes         SECURE_MAX_CONFIG_NODES   100000   YAML nodes visited with aliases
+//                                                           expanded (configs, Python options)
+//   config depth         SECURE_MAX_CONFIG_DEPTH   64       nesting of mappings and sequences
+//
+// Inputs must also be regular files (a FIFO would block, /dev/zero never ends): see
+// CheckRegularInputFile.
+
+#include <cstdint>
+#include <string>
+
+namespace secure {
+
+struct InputLimits {
+  std::uint64_t max_input_bytes = std::uint64_t{4} << 30;
+  long max_config_nodes = 100'000;
+  int max_config_depth = 64;
+};
+
+/// The limits in force: the defaults, overridden by the environment variables above (a value
+/// that is not a positive integer is ignored with a note on stderr), or by SetInputLimits.
+const InputLimits& GetInputLimits();
+void SetInputLimits(const InputLimits& limits);
+
+/// Checks that `path` names a regular file (symlinks followed) of at most max_input_bytes,
+/// before anything opens it (opening a FIFO without a writer blocks; /dev/zero never ends).
+/// Returns its size. `what` names the input in the message ("config file", "model file").
+/// @throws secure::Error, one line naming the path: "cannot read 'p': no such file",
+///   "cannot read 'p': it is a directory, not a regular file", "... it is a FIFO ...",
+///   "... it is a character device ...", "cannot read 'p': 5368709120 bytes, more than the
+///   input limit of 4294967296 bytes (raise it with SECURE_MAX_INPUT_BYTES or
+///   --max-input-bytes)".
+std::uint64_t CheckRegularInputFile(const std::string& path);
+
+/// "a FIFO", "a directory", ... for st_mode's file type.
+std::string FileTypeName(unsigned mode);
+
+}  // namespace secure

@@ -1,0 +1,84 @@
+// Task files (seed-K/task.json) are checked when read (issue 34, defect 8): an edited
+// `successes = 99` of 3 episodes gave a table with "841.7 %". A task file carries a checksum of
+// its content, which a rerun and a merge check; and its counts must be in range even when the
+// checksum was recomputed.
+#include <boost/crc.hpp>
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "domains/double_integrator/domain.h"
+#include "secure/common/atomic_file.h"
+#include "secure/experiments/experiment.h"
+#include "tests/test_util.h"
+
+namespace secure::experiments {
+namespace {
+
+using test::ErrorOf;
+
+class TaskFileTest : public test::TempDirTest {
+ protected:
+  ExperimentOptions Options() const {
+    static const domains::double_integrator::DoubleIntegratorDomain domain(Profile::kQuick);
+    ExperimentOptions o = domain.Preset();
+    o.methods = {eval::Method::kBc};
+    o.seeds = 1;
+    o.episodes = 3;
+    o.bc.epochs = 2;
+    o.verbose = false;
+    o.output_dir = PathOf("run");
+    return o;
+  }
+  ExperimentResult Run() const {
+    static const domains::double_integrator::DoubleIntegratorDomain domain(Profile::kQuick);
+    return RunExperiment(ExperimentKind::kMethodComparison, domain, Options(), nullptr);
+  }
+  std::string Task() const { return PathOf("run/seed-0/task.json"); }
+};
+
+std::string Crc(const nlohmann::json& task) {
+  nlohmann::json content = task;
+  content.erase("checksum");
+  const std::string text = content.dump();
+  boost::crc_32_type crc;
+  crc.process_bytes(text.data(), text.size());
+  char hex[9];
+  std::snprintf(hex, sizeof hex, "%08x", static_cast<unsigned>(crc.checksum()));
+  return std::string("crc32:") + hex;
+}
+
+TEST_F(TaskFileTest, AnEditedTaskFileIsRefusedByARerunAndAMerge) {
+  Run();
+  nlohmann::json task = nlohmann::json::parse(ReadFile(Task()));
+  ASSERT_TRUE(task.contains("checksum"));
+  EXPECT_EQ(task["checksum"], Crc(task));
+  // A rerun reuses the untouched file.
+  Run();
+  task["results"][0]["bc"]["successes"] = 99;
+  WriteFileAtomically(Task(), task.dump(2));
+  std::string message = ErrorOf([&] { Run(); });
+  EXPECT_HAS(message, Task() + ": checksum");
+  EXPECT_HAS(message, "does not match its content");
+  EXPECT_HAS(message, "remove it to recompute the seed");
+  message = ErrorOf([&] { MergeExperiment({PathOf("run")}); });
+  EXPECT_HAS(message, "does not match its content");
+  // With the checksum recomputed, the range check still refuses it.
+  task["checksum"] = Crc(task);
+  WriteFileAtomically(Task(), task.dump(2));
+  message = ErrorOf([&] { MergeExperiment({PathOf("run")}); });
+  EXPECT_HAS(message, Task() + ": results[0].bc.successes = 99, must be in [0, episodes = 3]");
+  task["results"][0]["bc"]["successes"] = -3;
+  task["checksum"] = Crc(task);
+  WriteFileAtomically(Task(), task.dump(2));
+  EXPECT_HAS(ErrorOf([&] { Run(); }), "successes = -3, must be in [0, episodes = 3]");
+  // Without a checksum (an older version's file, or one edited by hand).
+  task.erase("checksum");
+  WriteFileAtomically(Task(), task.dump(2));
+  EXPECT_HAS(ErrorOf([&] { Run(); }), Task() + ": no checksum");
+}
+
+}  // namespace
+}  // namespace secure::experiments
