@@ -5,6 +5,7 @@
 // Every stage reads and writes files, so users can bring their own data at any stage.
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -310,6 +311,7 @@ struct EvalCommand {
   int seeds = 10;
   long episodes = 100;
   std::uint64_t first_seed = 0;
+  CLI::Option* methods_option = nullptr;
   shield::ShieldOptions shield;
   ShieldFlags shield_flags;
   double tost_bound = 0.10;
@@ -343,8 +345,9 @@ struct EvalCommand {
     cmd->add_option("--barrier", barrier_path,
                     "barrier model (flat or per-obstacle), or 'ground-truth' for a domain that "
                     "has one (instead of / overriding --run)");
-    cmd->add_option("--methods", methods, "comma-separated methods (default: those whose models "
-                                          "are given)");
+    methods_option = cmd->add_option("--methods", methods,
+                                     "comma-separated methods (default: those whose models "
+                                     "are given)");
     cmd->add_option("--dynamics", dynamics_path,
                     "a learned dynamics model (`secure dynamics train`) as the shield model, "
                     "pessimistic over its members, instead of the domain's");
@@ -374,8 +377,13 @@ struct EvalCommand {
     shield_options.Validate();
     SECURE_CHECK(!run_dir.empty() || !airl_path.empty() || !bc_path.empty() || !joint_path.empty(),
                  "give --run DIR or at least one of --airl, --bc, --joint");
+    // The last seed, first_seed + seeds - 1, must not wrap around to 0.
+    SECURE_CHECK(first_seed <= std::numeric_limits<std::uint64_t>::max() -
+                                   static_cast<std::uint64_t>(seeds - 1),
+                 "--first-seed = " << first_seed << " with --seeds " << seeds
+                                   << ": the last seed would wrap around to 0");
     std::vector<eval::Method> list;
-    if (!methods.empty()) {
+    if (methods_option->count() > 0) {  // '' is an error (no method), not the default
       list = eval::ParseMethods(methods);
     } else {
       const bool has_barrier = !barrier_path.empty() || !run_dir.empty();

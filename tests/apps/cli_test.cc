@@ -1094,6 +1094,11 @@ TEST(CliHardeningTest, InvalidValuesAreRejected) {
   ExpectOneErrorLine(RunCli("demo --seeds 0"), "--seeds = 0, must be in [1, 10000]");
   ExpectOneErrorLine(RunCli("demo --episodes 0"), "--episodes = 0, must be in [1, 1000000]");
   ExpectOneErrorLine(RunCli("experiment derby-table3 --quick --seeds 0"), "--seeds = 0");
+  ExpectOneErrorLine(RunCli("eval --domain double-integrator --bc x.model --first-seed "
+                            "18446744073709551615 --seeds 2"),
+                     "the last seed would wrap around to 0");
+  ExpectOneErrorLine(RunCli("eval --domain double-integrator --bc x.model --methods ''"),
+                     "no method given");
   ExpectOneErrorLine(
       RunCli("shield run --domain double-integrator --barrier ground-truth --policy-sigma nan"),
       "policy_sigma = nan");
