@@ -483,8 +483,7 @@ struct MergeCommand {
       std::cerr << " and linked " << linked << " seed director" << (linked == 1 ? "y" : "ies")
                 << " of the shards into it (seed-K -> SHARD/seed-K: the models and curves "
                    "`secure report` draws)";
-    std::cerr << "
-";
+    std::cerr << "\n";
     PrintResult(result, json, "experiment merge");
   }
 };
