@@ -7,6 +7,7 @@
 #include <string>
 
 #include "common.h"
+#include "python/src/guard.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/eval/overlay.h"
@@ -108,6 +109,11 @@ class VideoWriter {
 };
 
 }  // namespace
+}  // namespace secure::python
+// An Overlay or VideoWriter made by __new__ without __init__ is a TypeError, not a crash.
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::Overlay);
+SECURE_PYTHON_CHECK_INITIALISED(secure::python::VideoWriter);
+namespace secure::python {
 
 void RegisterRender(py::module_& m) {
   py::class_<Overlay>(m, "Overlay", R"doc(

@@ -82,3 +82,10 @@ def test_video_writer_writes_on_success_and_discards_on_error(tmp_path):
         video.write(grey())
     with pytest.raises(ValueError):
         secure.VideoWriter(str(tmp_path), 320, 240)  # a directory
+
+
+def test_objects_made_without_init_raise_instead_of_crashing():
+    with pytest.raises(TypeError, match="not initialised"):
+        secure.Overlay.__new__(secure.Overlay).draw(grey(), step=0)
+    with pytest.raises(TypeError, match="not initialised"):
+        secure.VideoWriter.__new__(secure.VideoWriter).discard()
