@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -196,6 +197,7 @@ TEST(BarrierCheckTest, WritesTheWorstExamplesAsCsvThatReadsBackForAugmentation) 
               ReadCheckStates(path, {"x", "speed"});
             }).find("'speed'"),
             std::string::npos);
+  std::remove(path.c_str());  // the test's scratch file is not left in the temporary directory
 }
 
 TEST(BarrierCheckTest, RejectsBadInputs) {
