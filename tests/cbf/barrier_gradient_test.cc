@@ -122,7 +122,13 @@ INSTANTIATE_TEST_SUITE_P(
                       NetCase{5, {32, 16}, nn::Activation::kTanh},
                       NetCase{5, {32, 16}, nn::Activation::kRelu},
                       NetCase{9, {64, 128, 64}, nn::Activation::kRelu},
-                      NetCase{9, {64, 64, 64}, nn::Activation::kTanh}));
+                      NetCase{9, {64, 64, 64}, nn::Activation::kTanh}),
+    // Test names that say the net ("in5_32_16_relu"), not gtest's bytes of the struct.
+    [](const ::testing::TestParamInfo<NetCase>& info) {
+      std::string name = "in" + std::to_string(info.param.dim);
+      for (int h : info.param.hidden) name += "_" + std::to_string(h);
+      return name + (info.param.activation == nn::Activation::kTanh ? "_tanh" : "_relu");
+    });
 
 TEST(InferenceMlpGradientTest, OneStateEqualsItsColumnOfABatchAndChecksShapes) {
   const BarrierNet net = FlatNet(4, {16, 16}, nn::Activation::kTanh, 3);
