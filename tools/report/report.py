@@ -73,10 +73,11 @@ PAPER_TABLE3 = {
 METHOD_LABELS = {
     "bc": "BC", "airl": "AIRL", "secure": "SECURE", "secure-random-safe": "random safe",
     "secure-no-resampling": "no resampling", "bc+shield": "BC + shield",
-    "secure-myopic": "myopic", "joint": "joint",
+    "secure-myopic": "myopic", "joint": "joint", "cbf-qp": "CBF-QP",
+    "secure-qp": "gradient-first",
 }
 METHOD_ORDER = ["bc", "airl", "secure", "secure-random-safe", "secure-no-resampling",
-                "secure-myopic", "bc+shield", "joint"]
+                "secure-myopic", "bc+shield", "joint", "cbf-qp", "secure-qp"]
 SUCCESS_COLOR, DANGER_COLOR = "#2a9d8f", "#e76f51"
 
 
@@ -240,12 +241,15 @@ def significance_pairs(evaluation, names, metric):
     """[(method a, method b, p, test name)] the run computed for this metric."""
     out = []
     comp = evaluation.get("comparisons") or {}
-    sva = comp.get("secure_vs_airl")
-    if isinstance(sva, dict):
+    # "<a>_vs_<b>": SECURE vs AIRL, and the other safety filters (cbf-qp, secure-qp) vs SECURE.
+    pairs = sorted((k for k in comp if k.endswith(("_vs_airl", "_vs_secure"))
+                    and isinstance(comp[k], dict)), key=lambda k: (k != "secure_vs_airl", k))
+    for name in pairs:
+        a, _, b = name.partition("_vs_")
         key = "success_mann_whitney" if metric == "success_rate" else "dangerous_mann_whitney"
-        t = sva.get(key)
+        t = comp[name].get(key)
         if isinstance(t, dict):
-            out.append(("secure", "airl", t.get("p_value"), "Mann-Whitney U = %s" % t.get("u")))
+            out.append((a, b, t.get("p_value"), "Mann-Whitney U = %s" % t.get("u")))
     abl = comp.get("ablations")
     if isinstance(abl, dict) and isinstance(abl.get(metric), dict):
         group = abl.get("methods", [])
@@ -305,23 +309,29 @@ def comparison_figure(page, evaluation, title, name):
 def tests_table(evaluation):
     comp = evaluation.get("comparisons") or {}
     rows = []
-    sva = comp.get("secure_vs_airl")
-    if isinstance(sva, dict):
+    # Pairwise comparisons "<a>_vs_<b>": SECURE vs AIRL, and the other safety filters (cbf-qp,
+    # secure-qp) vs SECURE; each with Mann-Whitney on both rates and TOST on success.
+    pairs = sorted((k for k in comp if k.endswith(("_vs_airl", "_vs_secure"))
+                    and isinstance(comp[k], dict)), key=lambda k: (k != "secure_vs_airl", k))
+    for name in pairs:
+        sva = comp[name]
+        a, _, b = name.partition("_vs_")
+        label = "%s vs %s" % (METHOD_LABELS.get(a, a), METHOD_LABELS.get(b, b))
         for key, what in (("success_mann_whitney", "success, Mann-Whitney"),
                           ("dangerous_mann_whitney", "dangerous, Mann-Whitney")):
             t = sva.get(key) or {}
-            rows.append(("SECURE vs AIRL", what, "U = %s" % num(t.get("u")), fmt_p(t.get("p_value"))))
+            rows.append((label, what, "U = %s" % num(t.get("u")), fmt_p(t.get("p_value"))))
         t = sva.get("success_tost") or {}
         test = "success, TOST (Welch), bound %s" % num(t.get("bound"))
         se = t.get("se")
         if isinstance(se, (int, float)) and not isinstance(se, bool) and not se > 0:
             # Both methods' success is the same on every seed (e.g. 0 % against 0 %): the
             # standard error is 0 and the p-value says nothing about equivalence.
-            rows.append(("SECURE vs AIRL", test, "not informative: each method's success is "
+            rows.append((label, test, "not informative: each method's success is "
                          "constant over the seeds (difference %s)" % num(t.get("difference")),
                          "n/a"))
         else:
-            rows.append(("SECURE vs AIRL", test, "difference = %s" % num(t.get("difference")),
+            rows.append((label, test, "difference = %s" % num(t.get("difference")),
                          fmt_p(t.get("p_value"))))
     abl = comp.get("ablations")
     if isinstance(abl, dict):
