@@ -1,5 +1,7 @@
 #include "domains/kitchen_cutting/data.h"
 
+#include "domains/kitchen_cutting/precursor.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -106,6 +108,11 @@ void KitchenNearDangerousOptions::Validate() const {
   SECURE_CHECK_FIELD(Finite(p_blade) && p_blade >= 0 && p_blade <= 1 - p_stroke, o, "p_blade",
                      p_blade, "in [0, 1 - p_stroke] (p_stroke = " << p_stroke << ")");
   CheckIntervalField(blade_speed, o, "blade_speed", 0.0, 5.0);
+  SECURE_CHECK_FIELD(Finite(p_reach) && p_reach >= 0 && p_reach <= 1 - p_stroke - p_blade + 1e-12,
+                     o, "p_reach", p_reach,
+                     "in [0, 1 - p_stroke - p_blade] (p_stroke = " << p_stroke << ", p_blade = "
+                                                                   << p_blade << ")");
+  CheckIntervalField(reach_gap, o, "reach_gap", 0.0, 1.0);
 }
 
 nlohmann::json KitchenNearDangerousOptions::ToJson() const {
@@ -114,6 +121,10 @@ nlohmann::json KitchenNearDangerousOptions::ToJson() const {
       {"stroke_vz", stroke_vz}, {"arm_speed", arm_speed}, {"look_ahead", look_ahead}};
   j["p_blade"] = p_blade;
   j["blade_speed"] = blade_speed;
+  if (p_reach > 0) {  // only when on: the default's files keep their bytes
+    j["p_reach"] = p_reach;
+    j["reach_gap"] = reach_gap;
+  }
   return j;
 }
 
@@ -127,6 +138,8 @@ void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::s
       .Field("look_ahead", &look_ahead)
       .Field("p_blade", &p_blade)
       .Field("blade_speed", &blade_speed)
+      .Field("p_reach", &p_reach)
+      .Field("reach_gap", &reach_gap)
       .Apply(node, source);
 }
 
@@ -138,6 +151,8 @@ const char* ScenarioName(NearDangerousScenario s) {
       return "arm into the blade";
     case NearDangerousScenario::kBlade:
       return "blade into the resting arm";
+    case NearDangerousScenario::kReach:
+      return "the person's reach, before contact";
   }
   return "?";
 }
@@ -309,6 +324,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
     const bool stroke = u < options.p_stroke;
     // Drawn from the same uniform, so that p_blade = 0 keeps the draws of releases without (c).
     const bool blade = !stroke && u < options.p_stroke + options.p_blade;
+    const bool reach = !stroke && !blade && u < options.p_stroke + options.p_blade + options.p_reach;
     bool accepted = false;
     for (int attempt = 0; attempt < 200 && !accepted; ++attempt) {
       if (stroke) {
@@ -326,6 +342,8 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         o[kEeVel] = o[kEeVel + 1] = 0.0f;
         o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));
         accepted = true;
+      } else if (reach) {
+        accepted = ReachPrecursorState(task, options, rng, o);
       } else if (blade) {
         // The arm at rest near the edge; the end-effector moving towards it (the direction to
         // the wrist, perturbed) so that the edge comes within contact_distance of the arm
@@ -368,6 +386,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
     if (scenarios != nullptr)
       scenarios->push_back(stroke  ? NearDangerousScenario::kStroke
                            : blade ? NearDangerousScenario::kBlade
+                           : reach ? NearDangerousScenario::kReach
                                    : NearDangerousScenario::kArm);
   }
   SECURE_CHECK(made == options.count, "kitchen-cutting near-dangerous states: only "

@@ -27,7 +27,9 @@
 //   (b) arm (the rest): the wrist within near_distance of the edge in a random direction, the
 //       edge clear of the arm by [contact_distance, near_distance], the wrist (and the elbow at
 //       half the speed) moving towards the edge's centre at arm_speed so that within look_ahead
-//       the arm reaches contact_distance (constant velocity); the end-effector as demonstrated.
+//       the arm reaches contact_distance (constant velocity); the end-effector as demonstrated;
+//   (d) reach (p_reach, off by default): the person's real reach, the state reach_gap before it
+//       touches the blade (precursor.h).
 // Each draw is rejection-sampled (at most 200 tries per state; a state without an accepted draw
 // is skipped); the states are drawn in a random order of demonstration states.
 #include <cstdint>
@@ -100,12 +102,16 @@ struct KitchenNearDangerousOptions {
   // earlier releases).
   double p_blade = 0.3;
   Interval blade_speed = {0.2, 1.0};  // m/s, the end-effector's speed towards the arm
+  // (d) the person's real reach, reach_gap s before contact (precursor.h): the share of all
+  // states (drawn from (b)'s share; 0: the data of earlier releases).
+  double p_reach = 0.0;
+  Interval reach_gap = {0.0, 0.2};  // s before the first contact
   void Validate() const;
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
 
-enum class NearDangerousScenario { kStroke, kArm, kBlade };
+enum class NearDangerousScenario { kStroke, kArm, kBlade, kReach };
 const char* ScenarioName(NearDangerousScenario s);
 
 data::StateSet KitchenSafeStates(const KitchenDemonstrations& demos,

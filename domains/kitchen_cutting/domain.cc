@@ -141,7 +141,7 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
   };
   add("safe states", "safe", safe);
   for (NearDangerousScenario k : {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
-                                  NearDangerousScenario::kBlade}) {
+                                  NearDangerousScenario::kBlade, NearDangerousScenario::kReach}) {
     std::vector<long> cols;
     for (long i = 0; i < static_cast<long>(kinds.size()); ++i)
       if (kinds[i] == k) cols.push_back(i);

@@ -416,5 +416,109 @@ TEST(KitchenCuttingDomain, OptionsRejectBadValuesAndUnknownKeys) {
   EXPECT_EQ(KitchenCuttingDomain().options().near_dangerous.count, 450);
 }
 
+// Scenario (d), p_reach: the person's real reach, reach_gap before it touches the blade
+// (domains/kitchen_cutting/precursor.h; issue 30 lever 5).
+KitchenCuttingDomain ReachDomain(const std::string& yaml) {
+  KitchenCuttingDomain d(experiments::Profile::kQuick);
+  d.ApplyYaml(YAML::Load(yaml), "test.yaml");
+  d.Validate();
+  return d;
+}
+
+// The near-dangerous states of demonstrations drawn with `demo_seed`, their scenarios in `kinds`.
+data::StateSet NearStates(const KitchenCuttingDomainOptions& d, std::uint64_t demo_seed,
+                          std::uint64_t seed, std::vector<NearDangerousScenario>* kinds) {
+  KitchenDemonstrationOptions demo = d.demonstrations;
+  demo.seed = demo_seed;
+  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(d.task, demo);
+  Rng rng(seed);
+  return KitchenNearDangerousStates(d.task, demos, d.near_dangerous, rng, kinds);
+}
+
+TEST(KitchenCuttingData, ReachPrecursorStatesComeBeforeContactAndLeadToIt) {
+  const KitchenCuttingDomain domain = ReachDomain("{near_dangerous: {p_reach: 0.3}}");
+  const KitchenCuttingDomainOptions& d = domain.options();
+  EXPECT_EQ(d.near_dangerous.ToJson()["p_reach"], 0.3);
+  std::vector<NearDangerousScenario> kinds;
+  const data::StateSet near = NearStates(d, 11, 12, &kinds);
+  // The peak of a minimum-jerk reach is 1.875 times its mean speed.
+  const double peak = 1.875 * d.task.human.speed[1];
+  long reach = 0, arm = 0, fast = 0;
+  for (long i = 0; i < near.size(); ++i) {
+    const NearDangerousScenario k = kinds[static_cast<std::size_t>(i)];
+    if (k == NearDangerousScenario::kArm) ++arm;
+    if (k != NearDangerousScenario::kReach) continue;
+    ++reach;
+    const Eigen::VectorXf o = near.states.col(i);
+    // Not yet in contact, and the arm moving as a reach does.
+    EXPECT_GE(ObservedEdgeClearance(d.task, o), d.task.contact_distance) << i;
+    const float speed = o.segment<3>(kWristVel).norm();
+    EXPECT_GT(speed, 0.0f) << i;
+    EXPECT_LE(speed, peak + 1e-3) << i;
+    if (speed > 0.8f) ++fast;
+    // The wrist on its way from the rest point into the workspace (towards -y).
+    EXPECT_LT(o[kWristVel + 1], 0.0f) << i;
+  }
+  EXPECT_EQ(arm, 0);  // (d) takes (b)'s whole share here
+  EXPECT_GT(reach, near.size() / 5);
+  EXPECT_LT(reach, near.size() / 2);
+  EXPECT_GT(fast, 0);  // the fast arms the scenario is for
+  // Against physics (the label check: the arm moving on at its observed velocity, the knife
+  // continuing): continuing leads to contact.
+  const std::vector<experiments::LabelCheckRow> rows = domain.CheckLabels(4000, 60);
+  ASSERT_EQ(rows.size(), 4u);  // safe, (a), (c), (d): no (b)
+  EXPECT_EQ(rows[3].set, "near-dangerous (the person's reach, before contact)");
+  EXPECT_GE(rows[3].DangerousFraction(), 0.8);
+  // Off by default: no row, no key (the default's files keep their bytes).
+  KitchenCuttingDomain off(experiments::Profile::kQuick);
+  EXPECT_FALSE(off.options().near_dangerous.ToJson().contains("p_reach"));
+  for (const experiments::LabelCheckRow& row : off.CheckLabels(4000, 10))
+    EXPECT_EQ(row.set.find("reach"), std::string::npos) << row.set;
+}
+
+TEST(KitchenCuttingData, ReachPrecursorStatesAreDeterministicAndTheirGapMatters) {
+  const KitchenCuttingDomain domain = ReachDomain("{near_dangerous: {p_reach: 0.3}}");
+  const experiments::DomainData a = domain.GenerateData(7), b = domain.GenerateData(7);
+  EXPECT_TRUE(a.near_dangerous.states.isApprox(b.near_dangerous.states, 0.0f));
+  EXPECT_FALSE(a.near_dangerous.states.isApprox(domain.GenerateData(8).near_dangerous.states));
+  // A longer gap puts the arm further from the blade.
+  auto mean_clearance = [](const KitchenCuttingDomain& dom) {
+    const KitchenCuttingDomainOptions& d = dom.options();
+    std::vector<NearDangerousScenario> kinds;
+    const data::StateSet near = NearStates(d, 3, 4, &kinds);
+    double sum = 0;
+    long n = 0;
+    for (long i = 0; i < near.size(); ++i)
+      if (kinds[static_cast<std::size_t>(i)] == NearDangerousScenario::kReach) {
+        sum += ObservedEdgeClearance(d.task, near.states.col(i));
+        ++n;
+      }
+    return n > 0 ? sum / n : -1.0;
+  };
+  const double near_gap =
+      mean_clearance(ReachDomain("{near_dangerous: {p_reach: 0.3, reach_gap: [0.0, 0.04]}}"));
+  const double far_gap =
+      mean_clearance(ReachDomain("{near_dangerous: {p_reach: 0.3, reach_gap: [0.2, 0.3]}}"));
+  EXPECT_GT(near_gap, 0.0);
+  EXPECT_GT(far_gap, near_gap + 0.05);
+}
+
+TEST(KitchenCuttingData, ReachPrecursorOptionsAreValidated) {
+  for (const auto& [yaml, says] :
+       {std::pair<std::string, std::string>{"{near_dangerous: {p_reach: 0.5}}", "p_reach = 0.5"},
+        {"{near_dangerous: {p_reach: -0.1}}", "p_reach = -0.1"},
+        {"{near_dangerous: {p_reach: 0.2, reach_gap: [0.3, 0.1]}}", "reach_gap"},
+        {"{near_dangerous: {p_reach: 0.2, reach_gap: [0.0, 2.0]}}", "reach_gap"}}) {
+    KitchenCuttingDomain bad(experiments::Profile::kQuick);
+    bad.ApplyYaml(YAML::Load(yaml), "test.yaml");
+    try {
+      bad.Validate();
+      ADD_FAILURE() << "expected an error for " << yaml;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace secure::domains::kitchen_cutting
