@@ -76,6 +76,7 @@ inline double SuccessRate(const GaussianPolicy& pi, int episodes, std::uint64_t 
   return static_cast<double>(reached) / episodes;
 }
 
+// States uniform in [-2, 2]^2 grouped into episodes; actions from a linear expert with
 // per-axis Gaussian noise.
 inline const Eigen::Matrix2f kGain = (Eigen::Matrix2f() << -0.8f, 0.3f, 0.2f, -1.1f).finished();
 inline const Eigen::Vector2f kOffset(0.5f, -0.25f);

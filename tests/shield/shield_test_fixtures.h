@@ -50,7 +50,11 @@ namespace di = domains::double_integrator;
 inline constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 inline constexpr float kInf = std::numeric_limits<float>::infinity();
 
-                           int rounds = 1) {
+/// Replicates the shield's sampling: `rounds` consecutive rounds of M actions drawn column by
+/// column from N(mu, sigma) with the shield's generator (valid while no probe is drawn between
+/// the rounds, i.e. for round 1 or for resampling == kNone). `rng` is left after the draws.
+inline Eigen::MatrixXf DrawRounds(Rng& rng, const Eigen::VectorXf& mu,
+                                  const Eigen::VectorXf& sigma, int m, int rounds = 1) {
   Eigen::MatrixXf samples(mu.size(), static_cast<Eigen::Index>(m) * rounds);
   for (Eigen::Index c = 0; c < samples.cols(); ++c)
     for (Eigen::Index r = 0; r < mu.size(); ++r)
