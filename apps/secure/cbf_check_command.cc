@@ -25,6 +25,7 @@
 #include "secure/common/error.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
+#include "secure/experiments/config_section.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 #include "secure/nn/model_file.h"
@@ -227,18 +228,16 @@ struct CheckCommand {
                  "cbf check: --safe-states and --near-dangerous-states go together");
     if (held_out_opt->count() > 0) CheckRange("--held-out", held_out, 1, kMaxStates);
 
-    // The domain and the experiment options its check starts from: the preset, then its
-    // `--config` section (the domain's own options from the section's `domain:` key, the shield,
-    // check.held_out and the check options), then the task flags.
+    // The domain and the experiment options its check starts from: its `--config` section as
+    // every command reads it (experiments::ReadSection: the `domain:` key, the preset, the
+    // shield, check.held_out and the check options), then the task flags and the shield flags
+    // given.
     const std::unique_ptr<experiments::Domain> d =
         registry.Make(domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
     SECURE_CHECK(d->HasCheck(), "the " << domain
                                        << " domain has no barrier check (domains with one: "
                                        << CheckDomainList() << ")");
-    experiments::ExperimentOptions e = d->Preset();
-    const std::string section = d->ConfigSection();
-    const YAML::Node yaml = config->Section(section);
-    if (yaml.IsMap()) e.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
+    experiments::ExperimentOptions e = experiments::ReadSection(config->root, config->path, *d);
     task_flags.ApplyTo(d.get(), *config);  // the ground-truth section, the task flags; Validate
     ApplyShieldFlags(&e.shield);
     const cbf::BarrierCheckOptions options = Options(e.check);

@@ -20,6 +20,7 @@
 #include "secure/common/input_limits.h"
 #include "secure/common/atomic_file.h"
 #include "secure/common/yaml_value.h"
+#include "secure/experiments/config_section.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
@@ -63,25 +64,11 @@ YAML::Node Config::Section(const std::string& key) const {
 
 namespace {
 
-// Loads and checks the file; throws secure::Error naming the file (and the line where known).
+// Loads and checks the file (experiments::LoadConfigFile) and its section names; throws
+// secure::Error naming the file (and the line where known).
 YAML::Node LoadConfig(const std::string& path) {
-  // A regular file of bounded size (a FIFO would block, /dev/zero never end), nested no deeper
-  // than the parser can take, and at most so many nodes with aliases expanded (input_limits.h).
-  if (::access(path.c_str(), F_OK) != 0)
-    SECURE_THROW("cannot open config file '" << path << "': " << std::strerror(errno));
-  CheckRegularInputFile(path);
-  const std::string text = ReadFile(path);
-  CheckYamlTextDepth(text, path);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    SECURE_THROW(path << ": invalid YAML: " << Excerpt(e.what()));
-  }
-  CheckYamlLimits(root, path);
-  SECURE_CHECK(!root || root.IsMap(), path << ": the config file must be a mapping of sections");
+  const YAML::Node root = experiments::LoadConfigFile(path);
   if (!root) return root;
-  CheckNoDuplicateKeys(root, path);
   const auto& known = KnownConfigSections();
   for (const auto& item : root) {
     const std::string key = YamlKeyText(item.first);
@@ -121,28 +108,23 @@ void AddConfigFlag(CLI::App* cmd, const Config& /*config*/) {
 }
 
 std::unique_ptr<experiments::Domain> MakeConfiguredDomain(const std::string& name, bool quick,
-                                                          const Config& config) {
+                                                          const Config& config,
+                                                          experiments::ExperimentOptions* options) {
   config.Check();
   std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
       name, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
-  const std::string section = d->ConfigSection();
-  const YAML::Node yaml = config.Section(section);
-  if (!yaml.IsMap()) {
-    d->Validate();
-    return d;
-  }
-  // The whole section is read as `secure experiment` reads it, so that a key it would reject
-  // (e.g. a domain option outside `domain:`) is an error here too, not silently ignored; the
-  // domain takes its `domain:` options from it.
-  experiments::ExperimentOptions scratch = d->Preset();
-  scratch.ApplyYaml(yaml, config.path + " [" + section + "]", d.get());
-  const std::string where = config.path + " [" + section + "] [domain]";
-  try {
-    d->Validate();
-  } catch (const Error& e) {
-    throw Error(where + ": " + e.what());  // the value came from this file
-  }
+  // The whole section, as every command reads it (experiments::ReadSection): a key `secure
+  // experiment` would reject (e.g. a domain option outside `domain:`) is an error here too.
+  experiments::ExperimentOptions section = experiments::ReadSection(config.root, config.path, *d);
+  if (options != nullptr) *options = std::move(section);
   return d;
+}
+
+shield::ShieldOptions OverlayShieldFlags(shield::ShieldOptions from_file, const ShieldFlags& flags,
+                                         shield::ShieldOptions* parsed) {
+  flags.ApplyTo(parsed);
+  flags.OverlayGiven(*parsed, &from_file);
+  return from_file;
 }
 
 const CLI::Validator& NonNegativeSeed() {

@@ -17,6 +17,7 @@
 
 namespace secure::experiments {
 class Domain;
+struct ExperimentOptions;
 }
 
 namespace secure::cli {
@@ -69,10 +70,13 @@ class DeferredError {
 void AddConfigFlag(CLI::App* cmd, const Config& config);
 
 /// The registered domain `name` (profile quick or full) with its options from the config file's
-/// section for it, key `domain` (what `secure experiment` reads there too), validated. Throws
-/// the config's load error, an unknown domain's or a bad option's.
-std::unique_ptr<experiments::Domain> MakeConfiguredDomain(const std::string& name, bool quick,
-                                                          const Config& config);
+/// section for it (key `domain`), validated; in `options` (when given) the experiment options of
+/// that section: the domain's preset with the section's other keys over it. Both by
+/// experiments::ReadSection, the one reader of a domain's section. Throws the config's load
+/// error, an unknown domain's or a bad option's.
+std::unique_ptr<experiments::Domain> MakeConfiguredDomain(
+    const std::string& name, bool quick, const Config& config,
+    experiments::ExperimentOptions* options = nullptr);
 
 /// Rejects a negative value for an unsigned 64-bit seed (which CLI11 would wrap around to
 /// 2^64 - 1).
@@ -159,6 +163,12 @@ struct ShieldFlags {
                         std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>>>
       given_;
 };
+
+/// The shield of a command: `from_file` (the domain's preset with its config section's `shield:`
+/// key, MakeConfiguredDomain), then the fields whose flags were given, overlaid from `parsed` (the
+/// options `flags` are bound to; flags.ApplyTo(parsed) is called first). Not validated.
+shield::ShieldOptions OverlayShieldFlags(shield::ShieldOptions from_file, const ShieldFlags& flags,
+                                         shield::ShieldOptions* parsed);
 
 /// Prints `result` (with the build context added) as one JSON document on stdout.
 void PrintJson(nlohmann::json result);

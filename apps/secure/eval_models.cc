@@ -81,18 +81,6 @@ SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domai
   }
 }
 
-shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain, const Config& config,
-                                          const ShieldFlags& flags, shield::ShieldOptions* parsed) {
-  flags.ApplyTo(parsed);
-  shield::ShieldOptions options = domain.Preset().shield;
-  const std::string section = domain.ConfigSection();
-  const YAML::Node yaml = config.Section(section);
-  if (yaml.IsMap() && yaml["shield"])
-    options.ApplyYaml(yaml["shield"], config.path + " [" + section + "] [shield]");
-  flags.OverlayGiven(*parsed, &options);
-  return options;
-}
-
 std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
     std::unique_ptr<domains::Environment> env, const std::string& path,
     const shield::ShieldOptions& shield) {

@@ -59,13 +59,6 @@ class SeedModelSet {
   eval::SeedModels models_;
 };
 
-/// The shield of an evaluation: the domain's experiment preset, then the `shield:` key of the
-/// domain's section of `config` (as `secure experiment` reads it), then the fields whose flags were
-/// given, overlaid from `parsed` (the options `flags` are bound to); flags.ApplyTo(parsed) is
-/// called first. Not validated (the caller calls Validate()).
-shield::ShieldOptions DomainShieldOptions(const experiments::Domain& domain, const Config& config,
-                                          const ShieldFlags& flags, shield::ShieldOptions* parsed);
-
 /// `env` with the learned dynamics model at `path` as its shield model
 /// (dynamics::LearnedModelEnvironment), sized for the shield's batches (max(M, N)): `secure eval
 /// --dynamics`. @throws secure::Error naming the file on a bad model or features that are not

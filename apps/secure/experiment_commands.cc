@@ -31,6 +31,7 @@
 #include "secure/common/filesystem.h"
 #include "secure/common/progress.h"
 #include "secure/common/run_lock.h"
+#include "secure/experiments/config_section.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/user_study.h"
@@ -267,6 +268,8 @@ struct ExperimentCommand {
   CLI::Option* seeds_option = nullptr;
   CLI::Option* methods_option = nullptr;
   CLI::Option* episodes_option = nullptr;
+  shield::ShieldOptions shield;  // bound to the shield flags; given ones override the config
+  ShieldFlags shield_flags;
 
   CLI::App* Register(CLI::App& parent, const Config& cfg, const std::string& name,
                      const std::string& description, ExperimentKind which,
@@ -317,6 +320,7 @@ struct ExperimentCommand {
         "R: with --closed-loop, repair a failing candidate up to R times before replacing it: "
         "the states before its dangerous steps join the near-dangerous states and its barrier "
         "is retrained (closed_loop.repair_rounds)");
+    shield_flags.Add(cmd, &shield, /*domain_preset=*/true);  // `secure domains NAME` lists it
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     AddProgressOption(cmd, &progress);
     cmd->callback([this] { Run(); });
@@ -330,11 +334,11 @@ struct ExperimentCommand {
     if (episodes_option->count() > 0) CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     const std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
         domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
-    experiments::ExperimentOptions options = d->Preset();
+    // The domain's config section (experiments::ReadSection), then the flags given.
+    experiments::ExperimentOptions options =
+        experiments::ReadSection(config->root, config->path, *d);
     if (all_methods) options.methods = eval::AllMethods();
-    const std::string section = d->ConfigSection();
-    const YAML::Node yaml = config->Section(section);
-    if (yaml.IsMap()) options.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
+    options.shield = OverlayShieldFlags(options.shield, shield_flags, &shield);
     if (seeds_option->count() > 0) options.seeds = seeds;
     if (episodes_option->count() > 0) options.episodes = episodes;
     // An empty --methods '' is an error, not the defaults (issue 34).
@@ -575,10 +579,8 @@ struct UserStudyCommand {
     SECURE_CHECK(d->HasPopulation(), "--domain " << domain
                                                  << ": the domain has no participants for a "
                                                     "user study (Domain::HasPopulation)");
-    experiments::ExperimentOptions preset = d->Preset();
-    const std::string section = d->ConfigSection();
-    const YAML::Node yaml = config->Section(section);
-    if (yaml.IsMap()) preset.ApplyYaml(yaml, config->path + " [" + section + "]", d.get());
+    const experiments::ExperimentOptions preset =
+        experiments::ReadSection(config->root, config->path, *d);
     experiments::UserStudyOptions options = experiments::UserStudyOptions::From(preset, profile);
     if (participants_option->count() > 0) options.participants = participants;
     if (episodes_option->count() > 0) options.episodes = episodes;

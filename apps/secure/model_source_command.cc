@@ -27,6 +27,7 @@
 #include "secure/dynamics/transitions.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
 #include "secure/nn/torch_threads.h"
 #include "secure/stats/statistics.h"
 
@@ -114,9 +115,11 @@ struct ModelSourceCommand {
     CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     SECURE_CHECK(std::isfinite(tost_bound) && tost_bound > 0,
                  "--tost-bound = " << tost_bound << ", must be > 0");
-    const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, false, *config);
+    experiments::ExperimentOptions section;
+    const std::unique_ptr<experiments::Domain> d =
+        MakeConfiguredDomain(domain, false, *config, &section);
     const shield::ShieldOptions shield_options =
-        DomainShieldOptions(*d, *config, shield_flags, &shield);
+        OverlayShieldFlags(section.shield, shield_flags, &shield);
     shield_options.Validate();
     if (out.empty()) out = run_dir + "/model-source";
     CreateDirectories(out);

@@ -366,10 +366,12 @@ struct EvalCommand {
   }
 
   void Run() {
-    const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, false, *config);
-    // The shield: the domain's experiment preset, the config's `shield:` key, then the flags.
+    experiments::ExperimentOptions section;
+    const std::unique_ptr<experiments::Domain> d =
+        MakeConfiguredDomain(domain, false, *config, &section);
+    // The shield: the domain's experiment preset, the config's `shield:` key, then the flags given.
     const shield::ShieldOptions shield_options =
-        DomainShieldOptions(*d, *config, shield_flags, &shield);
+        OverlayShieldFlags(section.shield, shield_flags, &shield);
     CheckRange("--seeds", seeds, 1, kMaxSeeds);
     CheckRange("--episodes", episodes, 1, kMaxEpisodes);
     SECURE_CHECK(std::isfinite(tost_bound) && tost_bound > 0,

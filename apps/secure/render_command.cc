@@ -98,7 +98,9 @@ struct RenderCommand {
   }
 
   void Run() {
-    const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, false, *config);
+    experiments::ExperimentOptions section;
+    const std::unique_ptr<experiments::Domain> d =
+        MakeConfiguredDomain(domain, false, *config, &section);
     const std::unique_ptr<domains::Environment> env = d->MakeEnvironment();
     SECURE_CHECK(env->CanRender(),
                  "the " << domain << " domain cannot render (no offscreen renderer)");
@@ -108,7 +110,7 @@ struct RenderCommand {
                                 << "episode)");
     const eval::Method m = methods.front();
     const shield::ShieldOptions shield_options =
-        DomainShieldOptions(*d, *config, shield_flags, &shield);
+        OverlayShieldFlags(section.shield, shield_flags, &shield);
     shield_options.Validate();
     CheckRange("--episode", episode, 0, kMaxEpisodes - 1);
     video.Validate();

@@ -100,8 +100,7 @@ struct ShieldRunCommand {
     if (episodes_flag->count() > 0) run.episodes = request.episodes;
     if (seed_flag->count() > 0) run.seed = request.seed;
     if (sigma_flag->count() > 0) run.policy_sigma = request.policy_sigma;
-    shield_flags.ApplyTo(&shield);
-    shield_flags.OverlayGiven(shield, &run.shield);
+    run.shield = OverlayShieldFlags(run.shield, shield_flags, &shield);
     run.shielded = !unshielded;
 
     std::unique_ptr<cbf::Barrier> evaluator;

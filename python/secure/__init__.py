@@ -54,6 +54,7 @@ from ._secure import (  # noqa: F401
     generate_data,
     label,
     query,
+    read_config_section,
     run_episodes,
     train_airl,
     train_barrier,
@@ -70,6 +71,7 @@ if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one i
 __all__ = [
     "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Overlay",
     "Policy", "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
-    "gymnasium_installed", "label", "make_env", "query", "register_gymnasium", "run_episodes",
-    "train_airl", "train_barrier", "train_bc", "train_car_barrier", "VideoWriter",
+    "gymnasium_installed", "label", "make_env", "query", "read_config_section",
+    "register_gymnasium", "run_episodes", "train_airl", "train_barrier", "train_bc",
+    "train_car_barrier", "VideoWriter",
 ]

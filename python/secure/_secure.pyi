@@ -439,6 +439,16 @@ class EnvCore:
     def describe(self) -> str: ...
     def __repr__(self) -> str: ...
 
+def read_config_section(path: str, domain: str, profile: str = 'full') -> Dict[str, Any]:
+    """A domain's section of a config file, read as every `secure` command reads it
+    (experiments::ReadSection): its `domain:` key into the domain's options, then the domain's preset,
+    then the other keys (shield, bc, airl, barrier, check, closed_loop) over it. Returns {'section':
+    its name, 'domain': the domain's options in force (as make_env(..., **options) takes them),
+    'experiment': the experiment options (e.g. ['shield'] for secure.Shield(**...))}. Errors name
+    the file, the section and the field (ValueError; a missing file: FileNotFoundError).
+    """
+    ...
+
 def generate_data(domain: str, seed: int = 0, profile: str = 'quick', **kwargs: Any) -> Dict[str, Any]:
     """A domain's experiment data from a data seed: {'features', 'safe' (N, d), 'near_dangerous'
     (M, d), 'demonstrations' (secure.Demonstrations)}; profile 'quick' (default) is small.

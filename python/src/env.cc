@@ -1,5 +1,6 @@
 // secure.domains(), secure._secure.EnvCore (a domain's environment; python/secure/env.py wraps it
-// as secure.Env in Gymnasium's API), Dynamics.builtin, Barrier.ground_truth, secure.generate_data.
+// as secure.Env in Gymnasium's API), Dynamics.builtin, Barrier.ground_truth, secure.generate_data,
+// secure.read_config_section.
 #include <algorithm>
 #include <optional>
 
@@ -7,6 +8,7 @@
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
+#include "secure/experiments/config_section.h"
 #include "secure/experiments/domain.h"
 
 namespace secure::python {
@@ -236,6 +238,27 @@ stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
           },
           py::arg("domain"), py::arg("profile") = "full",
           "The domain's analytic ground-truth barrier, or None if it has none.");
+
+  m.def(
+      "read_config_section",
+      [](const std::string& path, const std::string& name, const std::string& profile) -> JsonDict {
+        RequireFile(path);
+        std::unique_ptr<experiments::Domain> d = MakeDomain(name, profile, py::dict());
+        const experiments::ExperimentOptions options =
+            experiments::ReadSection(experiments::LoadConfigFile(path), path, *d);
+        py::dict out;
+        out["section"] = d->ConfigSection();
+        out["domain"] = ToPython(d->OptionsJson());
+        out["experiment"] = ToPython(options.ToJson());
+        return out;
+      },
+      py::arg("path"), py::arg("domain"), py::arg("profile") = "full", R"doc(
+A domain's section of a config file, read as every `secure` command reads it
+(experiments::ReadSection): its `domain:` key into the domain's options, then the domain's preset,
+then the other keys (shield, bc, airl, barrier, check, closed_loop) over it. Returns {'section':
+its name, 'domain': the domain's options in force (as make_env(..., **options) takes them),
+'experiment': the experiment options (e.g. ['shield'] for secure.Shield(**...))}. Errors name
+the file, the section and the field (ValueError; a missing file: FileNotFoundError).)doc");
 
   m.def(
       "generate_data",

@@ -207,242 +207,281 @@ std::pair<Eigen::VectorXf, double> LocalSearch(const Eigen::VectorXf& start, dou
   return {current, current_score};
 }
 
-std::string FormatNumber(double v) {
-  char buffer[40];
-  std::snprintf(buffer, sizeof buffer, "%.9g", v);
-  return buffer;
-}
+// CheckBarrier's phases, in the order they draw from the check's one random stream: held-out
+// accuracy, sampling the region ((a), (c)) and the near-dangerous neighbourhood ((b)), local
+// search from the most promising samples of each kind, then the worst examples and the verdict.
+class CheckRun {
+ public:
+  CheckRun(Barrier& barrier, const domains::DynamicsModel& dynamics, const BarrierCheckProblem& p,
+           const BarrierCheckOptions& o)
+      : p_(p), o_(o), d_(barrier.state_dim()), checker_(barrier, dynamics, p, o), rng_(o.seed) {
+    report_.barrier = barrier.Describe();
+    report_.dynamics = dynamics.Describe();
+  }
 
-}  // namespace
+  CheckReport Run() {
+    report_.region = p_.region_description;
+    report_.unsafe_test = p_.is_unsafe ? p_.is_unsafe_description : "";
+    report_.class_k = p_.class_k_description;
+    report_.dt = p_.dt;
+    report_.options = o_;
+    report_.thresholds = o_.thresholds;
+    report_.features = p_.near_dangerous.features;  // checked: one name per row
+    HeldOutAccuracy();
+    SampleRegion();
+    SampleNearDangerous();
+    region_scale_ = FeatureStd(region_);
+    SearchNoSafeAction();
+    SearchNearDangerous();
+    if (p_.is_unsafe) SearchUnsafe();
+    auto finite_or_nan = [](double& v) {
+      if (!std::isfinite(v)) v = std::numeric_limits<double>::quiet_NaN();
+    };
+    if (report_.no_safe_action.checked == 0) finite_or_nan(report_.no_safe_action.worst_objective);
+    if (report_.near_dangerous.checked == 0) finite_or_nan(report_.near_dangerous.worst_objective);
+    if (report_.unsafe.checked == 0) finite_or_nan(report_.unsafe.worst_objective);
+    KeepWorst();
+    Verdict();
+    return std::move(report_);
+  }
 
-// ---------------------------------------------------------------------------------------------
-void CheckThresholds::Validate() const {
-  auto check = [](double v, const char* field) {
-    SECURE_CHECK_FIELD(std::isfinite(v) && v >= 0 && v <= 1, "CheckThresholds", field, v,
-                       "in [0, 1]");
+ private:
+  struct Scored {
+    long index;
+    double objective;
+    double h;  // tie-break: the smaller h first (nearer the boundary)
   };
-  check(no_safe_action, "no_safe_action");
-  check(near_dangerous, "near_dangerous");
-  check(unsafe, "unsafe");
-  check(min_accuracy_safe, "min_accuracy_safe");
-  check(min_accuracy_near_dangerous, "min_accuracy_near_dangerous");
-}
 
-nlohmann::json CheckThresholds::ToJson() const {
-  return {{"no_safe_action", no_safe_action},
-          {"near_dangerous", near_dangerous},
-          {"unsafe", unsafe},
-          {"min_accuracy_safe", min_accuracy_safe},
-          {"min_accuracy_near_dangerous", min_accuracy_near_dangerous}};
-}
+  void AddExample(CheckKind kind, bool from_search, const Eigen::VectorXf& s, double hv,
+                  double objective) {
+    pool_[static_cast<int>(kind)].push_back({kind, from_search, s, hv, objective});
+  }
 
-void BarrierCheckOptions::Validate() const {
-  SECURE_CHECK_FIELD(region_samples > 0 && region_samples <= kMaxStates, "BarrierCheckOptions",
-                     "region_samples", region_samples, "in [1, " << kMaxStates << "]");
-  SECURE_CHECK_FIELD(near_samples > 0 && near_samples <= kMaxStates, "BarrierCheckOptions",
-                     "near_samples", near_samples, "in [1, " << kMaxStates << "]");
-  SECURE_CHECK_FIELD(std::isfinite(near_radius) && near_radius > 0, "BarrierCheckOptions",
-                     "near_radius", near_radius, "finite and > 0");
-  SECURE_CHECK_FIELD(action_grid == 0 || (action_grid >= 2 && action_grid <= 1000),
-                     "BarrierCheckOptions", "action_grid", action_grid,
-                     "0 (no grid) or in [2, 1000]");
-  SECURE_CHECK_FIELD(action_samples >= 0 && action_samples <= kMaxShieldSamples,
-                     "BarrierCheckOptions", "action_samples", action_samples,
-                     "in [0, " << kMaxShieldSamples << "]");
-  SECURE_CHECK_FIELD(action_grid > 0 || action_samples > 0, "BarrierCheckOptions", "action_samples",
-                     action_samples, "> 0 when action_grid is 0");
-  SECURE_CHECK_FIELD(action_refine_rounds >= 0, "BarrierCheckOptions", "action_refine_rounds",
-                     action_refine_rounds, ">= 0");
-  SECURE_CHECK_FIELD(search_starts >= 0, "BarrierCheckOptions", "search_starts", search_starts,
-                     ">= 0");
-  SECURE_CHECK_FIELD(search_steps >= 0, "BarrierCheckOptions", "search_steps", search_steps,
-                     ">= 0");
-  SECURE_CHECK_FIELD(search_population > 0 && search_population <= kMaxShieldSamples,
-                     "BarrierCheckOptions", "search_population", search_population,
-                     "in [1, " << kMaxShieldSamples << "]");
-  SECURE_CHECK_FIELD(std::isfinite(search_step) && search_step > 0, "BarrierCheckOptions",
-                     "search_step", search_step, "finite and > 0");
-  SECURE_CHECK_FIELD(worst_examples >= 0, "BarrierCheckOptions", "worst_examples", worst_examples,
-                     ">= 0");
-  thresholds.Validate();
-}
+  void HeldOutAccuracy() {
+    if (!p_.held_out_safe) return;
+    Eigen::VectorXf h;
+    report_.has_accuracy = true;
+    checker_.H(p_.held_out_safe->states, &h);
+    report_.held_out_safe = p_.held_out_safe->size();
+    report_.accuracy_safe = double((h.array() >= 0.0f).count()) / double(h.size());
+    checker_.H(p_.held_out_near_dangerous->states, &h);
+    report_.held_out_near_dangerous = p_.held_out_near_dangerous->size();
+    report_.accuracy_near_dangerous = double((h.array() < 0.0f).count()) / double(h.size());
+  }
 
-nlohmann::json BarrierCheckOptions::ToJson() const {
-  return {{"region_samples", region_samples},
-          {"near_samples", near_samples},
-          {"near_radius", near_radius},
-          {"action_grid", action_grid},
-          {"action_samples", action_samples},
-          {"action_refine_rounds", action_refine_rounds},
-          {"search_starts", search_starts},
-          {"search_steps", search_steps},
-          {"search_population", search_population},
-          {"search_step", search_step},
-          {"worst_examples", worst_examples},
-          {"seed", seed},
-          {"thresholds", thresholds.ToJson()}};
-}
-
-void BarrierCheckOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier check options");
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    const YAML::Node& v = item.second;
-    if (key == "region_samples") {
-      region_samples = YamlValue<long>(v, key, source);
-    } else if (key == "near_samples") {
-      near_samples = YamlValue<long>(v, key, source);
-    } else if (key == "near_radius") {
-      near_radius = YamlValue<double>(v, key, source);
-    } else if (key == "action_grid") {
-      action_grid = YamlValue<int>(v, key, source);
-    } else if (key == "action_samples") {
-      action_samples = YamlValue<int>(v, key, source);
-    } else if (key == "action_refine_rounds") {
-      action_refine_rounds = YamlValue<int>(v, key, source);
-    } else if (key == "search_starts") {
-      search_starts = YamlValue<int>(v, key, source);
-    } else if (key == "search_steps") {
-      search_steps = YamlValue<int>(v, key, source);
-    } else if (key == "search_population") {
-      search_population = YamlValue<int>(v, key, source);
-    } else if (key == "search_step") {
-      search_step = YamlValue<double>(v, key, source);
-    } else if (key == "worst_examples") {
-      worst_examples = YamlValue<int>(v, key, source);
-    } else if (key == "seed") {
-      seed = YamlValue<std::uint64_t>(v, key, source);
-    } else if (key == "thresholds") {
-      SECURE_CHECK(v.IsMap(), source << ": field 'thresholds' must be a mapping");
-      for (const auto& t : v) {
-        const std::string name = YamlKey(t.first, source);
-        const std::string where = "thresholds." + name;
-        if (name == "no_safe_action") {
-          thresholds.no_safe_action = YamlValue<double>(t.second, where, source);
-        } else if (name == "near_dangerous") {
-          thresholds.near_dangerous = YamlValue<double>(t.second, where, source);
-        } else if (name == "unsafe") {
-          thresholds.unsafe = YamlValue<double>(t.second, where, source);
-        } else if (name == "min_accuracy_safe") {
-          thresholds.min_accuracy_safe = YamlValue<double>(t.second, where, source);
-        } else if (name == "min_accuracy_near_dangerous") {
-          thresholds.min_accuracy_near_dangerous = YamlValue<double>(t.second, where, source);
-        } else {
-          SECURE_THROW(source << ": unknown field '" << where
-                              << "' in the barrier check options (valid: no_safe_action, "
-                                 "near_dangerous, unsafe, min_accuracy_safe, "
-                                 "min_accuracy_near_dangerous)");
+  // Sampling phase, region: (a) and (c).
+  void SampleRegion() {
+    region_.resize(d_, o_.region_samples);
+    for (long i = 0; i < o_.region_samples; ++i) {
+      p_.sample_region(rng_, region_.col(i));
+      SECURE_CHECK(
+          region_.col(i).allFinite(),
+          "barrier check: the region sampler returned a non-finite state (sample " << i << ")");
+    }
+    Eigen::VectorXf h_region;
+    checker_.H(region_, &h_region);
+    report_.unsafe.available = static_cast<bool>(p_.is_unsafe);
+    report_.no_safe_action.worst_objective = kInf;
+    report_.unsafe.worst_objective = -kInf;
+    for (long i = 0; i < o_.region_samples; ++i) {
+      const double hv = h_region[i];
+      if (p_.is_unsafe && p_.is_unsafe(region_.col(i))) {
+        ++report_.unsafe.checked;
+        eligible_c_.push_back({i, hv, hv});
+        report_.unsafe.worst_objective = std::max(report_.unsafe.worst_objective, hv);
+        if (hv >= 0) {
+          ++report_.unsafe.counterexamples;
+          AddExample(CheckKind::kUnsafe, false, region_.col(i), hv, hv);
         }
       }
-    } else {
-      SECURE_THROW(source << ": unknown field '" << key
-                          << "' in the barrier check options (valid: the keys of "
-                             "BarrierCheckOptions::ToJson, e.g. region_samples, near_radius, "
-                             "thresholds)");
+      if (hv >= 0) {
+        ++report_.no_safe_action.checked;
+        const double g = checker_.MaxG(region_.col(i), hv, rng_);
+        eligible_a_.push_back({i, g, hv});
+        report_.no_safe_action.worst_objective =
+            std::min(report_.no_safe_action.worst_objective, g);
+        if (g < 0) {
+          ++report_.no_safe_action.counterexamples;
+          AddExample(CheckKind::kNoSafeAction, false, region_.col(i), hv, g);
+        }
+      }
     }
   }
-}
 
-// ---------------------------------------------------------------------------------------------
-const CheckKindStats& CheckReport::Stats(CheckKind kind) const {
-  switch (kind) {
-    case CheckKind::kNoSafeAction:
-      return no_safe_action;
-    case CheckKind::kNearDangerous:
-      return near_dangerous;
-    case CheckKind::kUnsafe:
-      return unsafe;
-  }
-  SECURE_INTERNAL_CHECK(false, "unknown check kind");
-  return unsafe;
-}
-
-nlohmann::json CheckReport::ToJson() const {
-  auto number = [](double v) -> nlohmann::json {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-  };
-  nlohmann::json kinds = nlohmann::json::object();
-  const double tau[3] = {thresholds.no_safe_action, thresholds.near_dangerous, thresholds.unsafe};
-  for (int k = 0; k < 3; ++k) {
-    const auto kind = static_cast<CheckKind>(k);
-    const CheckKindStats& s = Stats(kind);
-    long examples = 0;
-    for (const CheckExample& e : worst) examples += e.kind == kind;
-    kinds[ToString(kCheckKindNames, kind)] = {{"available", s.available},
-                                              {"checked", s.checked},
-                                              {"counterexamples", s.counterexamples},
-                                              {"rate", s.rate()},
-                                              {"threshold", tau[k]},
-                                              {"flagged", s.available && s.rate() > tau[k]},
-                                              {"search_counterexamples", s.search_counterexamples},
-                                              {"worst_objective", number(s.worst_objective)},
-                                              {"examples", examples}};
-  }
-  nlohmann::json j = {{"verdict", Verdict()},
-                      {"flagged", flagged},
-                      {"reasons", reasons},
-                      {"barrier", barrier},
-                      {"dynamics", dynamics},
-                      {"region", region},
-                      {"unsafe_test", unsafe_test},
-                      {"class_k", class_k},
-                      {"dt", dt},
-                      {"kinds", kinds},
-                      {"options", options.ToJson()}};
-  if (has_accuracy) {
-    j["accuracy"] = {{"held_out_safe", held_out_safe},
-                     {"held_out_near_dangerous", held_out_near_dangerous},
-                     {"safe", accuracy_safe},
-                     {"near_dangerous", accuracy_near_dangerous}};
-  } else {
-    j["accuracy"] = nullptr;
-  }
-  return j;
-}
-
-std::string CheckReport::Summary() const {
-  std::ostringstream out;
-  char line[256];
-  if (has_accuracy) {
-    std::snprintf(line, sizeof line,
-                  "held-out accuracy: safe %.4f (%ld states), near-dangerous %.4f (%ld states)\n",
-                  accuracy_safe, held_out_safe, accuracy_near_dangerous, held_out_near_dangerous);
-    out << line;
-  }
-  const char* what[3] = {"(a) h >= 0 but no action with g >= 0",
-                         "(b) near a near-dangerous state, h >= 0",
-                         "(c) unsafe by the domain's test, h >= 0"};
-  const double tau[3] = {thresholds.no_safe_action, thresholds.near_dangerous, thresholds.unsafe};
-  for (int k = 0; k < 3; ++k) {
-    const CheckKindStats& s = Stats(static_cast<CheckKind>(k));
-    if (!s.available) {
-      out << what[k] << ": not checked (the domain has no unsafe test)\n";
-      continue;
+  // Sampling phase, near-dangerous: (b).
+  void SampleNearDangerous() {
+    nd_scale_ = FeatureStd(p_.near_dangerous.states);
+    for (long i = 0; i < nd_scale_.size(); ++i)
+      if (!(nd_scale_[i] > 0)) nd_scale_[i] = 1.0;  // a constant feature: move in feature units
+    radius_ = o_.near_radius * nd_scale_;
+    near_.resize(d_, o_.near_samples);
+    anchors_.resize(static_cast<std::size_t>(o_.near_samples));
+    const long n_nd = p_.near_dangerous.size();
+    for (long j = 0; j < o_.near_samples; ++j) {
+      const long k = static_cast<long>(rng_.UniformIndex(static_cast<std::uint64_t>(n_nd)));
+      anchors_[static_cast<std::size_t>(j)] = k;
+      for (int i = 0; i < d_; ++i)
+        near_(i, j) = static_cast<float>(p_.near_dangerous.states(i, k) +
+                                         rng_.Uniform(-radius_[i], radius_[i]));
     }
-    std::snprintf(line, sizeof line,
-                  "%s: %ld of %ld sampled (rate %.4f, threshold %g), local search %ld\n", what[k],
-                  s.counterexamples, s.checked, s.rate(), tau[k], s.search_counterexamples);
-    out << line;
+    Eigen::VectorXf h_near;
+    checker_.H(near_, &h_near);
+    report_.near_dangerous.worst_objective = -kInf;
+    for (long j = 0; j < o_.near_samples; ++j) {
+      const double hv = h_near[j];
+      ++report_.near_dangerous.checked;
+      eligible_b_.push_back({j, hv, hv});
+      report_.near_dangerous.worst_objective =
+          std::max(report_.near_dangerous.worst_objective, hv);
+      if (hv >= 0) {
+        ++report_.near_dangerous.counterexamples;
+        AddExample(CheckKind::kNearDangerous, false, near_.col(j), hv, hv);
+      }
+    }
   }
-  out << "verdict: " << Verdict();
-  for (std::size_t i = 0; i < reasons.size(); ++i) out << (i ? "; " : " (") << reasons[i];
-  if (!reasons.empty()) out << ")";
-  out << "\n";
-  return out.str();
-}
 
-void CheckReport::WriteCsv(const std::string& path) const {
-  std::string text = "kind,found_by";
-  for (const std::string& f : features) text += "," + f;
-  text += ",h,objective\n";
-  for (const CheckExample& e : worst) {
-    text += ToString(kCheckKindNames, e.kind);
-    text += e.from_search ? ",search" : ",sample";
-    for (long i = 0; i < e.state.size(); ++i) text += "," + FormatNumber(e.state[i]);
-    text += "," + FormatNumber(e.h) + "," + FormatNumber(e.objective) + "\n";
+  // The `search_starts` samples with the lowest (or highest) objective.
+  std::vector<Scored> Top(std::vector<Scored> v, bool lowest) const {
+    std::stable_sort(v.begin(), v.end(), [&](const Scored& x, const Scored& y) {
+      if (x.objective != y.objective)
+        return lowest ? x.objective < y.objective : x.objective > y.objective;
+      return x.h < y.h;
+    });
+    if (static_cast<long>(v.size()) > o_.search_starts) v.resize(o_.search_starts);
+    return v;
   }
-  WriteFileAtomically(path, text);
-}
+  auto Perturb(const Eigen::VectorXd& scale) {
+    return [this, scale](const Eigen::VectorXf& from, double step, Eigen::VectorXf& to) {
+      for (long i = 0; i < from.size(); ++i)
+        to[i] = static_cast<float>(from[i] + step * scale[i] * rng_.Normal());
+      if (p_.project) p_.project(to);
+    };
+  }
+
+  // (a): minimise max_a g among states with h >= 0 (maximise its negative).
+  void SearchNoSafeAction() {
+    for (const Scored& s : Top(eligible_a_, true)) {
+      const auto [state, score] =
+          LocalSearch(region_.col(s.index), -s.objective, o_, Perturb(region_scale_),
+                      [&](const Eigen::VectorXf& c) -> std::optional<double> {
+                        if (!c.allFinite()) return std::nullopt;
+                        const double hv = checker_.HOne(c);
+                        if (!(hv >= 0)) return std::nullopt;
+                        return -checker_.MaxG(c, hv, rng_);
+                      });
+      const double g = -score;
+      report_.no_safe_action.worst_objective =
+          std::min(report_.no_safe_action.worst_objective, g);
+      if (g < 0) {
+        ++report_.no_safe_action.search_counterexamples;
+        AddExample(CheckKind::kNoSafeAction, true, state, checker_.HOne(state), g);
+      }
+    }
+  }
+
+  // (b): maximise h inside the box around the sample's near-dangerous anchor.
+  void SearchNearDangerous() {
+    for (const Scored& s : Top(eligible_b_, false)) {
+      const Eigen::VectorXf anchor =
+          p_.near_dangerous.states.col(anchors_[static_cast<std::size_t>(s.index)]);
+      const auto [state, score] = LocalSearch(
+          near_.col(s.index), s.objective, o_,
+          [&](const Eigen::VectorXf& from, double step, Eigen::VectorXf& to) {
+            for (long i = 0; i < from.size(); ++i) {
+              const double v = from[i] + step * nd_scale_[i] * rng_.Normal();
+              to[i] = static_cast<float>(
+                  std::clamp(v, anchor[i] - radius_[i], anchor[i] + radius_[i]));
+            }
+          },
+          [&](const Eigen::VectorXf& c) -> std::optional<double> {
+            const double hv = checker_.HOne(c);
+            if (!std::isfinite(hv)) return std::nullopt;
+            return hv;
+          });
+      report_.near_dangerous.worst_objective =
+          std::max(report_.near_dangerous.worst_objective, score);
+      if (score >= 0) {
+        ++report_.near_dangerous.search_counterexamples;
+        AddExample(CheckKind::kNearDangerous, true, state, score, score);
+      }
+    }
+  }
+
+  // (c): maximise h among states the predicate calls unsafe.
+  void SearchUnsafe() {
+    for (const Scored& s : Top(eligible_c_, false)) {
+      const auto [state, score] =
+          LocalSearch(region_.col(s.index), s.objective, o_, Perturb(region_scale_),
+                      [&](const Eigen::VectorXf& c) -> std::optional<double> {
+                        if (!c.allFinite() || !p_.is_unsafe(c)) return std::nullopt;
+                        const double hv = checker_.HOne(c);
+                        if (!std::isfinite(hv)) return std::nullopt;
+                        return hv;
+                      });
+      report_.unsafe.worst_objective = std::max(report_.unsafe.worst_objective, score);
+      if (score >= 0) {
+        ++report_.unsafe.search_counterexamples;
+        AddExample(CheckKind::kUnsafe, true, state, score, score);
+      }
+    }
+  }
+
+  // The worst examples per kind.
+  void KeepWorst() {
+    for (int k = 0; k < 3; ++k) {
+      std::vector<CheckExample>& v = pool_[k];
+      const bool lowest = k == static_cast<int>(CheckKind::kNoSafeAction);
+      std::stable_sort(v.begin(), v.end(), [&](const CheckExample& x, const CheckExample& y) {
+        return lowest ? x.objective < y.objective : x.objective > y.objective;
+      });
+      if (static_cast<long>(v.size()) > o_.worst_examples) v.resize(o_.worst_examples);
+      report_.worst.insert(report_.worst.end(), v.begin(), v.end());
+    }
+  }
+
+  void Verdict() {
+    auto flag = [&](bool condition, const std::string& reason) {
+      if (!condition) return;
+      report_.flagged = true;
+      report_.reasons.push_back(reason);
+    };
+    auto rate_reason = [](const char* name, double rate, double tau) {
+      char buffer[96];
+      std::snprintf(buffer, sizeof buffer, "rate(%s) %.4f > %g", name, rate, tau);
+      return std::string(buffer);
+    };
+    const CheckThresholds& t = o_.thresholds;
+    flag(report_.no_safe_action.rate() > t.no_safe_action,
+         rate_reason("a", report_.no_safe_action.rate(), t.no_safe_action));
+    flag(report_.near_dangerous.rate() > t.near_dangerous,
+         rate_reason("b", report_.near_dangerous.rate(), t.near_dangerous));
+    flag(report_.unsafe.available && report_.unsafe.rate() > t.unsafe,
+         rate_reason("c", report_.unsafe.rate(), t.unsafe));
+    if (report_.has_accuracy) {
+      char buffer[96];
+      std::snprintf(buffer, sizeof buffer, "held-out safe accuracy %.4f < %g",
+                    report_.accuracy_safe, t.min_accuracy_safe);
+      flag(report_.accuracy_safe < t.min_accuracy_safe, buffer);
+      std::snprintf(buffer, sizeof buffer, "held-out near-dangerous accuracy %.4f < %g",
+                    report_.accuracy_near_dangerous, t.min_accuracy_near_dangerous);
+      flag(report_.accuracy_near_dangerous < t.min_accuracy_near_dangerous, buffer);
+    }
+  }
+
+  const BarrierCheckProblem& p_;
+  const BarrierCheckOptions& o_;
+  const int d_;
+  Checker checker_;
+  Rng rng_;
+  CheckReport report_;
+  std::vector<CheckExample> pool_[3];
+  Eigen::MatrixXf region_, near_;
+  std::vector<Scored> eligible_a_, eligible_b_, eligible_c_;
+  std::vector<long> anchors_;
+  Eigen::VectorXd nd_scale_, radius_, region_scale_;
+};
+
+}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 double MaxCbfCondition(Barrier& barrier, const domains::DynamicsModel& dynamics,
@@ -459,263 +498,7 @@ double MaxCbfCondition(Barrier& barrier, const domains::DynamicsModel& dynamics,
 CheckReport CheckBarrier(Barrier& barrier, const domains::DynamicsModel& dynamics,
                          const BarrierCheckProblem& p, const BarrierCheckOptions& o) {
   ValidateInputs(barrier, dynamics, p, o);
-  const int d = barrier.state_dim();
-  Checker checker(barrier, dynamics, p, o);
-  Rng rng(o.seed);
-  CheckReport report;
-  report.barrier = barrier.Describe();
-  report.dynamics = dynamics.Describe();
-  report.region = p.region_description;
-  report.unsafe_test = p.is_unsafe ? p.is_unsafe_description : "";
-  report.class_k = p.class_k_description;
-  report.dt = p.dt;
-  report.options = o;
-  report.thresholds = o.thresholds;
-  report.features = p.near_dangerous.features;  // checked: one name per row
-
-  // Held-out accuracy.
-  Eigen::VectorXf h;
-  if (p.held_out_safe) {
-    report.has_accuracy = true;
-    checker.H(p.held_out_safe->states, &h);
-    report.held_out_safe = p.held_out_safe->size();
-    report.accuracy_safe = double((h.array() >= 0.0f).count()) / double(h.size());
-    checker.H(p.held_out_near_dangerous->states, &h);
-    report.held_out_near_dangerous = p.held_out_near_dangerous->size();
-    report.accuracy_near_dangerous = double((h.array() < 0.0f).count()) / double(h.size());
-  }
-
-  struct Scored {
-    long index;
-    double objective;
-    double h;  // tie-break: the smaller h first (nearer the boundary)
-  };
-  std::vector<CheckExample> pool[3];
-  auto add_example = [&](CheckKind kind, bool from_search, const Eigen::VectorXf& s, double hv,
-                         double objective) {
-    pool[static_cast<int>(kind)].push_back({kind, from_search, s, hv, objective});
-  };
-
-  // Sampling phase, region: (a) and (c).
-  Eigen::MatrixXf region(d, o.region_samples);
-  for (long i = 0; i < o.region_samples; ++i) {
-    p.sample_region(rng, region.col(i));
-    SECURE_CHECK(
-        region.col(i).allFinite(),
-        "barrier check: the region sampler returned a non-finite state (sample " << i << ")");
-  }
-  Eigen::VectorXf h_region;
-  checker.H(region, &h_region);
-  std::vector<Scored> eligible_a, eligible_c;
-  report.unsafe.available = static_cast<bool>(p.is_unsafe);
-  report.no_safe_action.worst_objective = kInf;
-  report.unsafe.worst_objective = -kInf;
-  for (long i = 0; i < o.region_samples; ++i) {
-    const double hv = h_region[i];
-    if (p.is_unsafe && p.is_unsafe(region.col(i))) {
-      ++report.unsafe.checked;
-      eligible_c.push_back({i, hv, hv});
-      report.unsafe.worst_objective = std::max(report.unsafe.worst_objective, hv);
-      if (hv >= 0) {
-        ++report.unsafe.counterexamples;
-        add_example(CheckKind::kUnsafe, false, region.col(i), hv, hv);
-      }
-    }
-    if (hv >= 0) {
-      ++report.no_safe_action.checked;
-      const double g = checker.MaxG(region.col(i), hv, rng);
-      eligible_a.push_back({i, g, hv});
-      report.no_safe_action.worst_objective = std::min(report.no_safe_action.worst_objective, g);
-      if (g < 0) {
-        ++report.no_safe_action.counterexamples;
-        add_example(CheckKind::kNoSafeAction, false, region.col(i), hv, g);
-      }
-    }
-  }
-
-  // Sampling phase, near-dangerous: (b).
-  Eigen::VectorXd nd_scale = FeatureStd(p.near_dangerous.states);
-  for (long i = 0; i < nd_scale.size(); ++i)
-    if (!(nd_scale[i] > 0)) nd_scale[i] = 1.0;  // a constant feature: move in feature units
-  const Eigen::VectorXd radius = o.near_radius * nd_scale;
-  Eigen::MatrixXf near(d, o.near_samples);
-  std::vector<long> anchors(static_cast<std::size_t>(o.near_samples));
-  const long n_nd = p.near_dangerous.size();
-  for (long j = 0; j < o.near_samples; ++j) {
-    const long k = static_cast<long>(rng.UniformIndex(static_cast<std::uint64_t>(n_nd)));
-    anchors[static_cast<std::size_t>(j)] = k;
-    for (int i = 0; i < d; ++i)
-      near(i, j) =
-          static_cast<float>(p.near_dangerous.states(i, k) + rng.Uniform(-radius[i], radius[i]));
-  }
-  Eigen::VectorXf h_near;
-  checker.H(near, &h_near);
-  std::vector<Scored> eligible_b;
-  report.near_dangerous.worst_objective = -kInf;
-  for (long j = 0; j < o.near_samples; ++j) {
-    const double hv = h_near[j];
-    ++report.near_dangerous.checked;
-    eligible_b.push_back({j, hv, hv});
-    report.near_dangerous.worst_objective = std::max(report.near_dangerous.worst_objective, hv);
-    if (hv >= 0) {
-      ++report.near_dangerous.counterexamples;
-      add_example(CheckKind::kNearDangerous, false, near.col(j), hv, hv);
-    }
-  }
-
-  // Local search from the most promising samples of each kind.
-  const Eigen::VectorXd region_scale = FeatureStd(region);
-  auto top = [&](std::vector<Scored> v, bool lowest) {
-    std::stable_sort(v.begin(), v.end(), [&](const Scored& x, const Scored& y) {
-      if (x.objective != y.objective)
-        return lowest ? x.objective < y.objective : x.objective > y.objective;
-      return x.h < y.h;
-    });
-    if (static_cast<long>(v.size()) > o.search_starts) v.resize(o.search_starts);
-    return v;
-  };
-  auto perturb = [&](const Eigen::VectorXd& scale) {
-    return [&rng, &p, scale](const Eigen::VectorXf& from, double step, Eigen::VectorXf& to) {
-      for (long i = 0; i < from.size(); ++i)
-        to[i] = static_cast<float>(from[i] + step * scale[i] * rng.Normal());
-      if (p.project) p.project(to);
-    };
-  };
-  // (a): minimise max_a g among states with h >= 0 (maximise its negative).
-  for (const Scored& s : top(eligible_a, true)) {
-    const auto [state, score] =
-        LocalSearch(region.col(s.index), -s.objective, o, perturb(region_scale),
-                    [&](const Eigen::VectorXf& c) -> std::optional<double> {
-                      if (!c.allFinite()) return std::nullopt;
-                      const double hv = checker.HOne(c);
-                      if (!(hv >= 0)) return std::nullopt;
-                      return -checker.MaxG(c, hv, rng);
-                    });
-    const double g = -score;
-    report.no_safe_action.worst_objective = std::min(report.no_safe_action.worst_objective, g);
-    if (g < 0) {
-      ++report.no_safe_action.search_counterexamples;
-      add_example(CheckKind::kNoSafeAction, true, state, checker.HOne(state), g);
-    }
-  }
-  // (b): maximise h inside the box around the sample's near-dangerous anchor.
-  for (const Scored& s : top(eligible_b, false)) {
-    const Eigen::VectorXf anchor =
-        p.near_dangerous.states.col(anchors[static_cast<std::size_t>(s.index)]);
-    const auto [state, score] = LocalSearch(
-        near.col(s.index), s.objective, o,
-        [&](const Eigen::VectorXf& from, double step, Eigen::VectorXf& to) {
-          for (long i = 0; i < from.size(); ++i) {
-            const double v = from[i] + step * nd_scale[i] * rng.Normal();
-            to[i] = static_cast<float>(std::clamp(v, anchor[i] - radius[i], anchor[i] + radius[i]));
-          }
-        },
-        [&](const Eigen::VectorXf& c) -> std::optional<double> {
-          const double hv = checker.HOne(c);
-          if (!std::isfinite(hv)) return std::nullopt;
-          return hv;
-        });
-    report.near_dangerous.worst_objective = std::max(report.near_dangerous.worst_objective, score);
-    if (score >= 0) {
-      ++report.near_dangerous.search_counterexamples;
-      add_example(CheckKind::kNearDangerous, true, state, score, score);
-    }
-  }
-  // (c): maximise h among states the predicate calls unsafe.
-  if (p.is_unsafe) {
-    for (const Scored& s : top(eligible_c, false)) {
-      const auto [state, score] =
-          LocalSearch(region.col(s.index), s.objective, o, perturb(region_scale),
-                      [&](const Eigen::VectorXf& c) -> std::optional<double> {
-                        if (!c.allFinite() || !p.is_unsafe(c)) return std::nullopt;
-                        const double hv = checker.HOne(c);
-                        if (!std::isfinite(hv)) return std::nullopt;
-                        return hv;
-                      });
-      report.unsafe.worst_objective = std::max(report.unsafe.worst_objective, score);
-      if (score >= 0) {
-        ++report.unsafe.search_counterexamples;
-        add_example(CheckKind::kUnsafe, true, state, score, score);
-      }
-    }
-  }
-  auto finite_or_nan = [](double& v) {
-    if (!std::isfinite(v)) v = std::numeric_limits<double>::quiet_NaN();
-  };
-  if (report.no_safe_action.checked == 0) finite_or_nan(report.no_safe_action.worst_objective);
-  if (report.near_dangerous.checked == 0) finite_or_nan(report.near_dangerous.worst_objective);
-  if (report.unsafe.checked == 0) finite_or_nan(report.unsafe.worst_objective);
-
-  // The worst examples per kind.
-  for (int k = 0; k < 3; ++k) {
-    std::vector<CheckExample>& v = pool[k];
-    const bool lowest = k == static_cast<int>(CheckKind::kNoSafeAction);
-    std::stable_sort(v.begin(), v.end(), [&](const CheckExample& x, const CheckExample& y) {
-      return lowest ? x.objective < y.objective : x.objective > y.objective;
-    });
-    if (static_cast<long>(v.size()) > o.worst_examples) v.resize(o.worst_examples);
-    report.worst.insert(report.worst.end(), v.begin(), v.end());
-  }
-
-  // The verdict.
-  auto flag = [&](bool condition, const std::string& reason) {
-    if (!condition) return;
-    report.flagged = true;
-    report.reasons.push_back(reason);
-  };
-  auto rate_reason = [](const char* name, double rate, double tau) {
-    char buffer[96];
-    std::snprintf(buffer, sizeof buffer, "rate(%s) %.4f > %g", name, rate, tau);
-    return std::string(buffer);
-  };
-  const CheckThresholds& t = o.thresholds;
-  flag(report.no_safe_action.rate() > t.no_safe_action,
-       rate_reason("a", report.no_safe_action.rate(), t.no_safe_action));
-  flag(report.near_dangerous.rate() > t.near_dangerous,
-       rate_reason("b", report.near_dangerous.rate(), t.near_dangerous));
-  flag(report.unsafe.available && report.unsafe.rate() > t.unsafe,
-       rate_reason("c", report.unsafe.rate(), t.unsafe));
-  if (report.has_accuracy) {
-    char buffer[96];
-    std::snprintf(buffer, sizeof buffer, "held-out safe accuracy %.4f < %g", report.accuracy_safe,
-                  t.min_accuracy_safe);
-    flag(report.accuracy_safe < t.min_accuracy_safe, buffer);
-    std::snprintf(buffer, sizeof buffer, "held-out near-dangerous accuracy %.4f < %g",
-                  report.accuracy_near_dangerous, t.min_accuracy_near_dangerous);
-    flag(report.accuracy_near_dangerous < t.min_accuracy_near_dangerous, buffer);
-  }
-  return report;
-}
-
-data::StateSet ReadCheckStates(const std::string& path, const std::vector<std::string>& features) {
-  // A check without counterexamples writes a header-only file: that adds no states.
-  CheckRegularInputFile(path);  // no FIFO, no device, within the input limit
-  std::ifstream in(path);
-  SECURE_CHECK(in.good(), path << ": cannot open the check CSV");
-  std::string header, line;
-  std::getline(in, header);
-  bool has_rows = false;
-  while (std::getline(in, line))
-    if (line.find_first_not_of(" \t\r") != std::string::npos) has_rows = true;
-  if (!has_rows) {
-    data::StateSet empty;
-    empty.source = path;
-    empty.features = features;
-    empty.states.resize(static_cast<long>(features.size()), 0);
-    // Still check the columns, so that a file for another model is caught.
-    std::set<std::string> names;
-    std::stringstream cells(header);
-    std::string cell;
-    while (std::getline(cells, cell, ',')) {
-      while (!cell.empty() && (cell.back() == '\r' || cell.back() == ' ')) cell.pop_back();
-      names.insert(cell);
-    }
-    for (const std::string& f : features)
-      SECURE_CHECK(names.count(f), path << ": the check CSV has no column '" << f
-                                        << "' (its header: " << header << ")");
-    return empty;
-  }
-  return data::ReadStateSet(path, features);
+  return CheckRun(barrier, dynamics, p, o).Run();
 }
 
 }  // namespace secure::cbf

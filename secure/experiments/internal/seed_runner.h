@@ -1,5 +1,5 @@
 #pragma once
-// Pieces of the experiment driver (experiment.cc):
+// Pieces of the experiment driver (experiment.cc, user_study.cc, label_efficiency.cc):
 // serialised progress lines and a pool that runs one job per seed on a few threads. INTERNAL:
 // include only from secure/experiments/*.cc.
 #include <algorithm>

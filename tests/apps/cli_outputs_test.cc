@@ -1,0 +1,258 @@
+// End-to-end tests of the `secure` command-line tool (the cli_test program, cli_test.cc):
+// `policy train` (flags of the other algorithm, --resume), output paths that are not plain files,
+// byte-identical model files for a seed, `secure compare`.
+#include "tests/apps/cli_test_util.h"
+
+namespace {
+using namespace secure::test::cli;  // NOLINT(google-build-using-namespace): the files' helpers
+
+// ------------------------------------------------------------------------------------------
+// `policy train`: flags of the other algorithm, --resume, corrupt checkpoints.
+
+TEST(CliTest, PolicyTrainRejectsFlagsOfTheOtherAlgorithm) {
+  // Checked before anything is read: the demonstrations file need not exist.
+  const std::string base = "policy train --demos /nonexistent/demos.csv --out never.model ";
+  for (const std::string flag :
+       {"--checkpoint x.ckpt", "--checkpoint x.ckpt --resume", "--checkpoint-every 5",
+        "--iterations 3", "--reward logit-d", "--warm-start bc.model", "--resume"}) {
+    const Result r = RunCli(base + "--algo bc " + flag);
+    EXPECT_EQ(r.exit_code, 1) << flag;
+    EXPECT_HAS(r.err, flag.substr(0, flag.find(' ')) + " applies to --algo airl only");
+  }
+  for (const std::string flag :
+       {"--epochs 3", "--state-features x,y,vx,vy", "--action-features ax,ay"}) {
+    const Result r = RunCli(base + "--algo airl " + flag);
+    EXPECT_EQ(r.exit_code, 1) << flag;
+    EXPECT_HAS(r.err, flag.substr(0, flag.find(' ')) + " applies to --algo bc only");
+  }
+  const Result r = RunCli(base + "--algo airl --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, "--resume needs --checkpoint");
+}
+
+TEST(CliTest, PolicyTrainAirlResumeChecksTheCheckpoint) {
+  const std::string dir = (TempDir() / "resume").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 4 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string ckpt = dir + "/airl.ckpt";
+  const std::string train = "policy train --algo airl --demos " + dir + "/demos.csv --out " + dir +
+                            "/airl.model --checkpoint " + ckpt + " --json ";
+  // --resume without a checkpoint yet starts from scratch and says so.
+  r = RunCli(train + "--iterations 2 --resume");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.err, "no checkpoint yet");
+  EXPECT_HAS(r.err, ckpt);
+  EXPECT_FALSE(nlohmann::json::parse(r.out)["summary"]["resumed"].get<bool>());
+  ASSERT_TRUE(fs::exists(ckpt));
+
+  // Fewer --iterations than the checkpoint has completed: an error, not the longer run's policy.
+  r = RunCli(train + "--iterations 1 --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, ckpt + ": checkpoint has 2 completed iterations, more than iterations = 1");
+  r = RunCli(train + "--iterations 2 --resume");  // as many: the checkpoint's policy
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(nlohmann::json::parse(r.out)["summary"]["resumed"].get<bool>());
+
+  // One flipped byte in the middle of the checkpoint: an error naming it.
+  std::string bytes;
+  {
+    std::ifstream in(ckpt, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  ASSERT_GT(bytes.size(), 1000u);
+  bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x10);
+  std::ofstream(ckpt, std::ios::binary) << bytes;
+  r = RunCli(train + "--iterations 3 --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, ckpt + ": checksum mismatch");
+  // Truncated.
+  std::ofstream(ckpt, std::ios::binary) << bytes.substr(0, bytes.size() - 3);
+  r = RunCli(train + "--iterations 3 --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, ckpt);
+  EXPECT_HAS(r.err, "truncated");
+}
+
+// ------------------------------------------------------------------------------------------
+// Output paths that are not plain files, and byte-identical model files for a seed.
+
+std::string TrainToyArgs(const std::string& out) {
+  WriteToyData();
+  return "cbf train --safe-states " + (TempDir() / "safe.csv").string() +
+         " --near-dangerous-states " + (TempDir() / "nd.csv").string() + " --features x,y" +
+         kFastTrain + " --out " + out;
+}
+
+bool IsCharDevice(const fs::path& p) { return fs::is_character_file(fs::symlink_status(p)); }
+
+TEST(CliTest, PredictToDevNullLeavesItACharacterDevice) {
+  const std::string model = (TempDir() / "devnull_toy.model").string();
+  Result r = RunCli(TrainToyArgs(model));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_TRUE(IsCharDevice("/dev/null"));
+  r = RunCli("cbf predict --model " + model + " --states " + (TempDir() / "nd.csv").string() +
+             " --out /dev/null --json");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(IsCharDevice("/dev/null"));
+}
+
+TEST(CliTest, TrainOutThroughASymlinkWritesTheTargetAndKeepsTheLink) {
+  const fs::path dir = TempDir() / "symlink_out";
+  fs::create_directories(dir / "models");
+  fs::create_symlink("models/barrier.model", dir / "latest.model");  // dangling: created
+  Result r = RunCli(TrainToyArgs((dir / "latest.model").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir / "latest.model"));
+  ASSERT_TRUE(fs::is_regular_file(fs::symlink_status(dir / "models" / "barrier.model")));
+  // Again, now replacing the existing target through the link.
+  const auto before = fs::last_write_time(dir / "models" / "barrier.model");
+  r = RunCli(TrainToyArgs((dir / "latest.model").string()) + " --seed 5");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir / "latest.model"));
+  EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(dir / "models" / "barrier.model")));
+  EXPECT_GE(fs::last_write_time(dir / "models" / "barrier.model"), before);
+  r = RunCli("cbf predict --model " + (dir / "latest.model").string() + " --states " +
+             (TempDir() / "nd.csv").string() + " --out " + (dir / "h.csv").string());
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir / "models"), fs::directory_iterator()), 1);
+}
+
+TEST(CliTest, TrainOutToADirectoryOrAReaderlessFifoFailsNamingIt) {
+  const fs::path dir = TempDir() / "bad_out";
+  fs::create_directories(dir / "a_directory");
+  Result r = RunCli(TrainToyArgs((dir / "a_directory").string()));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, (dir / "a_directory").string());
+  EXPECT_HAS(r.err, "directory");
+  EXPECT_TRUE(fs::is_empty(dir / "a_directory"));
+  const fs::path fifo = dir / "fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  r = RunCli(TrainToyArgs(fifo.string()));  // must not hang waiting for a reader
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_HAS(r.err, fifo.string());
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo)));
+}
+
+TEST(CliTest, SameSeedGivesByteIdenticalModelFilesTimingStaysInTheJson) {
+  auto slurp = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const fs::path dir = TempDir() / "same_seed";
+  fs::create_directories(dir);
+  for (const char* name : {"a.model", "b.model"}) {
+    const Result r = RunCli(TrainToyArgs((dir / name).string()) + " --seed 3 --json");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(nlohmann::json::parse(r.out)["summary"].contains("wall_seconds"));
+  }
+  EXPECT_TRUE(slurp(dir / "a.model") == slurp(dir / "b.model")) << "cbf train --seed 3";
+
+  Result r = RunCli("demos generate --domain double-integrator --episodes 6 --out " +
+                    dir.string() + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* name : {"bc_a.model", "bc_b.model"}) {
+    r = RunCli("policy train --algo bc --demos " + (dir / "demos.csv").string() + " --out " +
+               (dir / name).string() + " --epochs 2 --seed 3 --json");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  EXPECT_TRUE(slurp(dir / "bc_a.model") == slurp(dir / "bc_b.model")) << "policy train --algo bc";
+}
+
+// ------------------------------------------------------------------------------------------
+// `secure compare`: two `secure eval --json` results of the same episodes, paired by seed.
+
+TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
+  const std::string dir = (TempDir() / "compare").string();
+  Result r = RunCli("demos generate --domain double-integrator --episodes 12 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("policy train --algo bc --demos " + dir + "/demos.csv --out " + dir +
+             "/bc.model --epochs 3");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto eval = [&](const std::string& name, const std::string& flags) {
+    const Result e = RunCli("eval --domain double-integrator --bc " + dir +
+                            "/bc.model --barrier ground-truth --methods bc,bc+shield --seeds 3 "
+                            "--json " +
+                            flags);
+    EXPECT_EQ(e.exit_code, 0) << e.err;
+    return Write(name, e.out);
+  };
+  const std::string iid = eval("iid.json", "--episodes 4 --samples 32");
+  const std::string qmc = eval("qmc.json", "--episodes 4 --samples 16 --sampler qmc");
+  const std::string longer = eval("longer.json", "--episodes 5 --samples 32");
+
+  r = RunCli("compare " + qmc + " " + iid + " --tost-bound 0.5 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["seeds"], 3);
+  EXPECT_EQ(j["episodes"], 4);
+  const std::vector<std::string> differences = j["differences"];
+  EXPECT_EQ(differences, (std::vector<std::string>{"shield.num_samples: 16 vs 32",
+                                                   "shield.sampler: \"qmc\" vs \"iid\""}));
+  for (const char* method : {"bc", "bc+shield"}) {
+    const auto& m = j["methods"][method]["success_rate"];
+    EXPECT_NEAR(m["difference"].get<double>(),
+                m["a_mean"].get<double>() - m["b_mean"].get<double>(), 1e-12);
+    if (m["tost"]["se"] == 0.0) {  // equal differences on every seed: exact
+      EXPECT_TRUE(m["tost"]["df"].is_null()) << method;
+    } else {
+      EXPECT_EQ(m["tost"]["df"], 2.0) << method;  // paired: seeds - 1
+    }
+  }
+  // The unshielded policy plays the same episodes: its rates are identical, exactly equivalent.
+  EXPECT_EQ(j["methods"]["bc"]["success_rate"]["difference"], 0.0);
+  EXPECT_EQ(j["methods"]["bc"]["success_rate"]["equivalent"], true);
+  for (const char* method : {"bc", "bc+shield"})  // the policy query, or the whole decision
+    for (const char* key : {"a_p50", "b_p50", "a_p99", "b_p99"})
+      EXPECT_GT(j["methods"][method]["latency_us"][key].get<double>(), 0.0) << method << key;
+  // The table names both files and the settings that differ.
+  r = RunCli("compare " + qmc + " " + iid);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_HAS(r.out, "A = " + qmc);
+  EXPECT_HAS(r.out, "shield.sampler: \"qmc\" vs \"iid\"");
+  EXPECT_HAS(r.out, "| bc+shield | dangerous |");
+
+  // Not the same episodes, not an eval result, not a file: one line each.
+  ExpectOneErrorLine(RunCli("compare " + longer + " " + iid),
+                     "are not of the same episodes: field 'episodes' is 5 and 4");
+  ExpectOneErrorLine(RunCli("compare " + dir + " " + iid), dir + ": not a regular file");
+  ExpectOneErrorLine(RunCli("compare " + Write("broken.json", "{\"command\": ") + " " + iid),
+                     "broken.json: malformed JSON");
+  ExpectOneErrorLine(
+      RunCli("compare " + Write("other.json", "{\"command\": \"demo\"}") + " " + iid),
+      "other.json: not a `secure eval --json` result");
+  ExpectOneErrorLine(RunCli("compare " +
+                            Write("old.json",
+                                  "{\"command\": \"eval\", \"domain\": "
+                                  "\"derby\"}") +
+                            " " + iid),
+                     "old.json: no field 'first_seed'");
+  {  // Edited rates out of [0, 1] (issue 34: 7.0 and -3.0 gave "200.0 %").
+    std::ifstream in(iid);
+    nlohmann::json edited = nlohmann::json::parse(in);
+    for (auto& [method, m] : edited["methods"].items()) {
+      for (auto& v : m["success_rate"]["per_seed"]) v = 7.0;
+      break;
+    }
+    ExpectOneErrorLine(RunCli("compare " + Write("edited.json", edited.dump()) + " " + iid),
+                       "per_seed' holds 7.0, must be a rate in [0, 1]");
+  }
+  ExpectOneErrorLine(RunCli("compare " + qmc + " " + iid + " --tost-bound 0"),
+                     "--tost-bound = 0, must be in (0, 1)");
+
+  // eval's shield: the domain's preset, then the config's `shield:` key, then the flags.
+  const std::string cfg = Write("compare_shield.yaml", "pipeline:\n  shield: {num_samples: 24}\n");
+  const std::string base = "eval --domain double-integrator --bc " + dir +
+                           "/bc.model --barrier ground-truth --methods bc+shield --seeds 1 "
+                           "--episodes 1 --json --config " + cfg;
+  r = RunCli(base);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["shield"]["num_samples"], 24);
+  r = RunCli(base + " --samples 12");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["shield"]["num_samples"], 12);
+  const std::string bad = Write("compare_bad.yaml", "pipeline:\n  shield: {sampler: sobol}\n");
+  ExpectOneErrorLine(RunCli("eval --domain double-integrator --bc x.model --config " + bad),
+                     "compare_bad.yaml [pipeline] [shield]");
+}
+
+}  // namespace
