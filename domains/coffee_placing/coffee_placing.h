@@ -233,7 +233,7 @@ class CoffeePlacingEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double StepSeconds() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().control_period; }
   bool CanRender() const override { return true; }
   void Render(int width, int height, Frame* frame) override;
 

@@ -244,13 +244,6 @@ std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(
   return std::make_unique<CoffeePopulation>(options_, options);
 }
 
-void CoffeePlacingDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
-  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
-                     "ExperimentOptions", "shield.dt", options.shield.dt,
-                     "the control period (" << options_.task.control_period
-                                            << " s): the shield's model looks one step ahead");
-}
-
 experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
   experiments::ExperimentOptions o =
       franka::ArmExperimentPreset(profile_, options_.task.control_period);

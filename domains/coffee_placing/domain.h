@@ -72,7 +72,6 @@ class CoffeePlacingDomain final : public experiments::Domain {
   std::unique_ptr<Environment> MakeEnvironment() const override;
   /// The mean participant's data.
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
-  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   experiments::ExperimentOptions Preset() const override;
 
   /// The barrier check (cbf/barrier_check.h), judged by the mean participant (as

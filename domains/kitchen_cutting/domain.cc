@@ -247,13 +247,6 @@ std::optional<experiments::PaperTable3> KitchenCuttingDomain::PaperReference() c
   return t;
 }
 
-void KitchenCuttingDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
-  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
-                     "ExperimentOptions", "shield.dt", options.shield.dt,
-                     "the control period (" << options_.task.control_period
-                                            << " s): the shield's model looks one step ahead");
-}
-
 experiments::ExperimentOptions KitchenCuttingDomain::Preset() const {
   // 10 seeds x 100 episodes (the paper's own protocol, 10 episodes, is --seeds 1 --episodes 10).
   experiments::ExperimentOptions o =

@@ -244,7 +244,7 @@ class KitchenCuttingEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double StepSeconds() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().control_period; }
   /// domains/franka/'s offscreen renderer (OSMesa), created on the first call; frames up to
   /// 1280 x 720, seen from the robot's right, the person's arm at the back.
   bool CanRender() const override { return true; }

@@ -203,13 +203,6 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   return rows;
 }
 
-void PandaPushDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
-  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
-                     "ExperimentOptions", "shield.dt", options.shield.dt,
-                     "the control period (" << options_.task.control_period
-                                            << " s): the shield's model looks one step ahead");
-}
-
 void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                                    data::StateSet* near_dangerous) const {
   options_.Validate();

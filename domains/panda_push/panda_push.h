@@ -256,7 +256,7 @@ class PandaPushEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double StepSeconds() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().control_period; }
   /// MuJoCo's renderer in an OSMesa context (software OpenGL), created on the first call; frames
   /// up to 1280 x 720.
   bool CanRender() const override { return true; }
