@@ -181,19 +181,9 @@ void CoffeePlacingOptions::Validate() const {
   const char* o = "CoffeePlacingOptions";
   SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
                      "in [1, 100000]");
-  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
-                     "control_period", control_period, "in (0, 1] s");
-  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
-  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
-                     "large enough for a physics step <= 5 ms (control_period / substeps)");
+  tracking.Validate(o);
   SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
                      "action_scale", action_scale, "in (0, 0.2] m");
-  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
-                         tracking_omega * control_period / substeps < 0.5,
-                     o, "tracking_omega", tracking_omega,
-                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
-  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
-                     ik_damping, "in (0, 1)");
   for (int k = 0; k < 3; ++k) {
     SECURE_CHECK_FIELD(Finite(start[k]) && std::abs(start[k]) <= 1, o, "start", start[k],
                        "within 1 m of the origin");
@@ -219,31 +209,26 @@ void CoffeePlacingOptions::Validate() const {
 }
 
 nlohmann::json CoffeePlacingOptions::ToJson() const {
-  return {{"max_steps", max_steps},
-          {"control_period", control_period},
-          {"substeps", substeps},
-          {"action_scale", action_scale},
-          {"tracking_omega", tracking_omega},
-          {"ik_damping", ik_damping},
-          {"start", start},
-          {"start_noise", start_noise},
-          {"target", target},
-          {"target_half_size", target_half_size},
-          {"place_tolerance", place_tolerance},
-          {"upright_tilt", upright_tilt},
-          {"tilt_scale", tilt_scale},
-          {"tilt_coupling", tilt_coupling},
-          {"person", person.ToJson()}};
+  nlohmann::json j = {{"max_steps", max_steps},
+                      {"action_scale", action_scale},
+                      {"start", start},
+                      {"start_noise", start_noise},
+                      {"target", target},
+                      {"target_half_size", target_half_size},
+                      {"place_tolerance", place_tolerance},
+                      {"upright_tilt", upright_tilt},
+                      {"tilt_scale", tilt_scale},
+                      {"tilt_coupling", tilt_coupling},
+                      {"person", person.ToJson()}};
+  tracking.AddJson(&j);
+  return j;
 }
 
 void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("max_steps", &max_steps)
-      .Field("control_period", &control_period)
-      .Field("substeps", &substeps)
+  YamlFields fields;
+  tracking.AddFields(&fields);
+  fields.Field("max_steps", &max_steps)
       .Field("action_scale", &action_scale)
-      .Field("tracking_omega", &tracking_omega)
-      .Field("ik_damping", &ik_damping)
       .Field("start", &start)
       .Field("start_noise", &start_noise)
       .Field("target", &target)
@@ -253,8 +238,8 @@ void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& 
       .Field("tilt_scale", &tilt_scale)
       .Field("tilt_coupling", &tilt_coupling)
       .Section("person",
-               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); })
-      .Apply(node, source);
+               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); });
+  fields.Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -275,7 +260,7 @@ CoffeePlacingSim::CoffeePlacingSim(const CoffeePlacingOptions& options)
     : options_((options.Validate(), options)) {
   franka::MujocoModel m = franka::MujocoModel::Copy(CoffeePlacingModel());
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.control_period / options_.substeps;
+  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   const franka::HumanArmCapsules capsules(raw, Geometry(options_.person), "coffee-placing");
   const int cup_body = mj_name2id(raw, mjOBJ_BODY, "cup");
   SECURE_CHECK(cup_body >= 0 && raw->body_mocapid[cup_body] >= 0,
@@ -347,12 +332,7 @@ void CoffeePlacingSim::Step(const Eigen::Ref<const Eigen::Vector4f>& action) {
   Eigen::Vector3d target = ee + options_.action_scale * a.head<3>();
   // The cup stops at the table.
   target.z() = std::max(target.z(), options_.target[2] + kCupDrop);
-  franka::ArmTracking tracking;
-  tracking.control_period = options_.control_period;
-  tracking.substeps = options_.substeps;
-  tracking.tracking_omega = options_.tracking_omega;
-  tracking.ik_damping = options_.ik_damping;
-  impl_->arm.Track(m, d, target, tracking);
+  impl_->arm.Track(m, d, target, options_.tracking);
   franka::CheckWarnings(d, "coffee-placing", "a step");
   mj_objectVelocity(m, d, mjOBJ_SITE, impl_->arm.tcp(), v, 0);
   tilt_ =
@@ -474,7 +454,8 @@ std::string CoffeePlacingEnv::Describe() const {
        "person reaches for one of "
     << o.person.book_x.size() << " books beside its path; a violation: the hand-and-cup within "
     << thresholds_.comfort_distance << " m of the arm or the cup tilted beyond "
-    << thresholds_.max_tilt << " rad; " << o.max_steps << " steps of " << o.control_period << " s";
+    << thresholds_.max_tilt << " rad; " << o.max_steps << " steps of " << o.tracking.control_period
+    << " s";
   return s.str();
 }
 

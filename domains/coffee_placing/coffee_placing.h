@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_tracking.h"
 #include "domains/franka/human_arm.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
@@ -99,11 +100,10 @@ struct PersonOptions {
 
 struct CoffeePlacingOptions {
   int max_steps = 150;
-  double control_period = 0.04;  // s per Step()
-  int substeps = 20;             // physics steps per control period
+  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
+  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
+  franka::ArmTracking tracking;
   double action_scale = 0.05;    // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;  // rad/s
-  double ik_damping = 0.02;
   Vec3 start = {0.32, -0.18, 0.22};  // the tool centre point at reset (m)
   double start_noise = 0.02;         // m, uniform per axis at reset
   Vec3 target = {0.02, -0.18, 0.0};  // the target square's centre on the table (m)
@@ -233,7 +233,7 @@ class CoffeePlacingEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double control_period() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().tracking.control_period; }
   bool CanRender() const override { return true; }
   void Render(int width, int height, Frame* frame) override;
 

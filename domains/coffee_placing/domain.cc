@@ -45,8 +45,9 @@ void CoffeePlacingDomainOptions::Validate() const {
   demonstrations.Validate();
   labels.Validate();
   const char* o = "CoffeePlacingDomainOptions";
-  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.control_period) < 1e-12, o, "shield_model.dt",
-                     shield_model.dt, "the control period (" << task.control_period << " s)");
+  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.tracking.control_period) < 1e-12, o,
+                     "shield_model.dt", shield_model.dt,
+                     "the control period (" << task.tracking.control_period << " s)");
   SECURE_CHECK_FIELD(
       std::isfinite(margin_distance) && margin_distance >= 0 && margin_distance <= 0.5, o,
       "margin_distance", margin_distance, "in [0, 0.5] m");
@@ -246,7 +247,7 @@ std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(
 
 experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
   experiments::ExperimentOptions o =
-      franka::ArmExperimentPreset(profile_, options_.task.control_period);
+      franka::ArmExperimentPreset(profile_, options_.task.tracking.control_period);
   o.data_seed = 5000;
   // Table 2's coffee-placing barrier: FC(64, 64), tanh, on BarrierFeatures().
   o.flat_barrier.hidden = {64, 64};

@@ -385,8 +385,9 @@ KitchenLabelCheckResult CheckKitchenLabels(const KitchenCuttingOptions& task,
   KitchenLabelCheckResult r;
   const long n = std::min(set.size(), options.max_states);
   const int continue_steps =
-      static_cast<int>(std::lround(options.continue_seconds / task.control_period));
-  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
+      static_cast<int>(std::lround(options.continue_seconds / task.tracking.control_period));
+  const int hold_steps =
+      static_cast<int>(std::lround(options.hold_seconds / task.tracking.control_period));
   for (long i = 0; i < n; ++i) {
     ++r.states;
     const Eigen::VectorXf o = set.states.col(i);

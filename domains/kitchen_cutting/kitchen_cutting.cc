@@ -185,19 +185,9 @@ void KitchenCuttingOptions::Validate() const {
   const char* o = "KitchenCuttingOptions";
   SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
                      "in [1, 100000]");
-  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
-                     "control_period", control_period, "in (0, 1] s");
-  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
-  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
-                     "large enough for a physics step <= 5 ms (control_period / substeps)");
+  tracking.Validate(o);
   SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
                      "action_scale", action_scale, "in (0, 0.2] m");
-  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
-                         tracking_omega * control_period / substeps < 0.5,
-                     o, "tracking_omega", tracking_omega,
-                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
-  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
-                     ik_damping, "in (0, 1)");
   SECURE_CHECK_FIELD(
       Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
       "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
@@ -219,32 +209,27 @@ void KitchenCuttingOptions::Validate() const {
 }
 
 nlohmann::json KitchenCuttingOptions::ToJson() const {
-  return {{"max_steps", max_steps},
-          {"control_period", control_period},
-          {"substeps", substeps},
-          {"action_scale", action_scale},
-          {"tracking_omega", tracking_omega},
-          {"ik_damping", ik_damping},
-          {"initial_joint_noise", initial_joint_noise},
-          {"board_top", board_top},
-          {"cut_line_x", cut_line_x},
-          {"cut_line_y", cut_line_y},
-          {"cut_line_half_length", cut_line_half_length},
-          {"stroke_tolerance", stroke_tolerance},
-          {"lift_height", lift_height},
-          {"strokes_required", strokes_required},
-          {"contact_distance", contact_distance},
-          {"human", human.ToJson()}};
+  nlohmann::json j = {{"max_steps", max_steps},
+                      {"action_scale", action_scale},
+                      {"initial_joint_noise", initial_joint_noise},
+                      {"board_top", board_top},
+                      {"cut_line_x", cut_line_x},
+                      {"cut_line_y", cut_line_y},
+                      {"cut_line_half_length", cut_line_half_length},
+                      {"stroke_tolerance", stroke_tolerance},
+                      {"lift_height", lift_height},
+                      {"strokes_required", strokes_required},
+                      {"contact_distance", contact_distance},
+                      {"human", human.ToJson()}};
+  tracking.AddJson(&j);
+  return j;
 }
 
 void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("max_steps", &max_steps)
-      .Field("control_period", &control_period)
-      .Field("substeps", &substeps)
+  YamlFields fields;
+  tracking.AddFields(&fields);
+  fields.Field("max_steps", &max_steps)
       .Field("action_scale", &action_scale)
-      .Field("tracking_omega", &tracking_omega)
-      .Field("ik_damping", &ik_damping)
       .Field("initial_joint_noise", &initial_joint_noise)
       .Field("board_top", &board_top)
       .Field("cut_line_x", &cut_line_x)
@@ -255,8 +240,8 @@ void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string&
       .Field("strokes_required", &strokes_required)
       .Field("contact_distance", &contact_distance)
       .Section("human",
-               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); })
-      .Apply(node, source);
+               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); });
+  fields.Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -277,7 +262,7 @@ KitchenCuttingSim::KitchenCuttingSim(const KitchenCuttingOptions& options)
     : options_((options.Validate(), options)) {
   franka::MujocoModel m = franka::MujocoModel::Copy(KitchenCuttingModel());
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.control_period / options_.substeps;
+  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   // The person's capsules take the options' sizes (each runs along its body's z from 0 to L).
   const franka::HumanArmCapsules capsules(raw, Geometry(options_.human), "kitchen-cutting");
   impl_ = std::make_unique<Impl>(std::move(m), capsules);
@@ -362,12 +347,7 @@ void KitchenCuttingSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
   Eigen::Vector3d target = ee + options_.action_scale * a;
   // The blade stops at the board.
   target.z() = std::max(target.z(), options_.board_top + kBladeDrop);
-  franka::ArmTracking tracking;
-  tracking.control_period = options_.control_period;
-  tracking.substeps = options_.substeps;
-  tracking.tracking_omega = options_.tracking_omega;
-  tracking.ik_damping = options_.ik_damping;
-  impl_->arm.Track(m, d, target, tracking);
+  impl_->arm.Track(m, d, target, options_.tracking);
   franka::CheckWarnings(d, "kitchen-cutting", "a step");
   UpdateHuman();
   UpdateProgress();
@@ -507,7 +487,7 @@ std::string KitchenCuttingEnv::Describe() const {
     << o.strokes_required << " strokes through a line on a board while a simulated person's arm "
     << "reaches (into the knife's workspace with p = " << o.human.into_probability
     << "); dangerous: the blade's edge within " << o.contact_distance << " m of the arm; "
-    << o.max_steps << " steps of " << o.control_period << " s";
+    << o.max_steps << " steps of " << o.tracking.control_period << " s";
   return s.str();
 }
 

@@ -38,6 +38,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_tracking.h"
 #include "domains/franka/human_arm.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
@@ -90,11 +91,10 @@ struct HumanArmOptions {
 
 struct KitchenCuttingOptions {
   int max_steps = 200;
-  double control_period = 0.04;  // s per Step()
-  int substeps = 20;             // physics steps per control period
+  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
+  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
+  franka::ArmTracking tracking;
   double action_scale = 0.05;    // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;  // rad/s
-  double ik_damping = 0.02;
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   // The cut (the board's top is at board_top; the knife is fixed by the model: blade 0.16 m
   // long, its edge blade_drop below the tool centre point).
@@ -244,7 +244,7 @@ class KitchenCuttingEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double control_period() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().tracking.control_period; }
   /// domains/franka/'s offscreen renderer (OSMesa), created on the first call; frames up to
   /// 1280 x 720, seen from the robot's right, the person's arm at the back.
   bool CanRender() const override { return true; }

@@ -84,10 +84,12 @@ Continuation Continue(PandaPushSim& sim, const PandaPushOptions& task,
                       const Eigen::Ref<const Eigen::VectorXf>& s, const LabelCheckOptions& options,
                       Eigen::Ref<Eigen::VectorXf> o) {
   if (sim.SetObservation(s) > 0.01) return Continuation::kUnreachable;
-  const int push_steps = static_cast<int>(std::lround(options.push_seconds / task.control_period));
-  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
-  const int stop_steps =
-      std::max(1, static_cast<int>(std::lround(options.stop_seconds / task.control_period)));
+  const int push_steps =
+      static_cast<int>(std::lround(options.push_seconds / task.tracking.control_period));
+  const int hold_steps =
+      static_cast<int>(std::lround(options.hold_seconds / task.tracking.control_period));
+  const int stop_steps = std::max(
+      1, static_cast<int>(std::lround(options.stop_seconds / task.tracking.control_period)));
   Eigen::Vector3f a;
   for (int k = 0; k < 3; ++k)
     a[k] = std::clamp(static_cast<float>(s[kEeVel + k] / options.velocity_gain), -1.0f, 1.0f);

@@ -259,7 +259,7 @@ cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
 
 experiments::ExperimentOptions PandaPushDomain::Preset() const {
   experiments::ExperimentOptions o =
-      franka::ArmExperimentPreset(profile_, options_.task.control_period);
+      franka::ArmExperimentPreset(profile_, options_.task.tracking.control_period);
   o.data_seed = 3000;
   // The paper's Table 2 barrier: 32-128-128-256-256-256-256-128-128-32, tanh, on the first 9
   // observation features.

@@ -39,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_tracking.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
@@ -75,11 +76,10 @@ inline constexpr std::array<double, kArmJoints> kNeutralJoints = {0.0, 0.11, 0.0
 
 struct PandaPushOptions {
   int max_steps = 150;
-  double control_period = 0.04;       // s per Step()
-  int substeps = 20;                  // physics steps per control period (timestep 2 ms)
+  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
+  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
+  franka::ArmTracking tracking;
   double action_scale = 0.05;         // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;       // rad/s, the joint controller's natural frequency
-  double ik_damping = 0.02;           // damped least squares lambda (m / rad)
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   std::array<double, 3> block_start = {0.40, 0.0, 0.20};
   std::array<double, 3> target = {0.55, 0.0, 0.20};
@@ -256,7 +256,7 @@ class PandaPushEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double control_period() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().tracking.control_period; }
   /// MuJoCo's renderer in an OSMesa context (software OpenGL), created on the first call; frames
   /// up to 1280 x 720.
   bool CanRender() const override { return true; }
