@@ -293,31 +293,23 @@ void PandaPushShieldModelOptions::Validate() const {
                      "empty unless kind = learned");
   SECURE_CHECK_FIELD(kind != "learned" || !path.empty(), o, "path", "''",
                      "a learned dynamics model file (`secure dynamics train`) with kind = learned");
-  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
-                     ">= 0");
-  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
-                     ">= 0");
+  EndEffectorGains::Validate(o);
   SECURE_CHECK_FIELD(Finite(contact_range) && contact_range >= 0, o, "contact_range", contact_range,
                      ">= 0");
 }
 
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
-  nlohmann::json j = {{"kind", kind},
-                      {"position_gain", position_gain},
-                      {"velocity_gain", velocity_gain},
-                      {"contact_range", contact_range}};
+  nlohmann::json j = {{"kind", kind}, {"contact_range", contact_range}};
+  AddJson(&j);
   if (kind == "learned") j["path"] = path;
   return j;
 }
 
 void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("kind", &kind)
-      .Field("position_gain", &position_gain)
-      .Field("velocity_gain", &velocity_gain)
-      .Field("contact_range", &contact_range)
-      .Field("path", &path)
-      .Apply(node, source);
+  YamlFields fields;
+  fields.Field("kind", &kind);
+  AddFields(&fields);
+  fields.Field("contact_range", &contact_range).Field("path", &path).Apply(node, source);
 }
 
 PandaPushShieldModel::PandaPushShieldModel(const PandaPushShieldModelOptions& options)
@@ -334,19 +326,10 @@ std::string PandaPushShieldModel::Describe() const {
 void PandaPushShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
                                   const Eigen::Ref<const Eigen::MatrixXf>& actions,
                                   Eigen::Ref<Eigen::MatrixXf> next) const {
-  const float pg = static_cast<float>(options_.position_gain);
-  const float vg = static_cast<float>(options_.velocity_gain);
   const bool pushing =
       std::abs(state[kEePos] - state[kBlockPos]) < static_cast<float>(options_.contact_range);
-  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
-    next.col(c) = state;
-    for (int k = 0; k < 3; ++k) {
-      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
-      next(kEePos + k, c) += pg * a;
-      next(kEeVel + k, c) = vg * a;
-      if (pushing) next(kBlockPos + k, c) += pg * a;
-    }
-  }
+  for (Eigen::Index c = 0; c < actions.cols(); ++c)  // the block with the hand while pushing
+    options_.Step(state, actions, c, kEePos, kEeVel, pushing ? kBlockPos : -1, next);
 }
 
 PandaPushRolloutModel::PandaPushRolloutModel(const PandaPushSim& live)

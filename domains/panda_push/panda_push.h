@@ -39,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_shield_model.h"
 #include "domains/franka/arm_tracking.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
@@ -165,11 +166,10 @@ class PandaPushSim {
 /// `kind: rollout` replaces it with PandaPushRolloutModel (below), privileged and exact: an upper
 /// bound on what a perfect model gives the shield, at the cost of one simulated control period
 /// per sampled action (the gains then play no part).
-struct PandaPushShieldModelOptions {
+/// The gains (position_gain, velocity_gain) are the shared franka::EndEffectorGains.
+struct PandaPushShieldModelOptions : franka::EndEffectorGains {
   std::string kind = "approximate";  // approximate | rollout | learned
   std::string path;                  // kind = learned: a `secure dynamics train` model file
-  double position_gain = 0.05;
-  double velocity_gain = 1.25;
   double contact_range = 0.15;
   void Validate() const;
   nlohmann::json ToJson() const;
