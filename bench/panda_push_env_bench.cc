@@ -32,7 +32,7 @@ Eigen::Vector3f ScriptedPush(const Eigen::VectorXf& o) {
 
 void BM_PandaPushStep(benchmark::State& state) {
   PandaPushOptions options;
-  options.substeps = static_cast<int>(state.range(0));
+  options.tracking.substeps = static_cast<int>(state.range(0));
   PandaPushEnv env(options, PandaPushShieldModelOptions{});
   Rng rng(1);
   Eigen::VectorXf obs(kObservationDim);

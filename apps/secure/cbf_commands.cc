@@ -96,8 +96,8 @@ class TrainerFlags {
 
  private:
   using Options = cbf::BarrierTrainerOptions;
-  template <typename T>
-  CLI::Option* Bind(CLI::App* cmd, const std::string& name, T Options::*field,
+  template <typename T, typename C>  // C: Options or a base of it (cbf::TrainingSchedule)
+  CLI::Option* Bind(CLI::App* cmd, const std::string& name, T C::*field,
                     const std::string& help) {
     CLI::Option* option = cmd->add_option(name, parsed_.*field, help)->capture_default_str();
     copies_.emplace_back(option,

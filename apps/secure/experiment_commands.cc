@@ -378,7 +378,7 @@ struct ExperimentCommand {
     }
     d->Validate();  // before the first line of progress
     options.Validate();
-    d->CheckExperiment(options);
+    experiments::CheckExperimentOptions(*d, options);
     CreateDirectories(out);  // (also done by the run) an unusable --out fails before any output
     // One run per directory (shards of one experiment share it): a second one fails at once.
     std::optional<RunDirectoryLock> lock;

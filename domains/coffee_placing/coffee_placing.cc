@@ -35,21 +35,6 @@ Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
   return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
 }
 
-double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
-
-franka::HumanArmGeometry Geometry(const PersonOptions& p) {
-  franka::HumanArmGeometry g;
-  g.shoulder = V(p.shoulder);
-  g.upper_arm = p.upper_arm;
-  g.forearm = p.forearm;
-  g.hand = p.hand;
-  g.upper_arm_radius = p.upper_arm_radius;
-  g.forearm_radius = p.forearm_radius;
-  g.hand_radius = p.hand_radius;
-  g.elbow_out = Eigen::Vector3d(0, 1, -1);  // towards the person (+y) and down
-  return g;
-}
-
 }  // namespace
 
 bool Thresholds::Violated(double clearance, double tilt) const {
@@ -72,39 +57,25 @@ const std::vector<std::string>& ActionFeatures() {
 // ---------------------------------------------------------------------------------------------
 // The person's arm, the cup
 
-ArmPose ArmPoseForWrist(const PersonOptions& p, const Eigen::Vector3d& wrist) {
-  return franka::HumanArmPoseForWrist(Geometry(p), wrist);
-}
-
 Eigen::Vector3d CupBottom(const Eigen::Vector3d& ee, double tilt) {
   return ee + Eigen::Vector3d(-kCupDrop * std::sin(tilt), 0.0, -kCupDrop * std::cos(tilt));
 }
 
 double Clearance(const PersonOptions& p, const Eigen::Vector3d& ee, double tilt,
                  const ArmPose& arm) {
-  return franka::SegmentToArmDistance(Geometry(p), ee, CupBottom(ee, tilt), arm);
+  return franka::SegmentToArmDistance(p.Geometry(), ee, CupBottom(ee, tilt), arm);
 }
 
 double ObservedClearance(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o) {
-  return Clearance(p, At(o, kEePos), o[kTilt], franka::ReadHumanArm(o, kWrist, V(p.shoulder)));
-}
-
-Eigen::Vector3d BookReach::Wrist(const PersonOptions& p, double t) const {
-  const Eigen::Vector3d rest = V(p.rest);
-  if (t <= start) return rest;
-  if (t <= start + travel) return rest + franka::MinJerk((t - start) / travel) * (goal - rest);
-  if (t <= start + travel + dwell) return goal;
-  return goal + franka::MinJerk((t - start - travel - dwell) / travel) * (rest - goal);
+  return Clearance(p, At(o, kEePos), o[kTilt], franka::ReadHumanArm(o, kWrist, p.Shoulder()));
 }
 
 BookReach DrawBookReach(const PersonOptions& p, Rng& rng) {
   BookReach r;
   r.book = static_cast<int>(rng.UniformIndex(p.book_x.size()));
   r.goal = Eigen::Vector3d(p.book_x[static_cast<std::size_t>(r.book)],
-                           p.book_y + Draw(rng, p.goal_dy), p.goal_z);
-  r.start = Draw(rng, p.start_time);
-  r.travel = std::max(0.05, (r.goal - V(p.rest)).norm() / Draw(rng, p.speed));
-  r.dwell = Draw(rng, p.dwell);
+                           p.book_y + franka::DrawUniform(rng, p.goal_dy), p.goal_z);
+  franka::DrawReachTiming(p, rng, &r);
   return r;
 }
 
@@ -113,19 +84,7 @@ BookReach DrawBookReach(const PersonOptions& p, Rng& rng) {
 
 void PersonOptions::Validate() const {
   const char* o = "PersonOptions";
-  for (int k = 0; k < 3; ++k) {
-    SECURE_CHECK_FIELD(Finite(shoulder[k]), o, "shoulder", shoulder[k], "finite");
-    SECURE_CHECK_FIELD(Finite(rest[k]), o, "rest", rest[k], "finite");
-  }
-  for (auto [name, v] : {std::pair{"upper_arm", upper_arm}, std::pair{"forearm", forearm},
-                         std::pair{"hand", hand}}) {
-    SECURE_CHECK_FIELD(Finite(v) && v > 0.01 && v <= 1.0, o, name, v, "in (0.01, 1] m");
-  }
-  for (auto [name, v] :
-       {std::pair{"upper_arm_radius", upper_arm_radius},
-        std::pair{"forearm_radius", forearm_radius}, std::pair{"hand_radius", hand_radius}}) {
-    SECURE_CHECK_FIELD(Finite(v) && v > 0 && v <= 0.2, o, name, v, "in (0, 0.2] m");
-  }
+  PersonArmOptions::Validate(o);
   SECURE_CHECK_FIELD(!book_x.empty() && book_x.size() <= 16, o, "book_x", book_x.size() << " books",
                      "1 to 16 books");
   for (double x : book_x)
@@ -134,66 +93,32 @@ void PersonOptions::Validate() const {
   CheckIntervalField(goal_dy, o, "goal_dy", -0.5, 0.5);
   SECURE_CHECK_FIELD(Finite(goal_z) && goal_z > 0 && goal_z <= 1, o, "goal_z", goal_z,
                      "in (0, 1] m");
-  CheckIntervalField(start_time, o, "start_time", 0, 100);
-  CheckIntervalField(speed, o, "speed", 0.01, 5);
-  CheckIntervalField(dwell, o, "dwell", 0, 100);
 }
 
 nlohmann::json PersonOptions::ToJson() const {
-  return {{"shoulder", shoulder},
-          {"upper_arm", upper_arm},
-          {"forearm", forearm},
-          {"hand", hand},
-          {"upper_arm_radius", upper_arm_radius},
-          {"forearm_radius", forearm_radius},
-          {"hand_radius", hand_radius},
-          {"rest", rest},
-          {"book_x", book_x},
-          {"book_y", book_y},
-          {"goal_dy", goal_dy},
-          {"goal_z", goal_z},
-          {"start_time", start_time},
-          {"speed", speed},
-          {"dwell", dwell}};
+  nlohmann::json j = {
+      {"book_x", book_x}, {"book_y", book_y}, {"goal_dy", goal_dy}, {"goal_z", goal_z}};
+  AddJson(&j);
+  return j;
 }
 
 void PersonOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("shoulder", &shoulder)
-      .Field("upper_arm", &upper_arm)
-      .Field("forearm", &forearm)
-      .Field("hand", &hand)
-      .Field("upper_arm_radius", &upper_arm_radius)
-      .Field("forearm_radius", &forearm_radius)
-      .Field("hand_radius", &hand_radius)
-      .Field("rest", &rest)
-      .Field("book_x", &book_x)
+  YamlFields fields;
+  AddFields(&fields);
+  fields.Field("book_x", &book_x)
       .Field("book_y", &book_y)
       .Field("goal_dy", &goal_dy)
-      .Field("goal_z", &goal_z)
-      .Field("start_time", &start_time)
-      .Field("speed", &speed)
-      .Field("dwell", &dwell)
-      .Apply(node, source);
+      .Field("goal_z", &goal_z);
+  fields.Apply(node, source);
 }
 
 void CoffeePlacingOptions::Validate() const {
   const char* o = "CoffeePlacingOptions";
   SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
                      "in [1, 100000]");
-  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
-                     "control_period", control_period, "in (0, 1] s");
-  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
-  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
-                     "large enough for a physics step <= 5 ms (control_period / substeps)");
+  tracking.Validate(o);
   SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
                      "action_scale", action_scale, "in (0, 0.2] m");
-  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
-                         tracking_omega * control_period / substeps < 0.5,
-                     o, "tracking_omega", tracking_omega,
-                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
-  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
-                     ik_damping, "in (0, 1)");
   for (int k = 0; k < 3; ++k) {
     SECURE_CHECK_FIELD(Finite(start[k]) && std::abs(start[k]) <= 1, o, "start", start[k],
                        "within 1 m of the origin");
@@ -219,31 +144,26 @@ void CoffeePlacingOptions::Validate() const {
 }
 
 nlohmann::json CoffeePlacingOptions::ToJson() const {
-  return {{"max_steps", max_steps},
-          {"control_period", control_period},
-          {"substeps", substeps},
-          {"action_scale", action_scale},
-          {"tracking_omega", tracking_omega},
-          {"ik_damping", ik_damping},
-          {"start", start},
-          {"start_noise", start_noise},
-          {"target", target},
-          {"target_half_size", target_half_size},
-          {"place_tolerance", place_tolerance},
-          {"upright_tilt", upright_tilt},
-          {"tilt_scale", tilt_scale},
-          {"tilt_coupling", tilt_coupling},
-          {"person", person.ToJson()}};
+  nlohmann::json j = {{"max_steps", max_steps},
+                      {"action_scale", action_scale},
+                      {"start", start},
+                      {"start_noise", start_noise},
+                      {"target", target},
+                      {"target_half_size", target_half_size},
+                      {"place_tolerance", place_tolerance},
+                      {"upright_tilt", upright_tilt},
+                      {"tilt_scale", tilt_scale},
+                      {"tilt_coupling", tilt_coupling},
+                      {"person", person.ToJson()}};
+  tracking.AddJson(&j);
+  return j;
 }
 
 void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("max_steps", &max_steps)
-      .Field("control_period", &control_period)
-      .Field("substeps", &substeps)
+  YamlFields fields;
+  tracking.AddFields(&fields);
+  fields.Field("max_steps", &max_steps)
       .Field("action_scale", &action_scale)
-      .Field("tracking_omega", &tracking_omega)
-      .Field("ik_damping", &ik_damping)
       .Field("start", &start)
       .Field("start_noise", &start_noise)
       .Field("target", &target)
@@ -253,8 +173,8 @@ void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& 
       .Field("tilt_scale", &tilt_scale)
       .Field("tilt_coupling", &tilt_coupling)
       .Section("person",
-               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); })
-      .Apply(node, source);
+               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); });
+  fields.Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -275,8 +195,8 @@ CoffeePlacingSim::CoffeePlacingSim(const CoffeePlacingOptions& options)
     : options_((options.Validate(), options)) {
   franka::MujocoModel m = franka::MujocoModel::Copy(CoffeePlacingModel());
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.control_period / options_.substeps;
-  const franka::HumanArmCapsules capsules(raw, Geometry(options_.person), "coffee-placing");
+  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
+  const franka::HumanArmCapsules capsules(raw, options_.person.Geometry(), "coffee-placing");
   const int cup_body = mj_name2id(raw, mjOBJ_BODY, "cup");
   SECURE_CHECK(cup_body >= 0 && raw->body_mocapid[cup_body] >= 0,
                "coffee-placing: no cup mocap body in the model");
@@ -296,13 +216,10 @@ void CoffeePlacingSim::UpdateScene() {
   const PersonOptions& p = options_.person;
   mjData* d = impl_->data.get();
   const double t = d->time;
-  constexpr double kH = 1e-3;  // s, central differences for the velocities
-  arm_ = ArmPoseForWrist(p, reach_.Wrist(p, t));
-  const ArmPose ahead = ArmPoseForWrist(p, reach_.Wrist(p, t + kH));
-  const ArmPose behind = ArmPoseForWrist(p, reach_.Wrist(p, std::max(0.0, t - kH)));
-  const double span = t + kH - std::max(0.0, t - kH);
-  wrist_vel_ = (ahead.wrist - behind.wrist) / span;
-  elbow_vel_ = (ahead.elbow - behind.elbow) / span;
+  const franka::PersonArmMotion motion = franka::PersonArmAt(p, reach_, t);
+  arm_ = motion.pose;
+  wrist_vel_ = motion.wrist_velocity;
+  elbow_vel_ = motion.elbow_velocity;
   // The cup: its top at the tool centre point, tilted about y.
   const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
   const Eigen::Vector3d centre = 0.5 * (ee + CupBottom(ee, tilt_));
@@ -347,12 +264,7 @@ void CoffeePlacingSim::Step(const Eigen::Ref<const Eigen::Vector4f>& action) {
   Eigen::Vector3d target = ee + options_.action_scale * a.head<3>();
   // The cup stops at the table.
   target.z() = std::max(target.z(), options_.target[2] + kCupDrop);
-  franka::ArmTracking tracking;
-  tracking.control_period = options_.control_period;
-  tracking.substeps = options_.substeps;
-  tracking.tracking_omega = options_.tracking_omega;
-  tracking.ik_damping = options_.ik_damping;
-  impl_->arm.Track(m, d, target, tracking);
+  impl_->arm.Track(m, d, target, options_.tracking);
   franka::CheckWarnings(d, "coffee-placing", "a step");
   mj_objectVelocity(m, d, mjOBJ_SITE, impl_->arm.tcp(), v, 0);
   tilt_ =
@@ -392,27 +304,6 @@ void CoffeePlacingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
 // ---------------------------------------------------------------------------------------------
 // The shield's model
 
-void CoffeeShieldModelOptions::Validate() const {
-  const char* o = "CoffeeShieldModelOptions";
-  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
-                     ">= 0");
-  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
-                     ">= 0");
-  SECURE_CHECK_FIELD(Finite(dt) && dt > 0, o, "dt", dt, "> 0 s");
-}
-
-nlohmann::json CoffeeShieldModelOptions::ToJson() const {
-  return {{"position_gain", position_gain}, {"velocity_gain", velocity_gain}, {"dt", dt}};
-}
-
-void CoffeeShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("position_gain", &position_gain)
-      .Field("velocity_gain", &velocity_gain)
-      .Field("dt", &dt)
-      .Apply(node, source);
-}
-
 CoffeeShieldModel::CoffeeShieldModel(const CoffeeShieldModelOptions& options,
                                      const CoffeePlacingOptions& task)
     : options_((options.Validate(), options)), task_(task) {}
@@ -429,16 +320,9 @@ std::string CoffeeShieldModel::Describe() const {
 void CoffeeShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
                                const Eigen::Ref<const Eigen::MatrixXf>& actions,
                                Eigen::Ref<Eigen::MatrixXf> next) const {
-  const float pg = static_cast<float>(options_.position_gain);
-  const float vg = static_cast<float>(options_.velocity_gain);
   const float dt = static_cast<float>(options_.dt);
   for (Eigen::Index c = 0; c < actions.cols(); ++c) {
-    next.col(c) = state;
-    for (int k = 0; k < 3; ++k) {
-      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
-      next(kEePos + k, c) += pg * a;
-      next(kEeVel + k, c) = vg * a;
-    }
+    options_.Step(state, actions, c, kEePos, kEeVel, /*carried=*/-1, next);
     franka::ExtrapolateHumanArm(state, kWrist, dt, next.col(c));
     const float at = std::clamp(actions(3, c), -1.0f, 1.0f);
     const float tilt = state[kTilt] + static_cast<float>(task_.tilt_scale) * at +
@@ -474,7 +358,8 @@ std::string CoffeePlacingEnv::Describe() const {
        "person reaches for one of "
     << o.person.book_x.size() << " books beside its path; a violation: the hand-and-cup within "
     << thresholds_.comfort_distance << " m of the arm or the cup tilted beyond "
-    << thresholds_.max_tilt << " rad; " << o.max_steps << " steps of " << o.control_period << " s";
+    << thresholds_.max_tilt << " rad; " << o.max_steps << " steps of " << o.tracking.control_period
+    << " s";
   return s.str();
 }
 

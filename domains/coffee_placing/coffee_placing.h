@@ -36,7 +36,10 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_shield_model.h"
+#include "domains/franka/arm_tracking.h"
 #include "domains/franka/human_arm.h"
+#include "domains/franka/person.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
@@ -78,20 +81,21 @@ struct Thresholds {
 };
 
 /// The person's arm and its reaches for the books. ASSUMPTIONS standing in for a person
-/// (README.md), not measurements of people.
-struct PersonOptions {
-  Vec3 shoulder = {0.17, 0.48, 0.40};  // m, fixed (a person at the table's +y side)
-  double upper_arm = 0.30, forearm = 0.27, hand = 0.08;  // segment lengths (m)
-  double upper_arm_radius = 0.045, forearm_radius = 0.035, hand_radius = 0.03;  // m
-  Vec3 rest = {0.17, 0.28, 0.15};                         // the wrist's rest point (m)
+/// (README.md), not measurements of people. The arm's body and the timing of its reaches are the
+/// shared person's (franka::PersonArmOptions), with this plug-in's defaults for the shoulder
+/// (a person at the table's +y side), the rest point and the dwell; where a reach goes (a book)
+/// is this one's.
+struct PersonOptions : franka::PersonArmOptions {
   std::vector<double> book_x = {0.00, 0.11, 0.22, 0.33};  // the four books' centres (m)
   double book_y = -0.04;                                  // m, the row of books
   Interval goal_dy = {-0.02, 0.03};  // the wrist's goal: the book's centre + this in y
   double goal_z = 0.08;              // m, the wrist above the book
-  Interval start_time = {0.0, 1.0};  // s after reset the reach begins
-  Interval speed = {0.3, 0.6};       // m/s, the wrist's mean speed (minimum jerk)
-  Interval dwell = {0.5, 1.5};       // s at the book before returning
 
+  PersonOptions() {
+    shoulder = {0.17, 0.48, 0.40};  // m
+    rest = {0.17, 0.28, 0.15};      // m
+    dwell = {0.5, 1.5};             // s
+  }
   void Validate() const;
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
@@ -99,11 +103,10 @@ struct PersonOptions {
 
 struct CoffeePlacingOptions {
   int max_steps = 150;
-  double control_period = 0.04;  // s per Step()
-  int substeps = 20;             // physics steps per control period
+  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
+  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
+  franka::ArmTracking tracking;
   double action_scale = 0.05;    // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;  // rad/s
-  double ik_damping = 0.02;
   Vec3 start = {0.32, -0.18, 0.22};  // the tool centre point at reset (m)
   double start_noise = 0.02;         // m, uniform per axis at reset
   Vec3 target = {0.02, -0.18, 0.0};  // the target square's centre on the table (m)
@@ -122,7 +125,7 @@ struct CoffeePlacingOptions {
 /// The person's arm at one instant: shoulder, elbow, wrist, hand tip (m).
 using ArmPose = franka::HumanArmPose;
 /// The elbow and hand tip for a wrist position.
-ArmPose ArmPoseForWrist(const PersonOptions& p, const Eigen::Vector3d& wrist);
+using franka::ArmPoseForWrist;
 /// The cup's bottom for a tool centre point and tilt.
 Eigen::Vector3d CupBottom(const Eigen::Vector3d& ee, double tilt);
 /// The clearance: the hand-and-cup segment (ee to the cup's bottom) to the arm's surface (m).
@@ -132,11 +135,8 @@ double Clearance(const PersonOptions& p, const Eigen::Vector3d& ee, double tilt,
 double ObservedClearance(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o);
 
 /// One reach for a book (drawn at Reset).
-struct BookReach {
+struct BookReach : franka::PersonReach {
   int book = 0;
-  Eigen::Vector3d goal;
-  double start = 0, travel = 1, dwell = 0;
-  Eigen::Vector3d Wrist(const PersonOptions& p, double t) const;
 };
 BookReach DrawBookReach(const PersonOptions& p, Rng& rng);
 
@@ -179,13 +179,9 @@ class CoffeePlacingSim {
 /// ee_vx); the person's wrist, elbow and hand tip move on at the observed wrist and elbow
 /// velocities for dt (the tip with the wrist); the clearance recomputed from the predicted
 /// positions. It ignores the arm's dynamics, the table and the person's acceleration.
-struct CoffeeShieldModelOptions {
-  double position_gain = 0.05;
-  double velocity_gain = 1.25;
-  double dt = 0.04;
-  void Validate() const;
-  nlohmann::json ToJson() const;
-  void ApplyYaml(const YAML::Node& node, const std::string& source);
+/// The options (position_gain, velocity_gain, dt) are the shared franka::PersonShieldModelOptions.
+struct CoffeeShieldModelOptions : franka::PersonShieldModelOptions {
+  void Validate() const { PersonShieldModelOptions::Validate("CoffeeShieldModelOptions"); }
 };
 
 class CoffeeShieldModel final : public DynamicsModel {
@@ -233,7 +229,7 @@ class CoffeePlacingEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double StepSeconds() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().tracking.control_period; }
   bool CanRender() const override { return true; }
   void Render(int width, int height, Frame* frame) override;
 

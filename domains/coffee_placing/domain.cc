@@ -45,8 +45,9 @@ void CoffeePlacingDomainOptions::Validate() const {
   demonstrations.Validate();
   labels.Validate();
   const char* o = "CoffeePlacingDomainOptions";
-  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.control_period) < 1e-12, o, "shield_model.dt",
-                     shield_model.dt, "the control period (" << task.control_period << " s)");
+  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.tracking.control_period) < 1e-12, o,
+                     "shield_model.dt", shield_model.dt,
+                     "the control period (" << task.tracking.control_period << " s)");
   SECURE_CHECK_FIELD(
       std::isfinite(margin_distance) && margin_distance >= 0 && margin_distance <= 0.5, o,
       "margin_distance", margin_distance, "in [0, 0.5] m");
@@ -244,16 +245,9 @@ std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(
   return std::make_unique<CoffeePopulation>(options_, options);
 }
 
-void CoffeePlacingDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
-  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
-                     "ExperimentOptions", "shield.dt", options.shield.dt,
-                     "the control period (" << options_.task.control_period
-                                            << " s): the shield's model looks one step ahead");
-}
-
 experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
   experiments::ExperimentOptions o =
-      franka::ArmExperimentPreset(profile_, options_.task.control_period);
+      franka::ArmExperimentPreset(profile_, options_.task.tracking.control_period);
   o.data_seed = 5000;
   // Table 2's coffee-placing barrier: FC(64, 64), tanh, on BarrierFeatures().
   o.flat_barrier.hidden = {64, 64};

@@ -44,7 +44,7 @@ class CoffeePopulation final : public experiments::Population {
   std::unique_ptr<domains::Environment> MakeEnvironment(int p) const override;
   bool HeldWithMargin(int p, const Eigen::Ref<const Eigen::VectorXf>& observation) const override;
   std::string Describe() const override;
-  double StepSeconds() const override { return options_.task.control_period; }
+  double StepSeconds() const override { return options_.task.tracking.control_period; }
   /// Table 4 (Likert ratings, not rates).
   std::optional<experiments::PaperUserStudy> PaperReference() const override;
 
@@ -72,7 +72,6 @@ class CoffeePlacingDomain final : public experiments::Domain {
   std::unique_ptr<Environment> MakeEnvironment() const override;
   /// The mean participant's data.
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
-  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   experiments::ExperimentOptions Preset() const override;
 
   /// The barrier check (cbf/barrier_check.h), judged by the mean participant (as

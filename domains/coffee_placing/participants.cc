@@ -9,6 +9,7 @@
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/domains/demonstrations.h"
 
 namespace secure::domains::coffee_placing {
 namespace {
@@ -24,8 +25,7 @@ Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
 // The arm as the observation shows it, `ahead` seconds later at its velocity.
 ArmPose ObservedArm(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o,
                     double ahead) {
-  return franka::ReadHumanArm(o, kWrist,
-                              Eigen::Vector3d(p.shoulder[0], p.shoulder[1], p.shoulder[2]), ahead);
+  return franka::ReadHumanArm(o, kWrist, p.Shoulder(), ahead);
 }
 
 }  // namespace
@@ -252,19 +252,14 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
   CoffeePlacingEnv env(task, CoffeeShieldModelOptions{}, participant.thresholds);
   Rng rng(seed);
   CoffeeDemonstrations out;
-  out.trajectories.source =
-      "coffee-placing demonstrations of participant " + std::to_string(participant.index);
-  out.trajectories.state_features = ObservationFeatures();
-  out.trajectories.action_features = ActionFeatures();
-  out.trajectories.episode_begin.push_back(0);
-  std::vector<Eigen::VectorXf> obs_rows, act_rows;
-  std::vector<Eigen::VectorXf> eo, ea;
+  DemonstrationCollector collector(
+      "coffee-placing demonstrations of participant " + std::to_string(participant.index),
+      ObservationFeatures(), ActionFeatures());
   Eigen::VectorXf o(kObservationDim), next(kObservationDim);
   int attempt = 0;
-  while (static_cast<long>(obs_rows.size()) < options.states && attempt < options.max_attempts) {
+  while (collector.kept_steps() < options.states && attempt < options.max_attempts) {
     ++attempt;
-    eo.clear();
-    ea.clear();
+    collector.BeginEpisode();
     env.Reset(rng, o);
     bool violated = participant.thresholds.Violated(o[kClearance], o[kTilt]), placed = false;
     for (int t = 0; t < task.max_steps && !violated && !placed; ++t) {
@@ -272,8 +267,7 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
       for (int k = 0; k < kActionDim; ++k)
         a[k] = std::clamp(a[k] + static_cast<float>(participant.action_noise * rng.Normal()), -1.0f,
                           1.0f);
-      eo.push_back(o);
-      ea.push_back(a);
+      collector.Record(o, a);
       const StepOutcome r = env.Step(a, next);
       violated = r.collided;
       placed = r.reached_goal;
@@ -287,23 +281,15 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
       ++out.discarded_failed;
       continue;
     }
-    obs_rows.insert(obs_rows.end(), eo.begin(), eo.end());
-    act_rows.insert(act_rows.end(), ea.begin(), ea.end());
-    out.trajectories.episode_begin.push_back(static_cast<long>(obs_rows.size()));
+    collector.KeepEpisode();
   }
-  SECURE_CHECK(static_cast<long>(obs_rows.size()) >= options.states,
+  SECURE_CHECK(collector.kept_steps() >= options.states,
                "coffee-placing demonstrations of participant "
-                   << participant.index << ": only " << obs_rows.size() << " of " << options.states
-                   << " states in " << attempt << " attempts (" << out.discarded_violating
-                   << " violated the participant's thresholds, " << out.discarded_failed
-                   << " did not put the cup down)");
-  const long n = static_cast<long>(obs_rows.size());
-  out.trajectories.states.resize(kObservationDim, n);
-  out.trajectories.actions.resize(kActionDim, n);
-  for (long i = 0; i < n; ++i) {
-    out.trajectories.states.col(i) = obs_rows[static_cast<std::size_t>(i)];
-    out.trajectories.actions.col(i) = act_rows[static_cast<std::size_t>(i)];
-  }
+                   << participant.index << ": only " << collector.kept_steps() << " of "
+                   << options.states << " states in " << attempt << " attempts ("
+                   << out.discarded_violating << " violated the participant's thresholds, "
+                   << out.discarded_failed << " did not put the cup down)");
+  out.trajectories = collector.Finish();
   return out;
 }
 

@@ -191,7 +191,7 @@ class DerbyEnv final : public Environment {
     low.setConstant(-static_cast<float>(options_.accel_bound));
     high.setConstant(static_cast<float>(options_.accel_bound));
   }
-  double StepSeconds() const override { return options_.dt; }
+  double control_period() const override { return options_.dt; }
 
   /// A constructed situation (tests, replays): ego state (px, py, vx, vy), goal, and the cars'
   /// positions and velocities (2 x num_cars), every car then moving at CONSTANT velocity for all

@@ -9,6 +9,7 @@
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/timer.h"
+#include "secure/domains/demonstrations.h"
 
 namespace secure::domains::derby {
 namespace {
@@ -329,18 +330,11 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
 
   DerbyDemonstrations out;
   out.seed = demo.seed;
-  data::TrajectorySet& set = out.trajectories;
-  set.source = "derby expert demonstrations (seed " + std::to_string(demo.seed) + ")";
-  set.state_features = ObservationFeatures();
-  set.action_features = ActionFeatures();
-  set.episode_begin.push_back(0);
-  std::vector<float> states, actions;
-  states.reserve(static_cast<std::size_t>(demo.episodes) * horizon * kObservationDim);
-  actions.reserve(static_cast<std::size_t>(demo.episodes) * horizon * kActionDim);
-  Eigen::MatrixXf episode_states(kObservationDim, horizon);
-  Eigen::MatrixXf episode_actions(kActionDim, horizon);
+  DemonstrationCollector collector(
+      "derby expert demonstrations (seed " + std::to_string(demo.seed) + ")", ObservationFeatures(),
+      ActionFeatures(), demo.episodes * horizon);
   Eigen::VectorXf observation(kObservationDim);
-  Eigen::Vector2f action;
+  Eigen::Vector2f action, applied;
   const float bound = static_cast<float>(task.accel_bound);
   double min_distance = std::numeric_limits<double>::infinity();
   long kept = 0;
@@ -349,14 +343,15 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
     Rng rng = DerbyAttemptRng(demo.seed, attempt);
     env.Reset(rng, observation);
     expert.BeginEpisode(rng);
+    collector.BeginEpisode();
     int reached_at = 0;
     bool collided = false;
     double episode_min = env.NearestCarDistance();
     for (int step = 1; step <= horizon; ++step) {
       expert.Act(env, rng, action);
-      episode_states.col(step - 1) = observation;
       for (int i = 0; i < kActionDim; ++i)  // the applied action (the expert's is in the box)
-        episode_actions(i, step - 1) = std::clamp(action[i], -bound, bound);
+        applied[i] = std::clamp(action[i], -bound, bound);
+      collector.Record(observation, applied);
       const StepOutcome outcome = env.Step(action, observation);
       episode_min = std::min<double>(episode_min, env.NearestCarDistance());
       if (outcome.collided) {
@@ -377,10 +372,7 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
     min_distance = std::min(min_distance, episode_min);
     out.steps_to_goal.push_back(reached_at);
     out.attempts.push_back(attempt);
-    states.insert(states.end(), episode_states.data(), episode_states.data() + episode_states.size());
-    actions.insert(actions.end(), episode_actions.data(),
-                   episode_actions.data() + episode_actions.size());
-    set.episode_begin.push_back(set.episode_begin.back() + horizon);
+    collector.KeepEpisode();
   }
   out.expert = expert.stats();
   out.min_car_distance = kept > 0 ? min_distance : 0.0;
@@ -390,9 +382,7 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
                    << " demonstrations after " << out.attempted << " attempts ("
                    << out.discarded_collisions << " collided, " << out.discarded_no_goal
                    << " never reached the goal)");
-  const Eigen::Index steps = set.episode_begin.back();
-  set.states = Eigen::Map<const Eigen::MatrixXf>(states.data(), kObservationDim, steps);
-  set.actions = Eigen::Map<const Eigen::MatrixXf>(actions.data(), kActionDim, steps);
+  out.trajectories = collector.Finish();
   out.seconds = clock.Seconds();
   return out;
 }

@@ -131,12 +131,6 @@ experiments::ExperimentOptions DoubleIntegratorDomain::Preset() const {
   return o;
 }
 
-void DoubleIntegratorDomain::CheckExperiment(const experiments::ExperimentOptions& o) const {
-  SECURE_CHECK_FIELD(o.shield.dt == options_.task.dt, "ExperimentOptions", "shield.dt",
-                     o.shield.dt,
-                     "the task's dt = " << options_.task.dt << " (the shield looks one step ahead)");
-}
-
 std::unique_ptr<cbf::Barrier> DoubleIntegratorDomain::MakeGroundTruth() const {
   return std::make_unique<GroundTruthBarrier>(options_.task.truth);
 }

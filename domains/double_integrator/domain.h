@@ -51,8 +51,6 @@ class DoubleIntegratorDomain final : public experiments::Domain {
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
   experiments::ExperimentOptions Preset() const override;
-  /// The shield looks ahead one control period: shield.dt == task.dt.
-  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
 
   std::unique_ptr<cbf::Barrier> MakeGroundTruth() const override;
   std::optional<cbf::StateSource> ValidationGrid() const override;

@@ -10,6 +10,7 @@
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/timer.h"
+#include "secure/domains/demonstrations.h"
 
 namespace secure::domains::double_integrator {
 namespace {
@@ -299,14 +300,8 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
   const int horizon = env.max_steps();
 
   Demonstrations out;
-  data::TrajectorySet& set = out.trajectories;
-  set.source = "expert demonstrations (seed " + std::to_string(demo.seed) + ")";
-  set.state_features = StateFeatures();
-  set.action_features = ActionFeatures();
-  set.episode_begin.push_back(0);
-  std::vector<float> states, actions;  // column-major, grown per kept episode
-  Eigen::Matrix<float, kStateDim, Eigen::Dynamic> episode_states(kStateDim, horizon);
-  Eigen::Matrix<float, kActionDim, Eigen::Dynamic> episode_actions(kActionDim, horizon);
+  DemonstrationCollector collector("expert demonstrations (seed " + std::to_string(demo.seed) + ")",
+                                   StateFeatures(), ActionFeatures());
   Eigen::Vector4f observation;
   Eigen::Vector2f action;
   long kept = 0;
@@ -315,16 +310,15 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
     ++out.attempted;
     env.Reset(rng, observation);
     expert.BeginEpisode(rng);
-    int length = 0;
+    collector.BeginEpisode();
     int reached_at = 0;  // first step whose state is in the goal; 0 = never
     bool collided = false;
     for (int step = 1; step <= horizon; ++step) {
       expert.Act(observation, rng, action);
-      episode_states.col(length) = observation;
       // The action the environment applies: the clipped one (the expert's is inside the box).
-      episode_actions.col(length) = action.cwiseMax(-static_cast<float>(task.accel_bound))
-                                        .cwiseMin(static_cast<float>(task.accel_bound));
-      ++length;
+      const Eigen::Vector2f applied = action.cwiseMax(-static_cast<float>(task.accel_bound))
+                                          .cwiseMin(static_cast<float>(task.accel_bound));
+      collector.Record(observation, applied);
       const StepOutcome outcome = env.Step(action, observation);
       if (outcome.collided) {
         collided = true;
@@ -345,11 +339,7 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
     }
     ++kept;
     out.steps_to_goal.push_back(reached_at);
-    states.insert(states.end(), episode_states.data(),
-                  episode_states.data() + static_cast<std::ptrdiff_t>(kStateDim) * length);
-    actions.insert(actions.end(), episode_actions.data(),
-                   episode_actions.data() + static_cast<std::ptrdiff_t>(kActionDim) * length);
-    set.episode_begin.push_back(set.episode_begin.back() + length);
+    collector.KeepEpisode();
   }
   out.expert = expert.stats();
   SECURE_CHECK(!demo.require_all || kept == demo.episodes,
@@ -358,9 +348,7 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
                    << " demonstrations after " << out.attempted << " attempts ("
                    << out.discarded_collisions << " collided, " << out.discarded_no_goal
                    << " never reached the goal)");
-  const Eigen::Index steps = set.episode_begin.back();
-  set.states = Eigen::Map<const Eigen::MatrixXf>(states.data(), kStateDim, steps);
-  set.actions = Eigen::Map<const Eigen::MatrixXf>(actions.data(), kActionDim, steps);
+  out.trajectories = collector.Finish();
   out.seconds = clock.Seconds();
   return out;
 }

@@ -140,7 +140,7 @@ class ReachAvoidEnv final : public Environment {
     low.setConstant(-static_cast<float>(options_.accel_bound));
     high.setConstant(static_cast<float>(options_.accel_bound));
   }
-  double StepSeconds() const override { return options_.dt; }
+  double control_period() const override { return options_.dt; }
 
   const ReachAvoidOptions& options() const { return options_; }
   /// The current state (valid after Reset() or SetState()).

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_tracking.h"
+
 namespace secure::domains::franka {
 
 constexpr int kArmJoints = 7;
@@ -25,14 +27,6 @@ inline constexpr std::array<double, kArmJoints> kNeutralJoints = {0.0, 0.11, 0.0
 /// `<panda_arm_actuators/>` becomes the seven torque motors. @throws secure::Error naming `name`
 /// if either marker is missing.
 std::string WithPandaArm(const std::string& xml, const std::string& name);
-
-/// The controller's constants (the plug-ins' options; domains/panda_push/README.md, "Control").
-struct ArmTracking {
-  double control_period = 0.04;  // s per control step
-  int substeps = 20;             // physics steps per control step
-  double tracking_omega = 40.0;  // rad/s, natural frequency of the computed-torque controller
-  double ik_damping = 0.02;      // damped least squares lambda
-};
 
 /// Positions and velocities of every body and site from qpos, qvel (no collision, no forces).
 void UpdateKinematics(const mjModel* m, mjData* d);

@@ -12,6 +12,7 @@
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/domains/demonstrations.h"
 
 namespace secure::domains::kitchen_cutting {
 namespace {
@@ -26,8 +27,7 @@ Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
 // The person's arm as the observation shows it, `ahead` seconds later at its velocity.
 ArmPose ObservedArm(const HumanArmOptions& h, const Eigen::Ref<const Eigen::VectorXf>& o,
                     double ahead) {
-  return franka::ReadHumanArm(o, kWrist,
-                              Eigen::Vector3d(h.shoulder[0], h.shoulder[1], h.shoulder[2]), ahead);
+  return franka::ReadHumanArm(o, kWrist, h.Shoulder(), ahead);
 }
 
 // The clearance of the stroke's path: the edge lowered from where it is to the board (checked
@@ -200,21 +200,17 @@ KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions&
   KitchenCuttingEnv env(task, KitchenShieldModelOptions{});
   Rng rng(options.seed);
   KitchenDemonstrations out;
-  out.trajectories.source =
-      "scripted kitchen-cutting demonstrations (seed " + std::to_string(options.seed) + ")";
-  out.trajectories.state_features = ObservationFeatures();
-  out.trajectories.action_features = ActionFeatures();
-  out.trajectories.episode_begin.push_back(0);
-  std::vector<Eigen::VectorXf> obs_rows, act_rows;
+  DemonstrationCollector collector(
+      "scripted kitchen-cutting demonstrations (seed " + std::to_string(options.seed) + ")",
+      ObservationFeatures(), ActionFeatures());
   Eigen::VectorXf o(kObservationDim), next(kObservationDim), a(kActionDim);
   int attempt = 0;
-  for (; attempt < options.max_attempts && static_cast<long>(obs_rows.size()) < options.states;
-       ++attempt) {
+  for (; attempt < options.max_attempts && collector.kept_steps() < options.states; ++attempt) {
     Rng episode_rng(rng.NextU64());
     const double stroke = Draw(episode_rng, options.stroke_speed);
     const double travel = Draw(episode_rng, options.travel_speed);
     env.Reset(episode_rng, o);
-    std::vector<Eigen::VectorXf> eo, ea;
+    collector.BeginEpisode();
     bool success = false, dangerous = false;
     for (int t = 0; t < task.max_steps; ++t) {
       const Eigen::Vector3f clean = DemonstratorAction(task, options, o, stroke, travel);
@@ -222,8 +218,7 @@ KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions&
         a[k] =
             std::clamp(clean[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
                        -1.0f, 1.0f);
-      eo.push_back(o);
-      ea.push_back(a);
+      collector.Record(o, a);
       const StepOutcome r = env.Step(a, next);
       o = next;
       if (r.collided) {
@@ -244,22 +239,14 @@ KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions&
       continue;
     }
     if (env.sim().path().into) ++out.into_episodes;
-    obs_rows.insert(obs_rows.end(), eo.begin(), eo.end());
-    act_rows.insert(act_rows.end(), ea.begin(), ea.end());
-    out.trajectories.episode_begin.push_back(static_cast<long>(obs_rows.size()));
+    collector.KeepEpisode();
   }
-  SECURE_CHECK(static_cast<long>(obs_rows.size()) >= options.states,
+  SECURE_CHECK(collector.kept_steps() >= options.states,
                "kitchen-cutting demonstrations: only "
-                   << obs_rows.size() << " of " << options.states << " states in " << attempt
+                   << collector.kept_steps() << " of " << options.states << " states in " << attempt
                    << " attempts (" << out.discarded_dangerous << " came dangerous, "
                    << out.discarded_failed << " did not finish the cut)");
-  const long n = static_cast<long>(obs_rows.size());
-  out.trajectories.states.resize(kObservationDim, n);
-  out.trajectories.actions.resize(kActionDim, n);
-  for (long i = 0; i < n; ++i) {
-    out.trajectories.states.col(i) = obs_rows[i];
-    out.trajectories.actions.col(i) = act_rows[i];
-  }
+  out.trajectories = collector.Finish();
   return out;
 }
 
@@ -404,8 +391,9 @@ KitchenLabelCheckResult CheckKitchenLabels(const KitchenCuttingOptions& task,
   KitchenLabelCheckResult r;
   const long n = std::min(set.size(), options.max_states);
   const int continue_steps =
-      static_cast<int>(std::lround(options.continue_seconds / task.control_period));
-  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
+      static_cast<int>(std::lround(options.continue_seconds / task.tracking.control_period));
+  const int hold_steps =
+      static_cast<int>(std::lround(options.hold_seconds / task.tracking.control_period));
   for (long i = 0; i < n; ++i) {
     ++r.states;
     const Eigen::VectorXf o = set.states.col(i);

@@ -41,7 +41,6 @@ class KitchenCuttingDomain final : public experiments::Domain {
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
-  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   experiments::ExperimentOptions Preset() const override;
 
   /// Rows: the safe states, the demonstration states, the near-dangerous states by scenario

@@ -32,26 +32,10 @@ const mjModel* KitchenCuttingModel() {
 
 Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
 
-double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
-
-// The person's arm as the shared helper (domains/franka/human_arm.h) sees it.
-franka::HumanArmGeometry Geometry(const HumanArmOptions& h) {
-  franka::HumanArmGeometry g;
-  g.shoulder = V(h.shoulder);
-  g.upper_arm = h.upper_arm;
-  g.forearm = h.forearm;
-  g.hand = h.hand;
-  g.upper_arm_radius = h.upper_arm_radius;
-  g.forearm_radius = h.forearm_radius;
-  g.hand_radius = h.hand_radius;
-  g.elbow_out = Eigen::Vector3d(0, 1, -1);  // towards the person (+y) and down
-  return g;
-}
-
 double EdgeDistance(const HumanArmOptions& h, const Eigen::Vector3d& centre,
                     const Eigen::Vector3d& axis, const ArmPose& arm) {
   const Eigen::Vector3d a = centre - kBladeHalfLength * axis, b = centre + kBladeHalfLength * axis;
-  return franka::SegmentToArmDistance(Geometry(h), a, b, arm);
+  return franka::SegmentToArmDistance(h.Geometry(), a, b, arm);
 }
 
 }  // namespace
@@ -73,21 +57,9 @@ const std::vector<std::string>& ActionFeatures() {
 // ---------------------------------------------------------------------------------------------
 // The person's arm
 
-ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist) {
-  return franka::HumanArmPoseForWrist(Geometry(h), wrist);
-}
-
 double EdgeToArmDistance(const HumanArmOptions& h, const Eigen::Vector3d& edge_centre,
                          const ArmPose& arm) {
   return EdgeDistance(h, edge_centre, Eigen::Vector3d::UnitX(), arm);
-}
-
-Eigen::Vector3d ReachPath::Wrist(const HumanArmOptions& h, double t) const {
-  const Eigen::Vector3d rest = V(h.rest);
-  if (t <= start) return rest;
-  if (t <= start + travel) return rest + franka::MinJerk((t - start) / travel) * (goal - rest);
-  if (t <= start + travel + dwell) return goal;
-  return goal + franka::MinJerk((t - start - travel - dwell) / travel) * (rest - goal);
 }
 
 ReachPath DrawReachPath(const HumanArmOptions& h, Rng& rng) {
@@ -96,13 +68,10 @@ ReachPath DrawReachPath(const HumanArmOptions& h, Rng& rng) {
   const Interval& x = p.into ? h.into_x : h.away_x;
   const Interval& y = p.into ? h.into_y : h.away_y;
   const Interval& z = p.into ? h.into_z : h.away_z;
-  p.goal.x() = Draw(rng, x);
-  p.goal.y() = Draw(rng, y);
-  p.goal.z() = Draw(rng, z);
-  p.start = Draw(rng, h.start_time);
-  // Minimum jerk covers the distance at mean speed distance / travel.
-  p.travel = std::max(0.05, (p.goal - V(h.rest)).norm() / Draw(rng, h.speed));
-  p.dwell = Draw(rng, h.dwell);
+  p.goal.x() = franka::DrawUniform(rng, x);
+  p.goal.y() = franka::DrawUniform(rng, y);
+  p.goal.z() = franka::DrawUniform(rng, z);
+  franka::DrawReachTiming(h, rng, &p);
   return p;
 }
 
@@ -111,19 +80,7 @@ ReachPath DrawReachPath(const HumanArmOptions& h, Rng& rng) {
 
 void HumanArmOptions::Validate() const {
   const char* o = "HumanArmOptions";
-  for (int k = 0; k < 3; ++k) {
-    SECURE_CHECK_FIELD(Finite(shoulder[k]), o, "shoulder", shoulder[k], "finite");
-    SECURE_CHECK_FIELD(Finite(rest[k]), o, "rest", rest[k], "finite");
-  }
-  for (auto [name, v] : {std::pair{"upper_arm", upper_arm}, std::pair{"forearm", forearm},
-                         std::pair{"hand", hand}}) {
-    SECURE_CHECK_FIELD(Finite(v) && v > 0.01 && v <= 1.0, o, name, v, "in (0.01, 1] m");
-  }
-  for (auto [name, v] :
-       {std::pair{"upper_arm_radius", upper_arm_radius},
-        std::pair{"forearm_radius", forearm_radius}, std::pair{"hand_radius", hand_radius}}) {
-    SECURE_CHECK_FIELD(Finite(v) && v > 0 && v <= 0.2, o, name, v, "in (0, 0.2] m");
-  }
+  PersonArmOptions::Validate(o);
   SECURE_CHECK_FIELD(Finite(into_probability) && into_probability >= 0 && into_probability <= 1, o,
                      "into_probability", into_probability, "in [0, 1]");
   CheckIntervalField(into_x, o, "into_x", -2, 2);
@@ -132,72 +89,40 @@ void HumanArmOptions::Validate() const {
   CheckIntervalField(away_x, o, "away_x", -2, 2);
   CheckIntervalField(away_y, o, "away_y", -2, 2);
   CheckIntervalField(away_z, o, "away_z", 0, 2);
-  CheckIntervalField(start_time, o, "start_time", 0, 100);
-  CheckIntervalField(speed, o, "speed", 0.01, 5);
-  CheckIntervalField(dwell, o, "dwell", 0, 100);
 }
 
 nlohmann::json HumanArmOptions::ToJson() const {
-  return {{"shoulder", shoulder},
-          {"upper_arm", upper_arm},
-          {"forearm", forearm},
-          {"hand", hand},
-          {"upper_arm_radius", upper_arm_radius},
-          {"forearm_radius", forearm_radius},
-          {"hand_radius", hand_radius},
-          {"rest", rest},
-          {"into_probability", into_probability},
-          {"into_x", into_x},
-          {"into_y", into_y},
-          {"into_z", into_z},
-          {"away_x", away_x},
-          {"away_y", away_y},
-          {"away_z", away_z},
-          {"start_time", start_time},
-          {"speed", speed},
-          {"dwell", dwell}};
+  nlohmann::json j = {{"into_probability", into_probability},
+                      {"into_x", into_x},
+                      {"into_y", into_y},
+                      {"into_z", into_z},
+                      {"away_x", away_x},
+                      {"away_y", away_y},
+                      {"away_z", away_z}};
+  AddJson(&j);
+  return j;
 }
 
 void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("shoulder", &shoulder)
-      .Field("upper_arm", &upper_arm)
-      .Field("forearm", &forearm)
-      .Field("hand", &hand)
-      .Field("upper_arm_radius", &upper_arm_radius)
-      .Field("forearm_radius", &forearm_radius)
-      .Field("hand_radius", &hand_radius)
-      .Field("rest", &rest)
-      .Field("into_probability", &into_probability)
+  YamlFields fields;
+  AddFields(&fields);
+  fields.Field("into_probability", &into_probability)
       .Field("into_x", &into_x)
       .Field("into_y", &into_y)
       .Field("into_z", &into_z)
       .Field("away_x", &away_x)
       .Field("away_y", &away_y)
-      .Field("away_z", &away_z)
-      .Field("start_time", &start_time)
-      .Field("speed", &speed)
-      .Field("dwell", &dwell)
-      .Apply(node, source);
+      .Field("away_z", &away_z);
+  fields.Apply(node, source);
 }
 
 void KitchenCuttingOptions::Validate() const {
   const char* o = "KitchenCuttingOptions";
   SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
                      "in [1, 100000]");
-  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
-                     "control_period", control_period, "in (0, 1] s");
-  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
-  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
-                     "large enough for a physics step <= 5 ms (control_period / substeps)");
+  tracking.Validate(o);
   SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
                      "action_scale", action_scale, "in (0, 0.2] m");
-  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
-                         tracking_omega * control_period / substeps < 0.5,
-                     o, "tracking_omega", tracking_omega,
-                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
-  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
-                     ik_damping, "in (0, 1)");
   SECURE_CHECK_FIELD(
       Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
       "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
@@ -219,32 +144,27 @@ void KitchenCuttingOptions::Validate() const {
 }
 
 nlohmann::json KitchenCuttingOptions::ToJson() const {
-  return {{"max_steps", max_steps},
-          {"control_period", control_period},
-          {"substeps", substeps},
-          {"action_scale", action_scale},
-          {"tracking_omega", tracking_omega},
-          {"ik_damping", ik_damping},
-          {"initial_joint_noise", initial_joint_noise},
-          {"board_top", board_top},
-          {"cut_line_x", cut_line_x},
-          {"cut_line_y", cut_line_y},
-          {"cut_line_half_length", cut_line_half_length},
-          {"stroke_tolerance", stroke_tolerance},
-          {"lift_height", lift_height},
-          {"strokes_required", strokes_required},
-          {"contact_distance", contact_distance},
-          {"human", human.ToJson()}};
+  nlohmann::json j = {{"max_steps", max_steps},
+                      {"action_scale", action_scale},
+                      {"initial_joint_noise", initial_joint_noise},
+                      {"board_top", board_top},
+                      {"cut_line_x", cut_line_x},
+                      {"cut_line_y", cut_line_y},
+                      {"cut_line_half_length", cut_line_half_length},
+                      {"stroke_tolerance", stroke_tolerance},
+                      {"lift_height", lift_height},
+                      {"strokes_required", strokes_required},
+                      {"contact_distance", contact_distance},
+                      {"human", human.ToJson()}};
+  tracking.AddJson(&j);
+  return j;
 }
 
 void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("max_steps", &max_steps)
-      .Field("control_period", &control_period)
-      .Field("substeps", &substeps)
+  YamlFields fields;
+  tracking.AddFields(&fields);
+  fields.Field("max_steps", &max_steps)
       .Field("action_scale", &action_scale)
-      .Field("tracking_omega", &tracking_omega)
-      .Field("ik_damping", &ik_damping)
       .Field("initial_joint_noise", &initial_joint_noise)
       .Field("board_top", &board_top)
       .Field("cut_line_x", &cut_line_x)
@@ -255,8 +175,8 @@ void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string&
       .Field("strokes_required", &strokes_required)
       .Field("contact_distance", &contact_distance)
       .Section("human",
-               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); })
-      .Apply(node, source);
+               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); });
+  fields.Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -277,9 +197,9 @@ KitchenCuttingSim::KitchenCuttingSim(const KitchenCuttingOptions& options)
     : options_((options.Validate(), options)) {
   franka::MujocoModel m = franka::MujocoModel::Copy(KitchenCuttingModel());
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.control_period / options_.substeps;
+  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   // The person's capsules take the options' sizes (each runs along its body's z from 0 to L).
-  const franka::HumanArmCapsules capsules(raw, Geometry(options_.human), "kitchen-cutting");
+  const franka::HumanArmCapsules capsules(raw, options_.human.Geometry(), "kitchen-cutting");
   impl_ = std::make_unique<Impl>(std::move(m), capsules);
   const mjModel* mm = impl_->model.get();
   impl_->blade = mj_name2id(mm, mjOBJ_SITE, "blade");
@@ -298,10 +218,9 @@ double KitchenCuttingSim::time() const { return impl_->data.get()->time; }
 void KitchenCuttingSim::UpdateHuman() {
   const HumanArmOptions& h = options_.human;
   const double t = impl_->data.get()->time;
-  constexpr double kH = 1e-3;  // s, central differences for the velocities
   if (extrapolate_) {
     const double s = t - t0_;
-    arm_.shoulder = V(h.shoulder);
+    arm_.shoulder = h.Shoulder();
     arm_.wrist = wrist0_ + s * wrist_v_;
     arm_.elbow = elbow0_ + s * elbow_v_;
     const Eigen::Vector3d fore = arm_.wrist - arm_.elbow;
@@ -310,12 +229,10 @@ void KitchenCuttingSim::UpdateHuman() {
     wrist_vel_ = wrist_v_;
     elbow_vel_ = elbow_v_;
   } else {
-    arm_ = ArmPoseForWrist(h, path_.Wrist(h, t));
-    const ArmPose ahead = ArmPoseForWrist(h, path_.Wrist(h, t + kH));
-    const ArmPose behind = ArmPoseForWrist(h, path_.Wrist(h, std::max(0.0, t - kH)));
-    const double span = t + kH - std::max(0.0, t - kH);
-    wrist_vel_ = (ahead.wrist - behind.wrist) / span;
-    elbow_vel_ = (ahead.elbow - behind.elbow) / span;
+    const franka::PersonArmMotion motion = franka::PersonArmAt(h, path_, t);
+    arm_ = motion.pose;
+    wrist_vel_ = motion.wrist_velocity;
+    elbow_vel_ = motion.elbow_velocity;
   }
   // The capsules (for the picture; the dangerous test uses arm_).
   impl_->capsules.Pose(impl_->model.get(), impl_->data.get(), arm_);
@@ -362,12 +279,7 @@ void KitchenCuttingSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
   Eigen::Vector3d target = ee + options_.action_scale * a;
   // The blade stops at the board.
   target.z() = std::max(target.z(), options_.board_top + kBladeDrop);
-  franka::ArmTracking tracking;
-  tracking.control_period = options_.control_period;
-  tracking.substeps = options_.substeps;
-  tracking.tracking_omega = options_.tracking_omega;
-  tracking.ik_damping = options_.ik_damping;
-  impl_->arm.Track(m, d, target, tracking);
+  impl_->arm.Track(m, d, target, options_.tracking);
   franka::CheckWarnings(d, "kitchen-cutting", "a step");
   UpdateHuman();
   UpdateProgress();
@@ -436,27 +348,6 @@ double KitchenCuttingSim::Clearance() const {
 // ---------------------------------------------------------------------------------------------
 // The shield's model
 
-void KitchenShieldModelOptions::Validate() const {
-  const char* o = "KitchenShieldModelOptions";
-  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
-                     ">= 0");
-  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
-                     ">= 0");
-  SECURE_CHECK_FIELD(Finite(dt) && dt > 0, o, "dt", dt, "> 0 s");
-}
-
-nlohmann::json KitchenShieldModelOptions::ToJson() const {
-  return {{"position_gain", position_gain}, {"velocity_gain", velocity_gain}, {"dt", dt}};
-}
-
-void KitchenShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("position_gain", &position_gain)
-      .Field("velocity_gain", &velocity_gain)
-      .Field("dt", &dt)
-      .Apply(node, source);
-}
-
 KitchenShieldModel::KitchenShieldModel(const KitchenShieldModelOptions& options)
     : options_((options.Validate(), options)) {}
 
@@ -471,17 +362,9 @@ std::string KitchenShieldModel::Describe() const {
 void KitchenShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
                                 const Eigen::Ref<const Eigen::MatrixXf>& actions,
                                 Eigen::Ref<Eigen::MatrixXf> next) const {
-  const float pg = static_cast<float>(options_.position_gain);
-  const float vg = static_cast<float>(options_.velocity_gain);
   const float dt = static_cast<float>(options_.dt);
   for (Eigen::Index c = 0; c < actions.cols(); ++c) {
-    next.col(c) = state;
-    for (int k = 0; k < 3; ++k) {
-      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
-      next(kEePos + k, c) += pg * a;
-      next(kEeVel + k, c) = vg * a;
-      next(kBlade + k, c) += pg * a;
-    }
+    options_.Step(state, actions, c, kEePos, kEeVel, kBlade, next);  // the blade with the hand
     franka::ExtrapolateHumanArm(state, kWrist, dt, next.col(c));
   }
 }
@@ -507,7 +390,7 @@ std::string KitchenCuttingEnv::Describe() const {
     << o.strokes_required << " strokes through a line on a board while a simulated person's arm "
     << "reaches (into the knife's workspace with p = " << o.human.into_probability
     << "); dangerous: the blade's edge within " << o.contact_distance << " m of the arm; "
-    << o.max_steps << " steps of " << o.control_period << " s";
+    << o.max_steps << " steps of " << o.tracking.control_period << " s";
   return s.str();
 }
 

@@ -38,7 +38,10 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_shield_model.h"
+#include "domains/franka/arm_tracking.h"
 #include "domains/franka/human_arm.h"
+#include "domains/franka/person.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
@@ -69,19 +72,15 @@ using Vec3 = std::array<double, 3>;
 using Interval = std::array<double, 2>;  // [lo, hi], drawn uniformly
 
 /// The person's arm and its reaching paths. ASSUMPTIONS standing in for a person (README.md),
-/// not measurements of people.
-struct HumanArmOptions {
-  Vec3 shoulder = {0.30, 0.38, 0.38};  // m, fixed (a person standing at the table's +y side)
-  double upper_arm = 0.30, forearm = 0.27, hand = 0.08;  // segment lengths (m)
-  double upper_arm_radius = 0.045, forearm_radius = 0.035, hand_radius = 0.03;  // m
-  Vec3 rest = {0.30, 0.24, 0.12};  // the wrist's rest point (m)
-  double into_probability = 0.5;   // share of reaches that end over the cut line
+/// not measurements of people. The arm's body and the timing of its reaches are the shared
+/// person's (franka::PersonArmOptions, whose defaults are this plug-in's: the shoulder at
+/// (0.30, 0.38, 0.38) m, a person standing at the table's +y side; rest (0.30, 0.24, 0.12) m;
+/// start_time [0, 1] s, speed [0.3, 0.6] m/s, dwell [0.5, 2] s); where a reach goes is this one's.
+struct HumanArmOptions : franka::PersonArmOptions {
+  double into_probability = 0.5;  // share of reaches that end over the cut line
   // Wrist goals of a reach into the knife's workspace (over the line) and of one beside it.
   Interval into_x = {0.24, 0.36}, into_y = {-0.04, 0.06}, into_z = {0.05, 0.09};
   Interval away_x = {0.15, 0.45}, away_y = {0.16, 0.26}, away_z = {0.05, 0.10};
-  Interval start_time = {0.0, 1.0};  // s after reset the reach begins
-  Interval speed = {0.3, 0.6};       // m/s, the wrist's mean speed on the way (minimum jerk)
-  Interval dwell = {0.5, 2.0};       // s at the goal before returning
 
   void Validate() const;
   nlohmann::json ToJson() const;
@@ -90,11 +89,10 @@ struct HumanArmOptions {
 
 struct KitchenCuttingOptions {
   int max_steps = 200;
-  double control_period = 0.04;  // s per Step()
-  int substeps = 20;             // physics steps per control period
+  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
+  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
+  franka::ArmTracking tracking;
   double action_scale = 0.05;    // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;  // rad/s
-  double ik_damping = 0.02;
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   // The cut (the board's top is at board_top; the knife is fixed by the model: blade 0.16 m
   // long, its edge blade_drop below the tool centre point).
@@ -119,20 +117,16 @@ constexpr double kBladeDrop = 0.055, kBladeHalfLength = 0.08;
 using ArmPose = franka::HumanArmPose;
 
 /// The elbow and hand tip for a wrist position (the wrist pulled into reach if needed).
-ArmPose ArmPoseForWrist(const HumanArmOptions& h, const Eigen::Vector3d& wrist);
+using franka::ArmPoseForWrist;
 
 /// Distance from the blade's edge (the segment centre +- kBladeHalfLength along x) to the arm's
 /// surface (capsule axis distance minus radius; < 0 inside). `edge_centre` is the edge's centre.
 double EdgeToArmDistance(const HumanArmOptions& h, const Eigen::Vector3d& edge_centre,
                          const ArmPose& arm);
 
-/// One reaching path (drawn at Reset).
-struct ReachPath {
-  Eigen::Vector3d goal;
-  double start = 0, travel = 1, dwell = 0;
+/// One reaching path (drawn at Reset): over the cut line (`into`) or beside it.
+struct ReachPath : franka::PersonReach {
   bool into = false;
-  /// The wrist at time t (s since reset).
-  Eigen::Vector3d Wrist(const HumanArmOptions& h, double t) const;
 };
 ReachPath DrawReachPath(const HumanArmOptions& h, Rng& rng);
 
@@ -190,13 +184,9 @@ class KitchenCuttingSim {
 /// observed wrist and elbow velocities for one control period (the tip with the wrist);
 /// progress unchanged. It ignores the arm's dynamics, the board (the blade's floor) and the
 /// person's acceleration.
-struct KitchenShieldModelOptions {
-  double position_gain = 0.05;
-  double velocity_gain = 1.25;
-  double dt = 0.04;
-  void Validate() const;
-  nlohmann::json ToJson() const;
-  void ApplyYaml(const YAML::Node& node, const std::string& source);
+/// The options (position_gain, velocity_gain, dt) are the shared franka::PersonShieldModelOptions.
+struct KitchenShieldModelOptions : franka::PersonShieldModelOptions {
+  void Validate() const { PersonShieldModelOptions::Validate("KitchenShieldModelOptions"); }
 };
 
 class KitchenShieldModel final : public DynamicsModel {
@@ -244,7 +234,7 @@ class KitchenCuttingEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double StepSeconds() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().tracking.control_period; }
   /// domains/franka/'s offscreen renderer (OSMesa), created on the first call; frames up to
   /// 1280 x 720, seen from the robot's right, the person's arm at the back.
   bool CanRender() const override { return true; }

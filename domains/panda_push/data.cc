@@ -10,6 +10,7 @@
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/domains/demonstrations.h"
 
 namespace secure::domains::panda_push {
 namespace {
@@ -84,10 +85,12 @@ Continuation Continue(PandaPushSim& sim, const PandaPushOptions& task,
                       const Eigen::Ref<const Eigen::VectorXf>& s, const LabelCheckOptions& options,
                       Eigen::Ref<Eigen::VectorXf> o) {
   if (sim.SetObservation(s) > 0.01) return Continuation::kUnreachable;
-  const int push_steps = static_cast<int>(std::lround(options.push_seconds / task.control_period));
-  const int hold_steps = static_cast<int>(std::lround(options.hold_seconds / task.control_period));
-  const int stop_steps =
-      std::max(1, static_cast<int>(std::lround(options.stop_seconds / task.control_period)));
+  const int push_steps =
+      static_cast<int>(std::lround(options.push_seconds / task.tracking.control_period));
+  const int hold_steps =
+      static_cast<int>(std::lround(options.hold_seconds / task.tracking.control_period));
+  const int stop_steps = std::max(
+      1, static_cast<int>(std::lround(options.stop_seconds / task.tracking.control_period)));
   Eigen::Vector3f a;
   for (int k = 0; k < 3; ++k)
     a[k] = std::clamp(static_cast<float>(s[kEeVel + k] / options.velocity_gain), -1.0f, 1.0f);
@@ -285,12 +288,9 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
   PandaPushEnv env(task, PandaPushShieldModelOptions{});
   Rng rng(options.seed);
   PandaDemonstrations out;
-  std::vector<Eigen::VectorXf> obs_rows, act_rows;
-  out.trajectories.source =
-      "scripted panda-push demonstrations (seed " + std::to_string(options.seed) + ")";
-  out.trajectories.state_features = ObservationFeatures();
-  out.trajectories.action_features = ActionFeatures();
-  out.trajectories.episode_begin.push_back(0);
+  DemonstrationCollector collector(
+      "scripted panda-push demonstrations (seed " + std::to_string(options.seed) + ")",
+      ObservationFeatures(), ActionFeatures());
   Eigen::VectorXf o(kObservationDim), next(kObservationDim);
   Eigen::VectorXf a(kActionDim), applied(kActionDim);
   int kept = 0;
@@ -308,7 +308,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
     const bool dart = options.dart_noise > 0 || options.dart_brake_rate > 0;
     Rng dart_rng(dart ? episode_rng.NextU64() : 0);
     int braking = 0;  // steps of the current brake left
-    std::vector<Eigen::VectorXf> eo, ea;
+    collector.BeginEpisode();
     long push_begin = -1;
     bool descended = false, success = false, toppled = false;
     for (int t = 0; t < task.max_steps; ++t) {
@@ -324,7 +324,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
         // metres (a keyboard user easing off), the push speed once in contact.
         const double ease = std::clamp(gap / std::max(options.approach_gap, 1e-9), 0.0, 1.0);
         a[0] = static_cast<float>(push + (approach - push) * ease);
-        if (gap <= 0.005 && push_begin < 0) push_begin = static_cast<long>(eo.size());
+        if (gap <= 0.005 && push_begin < 0) push_begin = collector.episode_steps();
         if (options.pause_rate > 0 && paused == 0 && pause_rng.Uniform() < options.pause_rate)
           paused = static_cast<int>(std::floor(Draw(pause_rng, options.pause_steps) + 0.5));
         if (paused > 0) {
@@ -335,8 +335,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
       for (int k = 0; k < kActionDim; ++k)
         a[k] = std::clamp(a[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
                           -1.0f, 1.0f);
-      eo.push_back(o);
-      ea.push_back(a);
+      collector.Record(o, a);
       applied = a;
       if (dart && descended) {
         for (int k = 0; k < kActionDim; ++k)
@@ -369,10 +368,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
       ++out.discarded_failed;
       continue;
     }
-    out.push_begin.push_back(static_cast<long>(obs_rows.size()) + push_begin);
-    obs_rows.insert(obs_rows.end(), eo.begin(), eo.end());
-    act_rows.insert(act_rows.end(), ea.begin(), ea.end());
-    out.trajectories.episode_begin.push_back(static_cast<long>(obs_rows.size()));
+    out.push_begin.push_back(collector.KeepEpisode() + push_begin);
     ++kept;
   }
   SECURE_CHECK(kept == options.episodes,
@@ -380,13 +376,7 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
                    << kept << " of " << options.episodes << " succeeded in " << options.max_attempts
                    << " attempts (" << out.discarded_toppled << " toppled the block, "
                    << out.discarded_failed << " missed the target)");
-  const long n = static_cast<long>(obs_rows.size());
-  out.trajectories.states.resize(kObservationDim, n);
-  out.trajectories.actions.resize(kActionDim, n);
-  for (long i = 0; i < n; ++i) {
-    out.trajectories.states.col(i) = obs_rows[i];
-    out.trajectories.actions.col(i) = act_rows[i];
-  }
+  out.trajectories = collector.Finish();
   return out;
 }
 

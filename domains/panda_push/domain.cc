@@ -203,13 +203,6 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   return rows;
 }
 
-void PandaPushDomain::CheckExperiment(const experiments::ExperimentOptions& options) const {
-  SECURE_CHECK_FIELD(std::abs(options.shield.dt - options_.task.control_period) < 1e-12,
-                     "ExperimentOptions", "shield.dt", options.shield.dt,
-                     "the control period (" << options_.task.control_period
-                                            << " s): the shield's model looks one step ahead");
-}
-
 void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                                    data::StateSet* near_dangerous) const {
   options_.Validate();
@@ -266,7 +259,7 @@ cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
 
 experiments::ExperimentOptions PandaPushDomain::Preset() const {
   experiments::ExperimentOptions o =
-      franka::ArmExperimentPreset(profile_, options_.task.control_period);
+      franka::ArmExperimentPreset(profile_, options_.task.tracking.control_period);
   o.data_seed = 3000;
   // The paper's Table 2 barrier: 32-128-128-256-256-256-256-128-128-32, tanh, on the first 9
   // observation features.

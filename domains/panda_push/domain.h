@@ -51,7 +51,6 @@ class PandaPushDomain final : public experiments::Domain {
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
-  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   experiments::ExperimentOptions Preset() const override;
 
   /// Rows: the safe states; the pushing part of the demonstrations; the near-dangerous states

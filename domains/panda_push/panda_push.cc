@@ -64,20 +64,9 @@ void PandaPushOptions::Validate() const {
   const char* o = "PandaPushOptions";
   SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
                      "in [1, 100000]");
-  SECURE_CHECK_FIELD(Finite(control_period) && control_period > 0 && control_period <= 1, o,
-                     "control_period", control_period, "in (0, 1] s");
-  SECURE_CHECK_FIELD(substeps >= 1 && substeps <= 1000, o, "substeps", substeps, "in [1, 1000]");
-  SECURE_CHECK_FIELD(control_period / substeps <= 0.005, o, "substeps", substeps,
-                     "large enough for a physics step <= 5 ms (control_period / substeps; "
-                     "the contacts are unstable beyond)");
+  tracking.Validate(o);
   SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
                      "action_scale", action_scale, "in (0, 0.2] m");
-  SECURE_CHECK_FIELD(Finite(tracking_omega) && tracking_omega > 0 &&
-                         tracking_omega * control_period / substeps < 0.5,
-                     o, "tracking_omega", tracking_omega,
-                     "> 0 and < 0.5 / physics step (explicit integration stays stable)");
-  SECURE_CHECK_FIELD(Finite(ik_damping) && ik_damping > 0 && ik_damping < 1, o, "ik_damping",
-                     ik_damping, "in (0, 1)");
   SECURE_CHECK_FIELD(
       Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
       "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
@@ -98,37 +87,32 @@ void PandaPushOptions::Validate() const {
 }
 
 nlohmann::json PandaPushOptions::ToJson() const {
-  return {{"max_steps", max_steps},
-          {"control_period", control_period},
-          {"substeps", substeps},
-          {"action_scale", action_scale},
-          {"tracking_omega", tracking_omega},
-          {"ik_damping", ik_damping},
-          {"initial_joint_noise", initial_joint_noise},
-          {"block_start", block_start},
-          {"target", target},
-          {"success_radius", success_radius},
-          {"topple_angle", topple_angle},
-          {"table_friction", table_friction},
-          {"pusher_friction", pusher_friction}};
+  nlohmann::json j = {{"max_steps", max_steps},
+                      {"action_scale", action_scale},
+                      {"initial_joint_noise", initial_joint_noise},
+                      {"block_start", block_start},
+                      {"target", target},
+                      {"success_radius", success_radius},
+                      {"topple_angle", topple_angle},
+                      {"table_friction", table_friction},
+                      {"pusher_friction", pusher_friction}};
+  tracking.AddJson(&j);
+  return j;
 }
 
 void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("max_steps", &max_steps)
-      .Field("control_period", &control_period)
-      .Field("substeps", &substeps)
+  YamlFields fields;
+  tracking.AddFields(&fields);
+  fields.Field("max_steps", &max_steps)
       .Field("action_scale", &action_scale)
-      .Field("tracking_omega", &tracking_omega)
-      .Field("ik_damping", &ik_damping)
       .Field("initial_joint_noise", &initial_joint_noise)
       .Field("block_start", &block_start)
       .Field("target", &target)
       .Field("success_radius", &success_radius)
       .Field("topple_angle", &topple_angle)
       .Field("table_friction", &table_friction)
-      .Field("pusher_friction", &pusher_friction)
-      .Apply(node, source);
+      .Field("pusher_friction", &pusher_friction);
+  fields.Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -144,22 +128,11 @@ struct PandaPushSim::Impl {
       : model(std::move(m)), data(model), arm(model.get(), "panda-push") {}
 };
 
-namespace {
-franka::ArmTracking Tracking(const PandaPushOptions& o) {
-  franka::ArmTracking t;
-  t.control_period = o.control_period;
-  t.substeps = o.substeps;
-  t.tracking_omega = o.tracking_omega;
-  t.ik_damping = o.ik_damping;
-  return t;
-}
-}  // namespace
-
 PandaPushSim::PandaPushSim(const PandaPushOptions& options)
     : options_((options.Validate(), options)) {
   franka::MujocoModel m = franka::MujocoModel::Copy(PandaPushModel());
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.control_period / options_.substeps;
+  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   for (int p = 0; p < raw->npair; ++p) {
     const std::string name = mj_id2name(raw, mjOBJ_PAIR, p) ? mj_id2name(raw, mjOBJ_PAIR, p) : "";
     if (name == "block_table") {
@@ -222,7 +195,7 @@ void PandaPushSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
   const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * s.arm.tcp());
   Eigen::Vector3d target = ee + options_.action_scale * a;
   target.z() = std::max(target.z(), 0.0);
-  s.arm.Track(m, d, target, Tracking(options_));
+  s.arm.Track(m, d, target, options_.tracking);
   franka::CheckWarnings(d, "panda-push", "a step");
 }
 
@@ -320,31 +293,23 @@ void PandaPushShieldModelOptions::Validate() const {
                      "empty unless kind = learned");
   SECURE_CHECK_FIELD(kind != "learned" || !path.empty(), o, "path", "''",
                      "a learned dynamics model file (`secure dynamics train`) with kind = learned");
-  SECURE_CHECK_FIELD(Finite(position_gain) && position_gain >= 0, o, "position_gain", position_gain,
-                     ">= 0");
-  SECURE_CHECK_FIELD(Finite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain", velocity_gain,
-                     ">= 0");
+  EndEffectorGains::Validate(o);
   SECURE_CHECK_FIELD(Finite(contact_range) && contact_range >= 0, o, "contact_range", contact_range,
                      ">= 0");
 }
 
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
-  nlohmann::json j = {{"kind", kind},
-                      {"position_gain", position_gain},
-                      {"velocity_gain", velocity_gain},
-                      {"contact_range", contact_range}};
+  nlohmann::json j = {{"kind", kind}, {"contact_range", contact_range}};
+  AddJson(&j);
   if (kind == "learned") j["path"] = path;
   return j;
 }
 
 void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Field("kind", &kind)
-      .Field("position_gain", &position_gain)
-      .Field("velocity_gain", &velocity_gain)
-      .Field("contact_range", &contact_range)
-      .Field("path", &path)
-      .Apply(node, source);
+  YamlFields fields;
+  fields.Field("kind", &kind);
+  AddFields(&fields);
+  fields.Field("contact_range", &contact_range).Field("path", &path).Apply(node, source);
 }
 
 PandaPushShieldModel::PandaPushShieldModel(const PandaPushShieldModelOptions& options)
@@ -361,19 +326,10 @@ std::string PandaPushShieldModel::Describe() const {
 void PandaPushShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
                                   const Eigen::Ref<const Eigen::MatrixXf>& actions,
                                   Eigen::Ref<Eigen::MatrixXf> next) const {
-  const float pg = static_cast<float>(options_.position_gain);
-  const float vg = static_cast<float>(options_.velocity_gain);
   const bool pushing =
       std::abs(state[kEePos] - state[kBlockPos]) < static_cast<float>(options_.contact_range);
-  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
-    next.col(c) = state;
-    for (int k = 0; k < 3; ++k) {
-      const float a = std::clamp(actions(k, c), -1.0f, 1.0f);
-      next(kEePos + k, c) += pg * a;
-      next(kEeVel + k, c) = vg * a;
-      if (pushing) next(kBlockPos + k, c) += pg * a;
-    }
-  }
+  for (Eigen::Index c = 0; c < actions.cols(); ++c)  // the block with the hand while pushing
+    options_.Step(state, actions, c, kEePos, kEeVel, pushing ? kBlockPos : -1, next);
 }
 
 PandaPushRolloutModel::PandaPushRolloutModel(const PandaPushSim& live)
@@ -447,7 +403,7 @@ std::string PandaPushEnv::Describe() const {
     << "block from (" << o.block_start[0] << ", " << o.block_start[1] << ") to within "
     << o.success_radius << " m of (" << o.target[0] << ", " << o.target[1]
     << ") without tilting it past " << o.topple_angle << " rad; " << o.max_steps << " steps of "
-    << o.control_period << " s, friction table " << o.table_friction << ", pusher "
+    << o.tracking.control_period << " s, friction table " << o.table_friction << ", pusher "
     << o.pusher_friction;
   return s.str();
 }

@@ -39,6 +39,8 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_shield_model.h"
+#include "domains/franka/arm_tracking.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
@@ -75,11 +77,10 @@ inline constexpr std::array<double, kArmJoints> kNeutralJoints = {0.0, 0.11, 0.0
 
 struct PandaPushOptions {
   int max_steps = 150;
-  double control_period = 0.04;       // s per Step()
-  int substeps = 20;                  // physics steps per control period (timestep 2 ms)
+  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
+  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
+  franka::ArmTracking tracking;
   double action_scale = 0.05;         // m of end-effector target offset per unit action
-  double tracking_omega = 40.0;       // rad/s, the joint controller's natural frequency
-  double ik_damping = 0.02;           // damped least squares lambda (m / rad)
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   std::array<double, 3> block_start = {0.40, 0.0, 0.20};
   std::array<double, 3> target = {0.55, 0.0, 0.20};
@@ -165,11 +166,10 @@ class PandaPushSim {
 /// `kind: rollout` replaces it with PandaPushRolloutModel (below), privileged and exact: an upper
 /// bound on what a perfect model gives the shield, at the cost of one simulated control period
 /// per sampled action (the gains then play no part).
-struct PandaPushShieldModelOptions {
+/// The gains (position_gain, velocity_gain) are the shared franka::EndEffectorGains.
+struct PandaPushShieldModelOptions : franka::EndEffectorGains {
   std::string kind = "approximate";  // approximate | rollout | learned
   std::string path;                  // kind = learned: a `secure dynamics train` model file
-  double position_gain = 0.05;
-  double velocity_gain = 1.25;
   double contact_range = 0.15;
   void Validate() const;
   nlohmann::json ToJson() const;
@@ -256,7 +256,7 @@ class PandaPushEnv final : public Environment {
     low.setConstant(-1.0f);
     high.setConstant(1.0f);
   }
-  double StepSeconds() const override { return sim_.options().control_period; }
+  double control_period() const override { return sim_.options().tracking.control_period; }
   /// MuJoCo's renderer in an OSMesa context (software OpenGL), created on the first call; frames
   /// up to 1280 x 720.
   bool CanRender() const override { return true; }

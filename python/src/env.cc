@@ -190,7 +190,7 @@ stream continues. Returns (observation float32 (observation_dim,), {}).)doc")
       .def_property_readonly("can_render", [](const Env& e) { return e.env().CanRender(); })
       .def_property_readonly("action_bounds", &Env::ActionBounds,
                              "(low, high): the actuator box Step() clips actions to.")
-      .def_property_readonly("step_seconds", [](const Env& e) { return e.env().StepSeconds(); },
+      .def_property_readonly("step_seconds", [](const Env& e) { return e.env().control_period(); },
                              "Simulated seconds per step (0: the task has no clock).")
       .def("backup_action", &Env::Backup, py::arg("observation"),
            "The domain's safe fallback action at `observation` (e.g. braking), or None.")

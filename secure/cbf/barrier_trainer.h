@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "secure/cbf/barrier_net.h"
+#include "secure/cbf/training_schedule.h"
 #include "secure/cbf/validation.h"
 #include "secure/data/data.h"
 #include "secure/nn/mlp.h"
@@ -32,7 +33,7 @@ class Node;
 
 namespace secure::cbf {
 
-struct BarrierTrainerOptions {
+struct BarrierTrainerOptions : TrainingSchedule {
   // Input: the features (by name, in this order) of the training states that the barrier reads;
   // empty: all of them. The model's `features` are these names, so the model file records what it
   // reads; evaluate it on the whole states with BarrierNet::MakeEvaluatorFor. E.g. Panda's
@@ -50,18 +51,9 @@ struct BarrierTrainerOptions {
   double safe_weight = 1.0;     // extra weight on the safe term (> 0)
   double unsafe_weight = 1.0;   // extra weight on the near-dangerous term (> 0)
 
-  // Optimisation.
-  double learning_rate = 3e-3;        // Adam step size
-  double final_learning_rate = 3e-5;  // cosine decay from learning_rate to this over max_epochs
-  double weight_decay = 0.0;          // L2 on weights (Adam's coupled decay)
-  int batch_size = 128;               // states per minibatch (both classes shuffled together)
-  int max_epochs = 400;               // passes over the training split
-  int patience = 0;                   // stop after this many epochs without a better validation
-                                      // score (0: never stop early, keep the best checkpoint)
-  double validation_fraction = 0.1;   // per class, held out for best-checkpoint selection; 0: none
-  std::uint64_t seed = 0;             // weights, splits and minibatch order
-  int threads = 1;                    // LibTorch intra-op threads (1 is fastest for small nets)
-  bool verbose = false;               // one progress line per few seconds on stderr
+  // Optimisation: the shared TrainingSchedule (learning_rate 3e-3 -> final_learning_rate 3e-5,
+  // weight_decay 0, batch_size 128, max_epochs 400, patience 0, validation_fraction 0.1, seed,
+  // threads 1: fastest for small nets, verbose: one progress line per few seconds).
 
   /// Throws secure::Error naming the field, value and constraint
   /// ("BarrierTrainerOptions::batch_size = 0, must be > 0").

@@ -195,32 +195,20 @@ void CarBarrierTrainerOptions::Validate() const {
                      "danger_weight", danger_weight, "> 0");
   SECURE_CHECK_FIELD(std::isfinite(safe_weight) && safe_weight > 0, "CarBarrierTrainerOptions",
                      "safe_weight", safe_weight, "> 0");
-  SECURE_CHECK_FIELD(std::isfinite(learning_rate) && learning_rate > 0, "CarBarrierTrainerOptions",
-                     "learning_rate", learning_rate, "> 0");
-  SECURE_CHECK_FIELD(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
-                         final_learning_rate <= learning_rate,
-                     "CarBarrierTrainerOptions", "final_learning_rate", final_learning_rate,
-                     "in (0, learning_rate]");
-  SECURE_CHECK_FIELD(std::isfinite(weight_decay) && weight_decay >= 0, "CarBarrierTrainerOptions",
-                     "weight_decay", weight_decay, ">= 0");
-  SECURE_CHECK_FIELD(batch_size > 0, "CarBarrierTrainerOptions", "batch_size", batch_size, "> 0");
-  SECURE_CHECK_FIELD(max_epochs > 0, "CarBarrierTrainerOptions", "max_epochs", max_epochs, "> 0");
-  SECURE_CHECK_FIELD(patience >= 0, "CarBarrierTrainerOptions", "patience", patience, ">= 0");
-  SECURE_CHECK_FIELD(
-      std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
-      "CarBarrierTrainerOptions", "validation_fraction", validation_fraction, "in [0, 1)");
-  SECURE_CHECK_FIELD(threads > 0, "CarBarrierTrainerOptions", "threads", threads, "> 0");
+  ValidateSchedule("CarBarrierTrainerOptions");
 }
 
 void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of car barrier trainer options");
-  static const std::set<std::string> known = {
-      "layout",        "collision_radius", "sensing_radius",      "distance_epsilon",
-      "use_velocity",  "hidden",           "activation",          "normalize_inputs",
-      "cap",           "danger_margin",    "safe_margin",         "danger_weight",
-      "safe_weight",   "balance_classes",  "learning_rate",       "final_learning_rate",
-      "weight_decay",  "batch_size",       "max_epochs",          "patience",
-      "validation_fraction", "seed",       "threads",             "verbose"};
+  static const std::set<std::string> known = [] {
+    std::set<std::string> k = {"layout",           "collision_radius", "sensing_radius",
+                               "distance_epsilon", "use_velocity",     "hidden",
+                               "activation",       "normalize_inputs", "cap",
+                               "danger_margin",    "safe_margin",      "danger_weight",
+                               "safe_weight",      "balance_classes"};
+    k.insert(Keys().begin(), Keys().end());
+    return k;
+  }();
   static const std::set<std::string> layout_keys = {"obs_dim",         "first_obstacle_offset",
                                                     "obstacle_stride", "num_obstacles",
                                                     "position_offset", "velocity_offset"};
@@ -278,51 +266,26 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
       safe_weight = YamlValue<double>(v, key, source);
     } else if (key == "balance_classes") {
       balance_classes = YamlValue<bool>(v, key, source);
-    } else if (key == "learning_rate") {
-      learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "final_learning_rate") {
-      final_learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "weight_decay") {
-      weight_decay = YamlValue<double>(v, key, source);
-    } else if (key == "batch_size") {
-      batch_size = YamlValue<int>(v, key, source);
-    } else if (key == "max_epochs") {
-      max_epochs = YamlValue<int>(v, key, source);
-    } else if (key == "patience") {
-      patience = YamlValue<int>(v, key, source);
-    } else if (key == "validation_fraction") {
-      validation_fraction = YamlValue<double>(v, key, source);
-    } else if (key == "seed") {
-      seed = YamlValue<std::uint64_t>(v, key, source);
-    } else if (key == "threads") {
-      threads = YamlValue<int>(v, key, source);
-    } else if (key == "verbose") {
-      verbose = YamlValue<bool>(v, key, source);
+    } else {
+      ApplyYamlKey(key, v, source);
     }
   }
 }
 
 nlohmann::json CarBarrierTrainerOptions::ToJson() const {
-  return {{"input", input.ToJson()},
-          {"hidden", hidden},
-          {"activation", ToString(nn::kActivationNames, activation)},
-          {"normalize_inputs", normalize_inputs},
-          {"cap", cap.has_value() ? nlohmann::json(*cap) : nlohmann::json(nullptr)},
-          {"effective_cap", EffectiveCap()},
-          {"danger_margin", danger_margin},
-          {"safe_margin", safe_margin},
-          {"danger_weight", danger_weight},
-          {"safe_weight", safe_weight},
-          {"balance_classes", balance_classes},
-          {"learning_rate", learning_rate},
-          {"final_learning_rate", final_learning_rate},
-          {"weight_decay", weight_decay},
-          {"batch_size", batch_size},
-          {"max_epochs", max_epochs},
-          {"patience", patience},
-          {"validation_fraction", validation_fraction},
-          {"seed", seed},
-          {"threads", threads}};
+  nlohmann::json j = {{"input", input.ToJson()},
+                      {"hidden", hidden},
+                      {"activation", ToString(nn::kActivationNames, activation)},
+                      {"normalize_inputs", normalize_inputs},
+                      {"cap", cap.has_value() ? nlohmann::json(*cap) : nlohmann::json(nullptr)},
+                      {"effective_cap", EffectiveCap()},
+                      {"danger_margin", danger_margin},
+                      {"safe_margin", safe_margin},
+                      {"danger_weight", danger_weight},
+                      {"safe_weight", safe_weight},
+                      {"balance_classes", balance_classes}};
+  AddJson(&j);
+  return j;
 }
 
 // ------------------------------------------------------------------------------------------------

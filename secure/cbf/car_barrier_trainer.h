@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "secure/cbf/car_barrier.h"
+#include "secure/cbf/training_schedule.h"
 #include "secure/cbf/validation.h"
 #include "secure/data/data.h"
 #include "secure/nn/mlp.h"
@@ -41,7 +42,7 @@ class Node;
 
 namespace secure::cbf {
 
-struct CarBarrierTrainerOptions {
+struct CarBarrierTrainerOptions : TrainingSchedule {
   // Model.
   CarFeatureSpec input;  // layout (required, no default: the domain's), r, R, eps, use_velocity
   std::vector<int> hidden = {64, 128, 64};  // per-car MLP hidden widths (released)
@@ -57,18 +58,10 @@ struct CarBarrierTrainerOptions {
   double safe_weight = 1.0;     // w_s (released 1)
   bool balance_classes = true;  // weight states by N / (2 N_class) so both sets weigh the same
 
-  // Optimisation.
-  double learning_rate = 3e-3;        // Adam step size
-  double final_learning_rate = 3e-5;  // cosine decay to this over max_epochs (= lr: constant)
-  double weight_decay = 0.0;          // L2 (Adam's coupled decay; released 1e-8)
-  int batch_size = 128;               // states per minibatch
-  int max_epochs = 30;                // passes over the training split
-  int patience = 0;                   // early stopping after this many epochs without a better
-                                      // validation score (0: never, keep the best checkpoint)
-  double validation_fraction = 0.1;   // per set, held out for best-checkpoint selection; 0: none
-  std::uint64_t seed = 0;             // weights, split and minibatch order
-  int threads = 1;                    // LibTorch (and OpenBLAS) threads
-  bool verbose = false;               // a progress line every 10 epochs on stderr
+  // Optimisation: the shared TrainingSchedule (learning_rate 3e-3 -> final_learning_rate 3e-5,
+  // weight_decay 0 (released 1e-8), batch_size 128, max_epochs 30 (below), patience 0,
+  // validation_fraction 0.1 per set, seed, threads 1, verbose: a progress line every 10 epochs).
+  CarBarrierTrainerOptions() { max_epochs = 30; }
 
   /// The released training constants (§3.1): m_d 0.01, m_s 0.002, w_d 2, w_s 1, Adam lr 1e-4
   /// constant, L2 1e-8, batches of 4 states, one epoch (512 updates on 1024 + 1024 states), no

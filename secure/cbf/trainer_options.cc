@@ -15,10 +15,6 @@
 #include "secure/common/yaml_value.h"
 
 namespace secure::cbf {
-namespace {
-
-
-}  // namespace
 
 void BarrierTrainerOptions::Validate() const {
   for (std::size_t k = 0; k < input_features.size(); ++k) {
@@ -45,30 +41,17 @@ void BarrierTrainerOptions::Validate() const {
                      "safe_weight", safe_weight, "> 0");
   SECURE_CHECK_FIELD(std::isfinite(unsafe_weight) && unsafe_weight > 0, "BarrierTrainerOptions",
                      "unsafe_weight", unsafe_weight, "> 0");
-  SECURE_CHECK_FIELD(std::isfinite(learning_rate) && learning_rate > 0, "BarrierTrainerOptions",
-                     "learning_rate", learning_rate, "> 0");
-  SECURE_CHECK_FIELD(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
-                         final_learning_rate <= learning_rate,
-                     "BarrierTrainerOptions", "final_learning_rate", final_learning_rate,
-                     "in (0, learning_rate]");
-  SECURE_CHECK_FIELD(std::isfinite(weight_decay) && weight_decay >= 0, "BarrierTrainerOptions",
-                     "weight_decay", weight_decay, ">= 0");
-  SECURE_CHECK_FIELD(batch_size > 0, "BarrierTrainerOptions", "batch_size", batch_size, "> 0");
-  SECURE_CHECK_FIELD(max_epochs > 0, "BarrierTrainerOptions", "max_epochs", max_epochs, "> 0");
-  SECURE_CHECK_FIELD(patience >= 0, "BarrierTrainerOptions", "patience", patience, ">= 0");
-  SECURE_CHECK_FIELD(
-      std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
-      "BarrierTrainerOptions", "validation_fraction", validation_fraction, "in [0, 1)");
-  SECURE_CHECK_FIELD(threads > 0, "BarrierTrainerOptions", "threads", threads, "> 0");
+  ValidateSchedule("BarrierTrainerOptions");
 }
 
 void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier trainer options");
-  static const std::set<std::string> known = {
-      "hidden",      "activation",    "safe_margin",   "unsafe_margin",       "balance_classes",
-      "safe_weight", "unsafe_weight", "learning_rate", "final_learning_rate", "weight_decay",
-      "batch_size",  "max_epochs",    "patience",      "validation_fraction", "seed",
-      "threads",     "verbose",       "input_features"};
+  static const std::set<std::string> known = [] {
+    std::set<std::string> k = {"hidden",          "activation",  "safe_margin",   "unsafe_margin",
+                               "balance_classes", "safe_weight", "unsafe_weight", "input_features"};
+    k.insert(Keys().begin(), Keys().end());
+    return k;
+  }();
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
@@ -98,48 +81,23 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
       safe_weight = YamlValue<double>(v, key, source);
     } else if (key == "unsafe_weight") {
       unsafe_weight = YamlValue<double>(v, key, source);
-    } else if (key == "learning_rate") {
-      learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "final_learning_rate") {
-      final_learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "weight_decay") {
-      weight_decay = YamlValue<double>(v, key, source);
-    } else if (key == "batch_size") {
-      batch_size = YamlValue<int>(v, key, source);
-    } else if (key == "max_epochs") {
-      max_epochs = YamlValue<int>(v, key, source);
-    } else if (key == "patience") {
-      patience = YamlValue<int>(v, key, source);
-    } else if (key == "validation_fraction") {
-      validation_fraction = YamlValue<double>(v, key, source);
-    } else if (key == "seed") {
-      seed = YamlValue<std::uint64_t>(v, key, source);
-    } else if (key == "threads") {
-      threads = YamlValue<int>(v, key, source);
-    } else if (key == "verbose") {
-      verbose = YamlValue<bool>(v, key, source);
+    } else {
+      ApplyYamlKey(key, v, source);
     }
   }
 }
 
 nlohmann::json BarrierTrainerOptions::ToJson() const {
-  return {{"input_features", input_features},
-          {"hidden", hidden},
-          {"activation", ToString(nn::kActivationNames, activation)},
-          {"safe_margin", safe_margin},
-          {"unsafe_margin", unsafe_margin},
-          {"balance_classes", balance_classes},
-          {"safe_weight", safe_weight},
-          {"unsafe_weight", unsafe_weight},
-          {"learning_rate", learning_rate},
-          {"final_learning_rate", final_learning_rate},
-          {"weight_decay", weight_decay},
-          {"batch_size", batch_size},
-          {"max_epochs", max_epochs},
-          {"patience", patience},
-          {"validation_fraction", validation_fraction},
-          {"seed", seed},
-          {"threads", threads}};
+  nlohmann::json j = {{"input_features", input_features},
+                      {"hidden", hidden},
+                      {"activation", ToString(nn::kActivationNames, activation)},
+                      {"safe_margin", safe_margin},
+                      {"unsafe_margin", unsafe_margin},
+                      {"balance_classes", balance_classes},
+                      {"safe_weight", safe_weight},
+                      {"unsafe_weight", unsafe_weight}};
+  AddJson(&j);
+  return j;
 }
 
 namespace {

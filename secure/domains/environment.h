@@ -99,9 +99,11 @@ class Environment {
     low.setConstant(-std::numeric_limits<float>::infinity());
     high.setConstant(std::numeric_limits<float>::infinity());
   }
-  /// Simulated seconds one Step() lasts (the control period), or 0 if the task has no clock
-  /// (the Python module's metadata['render_fps'] is 1 / StepSeconds()).
-  virtual double StepSeconds() const { return 0.0; }
+  /// The control period: simulated seconds one Step() lasts, or 0 if the task has no clock (the
+  /// Python module's step_seconds, and metadata['render_fps'] = 1 / control_period()). The
+  /// experiment driver checks once that the shield looks ahead exactly this long (shield.dt:
+  /// experiments::CheckExperimentOptions); every registered domain has one (> 0).
+  virtual double control_period() const { return 0.0; }
 
   /// Whether Render() works (an offscreen renderer exists for this domain). False by default.
   virtual bool CanRender() const { return false; }

@@ -47,7 +47,7 @@ class LearnedModelEnvironment final : public domains::Environment {
                     Eigen::Ref<Eigen::VectorXf> high) const override {
     inner_->ActionBounds(low, high);
   }
-  double StepSeconds() const override { return inner_->StepSeconds(); }
+  double control_period() const override { return inner_->control_period(); }
   bool CanRender() const override { return inner_->CanRender(); }
   void Render(int width, int height, domains::Frame* frame) override {
     inner_->Render(width, height, frame);

@@ -1,9 +1,12 @@
 #include "secure/experiments/domain.h"
 
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 
 #include "secure/common/error.h"
+#include "secure/common/option_check.h"
+#include "secure/experiments/experiment.h"
 
 namespace secure::experiments {
 
@@ -37,6 +40,15 @@ ShieldRunRequest Domain::ShieldRunPreset() const {
 
 ShieldRunReport Domain::RunShield(const ShieldRunRequest&, cbf::Barrier&) const {
   SECURE_THROW("the " << name() << " domain has no shield run");
+}
+
+void CheckExperimentOptions(const Domain& domain, const ExperimentOptions& options) {
+  const double period = domain.MakeEnvironment()->control_period();
+  SECURE_CHECK_FIELD(period <= 0.0 || std::abs(options.shield.dt - period) < 1e-12,
+                     "ExperimentOptions", "shield.dt", options.shield.dt,
+                     "the control period of the " << domain.name() << " environment (" << period
+                                                  << " s): the shield's model looks one step ahead");
+  domain.CheckExperiment(options);
 }
 
 DomainRegistry& DomainRegistry::Global() {

@@ -188,8 +188,9 @@ class Domain {
   /// The experiment's data from `data_seed` (deterministic).
   virtual DomainData GenerateData(std::uint64_t data_seed) const = 0;
 
-  /// Checks experiment options against the domain (e.g. that the shield looks ahead exactly one
-  /// control period); called by RunExperiment. @throws secure::Error naming the field.
+  /// Checks experiment options against what is particular to the domain (none by default); called
+  /// by CheckExperimentOptions, which checks first what every domain shares (shield.dt = the
+  /// environment's control period). @throws secure::Error naming the field.
   virtual void CheckExperiment(const ExperimentOptions& options) const {}
 
   /// The experiment options this domain's experiments start from (barrier kind and trainer
@@ -288,6 +289,12 @@ class Domain {
   /// secure::Error on invalid options, or a barrier that does not take the domain's states.
   virtual ShieldRunReport RunShield(const ShieldRunRequest& request, cbf::Barrier& barrier) const;
 };
+
+/// Checks experiment options against `domain` before a run: first what every domain shares (the
+/// shield looks ahead exactly one control period: shield.dt equals the control_period() of the
+/// domain's environment, when it has a clock), then the domain's own CheckExperiment.
+/// @throws secure::Error naming the field and both values.
+void CheckExperimentOptions(const Domain& domain, const ExperimentOptions& options);
 
 /// Makes a domain with its options for a profile.
 using DomainFactory = std::function<std::unique_ptr<Domain>(Profile)>;

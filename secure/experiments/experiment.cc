@@ -106,7 +106,7 @@ std::vector<eval::Method> CheckRun(ExperimentKind kind, const Domain& domain,
                                    const ExperimentOptions& o) {
   domain.Validate();
   o.Validate();
-  domain.CheckExperiment(o);
+  CheckExperimentOptions(domain, o);
   const std::vector<eval::Method> methods = o.methods.empty() ? DefaultMethods(kind) : o.methods;
   SECURE_CHECK(
       kind != ExperimentKind::kSensitivity ||

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -112,7 +113,7 @@ TEST_P(DomainContract, OptionsAndPresetValidateInBothProfiles) {
     EXPECT_TRUE(d->OptionsJson().is_object());
     const experiments::ExperimentOptions o = d->Preset();
     EXPECT_NO_THROW(o.Validate());
-    EXPECT_NO_THROW(d->CheckExperiment(o));
+    EXPECT_NO_THROW(experiments::CheckExperimentOptions(*d, o));
     EXPECT_TRUE(o.ToJson().is_object());
   }
 }
@@ -257,13 +258,28 @@ TEST_P(DomainContract, CollisionsCountEntriesIntoDanger) {
   RecordProperty("contact_steps", contact_steps);
 }
 
+// The driver checks once, for every domain, that the shield looks ahead one control period
+// (experiments::CheckExperimentOptions): the preset does; another shield.dt is an error naming
+// the field and both values.
+TEST_P(DomainContract, ShieldDtMustBeTheControlPeriod) {
+  experiments::ExperimentOptions o = domain_->Preset();
+  const double period = env_->control_period();
+  EXPECT_NEAR(o.shield.dt, period, 1e-12);
+  o.shield.dt = 1.5 * period;
+  std::ostringstream expected;
+  expected << "ExperimentOptions::shield.dt = " << o.shield.dt
+           << ", must be the control period of the " << GetParam() << " environment (" << period
+           << " s)";
+  EXPECT_HAS(ErrorOf([&] { experiments::CheckExperimentOptions(*domain_, o); }), expected.str());
+}
+
 // The actuator box (Environment::ActionBounds) is what Step() clips to: an action outside it
 // steps exactly as the action clipped to it, in a second environment on the same episode.
 TEST_P(DomainContract, ActionBoundsAreTheClipOfStep) {
   const int n = env_->action_dim();
   Eigen::VectorXf low(n), high(n);
   env_->ActionBounds(low, high);
-  EXPECT_GT(env_->StepSeconds(), 0.0) << "every registered domain has a control period";
+  EXPECT_GT(env_->control_period(), 0.0) << "every registered domain has a control period";
   for (int i = 0; i < n; ++i) {
     ASSERT_TRUE(std::isfinite(low[i]) && std::isfinite(high[i]))
         << "component " << i << ": [" << low[i] << ", " << high[i] << "]";

@@ -8,6 +8,7 @@
 
 #include <yaml-cpp/yaml.h>
 #include <limits>
+#include <sstream>
 
 #include "secure/common/atomic_file.h"
 #include "secure/policy/airl_reward.h"
@@ -125,8 +126,11 @@ TEST(PipelineTest, OptionsAreValidated) {
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "ExperimentOptions::evaluation.tost_bound = inf");
   o = Tiny();
   o.shield.dt = 0.05;
-  EXPECT_HAS(ErrorOf([&] { TinyDomain().CheckExperiment(o); }),
-             "ExperimentOptions::shield.dt = 0.05");
+  std::ostringstream dt_error;  // the field and both values
+  dt_error << "ExperimentOptions::shield.dt = 0.05, must be the control period of the "
+              "double-integrator environment ("
+           << TinyDomain().options().task.dt << " s)";
+  EXPECT_HAS(ErrorOf([&] { CheckExperimentOptions(TinyDomain(), o); }), dt_error.str());
   EXPECT_HAS(ErrorOf([&] { RunTiny(o); }), "ExperimentOptions::shield.dt = 0.05");
   o = Tiny();
   EXPECT_HAS(ErrorOf([&] { o.ApplyYaml(YAML::Load("{policy: {epochs: 3}}"), "x.yaml"); }),

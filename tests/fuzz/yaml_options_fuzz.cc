@@ -42,7 +42,7 @@ void ApplyExperiment(const YAML::Node& node) {
     options.ApplyYaml(node, "fuzz.yaml", &domain);
     domain.Validate();
     options.Validate();
-    domain.CheckExperiment(options);
+    secure::experiments::CheckExperimentOptions(domain, options);
     (void)options.ToJson().dump();
     (void)domain.OptionsJson().dump();
   } catch (const secure::Error&) {

@@ -254,11 +254,6 @@ experiments::ExperimentOptions ToyCartDomain::Preset() const {
   return p;
 }
 
-void ToyCartDomain::CheckExperiment(const experiments::ExperimentOptions& o) const {
-  SECURE_CHECK_FIELD(o.shield.dt == options_.dt, "ExperimentOptions", "shield.dt", o.shield.dt,
-                     "the toy cart's dt = " << options_.dt << " (the shield looks one step ahead)");
-}
-
 std::unique_ptr<cbf::Barrier> ToyCartDomain::MakeGroundTruth() const {
   return std::make_unique<ToyCartGroundTruth>(options_);
 }

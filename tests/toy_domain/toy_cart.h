@@ -102,7 +102,7 @@ class ToyCartEnv final : public domains::Environment {
     low.setConstant(-static_cast<float>(options_.accel_bound));
     high.setConstant(static_cast<float>(options_.accel_bound));
   }
-  double StepSeconds() const override { return options_.dt; }
+  double control_period() const override { return options_.dt; }
 
  private:
   ToyCartOptions options_;
@@ -144,7 +144,6 @@ class ToyCartDomain final : public experiments::Domain {
   std::unique_ptr<domains::Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
   experiments::ExperimentOptions Preset() const override;
-  void CheckExperiment(const experiments::ExperimentOptions& options) const override;
   std::unique_ptr<cbf::Barrier> MakeGroundTruth() const override;
   std::optional<cbf::StateSource> ValidationGrid() const override;
   /// Uniform in the grid's box (x in [0, wall + 0.5), v in [-1, 3)), labelled by the ground truth.

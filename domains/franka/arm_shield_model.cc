@@ -1,0 +1,43 @@
+#include "domains/franka/arm_shield_model.h"
+
+#include <cmath>
+
+#include "secure/common/option_check.h"
+#include "secure/common/yaml_fields.h"
+
+namespace secure::domains::franka {
+
+void EndEffectorGains::Validate(const char* o) const {
+  SECURE_CHECK_FIELD(std::isfinite(position_gain) && position_gain >= 0, o, "position_gain",
+                     position_gain, ">= 0");
+  SECURE_CHECK_FIELD(std::isfinite(velocity_gain) && velocity_gain >= 0, o, "velocity_gain",
+                     velocity_gain, ">= 0");
+}
+
+void EndEffectorGains::AddJson(nlohmann::json* json) const {
+  (*json)["position_gain"] = position_gain;
+  (*json)["velocity_gain"] = velocity_gain;
+}
+
+void EndEffectorGains::AddFields(YamlFields* fields) {
+  fields->Field("position_gain", &position_gain).Field("velocity_gain", &velocity_gain);
+}
+
+void PersonShieldModelOptions::Validate(const char* o) const {
+  EndEffectorGains::Validate(o);
+  SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, o, "dt", dt, "> 0 s");
+}
+
+nlohmann::json PersonShieldModelOptions::ToJson() const {
+  nlohmann::json j = {{"dt", dt}};
+  AddJson(&j);
+  return j;
+}
+
+void PersonShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  YamlFields fields;
+  AddFields(&fields);
+  fields.Field("dt", &dt).Apply(node, source);
+}
+
+}  // namespace secure::domains::franka
