@@ -1,4 +1,4 @@
-#include "tests/toy_domain/toy_cart.h"
+#include "examples/toy_domain/toy_cart.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -12,7 +12,7 @@
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
 
-namespace secure::test {
+namespace secure::examples::toy_cart {
 
 void ToyCartOptions::Validate() const {
   SECURE_CHECK_FIELD(dt > 0 && dt <= 1, "ToyCartOptions", "dt", dt, "in (0, 1]");
@@ -243,7 +243,9 @@ experiments::ExperimentOptions ToyCartDomain::Preset() const {
   p.airl.iterations = 10;
   p.airl.steps_per_iteration = 1200;  // 20 episodes of 60 steps
   p.shield.dt = options_.dt;
-  p.check_enabled = false;  // no barrier check problem (HasCheck() is false)
+  // The experiments do not run the barrier check (`secure cbf check --domain toy-cart` does):
+  // the toy's results stay those of the example as first tuned.
+  p.check_enabled = false;
   if (profile_ == experiments::Profile::kQuick) {
     p.seeds = 2;
     p.episodes = 40;
@@ -301,10 +303,14 @@ experiments::GroundTruthSample ToyCartDomain::SampleGroundTruth(long n_safe, lon
           {source + " unsafe", {"x", "v"}, std::move(unsafe)}};
 }
 
-void RegisterToyCart(experiments::DomainRegistry& registry) {
-  if (registry.Has("toy-cart")) return;
-  registry.Add("toy-cart", "a cart must stop in front of a wall (tests only)",
-               [](experiments::Profile p) { return std::make_unique<ToyCartDomain>(p); });
-}
+}  // namespace secure::examples::toy_cart
 
-}  // namespace secure::test
+namespace secure::plugins {
+// The plug-in's registration (secure_add_domain(toy_cart ...): Register_<name>).
+void Register_toy_cart(experiments::DomainRegistry& registry) {
+  registry.Add("toy-cart", "a cart must stop in front of a wall (the example plug-in)",
+               [](experiments::Profile p) {
+                 return std::make_unique<examples::toy_cart::ToyCartDomain>(p);
+               });
+}
+}  // namespace secure::plugins
