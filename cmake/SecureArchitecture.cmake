@@ -18,8 +18,8 @@
 #   torch     <torch/...>, <ATen/...> and <c10/...> only from files of targets that link Torch
 #             (any item of TORCH_LIBRARIES, transitively).
 #   plugin    A file under a host folder (SECURE_ARCH_HOST_FOLDERS: apps/, the CLI) includes no
-#             header under domains/ (a plug-in, or the Franka arm the plug-ins share) nor under the
-#             folder of a plug-in outside it (secure_add_domain, e.g. examples/toy_domain/), even though
+#             header under domains/ (a plug-in, or the Franka arm the plug-ins share) nor under
+#             the folder of a plug-in outside it (secure_add_domain: examples/toy_domain/), although
 #             it links them all through secure::plugins: a host meets a domain only through the
 #             registry and the capabilities a domain offers (secure/experiments/domain.h).
 #

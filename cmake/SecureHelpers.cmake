@@ -80,8 +80,8 @@ endfunction()
 
 # secure_generate_domain_registry(): after every secure_add_domain (the top-level CMakeLists.txt
 # calls it once, after domains/ and the plug-in folders outside it, e.g. examples/toy_domain/),
-# writes <build>/generated/secure_registered_domains.cc (RegisterBuiltinDomains calling each plug-in's
-# Register_<name>) and the target secure::plugins, which links every domain plug-in.
+# writes <build>/generated/secure_registered_domains.cc (RegisterBuiltinDomains calling each
+# plug-in's Register_<name>) and the target secure::plugins, which links every domain plug-in.
 function(secure_generate_domain_registry)
   get_property(_domains GLOBAL PROPERTY SECURE_DOMAIN_PLUGINS)
   set(_declarations "")

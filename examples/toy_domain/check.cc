@@ -46,8 +46,8 @@ cbf::BarrierCheckProblem ToyCartDomain::MakeCheckProblem(
   p.action_hi = Eigen::VectorXf::Constant(1, float(options_.accel_bound));
   p.dt = shield.dt;
   p.class_k = [shield](double h) { return shield::ClassKValue(shield, h); };
-  p.class_k_description =
-      ToString(shield::kClassKNames, shield.class_k) + ", k = " + std::to_string(shield.class_k_gain);
+  p.class_k_description = ToString(shield::kClassKNames, shield.class_k) + ", k = " +
+                          std::to_string(shield.class_k_gain);
   p.near_dangerous = near_dangerous;
   p.held_out_safe = safe;
   p.held_out_near_dangerous = near_dangerous;

@@ -37,12 +37,13 @@ void ToyCartOptions::Validate() const {
 }
 
 nlohmann::json ToyCartOptions::ToJson() const {
-  return {{"dt", dt},
-          {"accel_bound", accel_bound},
-          {"wall", wall},
-          {"goal_lo", goal_lo},
-          {"goal_speed", goal_speed},
-          {"max_steps", max_steps},
+  return {{"task",
+           {{"dt", dt},
+            {"accel_bound", accel_bound},
+            {"wall", wall},
+            {"goal_lo", goal_lo},
+            {"goal_speed", goal_speed},
+            {"max_steps", max_steps}}},
           {"target", target},
           {"max_speed", max_speed},
           {"brake_fraction", brake_fraction},
@@ -161,9 +162,36 @@ void ToyCartDomain::ApplyYaml(const YAML::Node& node, const std::string& source)
       options_.safe_states = YamlValue<long>(entry.second, key, source);
     } else if (key == "near_dangerous") {
       options_.near_dangerous = YamlValue<long>(entry.second, key, source);
+    } else if (key == "task") {
+      ApplyTaskYaml(entry.second, source + " [task]");
     } else {
       SECURE_THROW(source << ": unknown key '" << key
-                          << "' (valid: demonstrations, safe_states, near_dangerous)");
+                          << "' (valid: demonstrations, safe_states, near_dangerous, task)");
+    }
+  }
+}
+
+// The task's keys (`task:`): the cart, the wall and the goal.
+void ToyCartDomain::ApplyTaskYaml(const YAML::Node& node, const std::string& source) {
+  SECURE_CHECK(node.IsMap(), source << ": the toy-cart task options must be a mapping");
+  ToyCartOptions& o = options_;
+  for (const auto& entry : node) {
+    const std::string key = YamlKey(entry.first, source);
+    if (key == "dt") {
+      o.dt = YamlValue<double>(entry.second, key, source);
+    } else if (key == "accel_bound") {
+      o.accel_bound = YamlValue<double>(entry.second, key, source);
+    } else if (key == "wall") {
+      o.wall = YamlValue<double>(entry.second, key, source);
+    } else if (key == "goal_lo") {
+      o.goal_lo = YamlValue<double>(entry.second, key, source);
+    } else if (key == "goal_speed") {
+      o.goal_speed = YamlValue<double>(entry.second, key, source);
+    } else if (key == "max_steps") {
+      o.max_steps = YamlValue<int>(entry.second, key, source);
+    } else {
+      SECURE_THROW(source << ": unknown key '" << key
+                          << "' (valid: dt, accel_bound, wall, goal_lo, goal_speed, max_steps)");
     }
   }
 }

@@ -142,7 +142,8 @@ class ToyCartDomain final : public experiments::Domain {
   std::string Describe() const override;
   std::string Title() const override { return "the toy cart (an example plug-in)"; }
   std::string ConfigSection() const override { return "toy_cart"; }
-  /// Keys: demonstrations, safe_states, near_dangerous (counts).
+  /// Keys: demonstrations, safe_states, near_dangerous (counts), task (dt, accel_bound, wall,
+  /// goal_lo, goal_speed, max_steps).
   void ApplyYaml(const YAML::Node& node, const std::string& source) override;
   void Validate() const override { options_.Validate(); }
   nlohmann::json OptionsJson() const override { return options_.ToJson(); }
@@ -169,6 +170,8 @@ class ToyCartDomain final : public experiments::Domain {
   ToyCartOptions& mutable_options() { return options_; }
 
  private:
+  void ApplyTaskYaml(const YAML::Node& node, const std::string& source);
+
   experiments::Profile profile_;
   ToyCartOptions options_;
 };

@@ -554,7 +554,7 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
              "unknown domain 'panda' (registered: coffee-placing | derby | double-integrator | "
-             "kitchen-cutting | panda-push)");
+             "kitchen-cutting | panda-push | toy-cart)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
   EXPECT_EQ(r.exit_code, 1);
@@ -575,7 +575,7 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
              "unknown domain 'unicycle' (registered: coffee-placing | derby | double-integrator | "
-             "kitchen-cutting | panda-push)");
+             "kitchen-cutting | panda-push | toy-cart)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
   EXPECT_HAS(v.err, "the derby domain has no ground truth");
@@ -1040,7 +1040,7 @@ TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
   ExpectOneErrorLine(
       r,
       "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, coffee_placing, "
-      "derby, double_integrator, kitchen_cutting, panda_push, pipeline, trainer)");
+      "derby, double_integrator, kitchen_cutting, panda_push, pipeline, toy_cart, trainer)");
   r = RunCli(base + Write("dup.yaml", "trainer:\n  max_epochs: 3\n  max_epochs: 4\n"));
   ExpectOneErrorLine(r, "dup.yaml:3: duplicate key 'max_epochs' (first at line 2)");
   r = RunCli(base + Write("dup_top.yaml", "trainer: {}\ndouble_integrator: {}\ntrainer: {}\n"));

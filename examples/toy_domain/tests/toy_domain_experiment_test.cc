@@ -1,8 +1,8 @@
 // The example plug-in (examples/toy_domain, registered like every plug-in) runs the quick method
-// comparison through the generic driver (experiments::RunExperiment), as any plug-in would: the proof that
-// a domain needs nothing but experiments::Domain. The toy is tuned so that the comparison says
-// something: the expert parks in front of the wall after a fast approach, the learned policies
-// sometimes overshoot into it, the shield keeps SECURE off it.
+// comparison through the generic driver (experiments::RunExperiment), as any plug-in would: the
+// proof that a domain needs nothing but experiments::Domain. The toy is tuned so that the
+// comparison says something: the expert parks in front of the wall after a fast approach, the
+// learned policies sometimes overshoot into it, the shield keeps SECURE off it.
 
 #include <gtest/gtest.h>
 
