@@ -1,15 +1,19 @@
-# The two commands of the README. Both set up the machine if needed (scripts/setup.sh installs
+# The commands of the README. Each sets up the machine if needed (scripts/setup.sh installs
 # missing Debian packages, configures and builds), then run.
 #   make demo   the main job: the SECURE pipeline on the default domain, printing its table,
 #               then its HTML report (secure report; the run directory is $(BUILD)/demo-run,
 #               made anew by each `make demo`: a run directory's finished seeds are otherwise reused)
+#   make reproduce  every experiment of the paper on every domain declaring it (secure reproduce,
+#               into $(BUILD)/reproduce: rerun to resume), then one HTML page of every table
+#               ($(BUILD)/reproduce/report.html). REPRODUCE_FLAGS='--profile quick' for the small
+#               sizes, '--shard k/N' for one shard (apps/secure/README.md, docs/CLUSTER.md)
 #   make test   every fast unit test of every module, the Python and report tests included
 #               (ctest without the labels slow, long, dispatch, property-random and install;
 #               tests/README.md)
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: demo test test-slow test-ci test-install build bench check clean
+.PHONY: demo reproduce test test-slow test-ci test-install build bench check clean
 
 build:
 	SECURE_BUILD_DIR=$(BUILD) scripts/setup.sh
@@ -18,6 +22,12 @@ demo: build
 	rm -rf $(BUILD)/demo-run
 	$(BUILD)/apps/secure/secure demo --out $(BUILD)/demo-run
 	$(BUILD)/apps/secure/secure report $(BUILD)/demo-run
+
+REPRODUCE_DIR ?= $(BUILD)/reproduce
+REPRODUCE_FLAGS ?=
+reproduce: build
+	$(BUILD)/apps/secure/secure reproduce --out $(REPRODUCE_DIR) $(REPRODUCE_FLAGS)
+	$(BUILD)/apps/secure/secure report $(REPRODUCE_DIR)
 
 # The labels `make test` leaves out (tests/README.md): slow (tests that train whole quick
 # experiments), dispatch (the inference and shield tests again on each forced kernel path),

@@ -18,7 +18,8 @@
 #   torch     <torch/...>, <ATen/...> and <c10/...> only from files of targets that link Torch
 #             (any item of TORCH_LIBRARIES, transitively).
 #   plugin    A file under a host folder (SECURE_ARCH_HOST_FOLDERS: apps/, the CLI) includes no
-#             header under domains/ (a plug-in, or the Franka arm the plug-ins share), even though
+#             header under domains/ (a plug-in, or the Franka arm the plug-ins share) nor under
+#             the folder of a plug-in outside it (secure_add_domain: examples/toy_domain/), although
 #             it links them all through secure::plugins: a host meets a domain only through the
 #             registry and the capabilities a domain offers (secure/experiments/domain.h).
 #
@@ -170,6 +171,17 @@ function(_secure_arch_generate)
                          "set(ARCH_EXCEPTIONS_${_t} \"${_exceptions}\")\n")
   endforeach()
   list(REMOVE_DUPLICATES _folders)
+  # The plugin rule's folders: domains/ and every plug-in's own (secure_domain_<name>).
+  set(_plugin_folders domains)
+  foreach(_t IN LISTS _targets)
+    if(_t MATCHES "^secure_domain_")
+      get_target_property(_src_dir ${_t} SOURCE_DIR)
+      file(RELATIVE_PATH _folder "${_root}" "${_src_dir}")
+      list(APPEND _plugin_folders "${_folder}")
+    endif()
+  endforeach()
+  list(REMOVE_DUPLICATES _plugin_folders)
+  string(APPEND _graph "set(ARCH_PLUGIN_FOLDERS \"${_plugin_folders}\")\n")
   foreach(_folder IN LISTS _folders)
     string(APPEND _graph "set(ARCH_FOLDER_${_folder} \"${_folder_targets_${_folder}}\")\n")
   endforeach()

@@ -38,24 +38,50 @@ function(secure_add_test name label)
     ENVIRONMENT "RC_PARAMS=seed=${SECURE_RAPIDCHECK_SEED}")
 endfunction()
 
-# secure_add_domain(<name> SOURCES ... DEPS ... [PRIVATE_DEPS ...])
-# A domain plug-in (domains/<name>/): target secure_domain_<name>, alias secure::domain_<name>.
-# Its dependencies stay its own (a MuJoCo domain links MuJoCo PRIVATE), so nothing else pulls
-# them. The plug-in defines `void secure::plugins::Register_<name>(experiments::DomainRegistry&)`
-# (it adds its experiments::Domain); secure_generate_domain_registry() calls every one of them
-# from secure::plugins::RegisterBuiltinDomains().
+# secure_add_domain(<name> SOURCES ... DEPS ... [PRIVATE_DEPS ...] [TESTS ...] [TEST_DEPS ...])
+# A domain plug-in (its own folder, usually domains/<name>/): target secure_domain_<name>, alias
+# secure::domain_<name>. Its dependencies stay its own (a MuJoCo domain links MuJoCo PRIVATE), so
+# nothing else pulls them. The plug-in defines
+# `void secure::plugins::Register_<name>(experiments::DomainRegistry&)` (it adds its
+# experiments::Domain); secure_generate_domain_registry() calls every one of them from
+# secure::plugins::RegisterBuiltinDomains().
+# TESTS: the plug-in's own GoogleTest files (conventionally <folder>/tests/*.cc), built by
+# secure_add_domain_tests() (tests/CMakeLists.txt) into one executable <name>_test, label
+# `domains`, linking the plug-in, its DEPS and TEST_DEPS (not PRIVATE_DEPS: an imported target such
+# as mujoco::mujoco exists only in the plug-in's folder; the static plug-in links it anyway);
+# SECURE_CLI is the path of the `secure` executable there (for tests that run the CLI on it).
 # Its includes are checked like a module's: it may include the generic modules it links (DEPS),
 # and generic code may include it only by linking it.
 function(secure_add_domain name)
-  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS;TESTS;TEST_DEPS" ${ARGN})
   secure_add_library(domain_${name} SOURCES ${ARG_SOURCES} DEPS ${ARG_DEPS}
                      PRIVATE_DEPS ${ARG_PRIVATE_DEPS})
   set_property(GLOBAL APPEND PROPERTY SECURE_DOMAIN_PLUGINS ${name})
+  list(TRANSFORM ARG_TESTS PREPEND "${CMAKE_CURRENT_SOURCE_DIR}/")
+  set_property(GLOBAL PROPERTY SECURE_DOMAIN_TESTS_${name} ${ARG_TESTS})
+  set_property(GLOBAL PROPERTY SECURE_DOMAIN_TEST_DEPS_${name} ${ARG_DEPS} ${ARG_TEST_DEPS})
 endfunction()
 
-# secure_generate_domain_registry(): after every secure_add_domain, writes
-# <build>/generated/secure_registered_domains.cc (RegisterBuiltinDomains calling each plug-in's
-# Register_<name>) and the target secure::plugins, which links every domain plug-in.
+# secure_add_domain_tests(): one test executable per plug-in that declared TESTS (called once,
+# from tests/CMakeLists.txt, where GoogleTest is found): <name>_test, label `domains`.
+function(secure_add_domain_tests)
+  get_property(_domains GLOBAL PROPERTY SECURE_DOMAIN_PLUGINS)
+  foreach(_d IN LISTS _domains)
+    get_property(_tests GLOBAL PROPERTY SECURE_DOMAIN_TESTS_${_d})
+    if(NOT _tests)
+      continue()
+    endif()
+    get_property(_deps GLOBAL PROPERTY SECURE_DOMAIN_TEST_DEPS_${_d})
+    secure_add_test(${_d}_test domains SOURCES ${_tests} DEPS secure::domain_${_d} ${_deps})
+    target_compile_definitions(${_d}_test PRIVATE SECURE_CLI="$<TARGET_FILE:secure>")
+    add_dependencies(${_d}_test secure)
+  endforeach()
+endfunction()
+
+# secure_generate_domain_registry(): after every secure_add_domain (the top-level CMakeLists.txt
+# calls it once, after domains/ and the plug-in folders outside it, e.g. examples/toy_domain/),
+# writes <build>/generated/secure_registered_domains.cc (RegisterBuiltinDomains calling each
+# plug-in's Register_<name>) and the target secure::plugins, which links every domain plug-in.
 function(secure_generate_domain_registry)
   get_property(_domains GLOBAL PROPERTY SECURE_DOMAIN_PLUGINS)
   set(_declarations "")

@@ -25,6 +25,9 @@ void RegisterExperimentCommands(CLI::App& app, const Config& config);
 /// secure experiment label-efficiency (label_efficiency_command.cc), registered by
 /// RegisterExperimentCommands.
 void RegisterLabelEfficiencyCommand(CLI::App& experiment, const Config& config);
+/// secure reproduce --out DIR (reproduce_command.cc): every experiment of the paper on every
+/// domain that declares it (secure/experiments/reproduce.h).
+void RegisterReproduceCommand(CLI::App& app);
 /// secure report RUN_DIR (report_command.cc): the run's HTML report (tools/report/report.py).
 void RegisterReportCommand(CLI::App& app);
 /// secure domains [NAME] (domains_command.cc): the registered domains, their capabilities, and

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
     secure::cli::RegisterRenderCommand(app, config);
     secure::cli::RegisterExperimentCommands(app, config);
     secure::cli::RegisterReportCommand(app);
+    secure::cli::RegisterReproduceCommand(app);
     secure::cli::RegisterCompareCommand(app);
     secure::cli::RegisterDomainsCommand(app);
     secure::cli::RegisterDynamicsCommands(app, config);

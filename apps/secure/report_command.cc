@@ -50,7 +50,8 @@ std::string EnvOr(const char* name, const char* fallback) {
   return v != nullptr && *v != '\0' ? std::string(v) : std::string(fallback);
 }
 
-// RUN_DIR must be a directory holding a result.json with an "experiment" object.
+// RUN_DIR must be a directory holding a result.json with an "experiment" object (or, from
+// `secure reproduce`, a reproduce.json).
 void CheckRunDirectory(const std::string& run_dir) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -60,6 +61,10 @@ void CheckRunDirectory(const std::string& run_dir) {
                run_dir << ": not a directory (expected a run directory written by `secure demo "
                           "--out` or `secure experiment --out`)");
   const std::string path = (fs::path(run_dir) / "result.json").string();
+  // A `secure reproduce --out` directory (reproduce.json, no result.json): the script checks it.
+  if (!fs::exists(fs::status(path, ec)) &&
+      fs::is_regular_file(fs::status(fs::path(run_dir) / "reproduce.json", ec)))
+    return;
   SECURE_CHECK(fs::is_regular_file(fs::status(path, ec)),
                path << ": missing: " << run_dir
                     << " is not a run directory (written by `secure demo --out` or `secure "

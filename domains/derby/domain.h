@@ -46,6 +46,10 @@ class DerbyDomain final : public experiments::Domain {
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
   experiments::ExperimentOptions Preset() const override;
+  /// The paper's experiments on this domain (Section 6), for `secure reproduce`.
+  std::vector<std::string> PaperExperiments() const override {
+    return {"method-comparison", "ablation", "sensitivity", "joint"};
+  }
 
   bool HasCheck() const override { return true; }
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,

@@ -52,6 +52,10 @@ class PandaPushDomain final : public experiments::Domain {
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
   experiments::ExperimentOptions Preset() const override;
+  /// The paper's experiments on this domain (Section 6), for `secure reproduce`.
+  std::vector<std::string> PaperExperiments() const override {
+    return {"method-comparison", "ablation", "sensitivity"};
+  }
 
   /// Rows: the safe states; the pushing part of the demonstrations; the near-dangerous states
   /// by scenario (upper part, fast along x, fast along z, both); with released_data_dir set,

@@ -229,6 +229,12 @@ class Domain {
   /// The paper's Table 3 numbers for this domain, if the paper has a row for it (printed beside
   /// a method comparison by `secure experiment`; nothing by default).
   virtual std::optional<PaperTable3> PaperReference() const { return std::nullopt; }
+  /// The paper's experiments on this domain (ExperimentKind names) that `secure reproduce` runs
+  /// (experiments/reproduce.h): any of "method-comparison" (a Table 3 row; implied by
+  /// PaperReference), "ablation" (Figure 9), "sensitivity" (Section 6.3) and "joint" (the joint
+  /// optimisation of Section 4.1). Table 1 and the user study follow from the capabilities
+  /// (ground truth, population). None by default.
+  virtual std::vector<std::string> PaperExperiments() const { return {}; }
 
   // The ground truth (optional): an analytic barrier h*, the states to validate a learned
   // barrier on, and a sampler of labelled states (`cbf validate`, `cbf train --domain`, the

@@ -77,10 +77,10 @@ TEST(CliCbfCheckTest, RejectsAnUnknownDomainAndMismatchedInputs) {
   ExpectOneErrorLine(
       r,
       "--domain = 'panda', must be one of: coffee-placing, derby, double-integrator, "
-      "kitchen-cutting, panda-push");
+      "kitchen-cutting, panda-push, toy-cart");
   EXPECT_HAS(RunCli("cbf check --help").out,
              "a domain with a barrier check: coffee-placing, derby, double-integrator, "
-             "kitchen-cutting, panda-push");
+             "kitchen-cutting, panda-push, toy-cart");
   // A model for other features than the domain's observation.
   r = RunCli("cbf check --model " + model + " --domain derby");
   ExpectOneErrorLine(r, "without 'x', which " + model + " reads");

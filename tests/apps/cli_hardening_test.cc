@@ -57,7 +57,7 @@ TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
   ExpectOneErrorLine(
       r,
       "typo.yaml:1: unknown section 'trainr' (known sections: airl, bc, check, coffee_placing, "
-      "derby, double_integrator, kitchen_cutting, panda_push, pipeline, trainer)");
+      "derby, double_integrator, kitchen_cutting, panda_push, pipeline, toy_cart, trainer)");
   r = RunCli(base + Write("dup.yaml", "trainer:\n  max_epochs: 3\n  max_epochs: 4\n"));
   ExpectOneErrorLine(r, "dup.yaml:3: duplicate key 'max_epochs' (first at line 2)");
   r = RunCli(base + Write("dup_top.yaml", "trainer: {}\ndouble_integrator: {}\ntrainer: {}\n"));

@@ -218,7 +218,7 @@ TEST(CliTest, PipelineStagesRejectBadInput) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
              "unknown domain 'panda' (registered: coffee-placing | derby | double-integrator | "
-             "kitchen-cutting | panda-push)");
+             "kitchen-cutting | panda-push | toy-cart)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
   r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
   EXPECT_EQ(r.exit_code, 1);
@@ -239,7 +239,7 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
              "unknown domain 'unicycle' (registered: coffee-placing | derby | double-integrator | "
-             "kitchen-cutting | panda-push)");
+             "kitchen-cutting | panda-push | toy-cart)");
   const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
   EXPECT_EQ(v.exit_code, 1);
   EXPECT_HAS(v.err, "the derby domain has no ground truth");

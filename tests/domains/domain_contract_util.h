@@ -1,22 +1,21 @@
 #pragma once
-// The domains the contract suites run over: every built-in plug-in
-// (secure::plugins::RegisterBuiltinDomains) plus the tests' toy domain (tests/toy_domain), in the
-// process-wide registry. A new plug-in under domains/ is picked up without touching the tests.
+// The domains the contract suites run over: every plug-in of the build
+// (secure::plugins::RegisterBuiltinDomains: the built-ins under domains/ and the example plug-in
+// examples/toy_domain), in the process-wide registry. A new plug-in is picked up without touching
+// the tests.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
 
 #include "secure/common/rng.h"
 #include "secure/experiments/domain.h"
-#include "tests/toy_domain/toy_cart.h"
 
 namespace secure::test {
 
-/// Registers the built-in domains and the toy one (once) and returns every registered name.
+/// Registers the plug-ins (once) and returns every registered name.
 inline std::vector<std::string> ContractDomainNames() {
   experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
   plugins::RegisterBuiltinDomains(registry);
-  RegisterToyCart(registry);  // the one line a test needs for a domain of its own
   return registry.Names();
 }
 

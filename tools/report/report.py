@@ -1225,7 +1225,12 @@ def main(argv):
     args = parser.parse_args(argv)
     out = args.out or os.path.join(args.run_dir, "report.html")
     try:
-        figures = build_report(args.run_dir, out, args.write_to)
+        import reproduce_page  # tools/report/reproduce_page.py: a `secure reproduce` directory
+        if reproduce_page.is_reproduce_dir(args.run_dir):
+            figures = reproduce_page.build(sys.modules[__name__], args.run_dir, out,
+                                           args.write_to)
+        else:
+            figures = build_report(args.run_dir, out, args.write_to)
     except ReportError as e:
         print("secure report: error: %s" % e, file=sys.stderr)
         return 1

@@ -1,4 +1,4 @@
-#include "tests/toy_domain/toy_cart.h"
+#include "examples/toy_domain/toy_cart.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -12,7 +12,7 @@
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_value.h"
 
-namespace secure::test {
+namespace secure::examples::toy_cart {
 
 void ToyCartOptions::Validate() const {
   SECURE_CHECK_FIELD(dt > 0 && dt <= 1, "ToyCartOptions", "dt", dt, "in (0, 1]");
@@ -37,12 +37,13 @@ void ToyCartOptions::Validate() const {
 }
 
 nlohmann::json ToyCartOptions::ToJson() const {
-  return {{"dt", dt},
-          {"accel_bound", accel_bound},
-          {"wall", wall},
-          {"goal_lo", goal_lo},
-          {"goal_speed", goal_speed},
-          {"max_steps", max_steps},
+  return {{"task",
+           {{"dt", dt},
+            {"accel_bound", accel_bound},
+            {"wall", wall},
+            {"goal_lo", goal_lo},
+            {"goal_speed", goal_speed},
+            {"max_steps", max_steps}}},
           {"target", target},
           {"max_speed", max_speed},
           {"brake_fraction", brake_fraction},
@@ -161,9 +162,36 @@ void ToyCartDomain::ApplyYaml(const YAML::Node& node, const std::string& source)
       options_.safe_states = YamlValue<long>(entry.second, key, source);
     } else if (key == "near_dangerous") {
       options_.near_dangerous = YamlValue<long>(entry.second, key, source);
+    } else if (key == "task") {
+      ApplyTaskYaml(entry.second, source + " [task]");
     } else {
       SECURE_THROW(source << ": unknown key '" << key
-                          << "' (valid: demonstrations, safe_states, near_dangerous)");
+                          << "' (valid: demonstrations, safe_states, near_dangerous, task)");
+    }
+  }
+}
+
+// The task's keys (`task:`): the cart, the wall and the goal.
+void ToyCartDomain::ApplyTaskYaml(const YAML::Node& node, const std::string& source) {
+  SECURE_CHECK(node.IsMap(), source << ": the toy-cart task options must be a mapping");
+  ToyCartOptions& o = options_;
+  for (const auto& entry : node) {
+    const std::string key = YamlKey(entry.first, source);
+    if (key == "dt") {
+      o.dt = YamlValue<double>(entry.second, key, source);
+    } else if (key == "accel_bound") {
+      o.accel_bound = YamlValue<double>(entry.second, key, source);
+    } else if (key == "wall") {
+      o.wall = YamlValue<double>(entry.second, key, source);
+    } else if (key == "goal_lo") {
+      o.goal_lo = YamlValue<double>(entry.second, key, source);
+    } else if (key == "goal_speed") {
+      o.goal_speed = YamlValue<double>(entry.second, key, source);
+    } else if (key == "max_steps") {
+      o.max_steps = YamlValue<int>(entry.second, key, source);
+    } else {
+      SECURE_THROW(source << ": unknown key '" << key
+                          << "' (valid: dt, accel_bound, wall, goal_lo, goal_speed, max_steps)");
     }
   }
 }
@@ -243,7 +271,9 @@ experiments::ExperimentOptions ToyCartDomain::Preset() const {
   p.airl.iterations = 10;
   p.airl.steps_per_iteration = 1200;  // 20 episodes of 60 steps
   p.shield.dt = options_.dt;
-  p.check_enabled = false;  // no barrier check problem (HasCheck() is false)
+  // The experiments do not run the barrier check (`secure cbf check --domain toy-cart` does):
+  // the toy's results stay those of the example as first tuned.
+  p.check_enabled = false;
   if (profile_ == experiments::Profile::kQuick) {
     p.seeds = 2;
     p.episodes = 40;
@@ -296,10 +326,14 @@ experiments::GroundTruthSample ToyCartDomain::SampleGroundTruth(long n_safe, lon
           {source + " unsafe", {"x", "v"}, std::move(unsafe)}};
 }
 
-void RegisterToyCart(experiments::DomainRegistry& registry) {
-  if (registry.Has("toy-cart")) return;
-  registry.Add("toy-cart", "a cart must stop in front of a wall (tests only)",
-               [](experiments::Profile p) { return std::make_unique<ToyCartDomain>(p); });
-}
+}  // namespace secure::examples::toy_cart
 
-}  // namespace secure::test
+namespace secure::plugins {
+// The plug-in's registration (secure_add_domain(toy_cart ...): Register_<name>).
+void Register_toy_cart(experiments::DomainRegistry& registry) {
+  registry.Add("toy-cart", "a cart must stop in front of a wall (the example plug-in)",
+               [](experiments::Profile p) {
+                 return std::make_unique<examples::toy_cart::ToyCartDomain>(p);
+               });
+}
+}  // namespace secure::plugins

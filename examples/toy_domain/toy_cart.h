@@ -1,7 +1,9 @@
 #pragma once
-// A toy third domain, defined only under tests/: the proof that a domain plugs into the generic
-// experiments through experiments::Domain alone (it includes only secure/... headers, never
-// domains/...). See docs/ADDING_A_DOMAIN.md.
+// The example plug-in (examples/toy_domain/, outside domains/): the proof that a domain is one
+// folder. It plugs into the generic experiments through experiments::Domain alone (it includes
+// only secure/... headers, never domains/...), registers through secure_add_domain like the
+// built-ins, and is added to the build by one add_subdirectory line (the top-level
+// CMakeLists.txt). See docs/ADDING_A_DOMAIN.md and README.md here.
 //
 // The task, "toy-cart": a cart on a rail must stop in front of a wall.
 //  - state = observation = (x, v); action = (a), clipped to [-accel_bound, accel_bound] [2];
@@ -20,8 +22,11 @@
 //  - near-dangerous states: x in [wall - 1.5, wall + 0.1), v above the stopping speed
 //    sqrt(2 accel_bound max(wall - x, 0)) by U[0, 1) (h < 0, up to ~1 m from the boundary).
 //
-// Registration (tests only, at run time):
-//   secure::test::RegisterToyCart(secure::experiments::DomainRegistry::Global());
+//  - barrier check: the region is the safe and near-dangerous states perturbed (sd 0.05), the
+//    unsafe test the ground truth h < 0.
+//
+// Registration: secure::plugins::Register_toy_cart (toy_cart.cc), called by the generated
+// secure::plugins::RegisterBuiltinDomains like every plug-in's.
 #include <Eigen/Core>
 #include <cstdint>
 #include <memory>
@@ -37,7 +42,7 @@
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
-namespace secure::test {
+namespace secure::examples::toy_cart {
 
 struct ToyCartOptions {
   double dt = 0.1;
@@ -135,9 +140,10 @@ class ToyCartDomain final : public experiments::Domain {
   explicit ToyCartDomain(experiments::Profile profile = experiments::Profile::kFull);
   std::string name() const override { return "toy-cart"; }
   std::string Describe() const override;
-  std::string Title() const override { return "the toy cart (tests only)"; }
+  std::string Title() const override { return "the toy cart (an example plug-in)"; }
   std::string ConfigSection() const override { return "toy_cart"; }
-  /// Keys: demonstrations, safe_states, near_dangerous (counts).
+  /// Keys: demonstrations, safe_states, near_dangerous (counts), task (dt, accel_bound, wall,
+  /// goal_lo, goal_speed, max_steps).
   void ApplyYaml(const YAML::Node& node, const std::string& source) override;
   void Validate() const override { options_.Validate(); }
   nlohmann::json OptionsJson() const override { return options_.ToJson(); }
@@ -149,15 +155,24 @@ class ToyCartDomain final : public experiments::Domain {
   /// Uniform in the grid's box (x in [0, wall + 0.5), v in [-1, 3)), labelled by the ground truth.
   experiments::GroundTruthSample SampleGroundTruth(long n_safe, long n_unsafe,
                                                    std::uint64_t seed) const override;
+  /// The barrier check (check.cc): held-out states from GenerateData's generators on another
+  /// stream; the exact model; the region around the labelled states; the ground truth as the
+  /// unsafe test.
+  bool HasCheck() const override { return true; }
+  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
+                    data::StateSet* near_dangerous) const override;
+  cbf::BarrierCheckProblem MakeCheckProblem(
+      const shield::ShieldOptions& shield, const data::StateSet& safe,
+      const data::StateSet& near_dangerous,
+      std::unique_ptr<domains::DynamicsModel>* dynamics) const override;
 
   ToyCartOptions& mutable_options() { return options_; }
 
  private:
+  void ApplyTaskYaml(const YAML::Node& node, const std::string& source);
+
   experiments::Profile profile_;
   ToyCartOptions options_;
 };
 
-/// Adds "toy-cart" to `registry` (once; repeated calls do nothing).
-void RegisterToyCart(experiments::DomainRegistry& registry);
-
-}  // namespace secure::test
+}  // namespace secure::examples::toy_cart

@@ -1,8 +1,8 @@
-// The toy domain (tests/toy_domain, registered at run time) runs the quick method comparison
-// through the generic driver (experiments::RunExperiment), as any plug-in would: the proof that
-// a domain needs nothing but experiments::Domain. The toy is tuned so that the comparison says
-// something: the expert parks in front of the wall after a fast approach, the learned policies
-// sometimes overshoot into it, the shield keeps SECURE off it.
+// The example plug-in (examples/toy_domain, registered like every plug-in) runs the quick method
+// comparison through the generic driver (experiments::RunExperiment), as any plug-in would: the
+// proof that a domain needs nothing but experiments::Domain. The toy is tuned so that the
+// comparison says something: the expert parks in front of the wall after a fast approach, the
+// learned policies sometimes overshoot into it, the shield keeps SECURE off it.
 
 #include <gtest/gtest.h>
 
@@ -15,7 +15,6 @@
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/ground_truth_study.h"
-#include "tests/domains/domain_contract_util.h"
 
 namespace secure::test {
 namespace {
@@ -24,7 +23,7 @@ using experiments::ExperimentKind;
 using experiments::Profile;
 
 TEST(ToyDomainExperiment, QuickMethodComparisonThroughTheGenericDriver) {
-  ContractDomainNames();  // registers the toy domain
+  plugins::RegisterBuiltinDomains(experiments::DomainRegistry::Global());
   std::unique_ptr<experiments::Domain> toy =
       experiments::DomainRegistry::Global().Make("toy-cart", Profile::kQuick);
   experiments::ExperimentOptions options = toy->Preset();
@@ -70,7 +69,7 @@ TEST(ToyDomainExperiment, QuickMethodComparisonThroughTheGenericDriver) {
 // ground truth, here the toy's (its sampler, grid and analytic barrier), and a domain without one
 // is refused naming the domains that have one.
 TEST(ToyDomainExperiment, GroundTruthStudyRunsOnTheToyDomain) {
-  ContractDomainNames();  // registers the toy domain
+  plugins::RegisterBuiltinDomains(experiments::DomainRegistry::Global());
   const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
   const std::unique_ptr<experiments::Domain> toy = registry.Make("toy-cart", Profile::kQuick);
   experiments::GroundTruthStudyOptions o;
