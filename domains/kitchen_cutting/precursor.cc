@@ -8,7 +8,9 @@
 
 namespace secure::domains::kitchen_cutting {
 
-double ReachPrecursorStep(const KitchenCuttingOptions& task) { return 0.25 * task.control_period; }
+double ReachPrecursorStep(const KitchenCuttingOptions& task) {
+  return 0.25 * task.tracking.control_period;
+}
 
 bool ReachPrecursorState(const KitchenCuttingOptions& task,
                          const KitchenNearDangerousOptions& options, Rng& rng,
