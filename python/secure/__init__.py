@@ -53,7 +53,9 @@ from ._secure import (  # noqa: F401
     episode_seed,
     generate_data,
     label,
+    paper_reference,
     query,
+    report_hints,
     run_episodes,
     train_airl,
     train_barrier,
@@ -70,6 +72,7 @@ if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one i
 __all__ = [
     "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Overlay",
     "Policy", "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
-    "gymnasium_installed", "label", "make_env", "query", "register_gymnasium", "run_episodes",
+    "gymnasium_installed", "label", "make_env", "paper_reference", "query", "register_gymnasium",
+    "report_hints", "run_episodes",
     "train_airl", "train_barrier", "train_bc", "train_car_barrier", "VideoWriter",
 ]

@@ -14,8 +14,8 @@
 //   - optionally, capabilities (each a group of methods below with its Has...() test): the
 //     barrier check's problem (region, unsafe test), the label check, participants for a user
 //     study, the paper's numbers, an analytic ground truth (reference barrier, validation grid,
-//     labelled-state sampler: what the ground-truth study, Table 1, needs), and a closed-loop
-//     shield run of a nominal policy.
+//     labelled-state sampler: what the ground-truth study, Table 1, needs), a closed-loop
+//     shield run of a nominal policy, and the report's picture hints (report_hints.h).
 // Generic modules and hosts (the CLI, the Python module) never include a concrete domain; they
 // see domains through this interface (the build checks it: cmake/SecureArchitecture.cmake).
 //
@@ -42,6 +42,7 @@
 #include "secure/data/data.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
+#include "secure/experiments/report_hints.h"
 #include "secure/shield/shield.h"
 
 namespace YAML {
@@ -228,6 +229,10 @@ class Domain {
   /// The paper's Table 3 numbers for this domain, if the paper has a row for it (printed beside
   /// a method comparison by `secure experiment`; nothing by default).
   virtual std::optional<PaperTable3> PaperReference() const { return std::nullopt; }
+
+  /// How the report draws this domain's barrier and trajectories (report_hints.h), or nothing:
+  /// the report then says "no picture hints".
+  virtual std::optional<ReportHints> MakeReportHints() const { return std::nullopt; }
 
   // The ground truth (optional): an analytic barrier h*, the states to validate a learned
   // barrier on, and a sampler of labelled states (`cbf validate`, `cbf train --domain`, the
