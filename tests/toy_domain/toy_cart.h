@@ -151,6 +151,9 @@ class ToyCartDomain final : public experiments::Domain {
   experiments::GroundTruthSample SampleGroundTruth(long n_safe, long n_unsafe,
                                                    std::uint64_t seed) const override;
 
+  /// The report's pictures: the barrier over (x, v) with the wall, the episodes in (x, v).
+  std::optional<experiments::ReportHints> MakeReportHints() const override;
+
   ToyCartOptions& mutable_options() { return options_; }
 
  private:
