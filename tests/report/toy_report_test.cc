@@ -78,7 +78,8 @@ TEST_F(ToyReport, HintsFromTheRunDirectoryDrawTheBarrier) {
   ASSERT_EQ(Report(run), 0) << ReadAll(PathOf("report.log"));
   const std::string without = ReadAll(PathOf("run/report.html"));
   EXPECT_EQ(without.find("<img id=\"fig-barrier\""), std::string::npos);
-  EXPECT_HAS(without, "No barrier picture for the toy-cart domain: report_hints('toy-cart')");
+  EXPECT_HAS(without,
+             "No barrier picture for the toy-cart domain: report_hints(&#x27;toy-cart&#x27;)");
 
   // A field of the wrong kind: a note naming the file, the field and the value.
   nlohmann::json bad = hints;
