@@ -29,6 +29,7 @@ std::vector<std::string> Capabilities(const experiments::Domain& d) {
   if (d.HasShieldRun()) c.push_back("shield run (shield run)");
   if (d.HasPopulation()) c.push_back("participants (experiment user-study)");
   if (d.PaperReference()) c.push_back("the paper's Table 3 row (experiment method-comparison)");
+  if (d.MakeReportHints()) c.push_back("report picture hints (report)");
   return c;
 }
 

@@ -114,21 +114,6 @@ std::string PaperFormTable(const experiments::ExperimentResult& result,
   return out.str();
 }
 
-nlohmann::json PaperJson(const experiments::PaperTable3& paper) {
-  nlohmann::json rows = nlohmann::json::array();
-  auto number = [](double v) {
-    return std::isnan(v) ? nlohmann::json(nullptr) : nlohmann::json(v);
-  };
-  for (const experiments::PaperTable3Row& r : paper.rows) {
-    rows.push_back({{"method", r.method},
-                    {"success", number(r.success)},
-                    {"success_std", number(r.success_std)},
-                    {"dangerous", number(r.dangerous)},
-                    {"dangerous_std", number(r.dangerous_std)}});
-  }
-  return {{"source", paper.source}, {"rows", rows}, {"comparison", paper.comparison}};
-}
-
 // What an unsharded run prints on stdout (and merge prints).
 void PrintResult(const experiments::ExperimentResult& result, bool json,
                  const std::string& command_name) {
@@ -136,7 +121,7 @@ void PrintResult(const experiments::ExperimentResult& result, bool json,
   if (json) {
     nlohmann::json r = result.ToJson();
     r["command"] = command_name;
-    if (paper) r["paper"] = PaperJson(*paper);
+    if (paper) r["paper"] = experiments::PaperTable3Json(*paper);
     PrintJson(r);
   } else {
     std::cout << "\n"

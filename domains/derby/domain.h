@@ -67,6 +67,11 @@ class DerbyDomain final : public experiments::Domain {
   std::string LabellerDescription() const override;
   double LabelDistance() const;
 
+  /// The report's pictures (report_hints.cc): the per-car barrier over one car's relative
+  /// position, the ego's episodes (ego-relative) with the observed cars; Table 3's Derby row.
+  std::optional<experiments::ReportHints> MakeReportHints() const override;
+  std::optional<experiments::PaperTable3> PaperReference() const override;
+
   const DerbyDomainOptions& options() const { return options_; }
   DerbyDomainOptions& mutable_options() { return options_; }
 

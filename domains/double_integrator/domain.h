@@ -93,6 +93,10 @@ class DoubleIntegratorDomain final : public experiments::Domain {
       const data::StateSet& near_dangerous,
       std::unique_ptr<DynamicsModel>* dynamics) const override;
 
+  /// The report's pictures (report_hints.cc): the barrier over (x, y) at three velocities,
+  /// the episodes in the box with the obstacle and the goal.
+  std::optional<experiments::ReportHints> MakeReportHints() const override;
+
   const DomainOptions& options() const { return options_; }
   DomainOptions& mutable_options() { return options_; }
 

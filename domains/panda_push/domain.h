@@ -100,6 +100,11 @@ class PandaPushDomain final : public experiments::Domain {
       const data::StateSet& near_dangerous,
       std::unique_ptr<DynamicsModel>* dynamics) const override;
 
+  /// The report's pictures (report_hints.cc): the barrier over the end effector's height and
+  /// pushing speed; Table 3's Panda Arm Push row.
+  std::optional<experiments::ReportHints> MakeReportHints() const override;
+  std::optional<experiments::PaperTable3> PaperReference() const override;
+
   const PandaPushDomainOptions& options() const { return options_; }
   PandaPushDomainOptions& mutable_options() { return options_; }
 

@@ -326,6 +326,23 @@ experiments::GroundTruthSample ToyCartDomain::SampleGroundTruth(long n_safe, lon
           {source + " unsafe", {"x", "v"}, std::move(unsafe)}};
 }
 
+std::optional<experiments::ReportHints> ToyCartDomain::MakeReportHints() const {
+  const double wall = options_.wall;
+  const nlohmann::json beyond_wall = {{"kind", "rectangle"}, {"corner", {wall, -1.0}},
+                                      {"size", {0.5, 4.0}}, {"color", "gray"}, {"alpha", 0.3}};
+  experiments::ReportHints h;
+  h.barrier = {{"x", {{"feature", "x"}, {"range", {0.0, wall + 0.5}}}},
+               {"y", {{"feature", "v"}, {"range", {-1.0, 3.0}}}},
+               {"shapes", {beyond_wall}},
+               {"caption", "The toy cart's barrier of <code>{model}</code>; gray: the wall."}};
+  h.trajectories = {{"layout", "overlay"},
+                    {"position", {{"x", "x"}, {"y", "v"}}},
+                    {"labels", {"x", "v"}},
+                    {"shapes", {beyond_wall}},
+                    {"caption", "Episodes in (x, v) ({shield_note})."}};
+  return h;
+}
+
 }  // namespace secure::examples::toy_cart
 
 namespace secure::plugins {

@@ -166,6 +166,9 @@ class ToyCartDomain final : public experiments::Domain {
       const data::StateSet& near_dangerous,
       std::unique_ptr<domains::DynamicsModel>* dynamics) const override;
 
+  /// The report's pictures: the barrier over (x, v) with the wall, the episodes in (x, v).
+  std::optional<experiments::ReportHints> MakeReportHints() const override;
+
   ToyCartOptions& mutable_options() { return options_; }
 
  private:

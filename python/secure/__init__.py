@@ -53,8 +53,10 @@ from ._secure import (  # noqa: F401
     episode_seed,
     generate_data,
     label,
+    paper_reference,
     query,
     read_config_section,
+    report_hints,
     run_episodes,
     train_airl,
     train_barrier,
@@ -71,7 +73,7 @@ if gymnasium_installed():  # gymnasium.make("secure/DoubleIntegrator-v0"), one i
 __all__ = [
     "AirlReward", "Barrier", "Decision", "Demonstrations", "Dynamics", "Env", "EnvCore", "Overlay",
     "Policy", "Rng", "Shield", "build_info", "domains", "env_id", "episode_seed", "generate_data",
-    "gymnasium_installed", "label", "make_env", "query", "read_config_section",
-    "register_gymnasium", "run_episodes", "train_airl", "train_barrier", "train_bc",
-    "train_car_barrier", "VideoWriter",
+    "gymnasium_installed", "label", "make_env", "paper_reference", "query",
+    "read_config_section", "register_gymnasium", "report_hints", "run_episodes",
+    "train_airl", "train_barrier", "train_bc", "train_car_barrier", "VideoWriter",
 ]

@@ -526,3 +526,18 @@ def label(domain: str, states: ArrayLike, seed: int = 0) -> NDArray[numpy.int32]
     physics). Raises ValueError for a domain without one.
     """
     ...
+
+def paper_reference(domain: str, profile: str = 'full', **kwargs: Any) -> Dict[str, Any]:
+    """The paper's numbers for a domain (with its options), a dict with the keys it has: 'table3'
+    ({'source', 'rows': [{'method', 'success', 'success_std', 'dangerous', 'dangerous_std'}] in %,
+    None where the paper gives none, 'comparison'}), 'ground_truth_study' (Table 1, %),
+    'user_study' ({'source', 'rows': [{'what', 'values'}]}). {} if the paper has none.
+    """
+    ...
+
+def report_hints(domain: str, profile: str = 'full', **kwargs: Any) -> Optional[Dict[str, Any]]:
+    """How the report draws a domain (with its options): {'barrier': dict or None, 'trajectories':
+    dict or None} (the schema: tools/report/README.md, "Report hints"), or None if the domain gives
+    no hints.
+    """
+    ...

@@ -3,6 +3,7 @@
 
 namespace secure::python {
 void RegisterQuery(py::module_& m);  // query.cc: secure.query, secure.label
+void RegisterReport(py::module_& m);  // report.cc: secure.paper_reference, secure.report_hints
 }  // namespace secure::python
 
 PYBIND11_MODULE(_secure, m) {
@@ -20,4 +21,5 @@ PYBIND11_MODULE(_secure, m) {
   RegisterEnvironment(m);
   RegisterRender(m);
   RegisterQuery(m);
+  RegisterReport(m);
 }

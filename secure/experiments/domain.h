@@ -14,8 +14,8 @@
 //   - optionally, capabilities (each a group of methods below with its Has...() test): the
 //     barrier check's problem (region, unsafe test), the label check, participants for a user
 //     study, the paper's numbers, an analytic ground truth (reference barrier, validation grid,
-//     labelled-state sampler: what the ground-truth study, Table 1, needs), and a closed-loop
-//     shield run of a nominal policy.
+//     labelled-state sampler: what the ground-truth study, Table 1, needs), a closed-loop
+//     shield run of a nominal policy, and the report's picture hints (report_hints.h).
 // Generic modules and hosts (the CLI, the Python module) never include a concrete domain; they
 // see domains through this interface (the build checks it: cmake/SecureArchitecture.cmake).
 //
@@ -42,6 +42,7 @@
 #include "secure/data/data.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
+#include "secure/experiments/report_hints.h"
 #include "secure/shield/shield.h"
 
 namespace YAML {
@@ -235,6 +236,10 @@ class Domain {
   /// optimisation of Section 4.1). Table 1 and the user study follow from the capabilities
   /// (ground truth, population). None by default.
   virtual std::vector<std::string> PaperExperiments() const { return {}; }
+
+  /// How the report draws this domain's barrier and trajectories (report_hints.h), or nothing:
+  /// the report then says "no picture hints".
+  virtual std::optional<ReportHints> MakeReportHints() const { return std::nullopt; }
 
   // The ground truth (optional): an analytic barrier h*, the states to validate a learned
   // barrier on, and a sampler of labelled states (`cbf validate`, `cbf train --domain`, the
