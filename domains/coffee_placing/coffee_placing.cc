@@ -95,21 +95,20 @@ void PersonOptions::Validate() const {
                      "in (0, 1] m");
 }
 
-nlohmann::json PersonOptions::ToJson() const {
-  nlohmann::json j = {
-      {"book_x", book_x}, {"book_y", book_y}, {"goal_dy", goal_dy}, {"goal_z", goal_z}};
-  AddJson(&j);
-  return j;
-}
+nlohmann::json PersonOptions::ToJson() const { return TableJson(*this); }
 
-void PersonOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields PersonOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
   fields.Field("book_x", &book_x)
       .Field("book_y", &book_y)
       .Field("goal_dy", &goal_dy)
       .Field("goal_z", &goal_z);
-  fields.Apply(node, source);
+  return fields;
+}
+
+void PersonOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
 
 void CoffeePlacingOptions::Validate() const {
@@ -143,23 +142,9 @@ void CoffeePlacingOptions::Validate() const {
   person.Validate();
 }
 
-nlohmann::json CoffeePlacingOptions::ToJson() const {
-  nlohmann::json j = {{"max_steps", max_steps},
-                      {"action_scale", action_scale},
-                      {"start", start},
-                      {"start_noise", start_noise},
-                      {"target", target},
-                      {"target_half_size", target_half_size},
-                      {"place_tolerance", place_tolerance},
-                      {"upright_tilt", upright_tilt},
-                      {"tilt_scale", tilt_scale},
-                      {"tilt_coupling", tilt_coupling},
-                      {"person", person.ToJson()}};
-  tracking.AddJson(&j);
-  return j;
-}
+nlohmann::json CoffeePlacingOptions::ToJson() const { return TableJson(*this); }
 
-void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields CoffeePlacingOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
   fields.Field("max_steps", &max_steps)
@@ -172,9 +157,12 @@ void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& 
       .Field("upright_tilt", &upright_tilt)
       .Field("tilt_scale", &tilt_scale)
       .Field("tilt_coupling", &tilt_coupling)
-      .Section("person",
-               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); });
-  fields.Apply(node, source);
+      .Part("person", &person);
+  return fields;
+}
+
+void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -52,6 +52,10 @@ namespace secure::domains::franka {
 class OffscreenRenderer;
 }
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::coffee_placing {
 
 constexpr int kObservationDim = 23;
@@ -97,6 +101,8 @@ struct PersonOptions : franka::PersonArmOptions {
     dwell = {0.5, 1.5};             // s
   }
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -118,6 +124,8 @@ struct CoffeePlacingOptions {
   PersonOptions person;
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };

@@ -55,31 +55,22 @@ void CoffeePlacingDomainOptions::Validate() const {
                      "margin_tilt", margin_tilt, "in [0, 0.5] rad");
 }
 
-void CoffeePlacingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Section("task", [this](const YAML::Node& n, const std::string& w) { task.ApplyYaml(n, w); })
-      .Section("shield_model",
-               [this](const YAML::Node& n, const std::string& w) { shield_model.ApplyYaml(n, w); })
-      .Section("population",
-               [this](const YAML::Node& n, const std::string& w) { population.ApplyYaml(n, w); })
-      .Section("demonstrations", [this](const YAML::Node& n,
-                                        const std::string& w) { demonstrations.ApplyYaml(n, w); })
-      .Section("labels",
-               [this](const YAML::Node& n, const std::string& w) { labels.ApplyYaml(n, w); })
+YamlFields CoffeePlacingDomainOptions::Fields() {
+  return YamlFields()
+      .Part("task", &task)
+      .Part("shield_model", &shield_model)
+      .Part("population", &population)
+      .Part("demonstrations", &demonstrations)
+      .Part("labels", &labels)
       .Field("margin_distance", &margin_distance)
-      .Field("margin_tilt", &margin_tilt)
-      .Apply(node, source);
+      .Field("margin_tilt", &margin_tilt);
 }
 
-nlohmann::json CoffeePlacingDomainOptions::ToJson() const {
-  return {{"task", task.ToJson()},
-          {"shield_model", shield_model.ToJson()},
-          {"population", population.ToJson()},
-          {"demonstrations", demonstrations.ToJson()},
-          {"labels", labels.ToJson()},
-          {"margin_distance", margin_distance},
-          {"margin_tilt", margin_tilt}};
+void CoffeePlacingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
+
+nlohmann::json CoffeePlacingDomainOptions::ToJson() const { return TableJson(*this); }
 
 experiments::DomainData ParticipantData(const CoffeePlacingDomainOptions& options,
                                         const coffee_placing::Participant& participant,

@@ -10,6 +10,10 @@
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::coffee_placing {
 
 /// The domain's own options (config section "coffee_placing").
@@ -30,6 +34,8 @@ struct CoffeePlacingDomainOptions {
   /// Keys: task, shield_model, population, demonstrations, labels (their fields),
   /// margin_distance, margin_tilt.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
 };
 

@@ -9,6 +9,10 @@
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::kitchen_cutting {
 
 /// The domain's own options (config section "kitchen_cutting").
@@ -24,6 +28,8 @@ struct KitchenCuttingDomainOptions {
   void Validate() const;
   /// Keys: task, shield_model, demonstrations, safe, near_dangerous (their fields).
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
 };
 

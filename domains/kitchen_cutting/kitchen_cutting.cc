@@ -91,19 +91,9 @@ void HumanArmOptions::Validate() const {
   CheckIntervalField(away_z, o, "away_z", 0, 2);
 }
 
-nlohmann::json HumanArmOptions::ToJson() const {
-  nlohmann::json j = {{"into_probability", into_probability},
-                      {"into_x", into_x},
-                      {"into_y", into_y},
-                      {"into_z", into_z},
-                      {"away_x", away_x},
-                      {"away_y", away_y},
-                      {"away_z", away_z}};
-  AddJson(&j);
-  return j;
-}
+nlohmann::json HumanArmOptions::ToJson() const { return TableJson(*this); }
 
-void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields HumanArmOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
   fields.Field("into_probability", &into_probability)
@@ -113,7 +103,11 @@ void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& sourc
       .Field("away_x", &away_x)
       .Field("away_y", &away_y)
       .Field("away_z", &away_z);
-  fields.Apply(node, source);
+  return fields;
+}
+
+void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
 
 void KitchenCuttingOptions::Validate() const {
@@ -143,24 +137,9 @@ void KitchenCuttingOptions::Validate() const {
   human.Validate();
 }
 
-nlohmann::json KitchenCuttingOptions::ToJson() const {
-  nlohmann::json j = {{"max_steps", max_steps},
-                      {"action_scale", action_scale},
-                      {"initial_joint_noise", initial_joint_noise},
-                      {"board_top", board_top},
-                      {"cut_line_x", cut_line_x},
-                      {"cut_line_y", cut_line_y},
-                      {"cut_line_half_length", cut_line_half_length},
-                      {"stroke_tolerance", stroke_tolerance},
-                      {"lift_height", lift_height},
-                      {"strokes_required", strokes_required},
-                      {"contact_distance", contact_distance},
-                      {"human", human.ToJson()}};
-  tracking.AddJson(&j);
-  return j;
-}
+nlohmann::json KitchenCuttingOptions::ToJson() const { return TableJson(*this); }
 
-void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields KitchenCuttingOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
   fields.Field("max_steps", &max_steps)
@@ -174,9 +153,12 @@ void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string&
       .Field("lift_height", &lift_height)
       .Field("strokes_required", &strokes_required)
       .Field("contact_distance", &contact_distance)
-      .Section("human",
-               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); });
-  fields.Apply(node, source);
+      .Part("human", &human);
+  return fields;
+}
+
+void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------

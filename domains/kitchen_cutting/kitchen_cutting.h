@@ -54,6 +54,10 @@ namespace secure::domains::franka {
 class OffscreenRenderer;
 }
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::kitchen_cutting {
 
 constexpr int kObservationDim = 26;
@@ -83,6 +87,8 @@ struct HumanArmOptions : franka::PersonArmOptions {
   Interval away_x = {0.15, 0.45}, away_y = {0.16, 0.26}, away_z = {0.05, 0.10};
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -105,6 +111,8 @@ struct KitchenCuttingOptions {
   HumanArmOptions human;
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };

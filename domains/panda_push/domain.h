@@ -9,6 +9,10 @@
 #include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::panda_push {
 
 /// Where the barrier's training states come from.
@@ -34,6 +38,8 @@ struct PandaPushDomainOptions {
   /// Keys: task, shield_model, demonstrations, safe, near_dangerous (their fields),
   /// barrier_data (generated | released), released_data_dir.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
 };
 

@@ -86,21 +86,9 @@ void PandaPushOptions::Validate() const {
                      "pusher_friction", pusher_friction, "in (0, 5]");
 }
 
-nlohmann::json PandaPushOptions::ToJson() const {
-  nlohmann::json j = {{"max_steps", max_steps},
-                      {"action_scale", action_scale},
-                      {"initial_joint_noise", initial_joint_noise},
-                      {"block_start", block_start},
-                      {"target", target},
-                      {"success_radius", success_radius},
-                      {"topple_angle", topple_angle},
-                      {"table_friction", table_friction},
-                      {"pusher_friction", pusher_friction}};
-  tracking.AddJson(&j);
-  return j;
-}
+nlohmann::json PandaPushOptions::ToJson() const { return TableJson(*this); }
 
-void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields PandaPushOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
   fields.Field("max_steps", &max_steps)
@@ -112,7 +100,11 @@ void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& sour
       .Field("topple_angle", &topple_angle)
       .Field("table_friction", &table_friction)
       .Field("pusher_friction", &pusher_friction);
-  fields.Apply(node, source);
+  return fields;
+}
+
+void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -298,18 +290,22 @@ void PandaPushShieldModelOptions::Validate() const {
                      ">= 0");
 }
 
+YamlFields PandaPushShieldModelOptions::Fields() {
+  YamlFields fields;
+  fields.Field("kind", &kind);
+  AddFields(&fields);
+  fields.Field("contact_range", &contact_range).Field("path", &path);
+  return fields;
+}
+
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
-  nlohmann::json j = {{"kind", kind}, {"contact_range", contact_range}};
-  AddJson(&j);
-  if (kind == "learned") j["path"] = path;
+  nlohmann::json j = TableJson(*this);
+  if (kind != "learned") j.erase("path");  // a model file only for kind = learned
   return j;
 }
 
 void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields fields;
-  fields.Field("kind", &kind);
-  AddFields(&fields);
-  fields.Field("contact_range", &contact_range).Field("path", &path).Apply(node, source);
+  Fields().Apply(node, source);
 }
 
 PandaPushShieldModel::PandaPushShieldModel(const PandaPushShieldModelOptions& options)

@@ -57,6 +57,10 @@ namespace secure::dynamics {
 class EnsembleModel;
 }  // namespace secure::dynamics
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::panda_push {
 
 constexpr int kObservationDim = 18;
@@ -91,6 +95,8 @@ struct PandaPushOptions {
 
   /// @throws secure::Error naming the field, value and rule.
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   /// Keys: the field names above (block_start and target as 3-sequences). Does not validate.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
@@ -172,6 +178,9 @@ struct PandaPushShieldModelOptions : franka::EndEffectorGains {
   std::string path;                  // kind = learned: a `secure dynamics train` model file
   double contact_range = 0.15;
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson (which writes path
+  /// only for kind = learned).
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
