@@ -95,8 +95,6 @@ void PersonOptions::Validate() const {
                      "in (0, 1] m");
 }
 
-nlohmann::json PersonOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields PersonOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
@@ -107,9 +105,7 @@ YamlFields PersonOptions::Fields() {
   return fields;
 }
 
-void PersonOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PersonOptions)
 
 void CoffeePlacingOptions::Validate() const {
   const char* o = "CoffeePlacingOptions";
@@ -142,8 +138,6 @@ void CoffeePlacingOptions::Validate() const {
   person.Validate();
 }
 
-nlohmann::json CoffeePlacingOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields CoffeePlacingOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
@@ -161,9 +155,7 @@ YamlFields CoffeePlacingOptions::Fields() {
   return fields;
 }
 
-void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(CoffeePlacingOptions)
 
 // ---------------------------------------------------------------------------------------------
 // The simulation

@@ -66,11 +66,7 @@ YamlFields CoffeePlacingDomainOptions::Fields() {
       .Field("margin_tilt", &margin_tilt);
 }
 
-void CoffeePlacingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
-
-nlohmann::json CoffeePlacingDomainOptions::ToJson() const { return TableJson(*this); }
+SECURE_YAML_JSON_FROM_FIELDS(CoffeePlacingDomainOptions)
 
 experiments::DomainData ParticipantData(const CoffeePlacingDomainOptions& options,
                                         const coffee_placing::Participant& participant,

@@ -62,8 +62,6 @@ void PopulationRanges::Validate() const {
   CheckIntervalField(label_noise, o, "label_noise", 0, 0.5);
 }
 
-nlohmann::json PopulationRanges::ToJson() const { return TableJson(*this); }
-
 YamlFields PopulationRanges::Fields() {
   return YamlFields()
       .Field("comfort_mean", &comfort_mean)
@@ -77,9 +75,7 @@ YamlFields PopulationRanges::Fields() {
       .Field("label_noise", &label_noise);
 }
 
-void PopulationRanges::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PopulationRanges)
 
 Participant DrawParticipant(const PopulationRanges& r, std::uint64_t seed, int index,
                             double spread) {
@@ -129,8 +125,6 @@ void CoffeeDemonstrationOptions::Validate() const {
                      "> 0");
 }
 
-nlohmann::json CoffeeDemonstrationOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields CoffeeDemonstrationOptions::Fields() {
   return YamlFields()
       .Field("states", &states)
@@ -141,9 +135,7 @@ YamlFields CoffeeDemonstrationOptions::Fields() {
       .Field("velocity_gain", &velocity_gain);
 }
 
-void CoffeeDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(CoffeeDemonstrationOptions)
 
 void CoffeeLabelOptions::Validate() const {
   const char* o = "CoffeeLabelOptions";
@@ -161,8 +153,6 @@ void CoffeeLabelOptions::Validate() const {
                      "tilt_range", tilt_range, "in [0, " << kMaxTilt << "] rad");
 }
 
-nlohmann::json CoffeeLabelOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields CoffeeLabelOptions::Fields() {
   return YamlFields()
       .Field("safe", &safe)
@@ -174,9 +164,7 @@ YamlFields CoffeeLabelOptions::Fields() {
       .Field("tilt_range", &tilt_range);
 }
 
-void CoffeeLabelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(CoffeeLabelOptions)
 
 // ---------------------------------------------------------------------------------------------
 // Demonstrations

@@ -30,10 +30,6 @@ YamlFields PersonShieldModelOptions::Fields() {
   return fields;
 }
 
-nlohmann::json PersonShieldModelOptions::ToJson() const { return TableJson(*this); }
-
-void PersonShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PersonShieldModelOptions)
 
 }  // namespace secure::domains::franka

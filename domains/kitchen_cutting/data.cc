@@ -61,8 +61,6 @@ void KitchenDemonstrationOptions::Validate() const {
                      "action_noise", action_noise, "in [0, 1]");
 }
 
-nlohmann::json KitchenDemonstrationOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields KitchenDemonstrationOptions::Fields() {
   return YamlFields()
       .Field("states", &states)
@@ -75,22 +73,17 @@ YamlFields KitchenDemonstrationOptions::Fields() {
       .Field("action_noise", &action_noise);
 }
 
-void KitchenDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(KitchenDemonstrationOptions)
 
 void KitchenSafeOptions::Validate() const {
   SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "KitchenSafeOptions", "count", count,
                      "in [1, 1e8]");
 }
-nlohmann::json KitchenSafeOptions::ToJson() const { return TableJson(*this); }
 YamlFields KitchenSafeOptions::Fields() {
   return YamlFields().Field("count", &count);
 }
 
-void KitchenSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(KitchenSafeOptions)
 
 void KitchenNearDangerousOptions::Validate() const {
   const char* o = "KitchenNearDangerousOptions";

@@ -59,11 +59,7 @@ YamlFields KitchenCuttingDomainOptions::Fields() {
       .Part("near_dangerous", &near_dangerous);
 }
 
-void KitchenCuttingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
-
-nlohmann::json KitchenCuttingDomainOptions::ToJson() const { return TableJson(*this); }
+SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
 KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile)

@@ -91,8 +91,6 @@ void HumanArmOptions::Validate() const {
   CheckIntervalField(away_z, o, "away_z", 0, 2);
 }
 
-nlohmann::json HumanArmOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields HumanArmOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
@@ -106,9 +104,7 @@ YamlFields HumanArmOptions::Fields() {
   return fields;
 }
 
-void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(HumanArmOptions)
 
 void KitchenCuttingOptions::Validate() const {
   const char* o = "KitchenCuttingOptions";
@@ -137,8 +133,6 @@ void KitchenCuttingOptions::Validate() const {
   human.Validate();
 }
 
-nlohmann::json KitchenCuttingOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields KitchenCuttingOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
@@ -157,9 +151,7 @@ YamlFields KitchenCuttingOptions::Fields() {
   return fields;
 }
 
-void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingOptions)
 
 // ---------------------------------------------------------------------------------------------
 // The simulation

@@ -136,8 +136,6 @@ void PandaDemonstrationOptions::Validate() const {
   CheckRange(dart_brake_steps, o, "dart_brake_steps", 1.0, 50.0);
 }
 
-nlohmann::json PandaDemonstrationOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields PandaDemonstrationOptions::Fields() {
   return YamlFields()
       .Field("episodes", &episodes)
@@ -155,9 +153,7 @@ YamlFields PandaDemonstrationOptions::Fields() {
       .Section("dart_brake_steps", RangeField(&dart_brake_steps));
 }
 
-void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PandaDemonstrationOptions)
 
 void PandaSafeOptions::Validate() const {
   SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "PandaSafeOptions", "count", count,
@@ -172,8 +168,6 @@ void PandaSafeOptions::Validate() const {
                      "PandaSafeOptions", "hover_speed", hover_speed, "in [0, 1] m/s");
 }
 
-nlohmann::json PandaSafeOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields PandaSafeOptions::Fields() {
   return YamlFields()
       .Field("count", &count)
@@ -184,9 +178,7 @@ YamlFields PandaSafeOptions::Fields() {
       .Field("hover_speed", &hover_speed);
 }
 
-void PandaSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PandaSafeOptions)
 
 void PandaNearDangerousOptions::Validate() const {
   const char* o = "PandaNearDangerousOptions";
@@ -210,8 +202,6 @@ void PandaNearDangerousOptions::Validate() const {
                      max_candidates, "in [1, 1e8]");
 }
 
-nlohmann::json PandaNearDangerousOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields PandaNearDangerousOptions::Fields() {
   return YamlFields()
       .Field("count", &count)
@@ -229,9 +219,7 @@ YamlFields PandaNearDangerousOptions::Fields() {
       .Field("max_candidates", &max_candidates);
 }
 
-void PandaNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PandaNearDangerousOptions)
 
 const char* ScenarioName(NearDangerousScenario s) {
   switch (s) {

@@ -71,11 +71,7 @@ YamlFields PandaPushDomainOptions::Fields() {
       .Field("released_data_dir", &released_data_dir);
 }
 
-void PandaPushDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
-
-nlohmann::json PandaPushDomainOptions::ToJson() const { return TableJson(*this); }
+SECURE_YAML_JSON_FROM_FIELDS(PandaPushDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
 PandaPushDomain::PandaPushDomain(experiments::Profile profile)

@@ -86,8 +86,6 @@ void PandaPushOptions::Validate() const {
                      "pusher_friction", pusher_friction, "in (0, 5]");
 }
 
-nlohmann::json PandaPushOptions::ToJson() const { return TableJson(*this); }
-
 YamlFields PandaPushOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
@@ -103,9 +101,7 @@ YamlFields PandaPushOptions::Fields() {
   return fields;
 }
 
-void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  Fields().Apply(node, source);
-}
+SECURE_YAML_JSON_FROM_FIELDS(PandaPushOptions)
 
 // ---------------------------------------------------------------------------------------------
 // The simulation

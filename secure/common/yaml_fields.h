@@ -6,8 +6,7 @@
 // that a struct declares its keys once for reading and writing:
 //
 //   YamlFields Options::Fields() { return YamlFields().Field("a", &a).Field("b", &b); }
-//   void Options::ApplyYaml(const YAML::Node& n, const std::string& s) { Fields().Apply(n, s); }
-//   nlohmann::json Options::ToJson() const { return TableJson(*this); }
+//   SECURE_YAML_JSON_FROM_FIELDS(Options)  // ApplyYaml and ToJson from Fields()
 //
 // Header-only; a target that includes it links yaml-cpp.
 //
@@ -136,3 +135,12 @@ nlohmann::json TableJson(const Options& options) {
 }
 
 }  // namespace secure
+
+/// Defines `void Options::ApplyYaml(node, source)` (Fields().Apply) and `nlohmann::json
+/// Options::ToJson() const` (TableJson) for a struct that declares the three members: its keys
+/// are then written once, in Fields().
+#define SECURE_YAML_JSON_FROM_FIELDS(Options)                                          \
+  void Options::ApplyYaml(const YAML::Node& node, const std::string& source) {         \
+    Fields().Apply(node, source);                                                      \
+  }                                                                                    \
+  nlohmann::json Options::ToJson() const { return ::secure::TableJson(*this); }
