@@ -315,10 +315,16 @@ void CoffeeShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
 // ---------------------------------------------------------------------------------------------
 // The environment
 
+namespace {
+// The camera of `secure render`, from the robot's right (-y), a little above: the person's arm
+// reaching in from the back.
+constexpr franka::CameraView kCoffeePlacingView{{0.25, 0.0, 0.12}, 1.5, 60, -30};
+}  // namespace
+
 CoffeePlacingEnv::CoffeePlacingEnv(const CoffeePlacingOptions& options,
                                    const CoffeeShieldModelOptions& shield_model,
                                    const Thresholds& thresholds)
-    : sim_(options),
+    : ArmEnvironment(options, "coffee-placing", kCoffeePlacingView),
       shield_model_options_(shield_model),
       shield_model_(shield_model, options),
       thresholds_(thresholds) {}
@@ -343,29 +349,6 @@ std::string CoffeePlacingEnv::Describe() const {
   return s.str();
 }
 
-void CoffeePlacingEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
-  sim_.Reset(rng);
-  violated_ = false;
-  sim_.Observe(observation);
-}
-
-StepOutcome CoffeePlacingEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                                   Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(action.size() == kActionDim,
-               "coffee-placing: action has " << action.size() << " entries, expected 4");
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "coffee-placing: observation has " << observation.size() << " entries, expected "
-                                                  << kObservationDim);
-  sim_.Step(Eigen::Vector4f(action[0], action[1], action[2], action[3]));
-  sim_.Observe(observation);
-  StepOutcome outcome;
-  outcome.reached_goal = sim_.Placed();
-  outcome.collided = thresholds_.Violated(sim_.clearance(), sim_.tilt());
-  outcome.collisions = outcome.collided && !violated_ ? 1 : 0;
-  violated_ = outcome.collided;
-  return outcome;
-}
-
 bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
                                     Eigen::Ref<Eigen::VectorXf> action) const {
   const CoffeePlacingOptions& t = sim_.options();
@@ -376,21 +359,7 @@ bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
   return true;
 }
 
-namespace {
-// The camera of `secure render`, from the robot's right (-y), a little above: the person's arm
-// reaching in from the back.
-constexpr franka::CameraView kCoffeePlacingView{{0.25, 0.0, 0.12}, 1.5, 60, -30};
-}  // namespace
-
 CoffeePlacingEnv::~CoffeePlacingEnv() = default;
-
-void CoffeePlacingEnv::Render(int width, int height, Frame* frame) {
-  const auto* model = static_cast<const mjModel*>(sim_.model());
-  if (renderer_ == nullptr)
-    renderer_ =
-        std::make_unique<franka::OffscreenRenderer>(model, kCoffeePlacingView, "coffee-placing");
-  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
-}
 
 std::unique_ptr<Environment> CoffeePlacingEnv::Clone() const {
   return std::make_unique<CoffeePlacingEnv>(sim_.options(), shield_model_options_, thresholds_);

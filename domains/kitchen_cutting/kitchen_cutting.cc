@@ -30,8 +30,6 @@ const mjModel* KitchenCuttingModel() {
   return model.get();
 }
 
-Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
-
 double EdgeDistance(const HumanArmOptions& h, const Eigen::Vector3d& centre,
                     const Eigen::Vector3d& axis, const ArmPose& arm) {
   const Eigen::Vector3d a = centre - kBladeHalfLength * axis, b = centre + kBladeHalfLength * axis;
@@ -346,9 +344,17 @@ void KitchenShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
 // ---------------------------------------------------------------------------------------------
 // The environment
 
+namespace {
+// The camera of `secure render`, looking at the board from the robot's right (-y), a little
+// above: the arm at the left, the person's arm reaching in from the back.
+constexpr franka::CameraView kKitchenCuttingView{{0.15, 0.05, 0.15}, 1.4, 60, -25};
+}  // namespace
+
 KitchenCuttingEnv::KitchenCuttingEnv(const KitchenCuttingOptions& options,
                                      const KitchenShieldModelOptions& shield_model)
-    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {}
+    : ArmEnvironment(options, "kitchen-cutting", kKitchenCuttingView),
+      shield_model_options_(shield_model),
+      shield_model_(shield_model) {}
 
 std::vector<std::string> KitchenCuttingEnv::ObservationFeatures() const {
   return kitchen_cutting::ObservationFeatures();
@@ -368,29 +374,6 @@ std::string KitchenCuttingEnv::Describe() const {
   return s.str();
 }
 
-void KitchenCuttingEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
-  sim_.Reset(rng);
-  dangerous_ = false;
-  sim_.Observe(observation);
-}
-
-StepOutcome KitchenCuttingEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                                    Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(action.size() == kActionDim,
-               "kitchen-cutting: action has " << action.size() << " entries, expected 3");
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "kitchen-cutting: observation has " << observation.size() << " entries, expected "
-                                                   << kObservationDim);
-  sim_.Step(Eigen::Vector3f(action[0], action[1], action[2]));
-  sim_.Observe(observation);
-  StepOutcome outcome;
-  outcome.reached_goal = sim_.Succeeded();
-  outcome.collided = sim_.Dangerous();
-  outcome.collisions = outcome.collided && !dangerous_ ? 1 : 0;
-  dangerous_ = outcome.collided;
-  return outcome;
-}
-
 bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                                      Eigen::Ref<Eigen::VectorXf> action) const {
   action.setZero();
@@ -398,21 +381,7 @@ bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& ob
   return true;
 }
 
-namespace {
-// The camera of `secure render`, looking at the board from the robot's right (-y), a little
-// above: the arm at the left, the person's arm reaching in from the back.
-constexpr franka::CameraView kKitchenCuttingView{{0.15, 0.05, 0.15}, 1.4, 60, -25};
-}  // namespace
-
 KitchenCuttingEnv::~KitchenCuttingEnv() = default;
-
-void KitchenCuttingEnv::Render(int width, int height, Frame* frame) {
-  const auto* model = static_cast<const mjModel*>(sim_.model());
-  if (renderer_ == nullptr)
-    renderer_ =
-        std::make_unique<franka::OffscreenRenderer>(model, kKitchenCuttingView, "kitchen-cutting");
-  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
-}
 
 std::unique_ptr<Environment> KitchenCuttingEnv::Clone() const {
   return std::make_unique<KitchenCuttingEnv>(sim_.options(), shield_model_options_);

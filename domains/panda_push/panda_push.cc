@@ -357,9 +357,17 @@ void PandaPushRolloutModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& stat
 // ---------------------------------------------------------------------------------------------
 // The environment
 
+namespace {
+// The camera of `secure render`, seen from the side (-y), slightly above the table: the arm at
+// the left, the block and the target at the right.
+constexpr franka::CameraView kPandaPushView{{0.12, 0.0, 0.3}, 2.0, 75, -15};
+}  // namespace
+
 PandaPushEnv::PandaPushEnv(const PandaPushOptions& options,
                            const PandaPushShieldModelOptions& shield_model)
-    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {
+    : ArmEnvironment(options, "panda-push", kPandaPushView),
+      shield_model_options_(shield_model),
+      shield_model_(shield_model) {
   if (shield_model.kind == "rollout")
     rollout_model_ = std::make_unique<PandaPushRolloutModel>(sim_);
   if (shield_model.kind == "learned") {
@@ -400,47 +408,10 @@ std::string PandaPushEnv::Describe() const {
   return s.str();
 }
 
-void PandaPushEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "panda-push: observation has " << observation.size() << " entries, expected 18");
-  sim_.Reset(rng);
-  toppled_ = false;
-  sim_.Observe(observation);
-}
-
-StepOutcome PandaPushEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                               Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(action.size() == kActionDim,
-               "panda-push: action has " << action.size() << " entries, expected 3");
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "panda-push: observation has " << observation.size() << " entries, expected 18");
-  sim_.Step(Eigen::Vector3f(action[0], action[1], action[2]));
-  sim_.Observe(observation);
-  StepOutcome outcome;
-  outcome.reached_goal = sim_.Succeeded();
-  outcome.collided = sim_.Toppled();
-  outcome.collisions = outcome.collided && !toppled_ ? 1 : 0;
-  toppled_ = outcome.collided;
-  return outcome;
-}
-
 bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                                 Eigen::Ref<Eigen::VectorXf> action) const {
   action.setZero();
   return true;
-}
-
-namespace {
-// The camera of `secure render`, seen from the side (-y), slightly above the table: the arm at
-// the left, the block and the target at the right.
-constexpr franka::CameraView kPandaPushView{{0.12, 0.0, 0.3}, 2.0, 75, -15};
-}  // namespace
-
-void PandaPushEnv::Render(int width, int height, Frame* frame) {
-  const auto* model = static_cast<const mjModel*>(sim_.model());
-  if (renderer_ == nullptr)
-    renderer_ = std::make_unique<franka::OffscreenRenderer>(model, kPandaPushView, "panda-push");
-  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 
 std::unique_ptr<Environment> PandaPushEnv::Clone() const {
