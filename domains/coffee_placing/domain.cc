@@ -144,16 +144,12 @@ std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() co
 
 // ---------------------------------------------------------------------------------------------
 CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile)
-    : profile_(profile), options_(CoffeePlacingDomainOptions::For(profile)) {}
+    : OptionsDomain(profile) {}
 
 std::string CoffeePlacingDomain::Describe() const {
   return CoffeePlacingEnv(options_.task, options_.shield_model,
                           MeanParticipant(options_.population).thresholds)
       .Describe();
-}
-
-void CoffeePlacingDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> CoffeePlacingDomain::MakeEnvironment() const {

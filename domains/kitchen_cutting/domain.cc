@@ -63,14 +63,10 @@ SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
 KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile)
-    : profile_(profile), options_(KitchenCuttingDomainOptions::For(profile)) {}
+    : OptionsDomain(profile) {}
 
 std::string KitchenCuttingDomain::Describe() const {
   return KitchenCuttingEnv(options_.task, options_.shield_model).Describe();
-}
-
-void KitchenCuttingDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> KitchenCuttingDomain::MakeEnvironment() const {

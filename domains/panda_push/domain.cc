@@ -75,14 +75,10 @@ SECURE_YAML_JSON_FROM_FIELDS(PandaPushDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
 PandaPushDomain::PandaPushDomain(experiments::Profile profile)
-    : profile_(profile), options_(PandaPushDomainOptions::For(profile)) {}
+    : OptionsDomain(profile) {}
 
 std::string PandaPushDomain::Describe() const {
   return PandaPushEnv(options_.task, options_.shield_model).Describe();
-}
-
-void PandaPushDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {
