@@ -143,8 +143,7 @@ std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() co
 }
 
 // ---------------------------------------------------------------------------------------------
-CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile)
-    : OptionsDomain(profile) {}
+CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string CoffeePlacingDomain::Describe() const {
   return CoffeePlacingEnv(options_.task, options_.shield_model,

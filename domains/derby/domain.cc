@@ -68,8 +68,7 @@ nlohmann::json DerbyDomainOptions::ToJson() const {
 }
 
 // ---------------------------------------------------------------------------------------------
-DerbyDomain::DerbyDomain(experiments::Profile profile)
-    : OptionsDomain(profile) {}
+DerbyDomain::DerbyDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string DerbyDomain::Describe() const { return DerbyEnv(options_.task).Describe(); }
 

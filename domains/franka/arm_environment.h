@@ -29,8 +29,7 @@ struct CameraView {
 /// Renders the MuJoCo model and data (`model`, `data`: mjModel, mjData) seen from `view` into
 /// `frame`, with *renderer, made on the first call (`who` names the plug-in in errors).
 void RenderSimulation(std::unique_ptr<OffscreenRenderer>* renderer, const void* model, void* data,
-                      const CameraView& view, const char* who, int width, int height,
-                      Frame* frame);
+                      const CameraView& view, const char* who, int width, int height, Frame* frame);
 
 /// `Sim`: the plug-in's MuJoCo simulation: Sim(options), options() (with max_steps and
 /// tracking.control_period), Reset(rng), Step(a fixed-size action), Observe(observation),

@@ -14,7 +14,6 @@ namespace secure::domains::franka {
 
 constexpr int kMaxRenderWidth = 1280, kMaxRenderHeight = 720;
 
-
 /// One OSMesa context and MuJoCo render context for one model; frames up to kMaxRenderWidth x
 /// kMaxRenderHeight (the model's offscreen buffer must be at least that). Not thread-safe; one
 /// per environment. `who` names the plug-in in messages.

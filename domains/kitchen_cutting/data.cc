@@ -79,9 +79,7 @@ void KitchenSafeOptions::Validate() const {
   SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "KitchenSafeOptions", "count", count,
                      "in [1, 1e8]");
 }
-YamlFields KitchenSafeOptions::Fields() {
-  return YamlFields().Field("count", &count);
-}
+YamlFields KitchenSafeOptions::Fields() { return YamlFields().Field("count", &count); }
 
 SECURE_YAML_JSON_FROM_FIELDS(KitchenSafeOptions)
 

@@ -62,8 +62,7 @@ YamlFields KitchenCuttingDomainOptions::Fields() {
 SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile)
-    : OptionsDomain(profile) {}
+KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string KitchenCuttingDomain::Describe() const {
   return KitchenCuttingEnv(options_.task, options_.shield_model).Describe();

@@ -57,25 +57,25 @@ YamlFields PandaPushDomainOptions::Fields() {
       .Part("demonstrations", &demonstrations)
       .Part("safe", &safe)
       .Part("near_dangerous", &near_dangerous)
-      .Section("barrier_data",
-               [this](const YAML::Node& n, const std::string& w) {
-                 const std::string v = YamlValue<std::string>(n, "barrier_data", w);
-                 SECURE_CHECK(v == "generated" || v == "released",
-                              w << ": barrier_data = '" << v << "', must be generated or released");
-                 barrier_data = v == "released" ? BarrierData::kReleased : BarrierData::kGenerated;
-               },
-               [this] {
-                 return nlohmann::json(barrier_data == BarrierData::kReleased ? "released"
-                                                                               : "generated");
-               })
+      .Section(
+          "barrier_data",
+          [this](const YAML::Node& n, const std::string& w) {
+            const std::string v = YamlValue<std::string>(n, "barrier_data", w);
+            SECURE_CHECK(v == "generated" || v == "released",
+                         w << ": barrier_data = '" << v << "', must be generated or released");
+            barrier_data = v == "released" ? BarrierData::kReleased : BarrierData::kGenerated;
+          },
+          [this] {
+            return nlohmann::json(barrier_data == BarrierData::kReleased ? "released"
+                                                                         : "generated");
+          })
       .Field("released_data_dir", &released_data_dir);
 }
 
 SECURE_YAML_JSON_FROM_FIELDS(PandaPushDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-PandaPushDomain::PandaPushDomain(experiments::Profile profile)
-    : OptionsDomain(profile) {}
+PandaPushDomain::PandaPushDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string PandaPushDomain::Describe() const {
   return PandaPushEnv(options_.task, options_.shield_model).Describe();

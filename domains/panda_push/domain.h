@@ -108,7 +108,6 @@ class PandaPushDomain final : public experiments::OptionsDomain<PandaPushDomainO
   std::optional<experiments::ReportHints> MakeReportHints() const override;
   std::optional<experiments::PaperTable3> PaperReference() const override;
 
-
  private:
   // The label check's continuation with this domain's shield-model velocity gain (also the
   // physics of the near-dangerous precursor generator).

@@ -12,7 +12,7 @@
 //
 //   YamlFields()
 //       .Field("safe_states", &o.safe_states)
-//       .Section("task", [&](const YAML::Node& n, const std::string& where) { o.task.ApplyYaml(n, where); })
+//       .Part("task", &o.task)
 //       .Section("demonstrations", YamlFields().Field("episodes", &o.demonstrations.episodes))
 //       .Apply(node, source);
 #include <yaml-cpp/yaml.h>
@@ -50,31 +50,31 @@ class YamlFields {
   /// ToJson writes the name.
   template <typename E, std::size_t N>
   YamlFields& Enum(const std::string& key, E* field, const EnumTable<E, N>& table) {
-    entries_.push_back(
-        {key,
-         [key, field, &table](const YAML::Node& node, const std::string& where) {
-           *field =
-               FromString(table, YamlValue<std::string>(node, key, where), where + " [" + key + "]");
-         },
-         [field, &table] { return nlohmann::json(ToString(table, *field)); }});
+    entries_.push_back({key,
+                        [key, field, &table](const YAML::Node& node, const std::string& where) {
+                          *field = FromString(table, YamlValue<std::string>(node, key, where),
+                                              where + " [" + key + "]");
+                        },
+                        [field, &table] { return nlohmann::json(ToString(table, *field)); }});
     return *this;
   }
   /// `key` is a nested mapping handled by `apply` (given the node and "source [key]"); ToJson
   /// writes write() under `key` (without `write`, the owner writes that key itself).
   YamlFields& Section(const std::string& key, Handler apply, Writer write = nullptr) {
-    entries_.push_back({key,
-                        [key, apply = std::move(apply)](const YAML::Node& node,
-                                                        const std::string& where) {
-                          apply(node, where + " [" + key + "]");
-                        },
-                        std::move(write)});
+    entries_.push_back(
+        {key,
+         [key, apply = std::move(apply)](const YAML::Node& node, const std::string& where) {
+           apply(node, where + " [" + key + "]");
+         },
+         std::move(write)});
     return *this;
   }
   /// `key` is a nested mapping read and written with its own field table.
   YamlFields& Section(const std::string& key, YamlFields fields) {
     auto shared = std::make_shared<const YamlFields>(std::move(fields));
     return Section(
-        key, [shared](const YAML::Node& node, const std::string& where) { shared->Apply(node, where); },
+        key,
+        [shared](const YAML::Node& node, const std::string& where) { shared->Apply(node, where); },
         [shared] { return shared->ToJson(); });
   }
 
@@ -82,7 +82,8 @@ class YamlFields {
   template <typename Options>
   YamlFields& Part(const std::string& key, Options* part) {
     return Section(
-        key, [part](const YAML::Node& node, const std::string& where) { part->ApplyYaml(node, where); },
+        key,
+        [part](const YAML::Node& node, const std::string& where) { part->ApplyYaml(node, where); },
         [part] { return part->ToJson(); });
   }
 
@@ -139,8 +140,8 @@ nlohmann::json TableJson(const Options& options) {
 /// Defines `void Options::ApplyYaml(node, source)` (Fields().Apply) and `nlohmann::json
 /// Options::ToJson() const` (TableJson) for a struct that declares the three members: its keys
 /// are then written once, in Fields().
-#define SECURE_YAML_JSON_FROM_FIELDS(Options)                                          \
-  void Options::ApplyYaml(const YAML::Node& node, const std::string& source) {         \
-    Fields().Apply(node, source);                                                      \
-  }                                                                                    \
+#define SECURE_YAML_JSON_FROM_FIELDS(Options)                                  \
+  void Options::ApplyYaml(const YAML::Node& node, const std::string& source) { \
+    Fields().Apply(node, source);                                              \
+  }                                                                            \
   nlohmann::json Options::ToJson() const { return ::secure::TableJson(*this); }
