@@ -20,6 +20,27 @@ function(secure_add_library module)
   secure_check_includes(secure_${module})
 endfunction()
 
+# secure_embed_text(<file> <namespace> <symbol> <out-var>)
+# Makes the text of <file> (in the calling folder, e.g. a MuJoCo model) a string in the library:
+# writes <build>/generated/<file's stem>_<file's extension>.cc defining
+# `const char <namespace>::<symbol>[]` and sets <out-var> to its path (add it to the SOURCES).
+# There is no path to find at run time; editing <file> re-runs CMake.
+function(secure_embed_text file namespace symbol out_var)
+  file(READ ${CMAKE_CURRENT_SOURCE_DIR}/${file} _text)
+  set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${file})
+  string(REPLACE "." "_" _stem "${file}")
+  file(RELATIVE_PATH _rel ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_SOURCE_DIR}/${file})
+  set(_out ${CMAKE_BINARY_DIR}/generated/${_stem}.cc)
+  file(CONFIGURE OUTPUT ${_out} CONTENT
+"// Generated from ${_rel} by its CMakeLists.txt: do not edit.
+namespace ${namespace} {
+extern const char ${symbol}[];
+const char ${symbol}[] = R\"mjcf(@_text@)mjcf\";
+}  // namespace ${namespace}
+" @ONLY)
+  set(${out_var} ${_out} PARENT_SCOPE)
+endfunction()
+
 # secure_add_test(<name> <module-label> SOURCES ... DEPS ...)
 # One GoogleTest executable per unit, registered with CTest and labelled by module
 # (ctest -L cbf runs the cbf tests).

@@ -95,22 +95,17 @@ void PersonOptions::Validate() const {
                      "in (0, 1] m");
 }
 
-nlohmann::json PersonOptions::ToJson() const {
-  nlohmann::json j = {
-      {"book_x", book_x}, {"book_y", book_y}, {"goal_dy", goal_dy}, {"goal_z", goal_z}};
-  AddJson(&j);
-  return j;
-}
-
-void PersonOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields PersonOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
   fields.Field("book_x", &book_x)
       .Field("book_y", &book_y)
       .Field("goal_dy", &goal_dy)
       .Field("goal_z", &goal_z);
-  fields.Apply(node, source);
+  return fields;
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PersonOptions)
 
 void CoffeePlacingOptions::Validate() const {
   const char* o = "CoffeePlacingOptions";
@@ -143,23 +138,7 @@ void CoffeePlacingOptions::Validate() const {
   person.Validate();
 }
 
-nlohmann::json CoffeePlacingOptions::ToJson() const {
-  nlohmann::json j = {{"max_steps", max_steps},
-                      {"action_scale", action_scale},
-                      {"start", start},
-                      {"start_noise", start_noise},
-                      {"target", target},
-                      {"target_half_size", target_half_size},
-                      {"place_tolerance", place_tolerance},
-                      {"upright_tilt", upright_tilt},
-                      {"tilt_scale", tilt_scale},
-                      {"tilt_coupling", tilt_coupling},
-                      {"person", person.ToJson()}};
-  tracking.AddJson(&j);
-  return j;
-}
-
-void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields CoffeePlacingOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
   fields.Field("max_steps", &max_steps)
@@ -172,10 +151,11 @@ void CoffeePlacingOptions::ApplyYaml(const YAML::Node& node, const std::string& 
       .Field("upright_tilt", &upright_tilt)
       .Field("tilt_scale", &tilt_scale)
       .Field("tilt_coupling", &tilt_coupling)
-      .Section("person",
-               [this](const YAML::Node& n, const std::string& w) { person.ApplyYaml(n, w); });
-  fields.Apply(node, source);
+      .Part("person", &person);
+  return fields;
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(CoffeePlacingOptions)
 
 // ---------------------------------------------------------------------------------------------
 // The simulation
@@ -335,10 +315,16 @@ void CoffeeShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
 // ---------------------------------------------------------------------------------------------
 // The environment
 
+namespace {
+// The camera of `secure render`, from the robot's right (-y), a little above: the person's arm
+// reaching in from the back.
+constexpr franka::CameraView kCoffeePlacingView{{0.25, 0.0, 0.12}, 1.5, 60, -30};
+}  // namespace
+
 CoffeePlacingEnv::CoffeePlacingEnv(const CoffeePlacingOptions& options,
                                    const CoffeeShieldModelOptions& shield_model,
                                    const Thresholds& thresholds)
-    : sim_(options),
+    : ArmEnvironment(options, "coffee-placing", kCoffeePlacingView),
       shield_model_options_(shield_model),
       shield_model_(shield_model, options),
       thresholds_(thresholds) {}
@@ -363,29 +349,6 @@ std::string CoffeePlacingEnv::Describe() const {
   return s.str();
 }
 
-void CoffeePlacingEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
-  sim_.Reset(rng);
-  violated_ = false;
-  sim_.Observe(observation);
-}
-
-StepOutcome CoffeePlacingEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                                   Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(action.size() == kActionDim,
-               "coffee-placing: action has " << action.size() << " entries, expected 4");
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "coffee-placing: observation has " << observation.size() << " entries, expected "
-                                                  << kObservationDim);
-  sim_.Step(Eigen::Vector4f(action[0], action[1], action[2], action[3]));
-  sim_.Observe(observation);
-  StepOutcome outcome;
-  outcome.reached_goal = sim_.Placed();
-  outcome.collided = thresholds_.Violated(sim_.clearance(), sim_.tilt());
-  outcome.collisions = outcome.collided && !violated_ ? 1 : 0;
-  violated_ = outcome.collided;
-  return outcome;
-}
-
 bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
                                     Eigen::Ref<Eigen::VectorXf> action) const {
   const CoffeePlacingOptions& t = sim_.options();
@@ -396,21 +359,7 @@ bool CoffeePlacingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
   return true;
 }
 
-namespace {
-// The camera of `secure render`, from the robot's right (-y), a little above: the person's arm
-// reaching in from the back.
-constexpr franka::CameraView kCoffeePlacingView{{0.25, 0.0, 0.12}, 1.5, 60, -30};
-}  // namespace
-
 CoffeePlacingEnv::~CoffeePlacingEnv() = default;
-
-void CoffeePlacingEnv::Render(int width, int height, Frame* frame) {
-  const auto* model = static_cast<const mjModel*>(sim_.model());
-  if (renderer_ == nullptr)
-    renderer_ =
-        std::make_unique<franka::OffscreenRenderer>(model, kCoffeePlacingView, "coffee-placing");
-  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
-}
 
 std::unique_ptr<Environment> CoffeePlacingEnv::Clone() const {
   return std::make_unique<CoffeePlacingEnv>(sim_.options(), shield_model_options_, thresholds_);

@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_environment.h"
 #include "domains/franka/arm_shield_model.h"
 #include "domains/franka/arm_tracking.h"
 #include "domains/franka/human_arm.h"
@@ -48,8 +49,8 @@ namespace YAML {
 class Node;
 }
 
-namespace secure::domains::franka {
-class OffscreenRenderer;
+namespace secure {
+class YamlFields;
 }
 
 namespace secure::domains::coffee_placing {
@@ -97,6 +98,8 @@ struct PersonOptions : franka::PersonArmOptions {
     dwell = {0.5, 1.5};             // s
   }
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -118,6 +121,8 @@ struct CoffeePlacingOptions {
   PersonOptions person;
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -202,47 +207,31 @@ class CoffeeShieldModel final : public DynamicsModel {
 };
 
 /// The task as an Environment, judged by `thresholds` (collided = a violation of them).
-class CoffeePlacingEnv final : public Environment {
+class CoffeePlacingEnv final
+    : public franka::ArmEnvironment<CoffeePlacingSim, kObservationDim, kActionDim> {
  public:
   CoffeePlacingEnv(const CoffeePlacingOptions& options,
                    const CoffeeShieldModelOptions& shield_model, const Thresholds& thresholds);
   ~CoffeePlacingEnv() override;
 
-  int observation_dim() const override { return kObservationDim; }
-  int action_dim() const override { return kActionDim; }
   std::vector<std::string> ObservationFeatures() const override;
   std::vector<std::string> ActionFeatures() const override;
-  int max_steps() const override { return sim_.options().max_steps; }
   std::string Describe() const override;
-
-  void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override;
-  StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                   Eigen::Ref<Eigen::VectorXf> observation) override;
   const DynamicsModel& ShieldModel() const override { return shield_model_; }
   /// Stop and level the cup: a = (0, 0, 0, turn the tilt back, the stop's own tilt included).
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
-  /// [-1, 1] per component (the clip of Step()).
-  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
-                    Eigen::Ref<Eigen::VectorXf> high) const override {
-    low.setConstant(-1.0f);
-    high.setConstant(1.0f);
-  }
-  double control_period() const override { return sim_.options().tracking.control_period; }
-  bool CanRender() const override { return true; }
-  void Render(int width, int height, Frame* frame) override;
 
-  CoffeePlacingSim& sim() { return sim_; }
   const Thresholds& thresholds() const { return thresholds_; }
 
  private:
-  CoffeePlacingSim sim_;
+  bool Reached() const override { return sim_.Placed(); }
+  bool Dangerous() const override { return thresholds_.Violated(sim_.clearance(), sim_.tilt()); }
+
   CoffeeShieldModelOptions shield_model_options_;
   CoffeeShieldModel shield_model_;
   Thresholds thresholds_;
-  bool violated_ = false;
-  std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };
 
 }  // namespace secure::domains::coffee_placing

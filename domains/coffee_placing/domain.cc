@@ -55,31 +55,18 @@ void CoffeePlacingDomainOptions::Validate() const {
                      "margin_tilt", margin_tilt, "in [0, 0.5] rad");
 }
 
-void CoffeePlacingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Section("task", [this](const YAML::Node& n, const std::string& w) { task.ApplyYaml(n, w); })
-      .Section("shield_model",
-               [this](const YAML::Node& n, const std::string& w) { shield_model.ApplyYaml(n, w); })
-      .Section("population",
-               [this](const YAML::Node& n, const std::string& w) { population.ApplyYaml(n, w); })
-      .Section("demonstrations", [this](const YAML::Node& n,
-                                        const std::string& w) { demonstrations.ApplyYaml(n, w); })
-      .Section("labels",
-               [this](const YAML::Node& n, const std::string& w) { labels.ApplyYaml(n, w); })
+YamlFields CoffeePlacingDomainOptions::Fields() {
+  return YamlFields()
+      .Part("task", &task)
+      .Part("shield_model", &shield_model)
+      .Part("population", &population)
+      .Part("demonstrations", &demonstrations)
+      .Part("labels", &labels)
       .Field("margin_distance", &margin_distance)
-      .Field("margin_tilt", &margin_tilt)
-      .Apply(node, source);
+      .Field("margin_tilt", &margin_tilt);
 }
 
-nlohmann::json CoffeePlacingDomainOptions::ToJson() const {
-  return {{"task", task.ToJson()},
-          {"shield_model", shield_model.ToJson()},
-          {"population", population.ToJson()},
-          {"demonstrations", demonstrations.ToJson()},
-          {"labels", labels.ToJson()},
-          {"margin_distance", margin_distance},
-          {"margin_tilt", margin_tilt}};
-}
+SECURE_YAML_JSON_FROM_FIELDS(CoffeePlacingDomainOptions)
 
 experiments::DomainData ParticipantData(const CoffeePlacingDomainOptions& options,
                                         const coffee_placing::Participant& participant,
@@ -156,17 +143,12 @@ std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() co
 }
 
 // ---------------------------------------------------------------------------------------------
-CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile)
-    : profile_(profile), options_(CoffeePlacingDomainOptions::For(profile)) {}
+CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string CoffeePlacingDomain::Describe() const {
   return CoffeePlacingEnv(options_.task, options_.shield_model,
                           MeanParticipant(options_.population).thresholds)
       .Describe();
-}
-
-void CoffeePlacingDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> CoffeePlacingDomain::MakeEnvironment() const {

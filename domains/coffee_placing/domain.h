@@ -7,8 +7,12 @@
 
 #include "domains/coffee_placing/coffee_placing.h"
 #include "domains/coffee_placing/participants.h"
-#include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/options_domain.h"
+
+namespace secure {
+class YamlFields;
+}
 
 namespace secure::domains::coffee_placing {
 
@@ -30,6 +34,8 @@ struct CoffeePlacingDomainOptions {
   /// Keys: task, shield_model, population, demonstrations, labels (their fields),
   /// margin_distance, margin_tilt.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
 };
 
@@ -55,7 +61,7 @@ class CoffeePopulation final : public experiments::Population {
   std::vector<coffee_placing::Participant> participants_;
 };
 
-class CoffeePlacingDomain final : public experiments::Domain {
+class CoffeePlacingDomain final : public experiments::OptionsDomain<CoffeePlacingDomainOptions> {
  public:
   explicit CoffeePlacingDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -63,9 +69,6 @@ class CoffeePlacingDomain final : public experiments::Domain {
   std::string Describe() const override;
   std::string Title() const override { return "Coffee Placing"; }
   std::string ConfigSection() const override { return "coffee_placing"; }
-  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
-  void Validate() const override { options_.Validate(); }
-  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
 
   /// The environment judged by the mean participant (MeanParticipant: every constant at the
   /// middle of its range).
@@ -100,13 +103,6 @@ class CoffeePlacingDomain final : public experiments::Domain {
   bool HasPopulation() const override { return true; }
   std::unique_ptr<experiments::Population> MakePopulation(
       const experiments::PopulationOptions& options) const override;
-
-  const CoffeePlacingDomainOptions& options() const { return options_; }
-  CoffeePlacingDomainOptions& mutable_options() { return options_; }
-
- private:
-  experiments::Profile profile_;
-  CoffeePlacingDomainOptions options_;
 };
 
 /// The barrier's input: the end-effector position and velocity, the cup's tilt, the person's

@@ -62,20 +62,8 @@ void PopulationRanges::Validate() const {
   CheckIntervalField(label_noise, o, "label_noise", 0, 0.5);
 }
 
-nlohmann::json PopulationRanges::ToJson() const {
-  return {{"comfort_mean", comfort_mean},
-          {"comfort_half_range", comfort_half_range},
-          {"tilt_mean", tilt_mean},
-          {"tilt_half_range", tilt_half_range},
-          {"caution", caution},
-          {"travel_speed", travel_speed},
-          {"ramp", ramp},
-          {"action_noise", action_noise},
-          {"label_noise", label_noise}};
-}
-
-void PopulationRanges::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields PopulationRanges::Fields() {
+  return YamlFields()
       .Field("comfort_mean", &comfort_mean)
       .Field("comfort_half_range", &comfort_half_range)
       .Field("tilt_mean", &tilt_mean)
@@ -84,9 +72,10 @@ void PopulationRanges::ApplyYaml(const YAML::Node& node, const std::string& sour
       .Field("travel_speed", &travel_speed)
       .Field("ramp", &ramp)
       .Field("action_noise", &action_noise)
-      .Field("label_noise", &label_noise)
-      .Apply(node, source);
+      .Field("label_noise", &label_noise);
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PopulationRanges)
 
 Participant DrawParticipant(const PopulationRanges& r, std::uint64_t seed, int index,
                             double spread) {
@@ -136,25 +125,17 @@ void CoffeeDemonstrationOptions::Validate() const {
                      "> 0");
 }
 
-nlohmann::json CoffeeDemonstrationOptions::ToJson() const {
-  return {{"states", states},
-          {"max_attempts", max_attempts},
-          {"look_ahead", look_ahead},
-          {"hover_height", hover_height},
-          {"descend_speed", descend_speed},
-          {"velocity_gain", velocity_gain}};
-}
-
-void CoffeeDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields CoffeeDemonstrationOptions::Fields() {
+  return YamlFields()
       .Field("states", &states)
       .Field("max_attempts", &max_attempts)
       .Field("look_ahead", &look_ahead)
       .Field("hover_height", &hover_height)
       .Field("descend_speed", &descend_speed)
-      .Field("velocity_gain", &velocity_gain)
-      .Apply(node, source);
+      .Field("velocity_gain", &velocity_gain);
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(CoffeeDemonstrationOptions)
 
 void CoffeeLabelOptions::Validate() const {
   const char* o = "CoffeeLabelOptions";
@@ -172,27 +153,18 @@ void CoffeeLabelOptions::Validate() const {
                      "tilt_range", tilt_range, "in [0, " << kMaxTilt << "] rad");
 }
 
-nlohmann::json CoffeeLabelOptions::ToJson() const {
-  return {{"safe", safe},
-          {"unsafe", unsafe},
-          {"arm_probability", arm_probability},
-          {"arm_radius", arm_radius},
-          {"arm_speed", arm_speed},
-          {"tilt_probability", tilt_probability},
-          {"tilt_range", tilt_range}};
-}
-
-void CoffeeLabelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields CoffeeLabelOptions::Fields() {
+  return YamlFields()
       .Field("safe", &safe)
       .Field("unsafe", &unsafe)
       .Field("arm_probability", &arm_probability)
       .Field("arm_radius", &arm_radius)
       .Field("arm_speed", &arm_speed)
       .Field("tilt_probability", &tilt_probability)
-      .Field("tilt_range", &tilt_range)
-      .Apply(node, source);
+      .Field("tilt_range", &tilt_range);
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(CoffeeLabelOptions)
 
 // ---------------------------------------------------------------------------------------------
 // Demonstrations

@@ -48,6 +48,10 @@ namespace YAML {
 class Node;
 }
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::coffee_placing {
 
 /// One participant (ASSUMPTIONS).
@@ -73,6 +77,8 @@ struct PopulationRanges {
   Interval label_noise = {0.0, 0.06};
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -95,6 +101,8 @@ struct CoffeeDemonstrationOptions {
   double velocity_gain = 1.25;  // the hand's velocity per unit action (m/s)
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -108,6 +116,8 @@ struct CoffeeLabelOptions {
   double tilt_range = 0.6;  // rad
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };

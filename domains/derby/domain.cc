@@ -68,14 +68,9 @@ nlohmann::json DerbyDomainOptions::ToJson() const {
 }
 
 // ---------------------------------------------------------------------------------------------
-DerbyDomain::DerbyDomain(experiments::Profile profile)
-    : profile_(profile), options_(DerbyDomainOptions::For(profile)) {}
+DerbyDomain::DerbyDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string DerbyDomain::Describe() const { return DerbyEnv(options_.task).Describe(); }
-
-void DerbyDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
-}
 
 std::unique_ptr<Environment> DerbyDomain::MakeEnvironment() const {
   return std::make_unique<DerbyEnv>(options_.task);

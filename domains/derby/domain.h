@@ -9,8 +9,8 @@
 #include "domains/derby/derby.h"
 #include "domains/derby/expert.h"
 #include "secure/cbf/car_barrier.h"
-#include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/options_domain.h"
 
 namespace secure::domains::derby {
 
@@ -31,7 +31,7 @@ struct DerbyDomainOptions {
   nlohmann::json ToJson() const;
 };
 
-class DerbyDomain final : public experiments::Domain {
+class DerbyDomain final : public experiments::OptionsDomain<DerbyDomainOptions> {
  public:
   explicit DerbyDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -39,9 +39,6 @@ class DerbyDomain final : public experiments::Domain {
   std::string Describe() const override;
   std::string Title() const override { return "Demolition Derby"; }
   std::string ConfigSection() const override { return "derby"; }
-  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
-  void Validate() const override { options_.Validate(); }
-  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
@@ -71,13 +68,6 @@ class DerbyDomain final : public experiments::Domain {
   /// position, the ego's episodes (ego-relative) with the observed cars; Table 3's Derby row.
   std::optional<experiments::ReportHints> MakeReportHints() const override;
   std::optional<experiments::PaperTable3> PaperReference() const override;
-
-  const DerbyDomainOptions& options() const { return options_; }
-  DerbyDomainOptions& mutable_options() { return options_; }
-
- private:
-  experiments::Profile profile_;
-  DerbyDomainOptions options_;
 };
 
 /// The barrier check's inputs on Demolition Derby:

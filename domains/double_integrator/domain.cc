@@ -76,14 +76,10 @@ nlohmann::json DomainOptions::ToJson() const {
 
 // ---------------------------------------------------------------------------------------------
 DoubleIntegratorDomain::DoubleIntegratorDomain(experiments::Profile profile)
-    : profile_(profile), options_(DomainOptions::For(profile)) {}
+    : OptionsDomain(profile) {}
 
 std::string DoubleIntegratorDomain::Describe() const {
   return ReachAvoidEnv(options_.task).Describe();
-}
-
-void DoubleIntegratorDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> DoubleIntegratorDomain::MakeEnvironment() const {

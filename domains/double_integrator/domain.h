@@ -10,8 +10,8 @@
 #include "domains/double_integrator/double_integrator.h"
 #include "domains/double_integrator/expert.h"
 #include "domains/double_integrator/reach_avoid.h"
-#include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/options_domain.h"
 
 namespace secure::domains::double_integrator {
 
@@ -36,7 +36,7 @@ struct DomainOptions {
   nlohmann::json ToJson() const;
 };
 
-class DoubleIntegratorDomain final : public experiments::Domain {
+class DoubleIntegratorDomain final : public experiments::OptionsDomain<DomainOptions> {
  public:
   explicit DoubleIntegratorDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -44,9 +44,6 @@ class DoubleIntegratorDomain final : public experiments::Domain {
   std::string Describe() const override;
   std::string Title() const override { return "the double-integrator reach-avoid task"; }
   std::string ConfigSection() const override { return "pipeline"; }
-  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
-  void Validate() const override { options_.Validate(); }
-  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
@@ -96,13 +93,6 @@ class DoubleIntegratorDomain final : public experiments::Domain {
   /// The report's pictures (report_hints.cc): the barrier over (x, y) at three velocities,
   /// the episodes in the box with the obstacle and the goal.
   std::optional<experiments::ReportHints> MakeReportHints() const override;
-
-  const DomainOptions& options() const { return options_; }
-  DomainOptions& mutable_options() { return options_; }
-
- private:
-  experiments::Profile profile_;
-  DomainOptions options_;
 };
 
 /// The barrier check's inputs on the double integrator:

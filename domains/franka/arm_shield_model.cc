@@ -14,11 +14,6 @@ void EndEffectorGains::Validate(const char* o) const {
                      velocity_gain, ">= 0");
 }
 
-void EndEffectorGains::AddJson(nlohmann::json* json) const {
-  (*json)["position_gain"] = position_gain;
-  (*json)["velocity_gain"] = velocity_gain;
-}
-
 void EndEffectorGains::AddFields(YamlFields* fields) {
   fields->Field("position_gain", &position_gain).Field("velocity_gain", &velocity_gain);
 }
@@ -28,16 +23,13 @@ void PersonShieldModelOptions::Validate(const char* o) const {
   SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, o, "dt", dt, "> 0 s");
 }
 
-nlohmann::json PersonShieldModelOptions::ToJson() const {
-  nlohmann::json j = {{"dt", dt}};
-  AddJson(&j);
-  return j;
-}
-
-void PersonShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields PersonShieldModelOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
-  fields.Field("dt", &dt).Apply(node, source);
+  fields.Field("dt", &dt);
+  return fields;
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PersonShieldModelOptions)
 
 }  // namespace secure::domains::franka

@@ -28,9 +28,8 @@ struct EndEffectorGains {
 
   /// @throws secure::Error "owner::field = value, must be ..." for the first field out of range.
   void Validate(const char* owner) const;
-  /// Adds the gains to `json` (an object: the plug-in's shield-model options).
-  void AddJson(nlohmann::json* json) const;
-  /// Adds the gains' keys to the field table of the plug-in's shield-model options.
+  /// Adds the gains' keys to the field table of the plug-in's shield-model options (which reads
+  /// and writes them).
   void AddFields(YamlFields* fields);
 
   /// Column c of the model's prediction, from `state`: `next` = state, then the end effector
@@ -59,6 +58,8 @@ struct PersonShieldModelOptions : EndEffectorGains {
 
   /// @throws secure::Error naming `owner`, the field, value and rule.
   void Validate(const char* owner) const;
+  /// The field table (position_gain, velocity_gain, dt): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   /// Keys: position_gain, velocity_gain, dt. Does not validate.
   void ApplyYaml(const YAML::Node& node, const std::string& source);

@@ -22,13 +22,6 @@ void ArmTracking::Validate(const char* o) const {
                      ik_damping, "in (0, 1)");
 }
 
-void ArmTracking::AddJson(nlohmann::json* json) const {
-  (*json)["control_period"] = control_period;
-  (*json)["substeps"] = substeps;
-  (*json)["tracking_omega"] = tracking_omega;
-  (*json)["ik_damping"] = ik_damping;
-}
-
 void ArmTracking::AddFields(YamlFields* fields) {
   fields->Field("control_period", &control_period)
       .Field("substeps", &substeps)

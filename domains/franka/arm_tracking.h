@@ -21,9 +21,8 @@ struct ArmTracking {
 
   /// @throws secure::Error "owner::field = value, must be ..." for the first field out of range.
   void Validate(const char* owner) const;
-  /// Adds the four fields to `json` (an object: the plug-in's task options).
-  void AddJson(nlohmann::json* json) const;
-  /// Adds the four keys to the field table of the plug-in's task options.
+  /// Adds the four keys to the field table of the plug-in's task options (which reads and writes
+  /// them).
   void AddFields(YamlFields* fields);
 };
 

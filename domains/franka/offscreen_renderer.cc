@@ -88,4 +88,12 @@ void OffscreenRenderer::Render(const mjModel* m, mjData* d, int width, int heigh
     std::memcpy(frame->rgb.data() + stride * y, r.rows.data() + stride * (height - 1 - y), stride);
 }
 
+void RenderSimulation(std::unique_ptr<OffscreenRenderer>* renderer, const void* model, void* data,
+                      const CameraView& view, const char* who, int width, int height,
+                      Frame* frame) {
+  const auto* m = static_cast<const mjModel*>(model);
+  if (*renderer == nullptr) *renderer = std::make_unique<OffscreenRenderer>(m, view, who);
+  (*renderer)->Render(m, static_cast<mjData*>(data), width, height, frame);
+}
+
 }  // namespace secure::domains::franka

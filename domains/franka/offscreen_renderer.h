@@ -7,19 +7,12 @@
 #include <memory>
 #include <string>
 
+#include "domains/franka/arm_environment.h"  // CameraView
 #include "secure/domains/environment.h"
 
 namespace secure::domains::franka {
 
 constexpr int kMaxRenderWidth = 1280, kMaxRenderHeight = 720;
-
-/// Where the free camera looks from: {lookat, distance, azimuth, elevation}.
-struct CameraView {
-  double lookat[3];  // m
-  double distance;   // m
-  double azimuth;    // degrees
-  double elevation;  // degrees
-};
 
 /// One OSMesa context and MuJoCo render context for one model; frames up to kMaxRenderWidth x
 /// kMaxRenderHeight (the model's offscreen buffer must be at least that). Not thread-safe; one

@@ -28,19 +28,6 @@ void PersonArmOptions::Validate(const char* o) const {
   CheckIntervalField(dwell, o, "dwell", 0, 100);
 }
 
-void PersonArmOptions::AddJson(nlohmann::json* json) const {
-  nlohmann::json& j = *json;
-  for (auto [name, v] :
-       {std::pair{"upper_arm", upper_arm}, std::pair{"forearm", forearm}, std::pair{"hand", hand},
-        std::pair{"upper_arm_radius", upper_arm_radius},
-        std::pair{"forearm_radius", forearm_radius}, std::pair{"hand_radius", hand_radius}})
-    j[name] = v;
-  for (auto [name, v] : {std::pair{"shoulder", shoulder}, std::pair{"rest", rest}}) j[name] = v;
-  for (auto [name, v] :
-       {std::pair{"start_time", start_time}, std::pair{"speed", speed}, std::pair{"dwell", dwell}})
-    j[name] = v;
-}
-
 void PersonArmOptions::AddFields(YamlFields* fields) {
   fields->Field("shoulder", &shoulder).Field("rest", &rest).Field("hand", &hand);
   fields->Field("upper_arm", &upper_arm).Field("forearm", &forearm);

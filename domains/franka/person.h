@@ -34,9 +34,8 @@ struct PersonArmOptions {
   /// The body (shoulder, rest, lengths, radii), then the timing. @throws secure::Error
   /// "owner::field = value, must be ..." for the first field out of range.
   void Validate(const char* owner) const;
-  /// Adds the fields above to `json` (an object: the plug-in's person options).
-  void AddJson(nlohmann::json* json) const;
-  /// Adds the fields' keys to the field table of the plug-in's person options.
+  /// Adds the fields' keys to the field table of the plug-in's person options (which reads and
+  /// writes them).
   void AddFields(YamlFields* fields);
   /// The arm as human_arm.h sees it (the elbow out towards the person, +y, and down).
   HumanArmGeometry Geometry() const;

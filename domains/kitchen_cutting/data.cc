@@ -61,19 +61,8 @@ void KitchenDemonstrationOptions::Validate() const {
                      "action_noise", action_noise, "in [0, 1]");
 }
 
-nlohmann::json KitchenDemonstrationOptions::ToJson() const {
-  return {{"states", states},
-          {"max_attempts", max_attempts},
-          {"stroke_speed", stroke_speed},
-          {"travel_speed", travel_speed},
-          {"caution_distance", caution_distance},
-          {"look_ahead", look_ahead},
-          {"hover_height", hover_height},
-          {"action_noise", action_noise}};
-}
-
-void KitchenDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields KitchenDemonstrationOptions::Fields() {
+  return YamlFields()
       .Field("states", &states)
       .Field("max_attempts", &max_attempts)
       .Field("stroke_speed", &stroke_speed)
@@ -81,18 +70,18 @@ void KitchenDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::s
       .Field("caution_distance", &caution_distance)
       .Field("look_ahead", &look_ahead)
       .Field("hover_height", &hover_height)
-      .Field("action_noise", &action_noise)
-      .Apply(node, source);
+      .Field("action_noise", &action_noise);
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(KitchenDemonstrationOptions)
 
 void KitchenSafeOptions::Validate() const {
   SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "KitchenSafeOptions", "count", count,
                      "in [1, 1e8]");
 }
-nlohmann::json KitchenSafeOptions::ToJson() const { return {{"count", count}}; }
-void KitchenSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields().Field("count", &count).Apply(node, source);
-}
+YamlFields KitchenSafeOptions::Fields() { return YamlFields().Field("count", &count); }
+
+SECURE_YAML_JSON_FROM_FIELDS(KitchenSafeOptions)
 
 void KitchenNearDangerousOptions::Validate() const {
   const char* o = "KitchenNearDangerousOptions";
@@ -116,20 +105,16 @@ void KitchenNearDangerousOptions::Validate() const {
 }
 
 nlohmann::json KitchenNearDangerousOptions::ToJson() const {
-  nlohmann::json j = {
-      {"count", count},         {"p_stroke", p_stroke},   {"near_distance", near_distance},
-      {"stroke_vz", stroke_vz}, {"arm_speed", arm_speed}, {"look_ahead", look_ahead}};
-  j["p_blade"] = p_blade;
-  j["blade_speed"] = blade_speed;
-  if (p_reach > 0) {  // only when on: the default's files keep their bytes
-    j["p_reach"] = p_reach;
-    j["reach_gap"] = reach_gap;
+  nlohmann::json j = TableJson(*this);
+  if (p_reach <= 0) {  // only when on: the default's files keep their bytes
+    j.erase("p_reach");
+    j.erase("reach_gap");
   }
   return j;
 }
 
-void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields KitchenNearDangerousOptions::Fields() {
+  return YamlFields()
       .Field("count", &count)
       .Field("p_stroke", &p_stroke)
       .Field("near_distance", &near_distance)
@@ -139,8 +124,11 @@ void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::s
       .Field("p_blade", &p_blade)
       .Field("blade_speed", &blade_speed)
       .Field("p_reach", &p_reach)
-      .Field("reach_gap", &reach_gap)
-      .Apply(node, source);
+      .Field("reach_gap", &reach_gap);
+}
+
+void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+  Fields().Apply(node, source);
 }
 
 const char* ScenarioName(NearDangerousScenario s) {

@@ -45,6 +45,10 @@ namespace YAML {
 class Node;
 }
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::kitchen_cutting {
 
 struct KitchenDemonstrationOptions {
@@ -59,6 +63,8 @@ struct KitchenDemonstrationOptions {
   std::uint64_t seed = 0;
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -83,6 +89,8 @@ Eigen::Vector3f DemonstratorAction(const KitchenCuttingOptions& task,
 struct KitchenSafeOptions {
   long count = 450;  // Table 2
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -107,6 +115,9 @@ struct KitchenNearDangerousOptions {
   double p_reach = 0.0;
   Interval reach_gap = {0.0, 0.2};  // s before the first contact
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson (which writes p_reach
+  /// and reach_gap only with p_reach > 0).
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };

@@ -50,37 +50,22 @@ void KitchenCuttingDomainOptions::Validate() const {
                      "the control period (" << task.tracking.control_period << " s)");
 }
 
-void KitchenCuttingDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Section("task", [this](const YAML::Node& n, const std::string& w) { task.ApplyYaml(n, w); })
-      .Section("shield_model",
-               [this](const YAML::Node& n, const std::string& w) { shield_model.ApplyYaml(n, w); })
-      .Section("demonstrations", [this](const YAML::Node& n,
-                                        const std::string& w) { demonstrations.ApplyYaml(n, w); })
-      .Section("safe", [this](const YAML::Node& n, const std::string& w) { safe.ApplyYaml(n, w); })
-      .Section("near_dangerous", [this](const YAML::Node& n,
-                                        const std::string& w) { near_dangerous.ApplyYaml(n, w); })
-      .Apply(node, source);
+YamlFields KitchenCuttingDomainOptions::Fields() {
+  return YamlFields()
+      .Part("task", &task)
+      .Part("shield_model", &shield_model)
+      .Part("demonstrations", &demonstrations)
+      .Part("safe", &safe)
+      .Part("near_dangerous", &near_dangerous);
 }
 
-nlohmann::json KitchenCuttingDomainOptions::ToJson() const {
-  return {{"task", task.ToJson()},
-          {"shield_model", shield_model.ToJson()},
-          {"demonstrations", demonstrations.ToJson()},
-          {"safe", safe.ToJson()},
-          {"near_dangerous", near_dangerous.ToJson()}};
-}
+SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile)
-    : profile_(profile), options_(KitchenCuttingDomainOptions::For(profile)) {}
+KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string KitchenCuttingDomain::Describe() const {
   return KitchenCuttingEnv(options_.task, options_.shield_model).Describe();
-}
-
-void KitchenCuttingDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> KitchenCuttingDomain::MakeEnvironment() const {

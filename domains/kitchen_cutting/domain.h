@@ -6,8 +6,12 @@
 
 #include "domains/kitchen_cutting/data.h"
 #include "domains/kitchen_cutting/kitchen_cutting.h"
-#include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/options_domain.h"
+
+namespace secure {
+class YamlFields;
+}
 
 namespace secure::domains::kitchen_cutting {
 
@@ -24,10 +28,12 @@ struct KitchenCuttingDomainOptions {
   void Validate() const;
   /// Keys: task, shield_model, demonstrations, safe, near_dangerous (their fields).
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
 };
 
-class KitchenCuttingDomain final : public experiments::Domain {
+class KitchenCuttingDomain final : public experiments::OptionsDomain<KitchenCuttingDomainOptions> {
  public:
   explicit KitchenCuttingDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -35,9 +41,6 @@ class KitchenCuttingDomain final : public experiments::Domain {
   std::string Describe() const override;
   std::string Title() const override { return "Kitchen Cutting"; }
   std::string ConfigSection() const override { return "kitchen_cutting"; }
-  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
-  void Validate() const override { options_.Validate(); }
-  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
@@ -76,13 +79,6 @@ class KitchenCuttingDomain final : public experiments::Domain {
   /// Table 3's kitchen row: the real robot, 10 episodes (BC 70 / AIRL 80 / SECURE 90 % success,
   /// 100 / 100 / 0 % dangerous; no standard deviations).
   std::optional<experiments::PaperTable3> PaperReference() const override;
-
-  const KitchenCuttingDomainOptions& options() const { return options_; }
-  KitchenCuttingDomainOptions& mutable_options() { return options_; }
-
- private:
-  experiments::Profile profile_;
-  KitchenCuttingDomainOptions options_;
 };
 
 /// The barrier's input: the blade's edge, the end-effector velocity, the person's wrist, elbow

@@ -30,8 +30,6 @@ const mjModel* KitchenCuttingModel() {
   return model.get();
 }
 
-Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
-
 double EdgeDistance(const HumanArmOptions& h, const Eigen::Vector3d& centre,
                     const Eigen::Vector3d& axis, const ArmPose& arm) {
   const Eigen::Vector3d a = centre - kBladeHalfLength * axis, b = centre + kBladeHalfLength * axis;
@@ -91,19 +89,7 @@ void HumanArmOptions::Validate() const {
   CheckIntervalField(away_z, o, "away_z", 0, 2);
 }
 
-nlohmann::json HumanArmOptions::ToJson() const {
-  nlohmann::json j = {{"into_probability", into_probability},
-                      {"into_x", into_x},
-                      {"into_y", into_y},
-                      {"into_z", into_z},
-                      {"away_x", away_x},
-                      {"away_y", away_y},
-                      {"away_z", away_z}};
-  AddJson(&j);
-  return j;
-}
-
-void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields HumanArmOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);
   fields.Field("into_probability", &into_probability)
@@ -113,8 +99,10 @@ void HumanArmOptions::ApplyYaml(const YAML::Node& node, const std::string& sourc
       .Field("away_x", &away_x)
       .Field("away_y", &away_y)
       .Field("away_z", &away_z);
-  fields.Apply(node, source);
+  return fields;
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(HumanArmOptions)
 
 void KitchenCuttingOptions::Validate() const {
   const char* o = "KitchenCuttingOptions";
@@ -143,24 +131,7 @@ void KitchenCuttingOptions::Validate() const {
   human.Validate();
 }
 
-nlohmann::json KitchenCuttingOptions::ToJson() const {
-  nlohmann::json j = {{"max_steps", max_steps},
-                      {"action_scale", action_scale},
-                      {"initial_joint_noise", initial_joint_noise},
-                      {"board_top", board_top},
-                      {"cut_line_x", cut_line_x},
-                      {"cut_line_y", cut_line_y},
-                      {"cut_line_half_length", cut_line_half_length},
-                      {"stroke_tolerance", stroke_tolerance},
-                      {"lift_height", lift_height},
-                      {"strokes_required", strokes_required},
-                      {"contact_distance", contact_distance},
-                      {"human", human.ToJson()}};
-  tracking.AddJson(&j);
-  return j;
-}
-
-void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields KitchenCuttingOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
   fields.Field("max_steps", &max_steps)
@@ -174,10 +145,11 @@ void KitchenCuttingOptions::ApplyYaml(const YAML::Node& node, const std::string&
       .Field("lift_height", &lift_height)
       .Field("strokes_required", &strokes_required)
       .Field("contact_distance", &contact_distance)
-      .Section("human",
-               [this](const YAML::Node& n, const std::string& w) { human.ApplyYaml(n, w); });
-  fields.Apply(node, source);
+      .Part("human", &human);
+  return fields;
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingOptions)
 
 // ---------------------------------------------------------------------------------------------
 // The simulation
@@ -372,9 +344,17 @@ void KitchenShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
 // ---------------------------------------------------------------------------------------------
 // The environment
 
+namespace {
+// The camera of `secure render`, looking at the board from the robot's right (-y), a little
+// above: the arm at the left, the person's arm reaching in from the back.
+constexpr franka::CameraView kKitchenCuttingView{{0.15, 0.05, 0.15}, 1.4, 60, -25};
+}  // namespace
+
 KitchenCuttingEnv::KitchenCuttingEnv(const KitchenCuttingOptions& options,
                                      const KitchenShieldModelOptions& shield_model)
-    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {}
+    : ArmEnvironment(options, "kitchen-cutting", kKitchenCuttingView),
+      shield_model_options_(shield_model),
+      shield_model_(shield_model) {}
 
 std::vector<std::string> KitchenCuttingEnv::ObservationFeatures() const {
   return kitchen_cutting::ObservationFeatures();
@@ -394,29 +374,6 @@ std::string KitchenCuttingEnv::Describe() const {
   return s.str();
 }
 
-void KitchenCuttingEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
-  sim_.Reset(rng);
-  dangerous_ = false;
-  sim_.Observe(observation);
-}
-
-StepOutcome KitchenCuttingEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                                    Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(action.size() == kActionDim,
-               "kitchen-cutting: action has " << action.size() << " entries, expected 3");
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "kitchen-cutting: observation has " << observation.size() << " entries, expected "
-                                                   << kObservationDim);
-  sim_.Step(Eigen::Vector3f(action[0], action[1], action[2]));
-  sim_.Observe(observation);
-  StepOutcome outcome;
-  outcome.reached_goal = sim_.Succeeded();
-  outcome.collided = sim_.Dangerous();
-  outcome.collisions = outcome.collided && !dangerous_ ? 1 : 0;
-  dangerous_ = outcome.collided;
-  return outcome;
-}
-
 bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                                      Eigen::Ref<Eigen::VectorXf> action) const {
   action.setZero();
@@ -424,21 +381,7 @@ bool KitchenCuttingEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& ob
   return true;
 }
 
-namespace {
-// The camera of `secure render`, looking at the board from the robot's right (-y), a little
-// above: the arm at the left, the person's arm reaching in from the back.
-constexpr franka::CameraView kKitchenCuttingView{{0.15, 0.05, 0.15}, 1.4, 60, -25};
-}  // namespace
-
 KitchenCuttingEnv::~KitchenCuttingEnv() = default;
-
-void KitchenCuttingEnv::Render(int width, int height, Frame* frame) {
-  const auto* model = static_cast<const mjModel*>(sim_.model());
-  if (renderer_ == nullptr)
-    renderer_ =
-        std::make_unique<franka::OffscreenRenderer>(model, kKitchenCuttingView, "kitchen-cutting");
-  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
-}
 
 std::unique_ptr<Environment> KitchenCuttingEnv::Clone() const {
   return std::make_unique<KitchenCuttingEnv>(sim_.options(), shield_model_options_);

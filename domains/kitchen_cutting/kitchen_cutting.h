@@ -38,6 +38,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_environment.h"
 #include "domains/franka/arm_shield_model.h"
 #include "domains/franka/arm_tracking.h"
 #include "domains/franka/human_arm.h"
@@ -50,8 +51,8 @@ namespace YAML {
 class Node;
 }
 
-namespace secure::domains::franka {
-class OffscreenRenderer;
+namespace secure {
+class YamlFields;
 }
 
 namespace secure::domains::kitchen_cutting {
@@ -83,6 +84,8 @@ struct HumanArmOptions : franka::PersonArmOptions {
   Interval away_x = {0.15, 0.45}, away_y = {0.16, 0.26}, away_z = {0.05, 0.10};
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -105,6 +108,8 @@ struct KitchenCuttingOptions {
   HumanArmOptions human;
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -205,50 +210,30 @@ class KitchenShieldModel final : public DynamicsModel {
   KitchenShieldModelOptions options_;
 };
 
-/// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
-
-class KitchenCuttingEnv final : public Environment {
+/// The task as an Environment (franka::ArmEnvironment: Render() draws offscreen with MuJoCo's
+/// renderer, OSMesa, from the robot's right, the person's arm at the back).
+class KitchenCuttingEnv final
+    : public franka::ArmEnvironment<KitchenCuttingSim, kObservationDim, kActionDim> {
  public:
   KitchenCuttingEnv(const KitchenCuttingOptions& options,
                     const KitchenShieldModelOptions& shield_model);
   ~KitchenCuttingEnv() override;
 
-  int observation_dim() const override { return kObservationDim; }
-  int action_dim() const override { return kActionDim; }
   std::vector<std::string> ObservationFeatures() const override;
   std::vector<std::string> ActionFeatures() const override;
-  int max_steps() const override { return sim_.options().max_steps; }
   std::string Describe() const override;
-
-  void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override;
-  StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                   Eigen::Ref<Eigen::VectorXf> observation) override;
   const DynamicsModel& ShieldModel() const override { return shield_model_; }
   /// Lifting the knife straight up: a = (0, 0, 1).
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
-  /// [-1, 1] per component (the clip of Step()).
-  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
-                    Eigen::Ref<Eigen::VectorXf> high) const override {
-    low.setConstant(-1.0f);
-    high.setConstant(1.0f);
-  }
-  double control_period() const override { return sim_.options().tracking.control_period; }
-  /// domains/franka/'s offscreen renderer (OSMesa), created on the first call; frames up to
-  /// 1280 x 720, seen from the robot's right, the person's arm at the back.
-  bool CanRender() const override { return true; }
-  void Render(int width, int height, Frame* frame) override;
-
-  KitchenCuttingSim& sim() { return sim_; }
-  const KitchenCuttingSim& sim() const { return sim_; }
 
  private:
-  KitchenCuttingSim sim_;
+  bool Reached() const override { return sim_.Succeeded(); }
+  bool Dangerous() const override { return sim_.Dangerous(); }
+
   KitchenShieldModelOptions shield_model_options_;
   KitchenShieldModel shield_model_;
-  bool dangerous_ = false;
-  std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };
 
 }  // namespace secure::domains::kitchen_cutting

@@ -29,13 +29,8 @@ void CheckRange(const Range& r, const char* owner, const char* field, double min
                      "an interval lo <= hi within [" << min << ", " << max << "]");
 }
 
-YamlFields::Handler RangeField(Range* r) {
-  return [r](const YAML::Node& n, const std::string& where) {
-    YamlFields().Field("lo", &r->lo).Field("hi", &r->hi).Apply(n, where);
-  };
-}
-
-nlohmann::json RangeJson(const Range& r) { return {{"lo", r.lo}, {"hi", r.hi}}; }
+// A range's field table: {lo, hi}.
+YamlFields RangeField(Range* r) { return YamlFields().Field("lo", &r->lo).Field("hi", &r->hi); }
 
 // Columns `cols` of `states`, in order.
 data::StateSet Subset(const std::string& source, const Eigen::MatrixXf& states,
@@ -141,24 +136,8 @@ void PandaDemonstrationOptions::Validate() const {
   CheckRange(dart_brake_steps, o, "dart_brake_steps", 1.0, 50.0);
 }
 
-nlohmann::json PandaDemonstrationOptions::ToJson() const {
-  return {{"episodes", episodes},
-          {"max_attempts", max_attempts},
-          {"push_height", RangeJson(push_height)},
-          {"descend_speed", RangeJson(descend_speed)},
-          {"approach_speed", RangeJson(approach_speed)},
-          {"push_speed", RangeJson(push_speed)},
-          {"approach_gap", approach_gap},
-          {"action_noise", action_noise},
-          {"pause_rate", pause_rate},
-          {"pause_steps", RangeJson(pause_steps)},
-          {"dart_noise", dart_noise},
-          {"dart_brake_rate", dart_brake_rate},
-          {"dart_brake_steps", RangeJson(dart_brake_steps)}};
-}
-
-void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields PandaDemonstrationOptions::Fields() {
+  return YamlFields()
       .Field("episodes", &episodes)
       .Field("max_attempts", &max_attempts)
       .Section("push_height", RangeField(&push_height))
@@ -171,9 +150,10 @@ void PandaDemonstrationOptions::ApplyYaml(const YAML::Node& node, const std::str
       .Section("pause_steps", RangeField(&pause_steps))
       .Field("dart_noise", &dart_noise)
       .Field("dart_brake_rate", &dart_brake_rate)
-      .Section("dart_brake_steps", RangeField(&dart_brake_steps))
-      .Apply(node, source);
+      .Section("dart_brake_steps", RangeField(&dart_brake_steps));
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PandaDemonstrationOptions)
 
 void PandaSafeOptions::Validate() const {
   SECURE_CHECK_FIELD(count >= 1 && count <= 100000000, "PandaSafeOptions", "count", count,
@@ -188,25 +168,17 @@ void PandaSafeOptions::Validate() const {
                      "PandaSafeOptions", "hover_speed", hover_speed, "in [0, 1] m/s");
 }
 
-nlohmann::json PandaSafeOptions::ToJson() const {
-  return {{"count", count},
-          {"noisy_copies", noisy_copies},
-          {"hover_copies", hover_copies},
-          {"hover_gap", RangeJson(hover_gap)},
-          {"hover_z", RangeJson(hover_z)},
-          {"hover_speed", hover_speed}};
-}
-
-void PandaSafeOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields PandaSafeOptions::Fields() {
+  return YamlFields()
       .Field("count", &count)
       .Field("noisy_copies", &noisy_copies)
       .Field("hover_copies", &hover_copies)
       .Section("hover_gap", RangeField(&hover_gap))
       .Section("hover_z", RangeField(&hover_z))
-      .Field("hover_speed", &hover_speed)
-      .Apply(node, source);
+      .Field("hover_speed", &hover_speed);
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PandaSafeOptions)
 
 void PandaNearDangerousOptions::Validate() const {
   const char* o = "PandaNearDangerousOptions";
@@ -230,24 +202,8 @@ void PandaNearDangerousOptions::Validate() const {
                      max_candidates, "in [1, 1e8]");
 }
 
-nlohmann::json PandaNearDangerousOptions::ToJson() const {
-  return {{"count", count},
-          {"copies", copies},
-          {"p_upper", p_upper},
-          {"p_fast", p_fast},
-          {"fast_x_share", fast_x_share},
-          {"upper_z", RangeJson(upper_z)},
-          {"low_z_max", low_z_max},
-          {"fast_vx", RangeJson(fast_vx)},
-          {"fast_vz", RangeJson(fast_vz)},
-          {"back_off", back_off},
-          {"generator", ToString(kNearDangerousGeneratorNames, generator)},
-          {"precursor_gap", RangeJson(precursor_gap)},
-          {"max_candidates", max_candidates}};
-}
-
-void PandaNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
+YamlFields PandaNearDangerousOptions::Fields() {
+  return YamlFields()
       .Field("count", &count)
       .Field("copies", &copies)
       .Field("p_upper", &p_upper)
@@ -260,9 +216,10 @@ void PandaNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::str
       .Field("back_off", &back_off)
       .Enum("generator", &generator, kNearDangerousGeneratorNames)
       .Section("precursor_gap", RangeField(&precursor_gap))
-      .Field("max_candidates", &max_candidates)
-      .Apply(node, source);
+      .Field("max_candidates", &max_candidates);
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PandaNearDangerousOptions)
 
 const char* ScenarioName(NearDangerousScenario s) {
   switch (s) {

@@ -40,6 +40,10 @@ namespace YAML {
 class Node;
 }
 
+namespace secure {
+class YamlFields;
+}
+
 namespace secure::domains::panda_push {
 
 /// A closed interval [lo, hi] to draw from uniformly.
@@ -88,6 +92,8 @@ struct PandaDemonstrationOptions {
   std::uint64_t seed = 0;
 
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -118,6 +124,8 @@ struct PandaSafeOptions {
   Range hover_z = {0.0, 0.5};      // m
   double hover_speed = 1.0;        // m/s
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -147,6 +155,8 @@ struct PandaNearDangerousOptions {
   Range precursor_gap = {0.0, 0.05};  // m
   long max_candidates = 20000;
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };

@@ -50,47 +50,35 @@ void PandaPushDomainOptions::Validate() const {
                      "barrier_data: released");
 }
 
-void PandaPushDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Section("task", [this](const YAML::Node& n, const std::string& w) { task.ApplyYaml(n, w); })
-      .Section("shield_model",
-               [this](const YAML::Node& n, const std::string& w) { shield_model.ApplyYaml(n, w); })
-      .Section("demonstrations", [this](const YAML::Node& n,
-                                        const std::string& w) { demonstrations.ApplyYaml(n, w); })
-      .Section("safe", [this](const YAML::Node& n, const std::string& w) { safe.ApplyYaml(n, w); })
-      .Section("near_dangerous", [this](const YAML::Node& n,
-                                        const std::string& w) { near_dangerous.ApplyYaml(n, w); })
-      .Section("barrier_data",
-               [this](const YAML::Node& n, const std::string& w) {
-                 const std::string v = YamlValue<std::string>(n, "barrier_data", w);
-                 SECURE_CHECK(v == "generated" || v == "released",
-                              w << ": barrier_data = '" << v << "', must be generated or released");
-                 barrier_data = v == "released" ? BarrierData::kReleased : BarrierData::kGenerated;
-               })
-      .Field("released_data_dir", &released_data_dir)
-      .Apply(node, source);
+YamlFields PandaPushDomainOptions::Fields() {
+  return YamlFields()
+      .Part("task", &task)
+      .Part("shield_model", &shield_model)
+      .Part("demonstrations", &demonstrations)
+      .Part("safe", &safe)
+      .Part("near_dangerous", &near_dangerous)
+      .Section(
+          "barrier_data",
+          [this](const YAML::Node& n, const std::string& w) {
+            const std::string v = YamlValue<std::string>(n, "barrier_data", w);
+            SECURE_CHECK(v == "generated" || v == "released",
+                         w << ": barrier_data = '" << v << "', must be generated or released");
+            barrier_data = v == "released" ? BarrierData::kReleased : BarrierData::kGenerated;
+          },
+          [this] {
+            return nlohmann::json(barrier_data == BarrierData::kReleased ? "released"
+                                                                         : "generated");
+          })
+      .Field("released_data_dir", &released_data_dir);
 }
 
-nlohmann::json PandaPushDomainOptions::ToJson() const {
-  return {{"task", task.ToJson()},
-          {"shield_model", shield_model.ToJson()},
-          {"demonstrations", demonstrations.ToJson()},
-          {"safe", safe.ToJson()},
-          {"near_dangerous", near_dangerous.ToJson()},
-          {"barrier_data", barrier_data == BarrierData::kReleased ? "released" : "generated"},
-          {"released_data_dir", released_data_dir}};
-}
+SECURE_YAML_JSON_FROM_FIELDS(PandaPushDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-PandaPushDomain::PandaPushDomain(experiments::Profile profile)
-    : profile_(profile), options_(PandaPushDomainOptions::For(profile)) {}
+PandaPushDomain::PandaPushDomain(experiments::Profile profile) : OptionsDomain(profile) {}
 
 std::string PandaPushDomain::Describe() const {
   return PandaPushEnv(options_.task, options_.shield_model).Describe();
-}
-
-void PandaPushDomain::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  options_.ApplyYaml(node, source);
 }
 
 std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {

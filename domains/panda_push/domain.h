@@ -6,8 +6,12 @@
 
 #include "domains/panda_push/data.h"
 #include "domains/panda_push/panda_push.h"
-#include "secure/experiments/domain.h"
 #include "secure/experiments/experiment.h"
+#include "secure/experiments/options_domain.h"
+
+namespace secure {
+class YamlFields;
+}
 
 namespace secure::domains::panda_push {
 
@@ -34,10 +38,12 @@ struct PandaPushDomainOptions {
   /// Keys: task, shield_model, demonstrations, safe, near_dangerous (their fields),
   /// barrier_data (generated | released), released_data_dir.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
 };
 
-class PandaPushDomain final : public experiments::Domain {
+class PandaPushDomain final : public experiments::OptionsDomain<PandaPushDomainOptions> {
  public:
   explicit PandaPushDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -45,9 +51,6 @@ class PandaPushDomain final : public experiments::Domain {
   std::string Describe() const override;
   std::string Title() const override { return "Panda Arm Push"; }
   std::string ConfigSection() const override { return "panda_push"; }
-  void ApplyYaml(const YAML::Node& node, const std::string& source) override;
-  void Validate() const override { options_.Validate(); }
-  nlohmann::json OptionsJson() const override { return options_.ToJson(); }
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
@@ -105,16 +108,10 @@ class PandaPushDomain final : public experiments::Domain {
   std::optional<experiments::ReportHints> MakeReportHints() const override;
   std::optional<experiments::PaperTable3> PaperReference() const override;
 
-  const PandaPushDomainOptions& options() const { return options_; }
-  PandaPushDomainOptions& mutable_options() { return options_; }
-
  private:
   // The label check's continuation with this domain's shield-model velocity gain (also the
   // physics of the near-dangerous precursor generator).
   LabelCheckOptions ContinuationOptions() const;
-
-  experiments::Profile profile_;
-  PandaPushDomainOptions options_;
 };
 
 /// The barrier's input: the first 9 observation features (ee position, ee velocity, block

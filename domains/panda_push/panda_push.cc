@@ -86,21 +86,7 @@ void PandaPushOptions::Validate() const {
                      "pusher_friction", pusher_friction, "in (0, 5]");
 }
 
-nlohmann::json PandaPushOptions::ToJson() const {
-  nlohmann::json j = {{"max_steps", max_steps},
-                      {"action_scale", action_scale},
-                      {"initial_joint_noise", initial_joint_noise},
-                      {"block_start", block_start},
-                      {"target", target},
-                      {"success_radius", success_radius},
-                      {"topple_angle", topple_angle},
-                      {"table_friction", table_friction},
-                      {"pusher_friction", pusher_friction}};
-  tracking.AddJson(&j);
-  return j;
-}
-
-void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
+YamlFields PandaPushOptions::Fields() {
   YamlFields fields;
   tracking.AddFields(&fields);
   fields.Field("max_steps", &max_steps)
@@ -112,8 +98,10 @@ void PandaPushOptions::ApplyYaml(const YAML::Node& node, const std::string& sour
       .Field("topple_angle", &topple_angle)
       .Field("table_friction", &table_friction)
       .Field("pusher_friction", &pusher_friction);
-  fields.Apply(node, source);
+  return fields;
 }
+
+SECURE_YAML_JSON_FROM_FIELDS(PandaPushOptions)
 
 // ---------------------------------------------------------------------------------------------
 // The simulation
@@ -298,18 +286,22 @@ void PandaPushShieldModelOptions::Validate() const {
                      ">= 0");
 }
 
+YamlFields PandaPushShieldModelOptions::Fields() {
+  YamlFields fields;
+  fields.Field("kind", &kind);
+  AddFields(&fields);
+  fields.Field("contact_range", &contact_range).Field("path", &path);
+  return fields;
+}
+
 nlohmann::json PandaPushShieldModelOptions::ToJson() const {
-  nlohmann::json j = {{"kind", kind}, {"contact_range", contact_range}};
-  AddJson(&j);
-  if (kind == "learned") j["path"] = path;
+  nlohmann::json j = TableJson(*this);
+  if (kind != "learned") j.erase("path");  // a model file only for kind = learned
   return j;
 }
 
 void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields fields;
-  fields.Field("kind", &kind);
-  AddFields(&fields);
-  fields.Field("contact_range", &contact_range).Field("path", &path).Apply(node, source);
+  Fields().Apply(node, source);
 }
 
 PandaPushShieldModel::PandaPushShieldModel(const PandaPushShieldModelOptions& options)
@@ -365,9 +357,17 @@ void PandaPushRolloutModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& stat
 // ---------------------------------------------------------------------------------------------
 // The environment
 
+namespace {
+// The camera of `secure render`, seen from the side (-y), slightly above the table: the arm at
+// the left, the block and the target at the right.
+constexpr franka::CameraView kPandaPushView{{0.12, 0.0, 0.3}, 2.0, 75, -15};
+}  // namespace
+
 PandaPushEnv::PandaPushEnv(const PandaPushOptions& options,
                            const PandaPushShieldModelOptions& shield_model)
-    : sim_(options), shield_model_options_(shield_model), shield_model_(shield_model) {
+    : ArmEnvironment(options, "panda-push", kPandaPushView),
+      shield_model_options_(shield_model),
+      shield_model_(shield_model) {
   if (shield_model.kind == "rollout")
     rollout_model_ = std::make_unique<PandaPushRolloutModel>(sim_);
   if (shield_model.kind == "learned") {
@@ -408,47 +408,10 @@ std::string PandaPushEnv::Describe() const {
   return s.str();
 }
 
-void PandaPushEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "panda-push: observation has " << observation.size() << " entries, expected 18");
-  sim_.Reset(rng);
-  toppled_ = false;
-  sim_.Observe(observation);
-}
-
-StepOutcome PandaPushEnv::Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                               Eigen::Ref<Eigen::VectorXf> observation) {
-  SECURE_CHECK(action.size() == kActionDim,
-               "panda-push: action has " << action.size() << " entries, expected 3");
-  SECURE_CHECK(observation.size() == kObservationDim,
-               "panda-push: observation has " << observation.size() << " entries, expected 18");
-  sim_.Step(Eigen::Vector3f(action[0], action[1], action[2]));
-  sim_.Observe(observation);
-  StepOutcome outcome;
-  outcome.reached_goal = sim_.Succeeded();
-  outcome.collided = sim_.Toppled();
-  outcome.collisions = outcome.collided && !toppled_ ? 1 : 0;
-  toppled_ = outcome.collided;
-  return outcome;
-}
-
 bool PandaPushEnv::BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                                 Eigen::Ref<Eigen::VectorXf> action) const {
   action.setZero();
   return true;
-}
-
-namespace {
-// The camera of `secure render`, seen from the side (-y), slightly above the table: the arm at
-// the left, the block and the target at the right.
-constexpr franka::CameraView kPandaPushView{{0.12, 0.0, 0.3}, 2.0, 75, -15};
-}  // namespace
-
-void PandaPushEnv::Render(int width, int height, Frame* frame) {
-  const auto* model = static_cast<const mjModel*>(sim_.model());
-  if (renderer_ == nullptr)
-    renderer_ = std::make_unique<franka::OffscreenRenderer>(model, kPandaPushView, "panda-push");
-  renderer_->Render(model, static_cast<mjData*>(sim_.data()), width, height, frame);
 }
 
 std::unique_ptr<Environment> PandaPushEnv::Clone() const {

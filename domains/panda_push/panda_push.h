@@ -39,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include "domains/franka/arm_environment.h"
 #include "domains/franka/arm_shield_model.h"
 #include "domains/franka/arm_tracking.h"
 #include "secure/common/rng.h"
@@ -49,13 +50,13 @@ namespace YAML {
 class Node;
 }
 
-namespace secure::domains::franka {
-class OffscreenRenderer;
-}
-
 namespace secure::dynamics {
 class EnsembleModel;
 }  // namespace secure::dynamics
+
+namespace secure {
+class YamlFields;
+}
 
 namespace secure::domains::panda_push {
 
@@ -91,6 +92,8 @@ struct PandaPushOptions {
 
   /// @throws secure::Error naming the field, value and rule.
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson.
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   /// Keys: the field names above (block_start and target as 3-sequences). Does not validate.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
@@ -172,6 +175,9 @@ struct PandaPushShieldModelOptions : franka::EndEffectorGains {
   std::string path;                  // kind = learned: a `secure dynamics train` model file
   double contact_range = 0.15;
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson (which writes path
+  /// only for kind = learned).
+  YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
@@ -225,23 +231,18 @@ class PandaPushRolloutModel final : public DynamicsModel {
   mutable long reconstructed_ = 0;
 };
 
-/// The task as an Environment. Render() draws offscreen with MuJoCo's renderer (OSMesa).
-
-class PandaPushEnv final : public Environment {
+/// The task as an Environment (franka::ArmEnvironment: Render() draws offscreen with MuJoCo's
+/// renderer, OSMesa, from the side).
+class PandaPushEnv final
+    : public franka::ArmEnvironment<PandaPushSim, kObservationDim, kActionDim> {
  public:
   PandaPushEnv(const PandaPushOptions& options, const PandaPushShieldModelOptions& shield_model);
   ~PandaPushEnv() override;
 
-  int observation_dim() const override { return kObservationDim; }
-  int action_dim() const override { return kActionDim; }
   std::vector<std::string> ObservationFeatures() const override;
   std::vector<std::string> ActionFeatures() const override;
-  int max_steps() const override { return sim_.options().max_steps; }
   std::string Describe() const override;
 
-  void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override;
-  StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                   Eigen::Ref<Eigen::VectorXf> observation) override;
   /// The approximate model, or with shield_model.kind = rollout the privileged rollout model.
   const DynamicsModel& ShieldModel() const override;
   /// True with the rollout model (exact from every observation the environment is in).
@@ -250,29 +251,15 @@ class PandaPushEnv final : public Environment {
   bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
                     Eigen::Ref<Eigen::VectorXf> action) const override;
   std::unique_ptr<Environment> Clone() const override;
-  /// [-1, 1] per component (the clip of Step()).
-  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low,
-                    Eigen::Ref<Eigen::VectorXf> high) const override {
-    low.setConstant(-1.0f);
-    high.setConstant(1.0f);
-  }
-  double control_period() const override { return sim_.options().tracking.control_period; }
-  /// MuJoCo's renderer in an OSMesa context (software OpenGL), created on the first call; frames
-  /// up to 1280 x 720.
-  bool CanRender() const override { return true; }
-  void Render(int width, int height, Frame* frame) override;
-
-  PandaPushSim& sim() { return sim_; }
-  const PandaPushSim& sim() const { return sim_; }
 
  private:
-  PandaPushSim sim_;
+  bool Reached() const override { return sim_.Succeeded(); }
+  bool Dangerous() const override { return sim_.Toppled(); }
+
   PandaPushShieldModelOptions shield_model_options_;
   PandaPushShieldModel shield_model_;
   std::unique_ptr<PandaPushRolloutModel> rollout_model_;  // kind = rollout
   std::unique_ptr<dynamics::EnsembleModel> learned_model_;  // kind = learned
-  bool toppled_ = false;
-  std::unique_ptr<franka::OffscreenRenderer> renderer_;  // made by the first Render
 };
 
 }  // namespace secure::domains::panda_push
