@@ -206,6 +206,9 @@ def build(report, run_dir, out_path, write_to=None):
            (float(doc.get("seconds", 0) or 0),)))
     paper = doc.get("paper") if isinstance(doc.get("paper"), dict) else None
     page.h2("1. Table 1's errors against labels used")
+    if opts.get("errors_from_labeller"):
+        page.note("This domain has no ground truth: the errors are against the labeller's "
+                  "answers on the estimate states (the simulated person, not physics).")
     p_under = paper.get("under_conservative") if paper else None
     p_over = paper.get("over_conservative") if paper else None
     if not _figure(page, by_strategy, "label_errors",
