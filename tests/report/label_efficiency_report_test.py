@@ -5,9 +5,9 @@ directory (issue 35; tools/report/label_efficiency_page.py).
 A quick run (double integrator, random and margin, 2 seeds) gets its page: both figures embedded,
 written next to the page and non-blank, the paper's reference line named, the table's last-round
 means equal to result.json's. Constructed curves check the table's counts (labels to the paper's
-Table 1; labels to random's last error, and how many times fewer), a note instead of the
-closed-loop figure when the run has no closed-loop rates, and bad result.json values as one line
-naming the field. Environment as report_test.py (whose helpers this uses).
+Table 1; labels to random's last under-conservative error, and how many times fewer), a note
+instead of the closed-loop figure when the run has no closed-loop rates, and bad result.json values
+as one line naming the field. Environment as report_test.py (whose helpers this uses).
 """
 import json
 import os
