@@ -21,9 +21,9 @@ namespace {
 
 struct LabelEfficiencyCommand {
   std::string domain, strategies, out, shard;
-  bool quick = false, json = false;
+  bool quick = false, json = false, errors_from_labeller = false;
   int seeds = 0, rounds = -1, threads = 2;
-  long k = 0, initial_labels = 0, pool = 0, episodes = -1, final_episodes = -1;
+  long k = 0, initial_labels = 0, pool = 0, episodes = -1, final_episodes = -1, eval_states = -1;
   double radius = -1;
   std::uint64_t first_seed = 0;
 
@@ -55,6 +55,11 @@ struct LabelEfficiencyCommand {
     cmd->add_option("--episodes", episodes, "closed-loop episodes per round (default 20)");
     cmd->add_option("--final-episodes", final_episodes,
                     "closed-loop episodes at the last round (default 100)");
+    cmd->add_option("--eval-states", eval_states,
+                    "states of each round's error estimate (default 200000; quick 20000; 0: none)");
+    cmd->add_flag("--errors-from-labeller", errors_from_labeller,
+                  "without a ground truth: the errors against the labeller's answers on the "
+                  "estimate states (asks the labeller --eval-states times per seed)");
     cmd->add_option("--threads", threads, "parallel jobs (seed x strategy)")->capture_default_str();
     cmd->add_option("--shard", shard, "k/N: run the seeds with index = k mod N (no result.json); "
                                       "an unsharded rerun into the same --out merges");
@@ -95,6 +100,8 @@ struct LabelEfficiencyCommand {
     if (radius >= 0) o.radius = radius;
     if (episodes >= 0) o.episodes = episodes;
     if (final_episodes >= 0) o.final_episodes = final_episodes;
+    if (eval_states >= 0) o.eval_states = eval_states;
+    o.errors_from_labeller = errors_from_labeller;
     o.threads = threads;
     o.output_dir = out;
     if (!shard.empty()) {

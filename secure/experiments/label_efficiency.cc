@@ -85,7 +85,7 @@ void LabelEfficiencyOptions::Validate() const {
 nlohmann::json LabelEfficiencyOptions::ToJson() const {
   std::vector<std::string> names;
   for (cbf::QueryStrategy s : strategies) names.push_back(ToString(cbf::kQueryStrategyNames, s));
-  return {{"strategies", names},
+  nlohmann::json j{{"strategies", names},
           {"seeds", seeds},
           {"first_seed", first_seed},
           {"pool", pool},
@@ -103,6 +103,8 @@ nlohmann::json LabelEfficiencyOptions::ToJson() const {
           {"trainer", trainer.ToJson()},
           {"reference_states", reference_states},
           {"max_epochs", max_epochs}};
+  if (errors_from_labeller) j["errors_from_labeller"] = true;  // absent: job files stay valid
+  return j;
 }
 
 nlohmann::json LabelEfficiencyPoint::ToJson() const {
@@ -185,7 +187,8 @@ struct Job {
   std::uint64_t seed;
   const data::StateSet& pool;
   const data::StateSet& eval;           // states for the ground-truth estimate (may be empty)
-  const Eigen::VectorXd& eval_truth;    // their ground-truth h
+  const Eigen::VectorXd& eval_truth;    // their ground-truth h (or labeller: +1 safe, -1
+                                        // near-dangerous, NaN cannot say)
   std::vector<std::string> features;    // the domain's observation features
 
   cbf::BarrierNet Train(const data::StateSet& safe, const data::StateSet& near,
@@ -256,11 +259,12 @@ struct Job {
       p.labels = labels;
       p.safe_labels = safe.size();
       p.near_dangerous_labels = near.size();
-      if (truth && eval.size() > 0) {
+      if (eval.size() > 0) {
         Eigen::VectorXf h(eval.size());
         barrier->Evaluate(eval.states, h);
         long ts = 0, tu = 0, over = 0, under = 0;
         for (long i = 0; i < eval.size(); ++i) {
+          if (std::isnan(eval_truth(i))) continue;  // the person cannot say
           const bool truly_safe = eval_truth(i) >= 0, predicted_safe = h(i) >= 0;
           if (truly_safe) {
             ++ts;
@@ -421,6 +425,14 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
             Eigen::VectorXf h(sd.eval.size());
             truth->Evaluate(sd.eval.states, h);
             sd.truth = h.cast<double>();
+          } else if (options.errors_from_labeller && options.eval_states > 0) {
+            sd.eval = domain.SampleQueryPool(options.eval_states, Stream(seed, 0xe5a1ULL));
+            const std::vector<int> l = domain.Label(sd.eval.states, Stream(seed, 0xe5a2ULL));
+            sd.truth.resize(sd.eval.size());
+            for (long i = 0; i < sd.eval.size(); ++i) {
+              const int v = l[static_cast<std::size_t>(i)];
+              sd.truth(i) = v == 1 ? 1.0 : v == 0 ? -1.0 : std::nan("");
+            }
           }
         });
         const Job j{domain, options, options.strategies[static_cast<std::size_t>(job % S)],
@@ -537,7 +549,11 @@ std::string LabelEfficiencyResult::Table() const {
           << mean_std(gu) << " | | |\n";
   }
   out << "\nmean (sample std) over seeds; over/under on the estimate states each round, on the "
-         "validation grid at the last round (Table 1)\n";
+         "validation grid at the last round (Table 1)"
+      << (options.value("errors_from_labeller", false)
+              ? "; without a ground truth, against the labeller's answers (the person, not physics)"
+              : "")
+      << "\n";
   if (paper) {
     out << "\nLabels (mean over seeds) at which the mean errors first reach the paper's Table 1 ("
         << paper->over_conservative << " % over, " << paper->under_conservative << " % under):\n\n"

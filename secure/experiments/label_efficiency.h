@@ -22,7 +22,9 @@
 //   integrator: uniform in the validation box, the grid's distribution), and at the last round on
 //   the domain's validation grid (Table 1 itself); where the domain has a shield run, its
 //   closed-loop dangerous and success rates over `episodes` episodes (`final_episodes` at the last
-//   round), the same episodes for every strategy and round (common random numbers).
+//   round), the same episodes for every strategy and round (common random numbers). A domain
+//   without a ground truth but with a labeller can have the same two rates measured against the
+//   labeller's answers (errors_from_labeller): the error against the person, not against physics.
 //
 // Each (seed, strategy) is a job on `threads` workers; results do not depend on their number.
 // With output_dir every job writes seed-K/<strategy>.json atomically; a rerun into the same
@@ -59,6 +61,10 @@ struct LabelEfficiencyOptions {
   double radius = 0.0;         // diversity radius of every strategy's batch but random's
   long eval_states = 200000;   // ground-truth error estimate per round (0: none)
   bool final_grid = true;      // Table 1 on the validation grid at the last round
+  // Without a ground truth: over/under against the simulated person's answers on eval_states
+  // states (states the person cannot say are skipped). Opt-in: it asks the labeller eval_states
+  // times per seed (Derby's distance rule is cheap; Panda's physics check is not).
+  bool errors_from_labeller = false;
   long episodes = 20;          // closed-loop episodes per round (0: none)
   long final_episodes = 100;   // at the last round
   long shield_pool_states = 20000;  // shield-relevant: visited states kept per round

@@ -228,5 +228,29 @@ TEST(CliQueryTest, LabelEfficiencyQuickIsDeterministicResumesAndMergesShards) {
                             "experiment");
 }
 
+// Derby has no ground truth: its errors are measured only with --errors-from-labeller, then
+// against the simulated person's answers (rates in [0, 100]; -1, not measured, without it).
+TEST(CliQueryTest, LabelEfficiencyErrorsFromTheLabellerWithoutAGroundTruth) {
+  const std::string base =
+      "experiment label-efficiency --domain derby --quick --seeds 1 --rounds 1 --strategies "
+      "random --eval-states 2000 --threads 1 --json";
+  const CliResult plain = RunCli(base);
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  const nlohmann::json p0 = nlohmann::json::parse(plain.out)["curves"][0]["points"][1];
+  EXPECT_EQ(p0["over_conservative"].get<double>(), -1.0);
+  EXPECT_EQ(p0["under_conservative"].get<double>(), -1.0);
+  const CliResult r = RunCli(base + " --errors-from-labeller");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json doc = nlohmann::json::parse(r.out);
+  EXPECT_EQ(doc["options"]["errors_from_labeller"], true);
+  for (const auto& p : doc["curves"][0]["points"])
+    for (const char* m : {"over_conservative", "under_conservative"}) {
+      EXPECT_GE(p[m].get<double>(), 0.0) << m;
+      EXPECT_LE(p[m].get<double>(), 100.0) << m;
+    }
+  // The same labels and barriers: only the measure differs.
+  EXPECT_EQ(doc["curves"][0]["points"][1]["near_dangerous_labels"], p0["near_dangerous_labels"]);
+}
+
 }  // namespace
 }  // namespace secure::test

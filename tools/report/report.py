@@ -36,13 +36,10 @@ FIGURE_NAMES = ["comparison", "learning_curves", "barrier_training", "sensitivit
                 "trajectories"]
 
 
-def build_report(run_dir, out_path, write_to=None):
-    result = load_run(run_dir)
-    exp = result["experiment"]
-    domain = str(exp.get("domain", "?"))
-    kind = str(exp.get("kind", "?"))
-    # The output first (a directory or a FIFO without a reader fails before any work); figure
-    # files next to a page that is a file, not next to a device or a FIFO (they are embedded).
+def prepare_figures(out_path, write_to, names):
+    """The figures' directory next to the page (None for a device or a FIFO: the figures are
+    embedded only), with last time's figures `names` removed; the output checked first (a
+    directory or a FIFO without a reader fails before any work)."""
     out_kind = output_kind(out_path)
     if out_kind == "fifo" and write_to is None:
         os.close(open_fifo_for_writing(out_path))
@@ -54,10 +51,32 @@ def build_report(run_dir, out_path, write_to=None):
         except OSError as e:
             raise ReportError("cannot create the figures' directory '%s': %s"
                               % (fig_dir, e.strerror))
-        for name in FIGURE_NAMES:  # a figure this run does not get must not survive
+        for name in names:  # a figure this run does not get must not survive
             old = os.path.join(fig_dir, name + ".png")
             if os.path.isfile(old):
                 os.remove(old)
+    return fig_dir
+
+
+def finish_page(page, out_path, write_to, title):
+    """Writes the page: to `write_to` (`secure report`'s scratch file, which its C++ writer
+    installs) or to out_path by the C++ writers' rules."""
+    doc = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>%s</title>"
+           "<style>%s</style></head><body>\n%s\n</body></html>\n"
+           % (html.escape(title), STYLE, "\n".join(page.parts)))
+    if write_to is not None:  # `secure report`: its C++ writer installs the page
+        with open(write_to, "w", encoding="utf-8") as f:
+            f.write(doc)
+    else:
+        write_output(out_path, doc)
+
+
+def build_report(run_dir, out_path, write_to=None):
+    result = load_run(run_dir)
+    exp = result["experiment"]
+    domain = str(exp.get("domain", "?"))
+    kind = str(exp.get("kind", "?"))
+    fig_dir = prepare_figures(out_path, write_to, FIGURE_NAMES)
     page = Page(fig_dir)
     # What the registry says of the domain (a malformed file in the run directory is an error).
     paper, why_no_paper = paper_table3(run_dir, result)
@@ -105,14 +124,7 @@ def build_report(run_dir, out_path, write_to=None):
     page.h2("5. Trajectories")
     trajectories_section(page, run_dir, result, out_path, hints, why_no_hints)
 
-    doc = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>SECURE report: %s on %s"
-           "</title><style>%s</style></head><body>\n%s\n</body></html>\n"
-           % (html.escape(kind), html.escape(domain), STYLE, "\n".join(page.parts)))
-    if write_to is not None:  # `secure report`: its C++ writer installs the page
-        with open(write_to, "w", encoding="utf-8") as f:
-            f.write(doc)
-    else:
-        write_output(out_path, doc)
+    finish_page(page, out_path, write_to, "SECURE report: %s on %s" % (kind, domain))
     return page.figures
 
 
@@ -125,9 +137,13 @@ def main(argv):
     out = args.out or os.path.join(args.run_dir, "report.html")
     try:
         import reproduce_page  # tools/report/reproduce_page.py: a `secure reproduce` directory
+        import label_efficiency_page  # tools/report/label_efficiency_page.py (issue 35)
         if reproduce_page.is_reproduce_dir(args.run_dir):
             figures = reproduce_page.build(sys.modules[__name__], args.run_dir, out,
                                            args.write_to)
+        elif label_efficiency_page.is_label_efficiency_dir(args.run_dir):
+            figures = label_efficiency_page.build(sys.modules[__name__], args.run_dir, out,
+                                                  args.write_to)
         else:
             figures = build_report(args.run_dir, out, args.write_to)
     except ReportError as e:
