@@ -86,8 +86,8 @@ void PessimismFlags::Add(CLI::App* cmd) {
   cmd->add_option("--pessimism", aggregate,
                   "learned model: how the members' h(s+) combine: min | mean-std")
       ->capture_default_str();
-  cmd->add_option("--pessimism-kappa", kappa, "learned model: kappa of mean-std (mean - kappa std)")
-      ->capture_default_str();
+  cmd->add_option("--pessimism-kappa", kappa,
+                  "learned model: kappa of mean-std (mean - kappa std; default 1)");
   cmd->add_flag("--pessimism-linear", linear,
                 "learned model: the members' h(s+) to first order through the barrier's gradient "
                 "at s (h on M states instead of K M)");
