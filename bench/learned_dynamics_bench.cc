@@ -8,9 +8,11 @@
 //   hand     the domain's hand-written model (domains/panda_push PandaPushShieldModel, approximate)
 //   learned  an EnsembleModel of K members 21-64-64-18 tanh (random weights; the cost does not
 //            depend on them), the barrier wrapped by dynamics::PessimisticBarrier: h on all K M
-//            predicted states in one batched forward, min over members.
+//            predicted states in one batched forward, min over members; with linear = 1 the
+//            first-order pessimism (PessimismOptions::linear): h on the M mean states plus one
+//            barrier gradient at s per decision, the members' spread taken through it.
 // Regimes: NoResampling (h lifted so every sample is safe: 1 + M + 1 states per decision for the
-// hand model, 1 + K M + K states for the learned one) and Resampling (h tilted through the
+// hand model, 1 + K M + K states for the learned one, 1 + M + 1 and a gradient with linear) and Resampling (h tilted through the
 // state, so that most samples are unsafe and Algorithm 2 runs with its probes).
 // Counters: hand_us, learned_us (p50 per decision, every decision recorded), ratio (learned_us /
 // hand_us: the target <= 1.5 at K = 5), hand_p99_us, learned_p99_us, iterations_hand,
@@ -43,6 +45,7 @@ class ShiftedBarrier final : public cbf::Barrier {
       : inner_(std::move(inner)), row_(row), slope_(slope), offset_(offset), lift_(lift) {}
   int state_dim() const override { return inner_->state_dim(); }
   std::string Describe() const override { return inner_->Describe(); }
+  bool analytic_gradient() const override { return inner_->analytic_gradient(); }
 
  protected:
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
@@ -50,6 +53,16 @@ class ShiftedBarrier final : public cbf::Barrier {
     inner_->Evaluate(states, h);
     for (Eigen::Index i = 0; i < states.cols(); ++i)
       h[i] += slope_ * (states(row_, i) - offset_) + lift_;
+  }
+  // The inner barrier's (analytic) gradient plus the slope on its row.
+  void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h,
+                          Eigen::Ref<Eigen::MatrixXf> gradients) override {
+    inner_->EvaluateGradient(states, h, gradients);
+    for (Eigen::Index i = 0; i < states.cols(); ++i) {
+      h[i] += slope_ * (states(row_, i) - offset_) + lift_;
+      gradients(row_, i) += slope_;
+    }
   }
 
  private:
@@ -68,6 +81,8 @@ double Percentile(std::vector<double> v, double p) {
 void BM_LearnedVsHandDecision(benchmark::State& st) {
   const int members = static_cast<int>(st.range(0));
   const bool resampling = st.range(1) != 0;
+  dynamics::PessimismOptions pessimism;
+  pessimism.linear = st.range(2) != 0;
   namespace pp = domains::panda_push;
   const std::vector<std::string>& features = pp::ObservationFeatures();
   const int d = pp::kObservationDim, a = pp::kActionDim;
@@ -109,7 +124,7 @@ void BM_LearnedVsHandDecision(benchmark::State& st) {
   dynamics::PessimisticBarrier learned_barrier(
       std::make_unique<ShiftedBarrier>(net.MakeEvaluatorFor(features, "bench", "barrier"), 0,
                                        slope, state[0], lift),
-      learned_model);
+      learned_model, pessimism);
   shield::Shield hand(options, hand_barrier, hand_model);
   shield::Shield learned(options, learned_barrier, learned_model);
   const Eigen::VectorXf mu = Eigen::VectorXf::Constant(a, 0.2f);
@@ -146,15 +161,16 @@ void BM_LearnedVsHandDecision(benchmark::State& st) {
   st.counters["learned_p99_us"] = Percentile(learned_us, 99);
   st.counters["iterations_hand"] = static_cast<double>(it_hand) / std::max(1L, n);
   st.counters["iterations_learned"] = static_cast<double>(it_learned) / std::max(1L, n);
-  st.SetLabel("K = " + std::to_string(members) + ", M = 128, " + learned_model.Describe() +
+  st.SetLabel("K = " + std::to_string(members) + ", M = 128, " + pessimism.Describe() + ", " +
+              learned_model.Describe() +
               " vs " + hand_model.Describe());
 }
 
 }  // namespace
 
 BENCHMARK(BM_LearnedVsHandDecision)
-    ->ArgsProduct({{1, 5}, {0, 1}})
-    ->ArgNames({"K", "resampling"})
+    ->ArgsProduct({{1, 5}, {0, 1}, {0, 1}})
+    ->ArgNames({"K", "resampling", "linear"})
     ->Unit(benchmark::kMicrosecond);
 
 BENCHMARK_MAIN();

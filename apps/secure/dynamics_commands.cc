@@ -76,6 +76,7 @@ struct DynamicsErrors {
   std::vector<double> rmse;          // one step, per feature: RMS of s'_pred - s'
   std::vector<double> delta_std;     // per feature: std of the true change s' - s
   std::vector<double> relative;      // rmse / delta_std (NaN where the feature never moves)
+  std::vector<double> spread;        // RMS over transitions of the members' std of s'_pred
   std::vector<int> horizons;         // k-step: 1..H (trajectories only)
   std::vector<std::vector<double>> k_rmse;  // [h][feature]
   std::vector<long> k_count;         // rollouts that reached horizon h
@@ -92,6 +93,7 @@ struct DynamicsErrors {
                              {"delta_std", delta_std[f]},
                              {"relative", std::isfinite(relative[f]) ? nlohmann::json(relative[f])
                                                                      : nlohmann::json(nullptr)},
+                             {"spread", spread[f]},
                              {"k_step_rmse", k}});
     }
     return {{"transitions", transitions},
@@ -101,21 +103,28 @@ struct DynamicsErrors {
             {"groups", Groups()}};
   }
 
-  // Per group: the RMS of the member features' rmse over the RMS of their delta_std.
+  // Per group: the RMS of the member features' rmse (and spread) over the RMS of their
+  // delta_std.
   nlohmann::json Groups() const {
-    std::map<std::string, std::pair<double, double>> sums;
+    struct Sums {
+      double rmse = 0, delta = 0, spread = 0;
+    };
+    std::map<std::string, Sums> sums;
     std::vector<std::string> order;
     for (std::size_t f = 0; f < features.size(); ++f) {
       const std::string g = FeatureGroup(features[f]);
       if (!sums.count(g)) order.push_back(g);
-      sums[g].first += rmse[f] * rmse[f];
-      sums[g].second += delta_std[f] * delta_std[f];
+      sums[g].rmse += rmse[f] * rmse[f];
+      sums[g].delta += delta_std[f] * delta_std[f];
+      sums[g].spread += spread[f] * spread[f];
     }
+    auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
     nlohmann::json out = nlohmann::json::array();
     for (const std::string& g : order) {
-      const double rel = sums[g].second > 0 ? std::sqrt(sums[g].first / sums[g].second) : NAN;
+      const Sums& x = sums[g];
       out.push_back({{"group", g},
-                     {"relative", std::isfinite(rel) ? nlohmann::json(rel) : nlohmann::json(nullptr)}});
+                     {"relative", number(x.delta > 0 ? std::sqrt(x.rmse / x.delta) : NAN)},
+                     {"relative_spread", number(x.delta > 0 ? std::sqrt(x.spread / x.delta) : NAN)}});
     }
     return out;
   }
@@ -130,11 +139,16 @@ DynamicsErrors ScoreDynamics(const dynamics::EnsembleDynamics& model,
   const dynamics::EnsembleModel m(std::make_shared<const dynamics::EnsembleDynamics>(model), 1);
   Eigen::MatrixXf next(d, 1);
   Eigen::VectorXd sq = Eigen::VectorXd::Zero(d), mean = Eigen::VectorXd::Zero(d),
-                  mean_sq = Eigen::VectorXd::Zero(d);
+                  mean_sq = Eigen::VectorXd::Zero(d), spread_sq = Eigen::VectorXd::Zero(d);
   for (long c = 0; c < t.size(); ++c) {
     m.Step(t.states.col(c), t.actions.col(c), next);
     const Eigen::VectorXd err = (next.col(0) - t.next_states.col(c)).cast<double>();
     sq += err.cwiseProduct(err);
+    // The members' variance about their mean (population), per feature.
+    for (int k = 0; k < m.num_members(); ++k) {
+      const Eigen::VectorXd dev = (m.last_members().col(k) - next.col(0)).cast<double>();
+      spread_sq += dev.cwiseProduct(dev) / m.num_members();
+    }
     const Eigen::VectorXd delta = (t.next_states.col(c) - t.states.col(c)).cast<double>();
     mean += delta;
     mean_sq += delta.cwiseProduct(delta);
@@ -142,6 +156,7 @@ DynamicsErrors ScoreDynamics(const dynamics::EnsembleDynamics& model,
   const double n = static_cast<double>(t.size());
   for (int f = 0; f < d; ++f) {
     e.rmse.push_back(std::sqrt(sq[f] / n));
+    e.spread.push_back(std::sqrt(spread_sq[f] / n));
     const double var = std::max(0.0, mean_sq[f] / n - (mean[f] / n) * (mean[f] / n));
     e.delta_std.push_back(std::sqrt(var));
     e.relative.push_back(var > 1e-24 ? e.rmse[f] / std::sqrt(var) : NAN);
@@ -299,26 +314,31 @@ struct DynamicsValidateCommand {
       return;
     }
     std::cout << model_path << " on " << e.transitions << " transitions (" << transitions
-              << "); relative = one-step RMSE / std of the true change\n";
+              << "); relative = one-step RMSE / std of the true change; spread = RMS of the "
+                 "members' std about their mean\n";
     std::cout << std::left << std::setw(18) << "feature" << std::right << std::setw(12) << "rmse"
-              << std::setw(12) << "delta std" << std::setw(10) << "relative";
+              << std::setw(12) << "delta std" << std::setw(10) << "relative" << std::setw(12)
+              << "spread";
     for (int h : e.horizons)
       if (h == 1 || h == e.horizons.back() || h == 5) std::cout << std::setw(11) << ("rmse@" + std::to_string(h));
     std::cout << "\n";
     for (std::size_t f = 0; f < e.features.size(); ++f) {
       std::cout << std::left << std::setw(18) << e.features[f] << std::right << std::setw(12)
                 << std::setprecision(4) << e.rmse[f] << std::setw(12) << e.delta_std[f]
-                << std::setw(10) << e.relative[f];
+                << std::setw(10) << e.relative[f] << std::setw(12) << e.spread[f];
       for (std::size_t h = 0; h < e.horizons.size(); ++h) {
         const int k = e.horizons[h];
         if (k == 1 || k == e.horizons.back() || k == 5) std::cout << std::setw(11) << e.k_rmse[h][f];
       }
       std::cout << "\n";
     }
-    std::cout << "groups:";
+    auto text = [](const nlohmann::json& v) {
+      return v.is_null() ? std::string("-") : std::to_string(v.get<double>());
+    };
+    std::cout << "groups (relative error / relative spread):";
     for (const auto& g : e.Groups())
-      std::cout << " " << g["group"].get<std::string>() << " "
-                << (g["relative"].is_null() ? std::string("-") : std::to_string(g["relative"].get<double>()));
+      std::cout << " " << g["group"].get<std::string>() << " " << text(g["relative"]) << " / "
+                << text(g["relative_spread"]);
     std::cout << "\n";
   }
 };

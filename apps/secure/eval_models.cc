@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 
 #include "secure/common/error.h"
@@ -81,14 +82,35 @@ SeedModelSet::SeedModelSet(const ModelSources& sources, const experiments::Domai
   }
 }
 
+void PessimismFlags::Add(CLI::App* cmd) {
+  cmd->add_option("--pessimism", aggregate,
+                  "learned model: how the members' h(s+) combine: min | mean-std")
+      ->capture_default_str();
+  cmd->add_option("--pessimism-kappa", kappa,
+                  "learned model: kappa of mean-std (mean - kappa std; default 1)");
+  cmd->add_flag("--pessimism-linear", linear,
+                "learned model: the members' h(s+) to first order through the barrier's gradient "
+                "at s (h on M states instead of K M)");
+}
+
+dynamics::PessimismOptions PessimismFlags::Options() const {
+  dynamics::PessimismOptions options;
+  options.aggregate = dynamics::PessimismOptions::ParseAggregate(aggregate, "--pessimism");
+  options.kappa = kappa;
+  SECURE_CHECK(std::isfinite(kappa) && kappa >= 0,
+               "--pessimism-kappa = " << kappa << ", must be finite and >= 0");
+  options.linear = linear;
+  return options;
+}
+
 std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
     std::unique_ptr<domains::Environment> env, const std::string& path,
-    const shield::ShieldOptions& shield) {
+    const shield::ShieldOptions& shield, const dynamics::PessimismOptions& pessimism) {
   auto model = std::make_shared<const dynamics::EnsembleDynamics>(
       dynamics::EnsembleDynamics::Load(path));
   return std::make_unique<dynamics::LearnedModelEnvironment>(
       std::move(env), std::move(model), path,
-      std::max(shield.num_samples, shield.num_probes));
+      std::max(shield.num_samples, shield.num_probes), pessimism);
 }
 
 }  // namespace secure::cli

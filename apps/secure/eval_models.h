@@ -11,6 +11,7 @@
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
 #include "secure/domains/environment.h"
+#include "secure/dynamics/ensemble.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/experiment.h"
 #include "secure/policy/gaussian_policy.h"
@@ -59,12 +60,23 @@ class SeedModelSet {
   eval::SeedModels models_;
 };
 
+/// How a shield through a learned model aggregates its members (dynamics::PessimismOptions):
+/// `--pessimism min|mean-std`, `--pessimism-kappa`, `--pessimism-linear`.
+struct PessimismFlags {
+  std::string aggregate = "min";
+  double kappa = 1.0;
+  bool linear = false;
+  void Add(CLI::App* cmd);
+  /// @throws secure::Error naming the flag and value.
+  dynamics::PessimismOptions Options() const;
+};
+
 /// `env` with the learned dynamics model at `path` as its shield model
-/// (dynamics::LearnedModelEnvironment), sized for the shield's batches (max(M, N)): `secure eval
-/// --dynamics`. @throws secure::Error naming the file on a bad model or features that are not
-/// the environment's.
+/// (dynamics::LearnedModelEnvironment), sized for the shield's batches (max(M, N)), pessimistic
+/// by `pessimism`: `secure eval --dynamics`. @throws secure::Error naming the file on a bad
+/// model or features that are not the environment's.
 std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
     std::unique_ptr<domains::Environment> env, const std::string& path,
-    const shield::ShieldOptions& shield);
+    const shield::ShieldOptions& shield, const dynamics::PessimismOptions& pessimism = {});
 
 }  // namespace secure::cli

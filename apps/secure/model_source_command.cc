@@ -70,6 +70,7 @@ struct ModelSourceCommand {
   dynamics::DynamicsTrainerOptions trainer;
   shield::ShieldOptions shield;
   ShieldFlags shield_flags;
+  PessimismFlags pessimism_flags;
   bool json = false;
   const Config* config = nullptr;
 
@@ -106,6 +107,7 @@ struct ModelSourceCommand {
         ->capture_default_str();
     AddSeedOption(cmd, "--dynamics-seed", &trainer.seed, "seed of a model trained here");
     shield_flags.Add(cmd, &shield, /*domain_preset=*/true);
+    pessimism_flags.Add(cmd);
     cmd->add_flag("--json", json, "print every number as JSON");
     cmd->callback([this] { Run(); });
   }
@@ -121,6 +123,7 @@ struct ModelSourceCommand {
     const shield::ShieldOptions shield_options =
         OverlayShieldFlags(section.shield, shield_flags, &shield);
     shield_options.Validate();
+    const dynamics::PessimismOptions pessimism = pessimism_flags.Options();
     if (out.empty()) out = run_dir + "/model-source";
     CreateDirectories(out);
     const std::unique_ptr<domains::Environment> hand = d->MakeEnvironment();
@@ -148,7 +151,7 @@ struct ModelSourceCommand {
       if (!json) std::cerr << "dynamics: " << summary.BriefReport() << " -> " << model_path << "\n";
     }
     const std::unique_ptr<domains::Environment> learned =
-        MakeLearnedModelEnvironment(hand->Clone(), model_path, shield_options);
+        MakeLearnedModelEnvironment(hand->Clone(), model_path, shield_options, pessimism);
 
     const std::string hand_name = hand->ShieldModelIsExact() ? "exact" : "hand-written";
     const std::vector<eval::Method> methods{eval::Method::kSecure};
@@ -188,7 +191,10 @@ struct ModelSourceCommand {
       r["run"] = run_dir;
       r["config"] = config->path;
       r["models"] = {{"airl", ""}, {"bc", ""}, {"joint", ""}, {"barrier", ""}};
-      if (s.name == "learned") r["models"]["dynamics"] = model_path;
+      if (s.name == "learned") {
+        r["models"]["dynamics"] = model_path;
+        r["pessimism"] = pessimism.Describe();
+      }
       r["first_seed"] = first_seed;
       r["seeds_evaluated"] = seeds;
       r["episodes"] = episodes;
@@ -208,6 +214,7 @@ struct ModelSourceCommand {
                  {"run", run_dir},
                  {"out", out},
                  {"model", model_path},
+                 {"pessimism", pessimism.Describe()},
                  {"training", training},
                  {"seeds", seeds},
                  {"first_seed", first_seed},
@@ -224,7 +231,7 @@ struct ModelSourceCommand {
     t << "| shield model | success % | dangerous % |\n|---|---:|---:|\n";
     t << "| " << hand_name << " | " << 100 * success.mean_b << " | " << 100 * dangerous.mean_b
       << " |\n";
-    t << "| learned (" << model_path << ") | " << 100 * success.mean_a << " | "
+    t << "| learned (" << model_path << ", " << pessimism.Describe() << ") | " << 100 * success.mean_a << " | "
       << 100 * dangerous.mean_a << " |\n\n";
     t << "| learned - " << hand_name << " | points | 90 % interval | TOST p (±"
       << 100 * tost_bound << ") |\n|---|---:|---|---:|\n";

@@ -314,6 +314,7 @@ struct EvalCommand {
   CLI::Option* methods_option = nullptr;
   shield::ShieldOptions shield;
   ShieldFlags shield_flags;
+  PessimismFlags pessimism_flags;  // with --dynamics
   double tost_bound = 0.10;
   bool json = false;
 
@@ -351,6 +352,7 @@ struct EvalCommand {
     cmd->add_option("--dynamics", dynamics_path,
                     "a learned dynamics model (`secure dynamics train`) as the shield model, "
                     "pessimistic over its members, instead of the domain's");
+    pessimism_flags.Add(cmd);
     cmd->add_option("--seeds", seeds,
                     "evaluation seeds (with --run: the number of seed-<k> directories used)")
         ->capture_default_str();
@@ -399,7 +401,8 @@ struct EvalCommand {
     const std::unique_ptr<domains::Environment> env =
         dynamics_path.empty()
             ? d->MakeEnvironment()
-            : MakeLearnedModelEnvironment(d->MakeEnvironment(), dynamics_path, shield_options);
+            : MakeLearnedModelEnvironment(d->MakeEnvironment(), dynamics_path, shield_options,
+                                          pessimism_flags.Options());
     eval::Evaluation evaluation(eval::EvaluationOptions{tost_bound, 0.05});
     for (int k = 0; k < seeds; ++k) {
       const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(k);

@@ -29,6 +29,29 @@ std::string MemberPrefix(int k) { return "member" + std::to_string(k); }
 
 }  // namespace
 
+void PessimismOptions::Validate() const {
+  SECURE_CHECK(std::isfinite(kappa) && kappa >= 0,
+               "pessimism: kappa = " << kappa << ", must be finite and >= 0");
+}
+
+std::string PessimismOptions::Describe() const {
+  std::ostringstream out;
+  if (linear) out << "linear ";
+  if (aggregate == Aggregate::kMin)
+    out << "min";
+  else
+    out << "mean-" << kappa << "std";
+  return out.str();
+}
+
+PessimismOptions::Aggregate PessimismOptions::ParseAggregate(const std::string& text,
+                                                             const std::string& what) {
+  if (text == "min") return Aggregate::kMin;
+  if (text == "mean-std") return Aggregate::kMeanStd;
+  SECURE_THROW(what << " = '" << text << "', must be min | mean-std");
+  return Aggregate::kMin;  // not reached
+}
+
 void EnsembleDynamics::Validate(const std::string& what) const {
   SECURE_CHECK(!state_features.empty(), what << ": no state features");
   SECURE_CHECK(!action_features.empty(), what << ": no action features");
@@ -114,8 +137,9 @@ Eigen::MatrixXd EnsembleDynamics::ReferenceNext(
 // ------------------------------------------------------------------------------------------------
 
 EnsembleModel::EnsembleModel(std::shared_ptr<const EnsembleDynamics> model, int max_batch,
-                             nn::MatmulBackend backend)
-    : model_(std::move(model)), max_batch_(max_batch) {
+                             nn::MatmulBackend backend, PessimismOptions pessimism)
+    : model_(std::move(model)), max_batch_(max_batch), pessimism_(pessimism) {
+  pessimism_.Validate();
   SECURE_CHECK(model_ != nullptr, "EnsembleModel: no model");
   SECURE_CHECK(max_batch >= 1 && max_batch <= kMaxBatch,
                "EnsembleModel: max_batch = " << max_batch << ", must be in [1, " << kMaxBatch
@@ -134,6 +158,7 @@ EnsembleModel::EnsembleModel(std::shared_ptr<const EnsembleDynamics> model, int 
   members_.resize(d, static_cast<Eigen::Index>(k) * max_batch);
   mean_.resize(d, max_batch);
   offset_.resize(d);
+  last_state_.resize(d);
 }
 
 std::string EnsembleModel::Describe() const {
@@ -156,6 +181,7 @@ void EnsembleModel::Predict(const Eigen::Ref<const Eigen::VectorXf>& state,
   x.bottomRows(action_dim()) = actions;
   auto y = outputs_.leftCols(m);
   offset_ = delta_mean_ + state;  // preallocated: no temporary per member
+  last_state_ = state;
   for (int k = 0; k < num_members(); ++k) {
     nets_[static_cast<std::size_t>(k)].Forward(x, workspaces_[static_cast<std::size_t>(k)], y);
     auto out = members_.middleCols(static_cast<Eigen::Index>(k) * m, m);
@@ -206,18 +232,22 @@ bool EnsembleModel::IsLastStep(const Eigen::Ref<const Eigen::MatrixXf>& states) 
 // ------------------------------------------------------------------------------------------------
 
 PessimisticBarrier::PessimisticBarrier(std::unique_ptr<cbf::Barrier> inner,
-                                       const EnsembleModel& model)
-    : inner_(std::move(inner)), model_(model) {
+                                       const EnsembleModel& model, PessimismOptions options)
+    : inner_(std::move(inner)), model_(model), options_(options) {
   SECURE_CHECK(inner_ != nullptr, "PessimisticBarrier: no barrier");
   SECURE_CHECK(inner_->state_dim() == model.state_dim(),
                "PessimisticBarrier: the barrier reads " << inner_->state_dim()
                    << "-D states, the learned dynamics predicts " << model.state_dim() << "-D");
+  options_.Validate();
   h_members_.resize(static_cast<Eigen::Index>(model.num_members()) * model.max_batch());
+  gradient_state_.resize(model.state_dim());
+  gradient_h_.resize(1);
+  gradient_.resize(model.state_dim(), 1);
 }
 
 std::string PessimisticBarrier::Describe() const {
-  return inner_->Describe() + ", min over the " + std::to_string(model_.num_members()) +
-         " members of the learned dynamics";
+  return inner_->Describe() + ", " + options_.Describe() + " over the " +
+         std::to_string(model_.num_members()) + " members of the learned dynamics";
 }
 
 void PessimisticBarrier::EvaluateMin(const Eigen::Ref<const Eigen::MatrixXf>& states,
@@ -231,17 +261,61 @@ void PessimisticBarrier::EvaluateMin(const Eigen::Ref<const Eigen::MatrixXf>& st
   }
   const Eigen::Index m = states.cols();
   const int k = model_.num_members();
-  auto hm = h_members_.head(m * k);
+  if (options_.linear) {
+    LinearMembers(states, h, dense);
+  } else if (dense) {
+    inner_->EvaluateDense(model_.last_members(), h_members_.head(m * k));
+  } else {
+    inner_->Evaluate(model_.last_members(), h_members_.head(m * k));
+  }
+  AggregateMembers(m, h);
+}
+
+void PessimisticBarrier::LinearMembers(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                       Eigen::Ref<Eigen::VectorXf> h, bool dense) {
+  const Eigen::VectorXf& s = model_.last_state();
+  if (!gradient_valid_ || gradient_state_ != s) {
+    // One gradient per state s (a decision's rounds, probes and re-checks share it).
+    inner_->EvaluateGradient(s, gradient_h_, gradient_);
+    gradient_state_ = s;
+    gradient_valid_ = gradient_.allFinite();
+  }
+  const Eigen::Index m = states.cols();
+  const int k = model_.num_members();
   if (dense)
-    inner_->EvaluateDense(model_.last_members(), hm);
+    inner_->EvaluateDense(states, h);  // h(s̄⁺) on the members' mean (the M states given)
   else
-    inner_->Evaluate(model_.last_members(), hm);
-  h = hm.head(m);
-  for (int j = 1; j < k; ++j) {
-    auto other = hm.segment(j * m, m);
-    // NaN propagates: a NaN member makes h NaN (never safe).
-    for (Eigen::Index i = 0; i < m; ++i)
-      if (!std::isnan(h[i]) && !(other[i] >= h[i])) h[i] = other[i];
+    inner_->Evaluate(states, h);
+  const auto members = model_.last_members();
+  // h_k = h(s̄⁺) + ∇h(s)·(s⁺_k − s̄⁺); the gradient's product with s̄⁺ once per action.
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const float base = h[i] - gradient_.col(0).dot(states.col(i));
+    for (int j = 0; j < k; ++j)
+      h_members_[j * m + i] = base + gradient_.col(0).dot(members.col(j * m + i));
+  }
+  if (!gradient_valid_) h_members_.head(m * k).setConstant(std::numeric_limits<float>::quiet_NaN());
+}
+
+void PessimisticBarrier::AggregateMembers(Eigen::Index m, Eigen::Ref<Eigen::VectorXf> h) const {
+  const int k = model_.num_members();
+  const auto hm = h_members_.head(m * k);
+  if (options_.aggregate == PessimismOptions::Aggregate::kMin) {
+    h = hm.head(m);
+    for (int j = 1; j < k; ++j) {
+      const auto other = hm.segment(j * m, m);
+      // NaN propagates: a NaN member makes h NaN (never safe).
+      for (Eigen::Index i = 0; i < m; ++i)
+        if (!std::isnan(h[i]) && !(other[i] >= h[i])) h[i] = other[i];
+    }
+    return;
+  }
+  // mean − κ std (population std, in double; a NaN member makes h NaN).
+  for (Eigen::Index i = 0; i < m; ++i) {
+    double sum = 0, sum_sq = 0;
+    for (int j = 0; j < k; ++j) sum += hm[j * m + i];
+    const double mean = sum / k;
+    for (int j = 0; j < k; ++j) sum_sq += (hm[j * m + i] - mean) * (hm[j * m + i] - mean);
+    h[i] = static_cast<float>(mean - options_.kappa * std::sqrt(sum_sq / k));
   }
 }
 
@@ -259,7 +333,8 @@ std::unique_ptr<cbf::Barrier> ForShieldModel(std::unique_ptr<cbf::Barrier> barri
                                              const domains::DynamicsModel& dynamics) {
   const auto* ensemble = dynamic_cast<const EnsembleModel*>(&dynamics);
   if (ensemble == nullptr) return barrier;
-  return std::make_unique<PessimisticBarrier>(std::move(barrier), *ensemble);
+  return std::make_unique<PessimisticBarrier>(std::move(barrier), *ensemble,
+                                              ensemble->pessimism());
 }
 
 }  // namespace secure::dynamics

@@ -37,6 +37,29 @@ inline constexpr const char* kEnsembleModelKind = "dynamics_ensemble";
 inline constexpr int kMaxMembers = 64;
 inline constexpr int kMaxBatch = 4096;
 
+/// How PessimisticBarrier turns the members' h(s⁺_k) into one h per action.
+///   aggregate   min: min_k (never above any member); mean-std: mean_k − κ·std_k (population
+///               std; softer: a member far below the others lowers h by κ·std, not to its value)
+///   linear      false: h on all K·M predicted states (one forward of K·M columns);
+///               true: first order around the step's state s: h_k ≈ h(s̄⁺) + ∇h(s)·(s⁺_k − s̄⁺),
+///               with s̄⁺ the members' mean: h on the M mean states plus one gradient per state s
+///               (cached), so the decision costs about what the hand-written model's does.
+///               An approximation: exact for a barrier affine in s, otherwise off by the
+///               curvature times the members' spread.
+struct PessimismOptions {
+  enum class Aggregate { kMin, kMeanStd };
+  Aggregate aggregate = Aggregate::kMin;
+  double kappa = 1.0;  // mean-std only, >= 0
+  bool linear = false;
+
+  /// @throws secure::Error naming the field and value.
+  void Validate() const;
+  /// "min", "mean-1.5std", "linear min", ...
+  std::string Describe() const;
+  /// "min" | "mean-std"; @throws secure::Error naming `what` and the value.
+  static Aggregate ParseAggregate(const std::string& text, const std::string& what);
+};
+
 struct EnsembleDynamics {
   std::vector<std::string> state_features;   // the rows of s (and of s')
   std::vector<std::string> action_features;  // the rows of a
@@ -66,7 +89,8 @@ class EnsembleModel final : public domains::DynamicsModel {
   /// Buffers for batches of up to `max_batch` actions (the shield's max(M, N)).
   /// @throws secure::Error if max_batch is outside [1, kMaxBatch] or the model is invalid.
   explicit EnsembleModel(std::shared_ptr<const EnsembleDynamics> model, int max_batch = 1024,
-                         nn::MatmulBackend backend = nn::MatmulBackend::kAuto);
+                         nn::MatmulBackend backend = nn::MatmulBackend::kAuto,
+                         PessimismOptions pessimism = {});
 
   int state_dim() const override { return model_->state_dim(); }
   int action_dim() const override { return model_->action_dim(); }
@@ -75,6 +99,8 @@ class EnsembleModel final : public domains::DynamicsModel {
   int max_batch() const { return max_batch_; }
   const EnsembleDynamics& model() const { return *model_; }
   const std::shared_ptr<const EnsembleDynamics>& shared_model() const { return model_; }
+  /// How a PessimisticBarrier over this model aggregates the members (ForShieldModel reads it).
+  const PessimismOptions& pessimism() const { return pessimism_; }
 
   /// members (state_dim x K·M): member k's next states in columns [k M, (k + 1) M).
   /// @throws secure::Error on wrong dimensions or M > max_batch().
@@ -89,6 +115,8 @@ class EnsembleModel final : public domains::DynamicsModel {
   Eigen::Ref<const Eigen::MatrixXf> last_members() const {
     return members_.leftCols(static_cast<Eigen::Index>(last_cols_) * num_members());
   }
+  /// The state s of the last Step() (valid while IsLastStep holds).
+  const Eigen::VectorXf& last_state() const { return last_state_; }
 
  protected:
   /// next_states = the members' mean.
@@ -104,6 +132,7 @@ class EnsembleModel final : public domains::DynamicsModel {
   std::shared_ptr<const EnsembleDynamics> model_;
   std::vector<nn::InferenceMlp> nets_;
   int max_batch_;
+  PessimismOptions pessimism_;
   Eigen::VectorXf delta_mean_, delta_scale_;
   // Scratch (mutable: Step is const by the DynamicsModel interface; one thread per object).
   mutable std::vector<nn::InferenceMlp::Workspace> workspaces_;
@@ -112,17 +141,20 @@ class EnsembleModel final : public domains::DynamicsModel {
   mutable Eigen::MatrixXf members_;  // state x (K max_batch)
   mutable Eigen::VectorXf offset_;  // delta.mean + s
   mutable Eigen::MatrixXf mean_;     // state x max_batch: the last Step's output, as written
+  mutable Eigen::VectorXf last_state_;  // the last Step's s
   mutable const float* last_data_ = nullptr;
   mutable Eigen::Index last_cols_ = 0, last_stride_ = 0;
 };
 
-/// h(s⁺) pessimistic over the ensemble: on the next states `model` last wrote, min over members
-/// of inner h(member's s⁺); on other states, inner h. The inner barrier sees K·M columns at once.
+/// h(s⁺) pessimistic over the ensemble: on the next states `model` last wrote, the members'
+/// h(member's s⁺) aggregated by `options` (default: the minimum; the inner barrier sees K·M
+/// columns at once); on other states, inner h.
 class PessimisticBarrier final : public cbf::Barrier {
  public:
   /// `model` must outlive this barrier; `inner` reads model.state_dim() rows.
-  /// @throws secure::Error if the state dimensions differ.
-  PessimisticBarrier(std::unique_ptr<cbf::Barrier> inner, const EnsembleModel& model);
+  /// @throws secure::Error if the state dimensions differ or the options are invalid.
+  PessimisticBarrier(std::unique_ptr<cbf::Barrier> inner, const EnsembleModel& model,
+                     PessimismOptions options = {});
   int state_dim() const override { return inner_->state_dim(); }
   std::string Describe() const override;
   cbf::Barrier& inner() { return *inner_; }
@@ -136,13 +168,23 @@ class PessimisticBarrier final : public cbf::Barrier {
  private:
   void EvaluateMin(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
                    bool dense);
+  // h_members_ for the linear path: h(s̄⁺_i) + ∇h(s)·(s⁺_ik − s̄⁺_i).
+  void LinearMembers(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                     Eigen::Ref<Eigen::VectorXf> h, bool dense);
+  // h[i] from h_members_ (member k of action i at k m + i).
+  void AggregateMembers(Eigen::Index m, Eigen::Ref<Eigen::VectorXf> h) const;
   std::unique_ptr<cbf::Barrier> inner_;
   const EnsembleModel& model_;
+  PessimismOptions options_;
   Eigen::VectorXf h_members_;  // (K max_batch)
+  // The linear path's gradient ∇h(s), cached for the state it was taken at.
+  Eigen::VectorXf gradient_state_, gradient_h_;
+  Eigen::MatrixXf gradient_;
+  bool gradient_valid_ = false;
 };
 
 /// The barrier a shield over `dynamics` should use: `barrier` wrapped in a PessimisticBarrier
-/// when `dynamics` is an EnsembleModel, else `barrier` itself. (The evaluation harness and the
+/// (with the model's pessimism()) when `dynamics` is an EnsembleModel, else `barrier` itself. (The evaluation harness and the
 /// Python module call this where they pair a barrier with an environment's shield model.)
 std::unique_ptr<cbf::Barrier> ForShieldModel(std::unique_ptr<cbf::Barrier> barrier,
                                              const domains::DynamicsModel& dynamics);

@@ -23,20 +23,24 @@ void CheckModelFeatures(const EnsembleDynamics& model,
 
 LearnedModelEnvironment::LearnedModelEnvironment(std::unique_ptr<domains::Environment> inner,
                                                  std::shared_ptr<const EnsembleDynamics> model,
-                                                 const std::string& source, int max_batch)
-    : inner_(std::move(inner)), source_(source), model_(std::move(model), max_batch) {
+                                                 const std::string& source, int max_batch,
+                                                 PessimismOptions pessimism)
+    : inner_(std::move(inner)),
+      source_(source),
+      model_(std::move(model), max_batch, nn::MatmulBackend::kAuto, pessimism) {
   SECURE_CHECK(inner_ != nullptr, "LearnedModelEnvironment: no environment");
   CheckModelFeatures(model_.model(), inner_->ObservationFeatures(), inner_->ActionFeatures(),
                      source_);
 }
 
 std::string LearnedModelEnvironment::Describe() const {
-  return inner_->Describe() + "; shield model: " + model_.Describe() + " (" + source_ + ")";
+  return inner_->Describe() + "; shield model: " + model_.Describe() + " (" + source_ +
+         "), pessimism " + model_.pessimism().Describe();
 }
 
 std::unique_ptr<domains::Environment> LearnedModelEnvironment::Clone() const {
   return std::make_unique<LearnedModelEnvironment>(inner_->Clone(), model_.shared_model(), source_,
-                                                   model_.max_batch());
+                                                   model_.max_batch(), model_.pessimism());
 }
 
 }  // namespace secure::dynamics

@@ -20,7 +20,7 @@ class LearnedModelEnvironment final : public domains::Environment {
   ///   observation / action features (in order), naming `source` (the model file).
   LearnedModelEnvironment(std::unique_ptr<domains::Environment> inner,
                           std::shared_ptr<const EnsembleDynamics> model, const std::string& source,
-                          int max_batch = 1024);
+                          int max_batch = 1024, PessimismOptions pessimism = {});
 
   int observation_dim() const override { return inner_->observation_dim(); }
   int action_dim() const override { return inner_->action_dim(); }

@@ -58,6 +58,43 @@ class LinearBarrier final : public cbf::Barrier {
   float b_;
 };
 
+// A barrier that counts the states (columns) it evaluates, around another.
+class CountingBarrier final : public cbf::Barrier {
+ public:
+  CountingBarrier(std::unique_ptr<cbf::Barrier> inner, long* columns)
+      : inner_(std::move(inner)), columns_(columns) {}
+  int state_dim() const override { return inner_->state_dim(); }
+  std::string Describe() const override { return inner_->Describe(); }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
+    *columns_ += states.cols();
+    inner_->Evaluate(states, h);
+  }
+
+ private:
+  std::unique_ptr<cbf::Barrier> inner_;
+  long* columns_;
+};
+
+// h(s) = 1 − |s|² (curved: the first-order pessimism is not exact on it).
+class QuadraticBarrier final : public cbf::Barrier {
+ public:
+  explicit QuadraticBarrier(int d) : d_(d) {}
+  int state_dim() const override { return d_; }
+  std::string Describe() const override { return "quadratic"; }
+
+ protected:
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) override {
+    h = (1.0f - states.colwise().squaredNorm().array()).transpose();
+  }
+
+ private:
+  int d_;
+};
+
 class DynamicsTest : public test::TempDirTest {};
 
 TEST_F(DynamicsTest, ModelFileRoundTripsAndStepMatchesTheReference) {
@@ -243,6 +280,83 @@ TEST_F(DynamicsTest, PessimisticBarrierIsTheMinimumOverMembers) {
     for (int k = 0; k < 5; ++k) worst = std::min(worst, double(hk[k * 16 + i]));
     EXPECT_NEAR(g[i], (worst - h_s) / options.dt + options.class_k_gain * h_s, 1e-4);
   }
+}
+
+TEST_F(DynamicsTest, PessimismMeanStdAndLinearOptions) {
+  auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(4, 2, 5, {32, 32}, 9));
+  const EnsembleModel model(shared, 64);
+  Eigen::VectorXf c(4);
+  c << 1.0f, -2.0f, 0.5f, 3.0f;
+  PessimismOptions mean_std;
+  mean_std.aggregate = PessimismOptions::Aggregate::kMeanStd;
+  mean_std.kappa = 1.5;
+  PessimismOptions linear;
+  linear.linear = true;
+  long exact_columns = 0, linear_columns = 0;
+  PessimisticBarrier soft(std::make_unique<LinearBarrier>(c, 0.2f), model, mean_std);
+  PessimisticBarrier exact(
+      std::make_unique<CountingBarrier>(std::make_unique<QuadraticBarrier>(4), &exact_columns),
+      model);
+  PessimisticBarrier first_order(
+      std::make_unique<CountingBarrier>(std::make_unique<QuadraticBarrier>(4), &linear_columns),
+      model, linear);
+  PessimisticBarrier first_order_affine(std::make_unique<LinearBarrier>(c, 0.2f), model, linear);
+  LinearBarrier plain(c, 0.2f);
+  QuadraticBarrier curved(4);
+  Rng rng(5);
+  const int m = 40;
+  Eigen::VectorXf s(4);
+  for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(0.3 * rng.Normal());
+  Eigen::MatrixXf actions(2, m);
+  for (Eigen::Index j = 0; j < actions.size(); ++j) actions(j) = static_cast<float>(rng.Normal());
+  Eigen::MatrixXf next(4, m), members(4, 5 * m);
+  model.StepMembers(s, actions, members);
+  Eigen::VectorXf hk(5 * m), hq(5 * m);
+  plain.Evaluate(members, hk);
+  curved.Evaluate(members, hq);
+  model.Step(s, actions, next);
+  Eigen::VectorXf h_soft(m), h_exact(m), h_linear(m), h_affine(m);
+  soft.Evaluate(next, h_soft);
+  exact.Evaluate(next, h_exact);
+  first_order.Evaluate(next, h_linear);
+  first_order_affine.Evaluate(next, h_affine);
+  // The exact path evaluates K M states, the first-order one M (and the gradient's few at s).
+  EXPECT_EQ(exact_columns, 5 * m);
+  EXPECT_LT(linear_columns, m + 2 * 4 + 2);
+  const Eigen::VectorXf grad = -2.0f * s;
+  for (int i = 0; i < m; ++i) {
+    double sum = 0, sum_sq = 0, lowest = 1e30, lowest_first_order = 1e30;
+    for (int k = 0; k < 5; ++k) sum += hk[k * m + i];
+    for (int k = 0; k < 5; ++k) sum_sq += std::pow(hk[k * m + i] - sum / 5, 2);
+    // mean − κ std of the members' h.
+    EXPECT_NEAR(h_soft[i], sum / 5 - 1.5 * std::sqrt(sum_sq / 5), 1e-4) << i;
+    for (int k = 0; k < 5; ++k) {
+      lowest = std::min(lowest, double(hk[k * m + i]));
+      const Eigen::VectorXf dev = members.col(k * m + i) - next.col(i);
+      lowest_first_order = std::min(lowest_first_order, double(grad.dot(dev)));
+    }
+    // An affine barrier: first order is exact, so the linear path is the minimum.
+    EXPECT_NEAR(h_affine[i], lowest, 1e-3) << i;
+    // A curved one: h(s̄⁺) plus the smallest first-order deviation through ∇h(s) (finite
+    // differences: 1e-3 tolerance), which differs from the exact minimum by the curvature.
+    const double h_mean = 1.0 - next.col(i).squaredNorm();
+    EXPECT_NEAR(h_linear[i], h_mean + lowest_first_order, 2e-3) << i;
+    double exact_lowest = 1e30;
+    for (int k = 0; k < 5; ++k) exact_lowest = std::min(exact_lowest, double(hq[k * m + i]));
+    EXPECT_EQ(h_exact[i], static_cast<float>(exact_lowest));
+  }
+  // Bad options: one line naming the field and the value.
+  PessimismOptions bad;
+  bad.kappa = -1;
+  EXPECT_HAS(test::ErrorOf([&] { bad.Validate(); }), "pessimism: kappa = -1");
+  EXPECT_HAS(test::ErrorOf([&] { PessimismOptions::ParseAggregate("max", "--pessimism"); }),
+             "--pessimism = 'max', must be min | mean-std");
+  EXPECT_HAS(test::ErrorOf([&] { EnsembleModel(shared, 8, nn::MatmulBackend::kAuto, bad); }),
+             "kappa = -1");
+  // ForShieldModel takes the model's pessimism.
+  const EnsembleModel soft_model(shared, 8, nn::MatmulBackend::kAuto, mean_std);
+  EXPECT_HAS(ForShieldModel(std::make_unique<LinearBarrier>(c, 0.2f), soft_model)->Describe(),
+             "mean-1.5std over the 5 members");
 }
 
 TEST_F(DynamicsTest, ForShieldModelWrapsOnlyAnEnsemble) {

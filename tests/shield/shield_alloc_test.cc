@@ -649,6 +649,18 @@ TEST(ShieldAllocTest, LearnedDynamicsEnsembleDecisionsDoNotAllocate) {
     s.expect_resampling = true;
     ExpectNoAllocations(s, barrier, model, 100);
   }
+  {
+    // The other pessimism options (issue 36): mean − κ std, and first order through the
+    // barrier's gradient at s (finite differences here: its buffers are sized at the first call).
+    const std::unique_ptr<cbf::Barrier> evaluator = net.MakeEvaluator();
+    dynamics::PessimismOptions pessimism;
+    pessimism.aggregate = dynamics::PessimismOptions::Aggregate::kMeanStd;
+    pessimism.linear = true;
+    dynamics::PessimisticBarrier barrier(
+        std::make_unique<TiltedBarrier>(*evaluator, 0, -1000.0f, s.state[0]), model, pessimism);
+    s.name = "learned ensemble K = 5, M = 128, resampling, linear mean-std";
+    ExpectNoAllocations(s, barrier, model, 100);
+  }
 }
 
 }  // namespace
