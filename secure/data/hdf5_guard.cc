@@ -241,26 +241,59 @@ std::string RunGuarded(const std::string& path, const std::function<void(Encoder
   return reply;
 }
 
+// The readers' results through the pipe: Encode in the child, Decode in the parent.
+void Encode(Encoder& e, const Hdf5Contents& c) {
+  e.U64(c.has_demonstrations ? 1 : 0);
+  for (const auto* v : {&c.observation_features, &c.unreadable_obs_keys, &c.action_features,
+                        &c.state_sets})
+    e.Strings(*v);
+}
+void Decode(Decoder& d, const std::string& /*path*/, Hdf5Contents* c) {
+  c->has_demonstrations = d.U64() != 0;
+  for (auto* v : {&c->observation_features, &c->unreadable_obs_keys, &c->action_features,
+                  &c->state_sets})
+    *v = d.Strings();
+}
+void Encode(Encoder& e, const TrajectorySet& t) {
+  e.Strings(t.state_features);
+  e.Strings(t.action_features);
+  e.Matrix(t.states);
+  e.Matrix(t.actions);
+  e.Longs(t.episode_begin);
+}
+void Decode(Decoder& d, const std::string& path, TrajectorySet* t) {
+  t->source = path;
+  t->state_features = d.Strings();
+  t->action_features = d.Strings();
+  t->states = d.Matrix();
+  t->actions = d.Matrix();
+  t->episode_begin = d.Longs();
+}
+void Encode(Encoder& e, const StateSet& s) {
+  e.Strings(s.features);
+  e.Matrix(s.states);
+}
+void Decode(Decoder& d, const std::string& path, StateSet* s) {
+  s->source = path;
+  s->features = d.Strings();
+  s->states = d.Matrix();
+}
+
+// `read()` (an in-process reader of `path`) run in a child process, its result sent back.
+template <typename T, typename Read>
+T ReadGuarded(const std::string& path, const Read& read) {
+  const std::string reply = RunGuarded(path, [&](Encoder& e) { Encode(e, read()); });
+  Decoder d(reply, 1, path);
+  T value;
+  Decode(d, path, &value);
+  d.End();
+  return value;
+}
+
 }  // namespace
 
 Hdf5Contents InspectHdf5(const std::string& path) {
-  const std::string reply = RunGuarded(path, [&](Encoder& e) {
-    const Hdf5Contents c = internal::InspectHdf5InProcess(path);
-    e.U64(c.has_demonstrations ? 1 : 0);
-    e.Strings(c.observation_features);
-    e.Strings(c.unreadable_obs_keys);
-    e.Strings(c.action_features);
-    e.Strings(c.state_sets);
-  });
-  Decoder d(reply, 1, path);
-  Hdf5Contents c;
-  c.has_demonstrations = d.U64() != 0;
-  c.observation_features = d.Strings();
-  c.unreadable_obs_keys = d.Strings();
-  c.action_features = d.Strings();
-  c.state_sets = d.Strings();
-  d.End();
-  return c;
+  return ReadGuarded<Hdf5Contents>(path, [&] { return internal::InspectHdf5InProcess(path); });
 }
 
 namespace internal {
@@ -268,40 +301,15 @@ namespace internal {
 TrajectorySet ReadHdf5Trajectories(const std::string& path,
                                    const std::vector<std::string>& state_features,
                                    const std::vector<std::string>& action_features) {
-  const std::string reply = RunGuarded(path, [&](Encoder& e) {
-    const TrajectorySet t = ReadHdf5TrajectoriesInProcess(path, state_features, action_features);
-    e.Strings(t.state_features);
-    e.Strings(t.action_features);
-    e.Matrix(t.states);
-    e.Matrix(t.actions);
-    e.Longs(t.episode_begin);
+  return ReadGuarded<TrajectorySet>(path, [&] {
+    return ReadHdf5TrajectoriesInProcess(path, state_features, action_features);
   });
-  Decoder d(reply, 1, path);
-  TrajectorySet t;
-  t.source = path;
-  t.state_features = d.Strings();
-  t.action_features = d.Strings();
-  t.states = d.Matrix();
-  t.actions = d.Matrix();
-  t.episode_begin = d.Longs();
-  d.End();
-  return t;
 }
 
 StateSet ReadHdf5StateSet(const std::string& path, const std::vector<std::string>& features,
                           const std::string& label) {
-  const std::string reply = RunGuarded(path, [&](Encoder& e) {
-    const StateSet s = ReadHdf5StateSetInProcess(path, features, label);
-    e.Strings(s.features);
-    e.Matrix(s.states);
-  });
-  Decoder d(reply, 1, path);
-  StateSet s;
-  s.source = path;
-  s.features = d.Strings();
-  s.states = d.Matrix();
-  d.End();
-  return s;
+  return ReadGuarded<StateSet>(
+      path, [&] { return ReadHdf5StateSetInProcess(path, features, label); });
 }
 
 }  // namespace internal

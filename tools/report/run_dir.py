@@ -159,18 +159,28 @@ def seed_dirs(run_dir):
     return [d for _, d in sorted(out)]
 
 
-def read_curve(path):
-    """A curve CSV (seed-<k>/*_curve.csv) as {column: np.array}; an empty cell (a value not
-    measured in that row) is NaN. The file must be a header of distinct names and rows of as many decimal numbers (or empty cells); anything else
-    is a ReportError naming the file, the line, the column and the value."""
+def csv_rows(path):
+    """(line number, cells) of each row of a CSV file that is a regular file within the input
+    limit; an unreadable file or one that is no UTF-8 CSV is a ReportError naming it."""
     check_input(path)
     try:
         with open(path, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
+            reader = csv.reader(f)
+            for row in reader:
+                yield reader.line_num, row
     except OSError as e:
         raise ReportError("%s: cannot read: %s" % (path, e.strerror))
     except (UnicodeDecodeError, csv.Error) as e:
         raise ReportError("%s: not a CSV file: %s" % (path, e))
+
+
+def read_curve(path):
+    """A curve CSV (seed-<k>/*_curve.csv) as {column: np.array}; an empty cell (a value not
+    measured in that row) is NaN. The file must be a header of distinct names and rows of as
+    many decimal numbers (or empty cells); anything else is a ReportError naming the file, the
+    line, the column and the value."""
+    numbered = list(csv_rows(path))
+    rows = [row for _, row in numbered]
     if not rows:
         raise ReportError("%s: empty file (expected a header such as 'epoch,...')" % path)
     header, body = rows[0], rows[1:]
@@ -183,19 +193,21 @@ def read_curve(path):
         raise ReportError("%s: a header and no rows" % path)
     values = np.full((len(body), len(header)), np.nan)
     for i, row in enumerate(body):
+        line = numbered[i + 1][0]
         if len(row) != len(header):
             raise ReportError("%s: line %d: %d cells, but the header has %d"
-                              % (path, i + 2, len(row), len(header)))
+                              % (path, line, len(row), len(header)))
         for j, cell in enumerate(row):
             if cell == "":
                 continue
             if not NUMBER.match(cell) or not math.isfinite(float(cell)):
                 raise ReportError("%s: line %d: column '%s': value %s is not a finite number"
-                                  % (path, i + 2, header[j], shown(cell)))
+                                  % (path, line, header[j], shown(cell)))
             values[i, j] = float(cell)
     if np.isnan(values[:, 0]).any():
         raise ReportError("%s: line %d: column '%s' (the x axis) is empty"
-                          % (path, int(np.isnan(values[:, 0]).argmax()) + 2, header[0]))
+                          % (path, numbered[int(np.isnan(values[:, 0]).argmax()) + 1][0],
+                             header[0]))
     return {name: values[:, j] for j, name in enumerate(header)}
 
 
@@ -209,35 +221,28 @@ def first_model(run_dir, name="barrier.model"):
 
 def read_states_csv(path, features, limit=20000):
     """The columns `features` of a state CSV (at most `limit` rows), checked as read_curve."""
-    check_input(path)
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            reader = csv.reader(f)
-            header = next(reader, None)
-            if header is None:
-                raise ReportError("%s: empty file (expected a header of feature names)" % path)
+    rows, idx, header = [], None, None
+    for line, r in csv_rows(path):
+        if header is None:
+            header = r
             missing = [n for n in features if n not in header]
             if missing:
                 raise ReportError("%s: no column %s (the header: %s)"
                                   % (path, shown(missing[0]), shown(",".join(header))))
             idx = [header.index(n) for n in features]
-            rows = []
-            for r in reader:
-                line = reader.line_num
-                if len(r) != len(header):
-                    raise ReportError("%s: line %d: %d cells, but the header has %d"
-                                      % (path, line, len(r), len(header)))
-                for i, n in zip(idx, features):
-                    if not NUMBER.match(r[i]) or not math.isfinite(float(r[i])):
-                        raise ReportError("%s: line %d: column '%s': value %s is not a finite "
-                                          "number" % (path, line, n, shown(r[i])))
-                rows.append([float(r[i]) for i in idx])
-                if len(rows) >= limit:
-                    break
-    except OSError as e:
-        raise ReportError("%s: cannot read: %s" % (path, e.strerror))
-    except (UnicodeDecodeError, csv.Error) as e:
-        raise ReportError("%s: not a CSV file: %s" % (path, e))
+            continue
+        if len(r) != len(header):
+            raise ReportError("%s: line %d: %d cells, but the header has %d"
+                              % (path, line, len(r), len(header)))
+        for i, n in zip(idx, features):
+            if not NUMBER.match(r[i]) or not math.isfinite(float(r[i])):
+                raise ReportError("%s: line %d: column '%s': value %s is not a finite number"
+                                  % (path, line, n, shown(r[i])))
+        rows.append([float(r[i]) for i in idx])
+        if len(rows) >= limit:
+            break
+    if header is None:
+        raise ReportError("%s: empty file (expected a header of feature names)" % path)
     if not rows:
         raise ReportError("%s: no rows" % path)
     return np.array(rows, dtype=np.float32)
