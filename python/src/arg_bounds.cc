@@ -77,9 +77,24 @@ std::string Describe(PyObject* capsule, Py_ssize_t index, PyObject* keyword) {
   return where + ": argument " + std::to_string(index + 1);
 }
 
-PyObject* Refuse(PyObject* capsule, Py_ssize_t index, PyObject* keyword, const Walk& walk) {
+// " [key]": the entry of a dict `value` that is past the limits on its own (make_env(task=x)
+// reaches the binding as options={'task': x}), or "".
+std::string EntryPastTheLimits(PyObject* value, const Walk& limits) {
+  if (!PyDict_Check(value)) return "";
+  PyObject *key = nullptr, *item = nullptr;
+  Py_ssize_t pos = 0;
+  while (PyDict_Next(value, &pos, &key, &item)) {
+    Walk walk{0, limits.max_nodes, limits.max_depth};
+    if (!Within(item, walk, 1) && PyUnicode_Check(key))
+      return " ['" + py::str(key).cast<std::string>() + "']";
+  }
+  return "";
+}
+
+PyObject* Refuse(PyObject* capsule, Py_ssize_t index, PyObject* keyword, PyObject* value,
+                 const Walk& walk) {
   const std::string message =
-      Describe(capsule, index, keyword) + " holds more than " + std::to_string(walk.max_nodes) +
+      Describe(capsule, index, keyword) + EntryPastTheLimits(value, walk) + " holds more than " + std::to_string(walk.max_nodes) +
       " nodes (lists, tuples and dicts, counted with repetition) or is nested more than " +
       std::to_string(walk.max_depth) +
       " levels deep (shared references, or a container that contains itself; use a NumPy "
@@ -106,7 +121,8 @@ PyObject* BoundedDispatcher(PyObject* self, PyObject* args, PyObject* kwargs) {
     const Py_ssize_t n = PyTuple_GET_SIZE(args);
     for (Py_ssize_t i = 0; i < n; ++i) {
       Walk walk{0, limits.max_config_nodes, limits.max_config_depth};
-      if (!Within(PyTuple_GET_ITEM(args, i), walk, 0)) return Refuse(self, i, nullptr, walk);
+      if (!Within(PyTuple_GET_ITEM(args, i), walk, 0))
+        return Refuse(self, i, nullptr, PyTuple_GET_ITEM(args, i), walk);
     }
   }
   if (kwargs != nullptr) {
@@ -114,7 +130,7 @@ PyObject* BoundedDispatcher(PyObject* self, PyObject* args, PyObject* kwargs) {
     Py_ssize_t pos = 0;
     while (PyDict_Next(kwargs, &pos, &key, &value)) {
       Walk walk{0, limits.max_config_nodes, limits.max_config_depth};
-      if (!Within(value, walk, 0)) return Refuse(self, -1, key, walk);
+      if (!Within(value, walk, 0)) return Refuse(self, -1, key, value, walk);
     }
   }
   return pybind_dispatcher(self, args, kwargs);

@@ -95,6 +95,8 @@ def test_shared_reference_bombs_in_any_argument_fail_fast_naming_it():
             x = [x] * 9
         s = np.zeros(4, np.float32)
         expect(ValueError, lambda: secure.domains(x), "secure.domains: argument 1")
+        expect(ValueError, lambda: secure.make_env("double-integrator", task=x),
+               "argument 'options' ['task'] holds more than 100000 nodes")
         expect(ValueError, lambda: b.h(x), "secure.Barrier.h: argument 'states'")
         expect(ValueError, lambda: secure.EnvCore(x, "full", False, {}), "argument 'name'")
         expect(ValueError, lambda: secure.Shield(b, d, num_samples=x), "argument 'num_samples'")
