@@ -108,8 +108,9 @@ void CheckRange(const std::string& name, long value, long lo, long hi);
 /// of every error.
 int ReportError(const std::string& message);
 
-/// The global flags --max-input-bytes and --max-config-nodes (input_limit_flags.cc): scanned
-/// from argv and applied at once (before the config file is read), and declared on `app`.
+/// The global flags --max-input-bytes, --max-config-nodes, --max-hdf5-memory
+/// (input_limit_flags.cc): scanned from argv and applied at once (before the config file is
+/// read), and declared on `app`.
 void AddInputLimitFlags(CLI::App& app, int argc, char** argv);
 
 /// Flags that set options of the domain's task (its `task:` keys of the same names: the double

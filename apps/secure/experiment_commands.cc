@@ -351,6 +351,18 @@ struct MergeCommand {
   }
 
   void Run() {
+    // Every run directory must be there before anything is made (the first is the default
+    // --out: creating it would turn "no such directory" into "no task file").
+    for (const std::string& dir : dirs) {
+      std::error_code ec;
+      const auto status = std::filesystem::status(dir, ec);
+      SECURE_CHECK(std::filesystem::exists(status),
+                   "merge: run directory '" << dir << "' does not exist (expected the --out "
+                                            << "directory of a shard)");
+      SECURE_CHECK(std::filesystem::is_directory(status),
+                   "merge: '" << dir << "' is not a directory (expected the --out directory "
+                              << "of a shard)");
+    }
     const std::string target = out.empty() ? dirs.front() : out;
     CreateDirectories(target);
     const RunDirectoryLock lock(target);  // not while a run (or a shard) still writes there

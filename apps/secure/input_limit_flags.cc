@@ -1,6 +1,6 @@
-// The global flags that raise the input limits (secure/common/input_limits.h): --max-input-bytes
-// and --max-config-nodes, given before the command (`secure --max-input-bytes 10000000000 demos
-// convert ...`). They are applied before anything is read, the --config file included (which
+// The global flags that raise the input limits (secure/common/input_limits.h): --max-input-bytes,
+// --max-config-nodes and --max-hdf5-memory, given before the command (`secure
+// --max-input-bytes 10000000000 demos convert ...`). They are applied before anything is read, the --config file included (which
 // is read before the command line is parsed), so they are scanned from argv here and also
 // declared to CLI11 (for --help and the value check).
 #include <CLI/CLI.hpp>
@@ -34,7 +34,7 @@ void AddInputLimitFlags(CLI::App& app, int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg.empty() || arg[0] != '-') break;
-    for (const char* flag : {"--max-input-bytes", "--max-config-nodes"}) {
+    for (const char* flag : {"--max-input-bytes", "--max-config-nodes", "--max-hdf5-memory"}) {
       std::string value;
       const std::string prefix = std::string(flag) + "=";
       if (arg == flag && i + 1 < argc) {
@@ -47,6 +47,8 @@ void AddInputLimitFlags(CLI::App& app, int argc, char** argv) {
       const unsigned long long v = PositiveInteger(flag, value);
       if (std::strcmp(flag, "--max-input-bytes") == 0) {
         limits.max_input_bytes = v;
+      } else if (std::strcmp(flag, "--max-hdf5-memory") == 0) {
+        limits.max_hdf5_memory_bytes = v;
       } else {
         SECURE_CHECK(v <= 1'000'000'000ull, flag << " = " << v << ", must be at most 1000000000");
         limits.max_config_nodes = static_cast<long>(v);
@@ -57,6 +59,9 @@ void AddInputLimitFlags(CLI::App& app, int argc, char** argv) {
   app.add_option("--max-input-bytes", "largest input file read, and largest HDF5 data declared, "
                                       "in bytes (default 4294967296; env SECURE_MAX_INPUT_BYTES); "
                                       "before the command");
+  app.add_option("--max-hdf5-memory", "memory, in bytes, of the child process that reads an "
+                                      "HDF5 file (default 1 GiB + 8 x the file's size; env "
+                                      "SECURE_MAX_HDF5_MEMORY); before the command");
   app.add_option("--max-config-nodes", "most YAML nodes of a --config file with aliases expanded "
                                        "(default 100000; env SECURE_MAX_CONFIG_NODES); before "
                                        "the command");

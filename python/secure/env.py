@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numbers
 import re
+import reprlib
 import warnings
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -31,6 +32,12 @@ else:
 __all__ = ["Env", "make_env", "env_id", "register_gymnasium", "RENDER_SIZE"]
 
 RENDER_SIZE = (640, 480)  # (width, height) of render(); `secure render`'s default
+
+
+def _shown(value: Any) -> str:
+    """repr() bounded in length and depth (reprlib) for messages: a value of nested shared
+    references (9^9 items) or one that contains itself is never walked whole."""
+    return reprlib.repr(value)
 
 
 class _EnvBase:
@@ -90,7 +97,7 @@ def _check_seed(seed) -> Optional[int]:
     if seed is None:
         return None
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or seed < 0:
-        raise ValueError(f"reset: seed = {seed!r}, must be None or a non-negative integer")
+        raise ValueError(f"reset: seed = {_shown(seed)}, must be None or a non-negative integer")
     return int(seed)
 
 
@@ -121,12 +128,12 @@ class Env(_Base):
                          "render_fps": 1.0 / dt if dt > 0 else None}
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
-                f"make_env('{name}'): render_mode = {render_mode!r}, the {name} domain renders "
-                f"in {self.metadata['render_modes']} (None: no rendering)")
+                f"make_env('{name}'): render_mode = {_shown(render_mode)}, the {name} domain "
+                f"renders in {self.metadata['render_modes']} (None: no rendering)")
         self.render_mode = render_mode
         if (len(render_size) != 2 or
                 not all(isinstance(n, numbers.Integral) and n > 0 for n in render_size)):
-            raise ValueError(f"make_env('{name}'): render_size = {render_size!r}, must be "
+            raise ValueError(f"make_env('{name}'): render_size = {_shown(render_size)}, must be "
                              "(width, height), two positive integers")
         self.render_size = (int(render_size[0]), int(render_size[1]))
         low, high = self._core.action_bounds
@@ -146,7 +153,7 @@ class Env(_Base):
         seed = _check_seed(seed)
         if options is not None:
             if not isinstance(options, dict):
-                raise TypeError(f"reset: options = {options!r}, must be None or a dict")
+                raise TypeError(f"reset: options = {_shown(options)}, must be None or a dict")
             if options:
                 raise ValueError(f"reset: options: unknown key '{next(iter(options))}' "
                                  "(this environment takes none)")
@@ -258,7 +265,7 @@ def env_id(domain: str) -> str:
     """The Gymnasium id of a registry domain: 'double-integrator' -> 'secure/DoubleIntegrator-v0'."""
     parts = [p for p in re.split(r"[^0-9A-Za-z]+", domain) if p]
     if not parts:
-        raise ValueError(f"env_id: domain = {domain!r} has no letters or digits")
+        raise ValueError(f"env_id: domain = {_shown(domain)} has no letters or digits")
     return "secure/" + "".join(p[0].upper() + p[1:] for p in parts) + "-v0"
 
 

@@ -4,6 +4,9 @@
 namespace secure::python {
 void RegisterQuery(py::module_& m);  // query.cc: secure.query, secure.label
 void RegisterReport(py::module_& m);  // report.cc: secure.paper_reference, secure.report_hints
+// arg_bounds.cc: every function's arguments within the config limits before pybind11 sees them
+// (its error message would repr() a value of 9^9 shared references without end).
+void BoundArgumentSizes(py::module_& m, const char* any_function);
 }  // namespace secure::python
 
 PYBIND11_MODULE(_secure, m) {
@@ -22,4 +25,5 @@ PYBIND11_MODULE(_secure, m) {
   RegisterRender(m);
   RegisterQuery(m);
   RegisterReport(m);
+  BoundArgumentSizes(m, "domains");  // last: every function is defined
 }

@@ -98,11 +98,11 @@ def child(seconds, seed):
     cyclic_list.append(cyclic_list)
     cyclic_dict = {}
     cyclic_dict["self"] = cyclic_dict
-    # Shared references: 9^6 leaves if expanded, over the option walk's node limit. (Not 9^9:
-    # pybind11's "incompatible function arguments" message repr()s the arguments, and repr of
-    # 9^9 leaves does not end in plain Python either.)
+    # Shared references: 9^9 leaves if expanded, over every argument's node limit (each bound
+    # function counts its arguments' containers first: python/src/arg_bounds.cc; pybind11's
+    # "incompatible function arguments" message would repr() them without end).
     bomb = [1.0]
-    for _ in range(6):
+    for _ in range(9):
         bomb = [bomb] * 9
     dict_bomb = {"goal": bomb}
 

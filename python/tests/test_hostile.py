@@ -85,6 +85,38 @@ def test_shared_reference_bombs_fail_fast():
     """, timeout=30)
 
 
+def test_shared_reference_bombs_in_any_argument_fail_fast_naming_it():
+    # Issue 34: where pybind11 could not convert such a value, its message repr()ed all 9^9
+    # leaves (no end); where NumPy converted it, it built a 9^9 array. Each bound function now
+    # counts its arguments' containers first (python/src/arg_bounds.cc).
+    out = assert_clean("""
+        x = [1.0]
+        for _ in range(9):
+            x = [x] * 9
+        s = np.zeros(4, np.float32)
+        expect(ValueError, lambda: secure.domains(x), "secure.domains: argument 1")
+        expect(ValueError, lambda: secure.make_env("double-integrator", task=x),
+               "argument 'options' ['task'] holds more than 100000 nodes")
+        expect(ValueError, lambda: b.h(x), "secure.Barrier.h: argument 'states'")
+        expect(ValueError, lambda: secure.EnvCore(x, "full", False, {}), "argument 'name'")
+        expect(ValueError, lambda: secure.Shield(b, d, num_samples=x), "argument 'num_samples'")
+        expect(ValueError, lambda: secure.Rng(x), "secure.Rng.__init__")
+        expect(ValueError, lambda: secure.make_env("double-integrator", render_mode=x),
+               "render_mode = [[[[[[")
+        expect(ValueError, lambda: secure.make_env("double-integrator", render_size=x),
+               "render_size")
+        expect(ValueError, lambda: secure.make_env("double-integrator").reset(seed=x), "seed")
+        # An unbound method called on None crashed the interpreter (found by python_fuzz).
+        expect(TypeError, lambda: secure.Rng.next_u64(None), "secure.Rng.next_u64: called on None")
+        expect(TypeError, lambda: secure.Barrier.h(None, s), "called on None")
+        c = [1.0]; c.append(c)
+        expect(ValueError, lambda: b.h(c), "contains itself")
+        # Ordinary nested lists still convert.
+        print("h", b.h([[0.0, 0.0, 0.0, 0.0]] * 1000).shape)
+    """, timeout=30)
+    assert "h (1000,)" in out
+
+
 def test_uninitialised_objects_raise_instead_of_crashing():
     out = assert_clean("""
         s = np.zeros(4, np.float32); a = np.zeros(2, np.float32)

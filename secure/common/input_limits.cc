@@ -1,5 +1,6 @@
 #include "secure/common/input_limits.h"
 
+#include <pthread.h>
 #include <sys/stat.h>
 
 #include <cerrno>
@@ -31,8 +32,15 @@ void FromEnvironment(const char* name, T* value) {
 }
 
 std::mutex& LimitsMutex() {
-  static std::mutex m;
-  return m;
+  // Held across fork() (the HDF5 readers' child process reads the limits): a child never
+  // inherits it locked by a thread it does not have.
+  static std::mutex* m = [] {
+    auto* mutex = new std::mutex;
+    ::pthread_atfork([] { LimitsMutex().lock(); }, [] { LimitsMutex().unlock(); },
+                     [] { LimitsMutex().unlock(); });
+    return mutex;
+  }();
+  return *m;
 }
 
 InputLimits& Limits() {
@@ -41,6 +49,7 @@ InputLimits& Limits() {
     FromEnvironment("SECURE_MAX_INPUT_BYTES", &l.max_input_bytes);
     FromEnvironment("SECURE_MAX_CONFIG_NODES", &l.max_config_nodes);
     FromEnvironment("SECURE_MAX_CONFIG_DEPTH", &l.max_config_depth);
+    FromEnvironment("SECURE_MAX_HDF5_MEMORY", &l.max_hdf5_memory_bytes);
     return l;
   }();
   return limits;
@@ -56,6 +65,14 @@ const InputLimits& GetInputLimits() {
 void SetInputLimits(const InputLimits& limits) {
   std::lock_guard<std::mutex> lock(LimitsMutex());
   Limits() = limits;
+}
+
+std::uint64_t Hdf5ReaderMemoryLimit(std::uint64_t file_bytes) {
+  const std::uint64_t set = GetInputLimits().max_hdf5_memory_bytes;
+  if (set != 0) return set;
+  const std::uint64_t gib = std::uint64_t{1} << 30;
+  const std::uint64_t max = std::numeric_limits<std::uint64_t>::max();
+  return file_bytes > (max - gib) / 8 ? max : gib + 8 * file_bytes;
 }
 
 std::string FileTypeName(unsigned mode) {

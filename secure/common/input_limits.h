@@ -2,7 +2,7 @@
 // Resource limits on what the program reads (issue 34): no small input may exhaust memory or
 // hang a command. Each limit is stated here, with its default, and can be raised: by an
 // environment variable (read once, at the first use) or by a program calling SetInputLimits (the
-// CLI's global flags --max-input-bytes, --max-config-nodes). tests/README.md lists them.
+// CLI's global flags --max-input-bytes, --max-config-nodes, --max-hdf5-memory). tests/README.md lists them.
 //
 //   input file size      SECURE_MAX_INPUT_BYTES    4 GiB    every file read (CSV, model files,
 //                                                           HDF5, task.json, result.json)
@@ -11,6 +11,9 @@
 //   config nodes         SECURE_MAX_CONFIG_NODES   100000   YAML nodes visited with aliases
 //                                                           expanded (configs, Python options)
 //   config depth         SECURE_MAX_CONFIG_DEPTH   64       nesting of mappings and sequences
+//   HDF5 reader memory   SECURE_MAX_HDF5_MEMORY    1 GiB +  address space the child process
+//                                                  8 x the  reading an HDF5 file may map beyond
+//                                                  file     its parent's (secure/data/data.h)
 //
 // Inputs must also be regular files (a FIFO would block, /dev/zero never ends): see
 // CheckRegularInputFile.
@@ -24,7 +27,14 @@ struct InputLimits {
   std::uint64_t max_input_bytes = std::uint64_t{4} << 30;
   long max_config_nodes = 100'000;
   int max_config_depth = 64;
+  // 0: 1 GiB plus 8 times the size of the file read (Hdf5ReaderMemoryLimit).
+  std::uint64_t max_hdf5_memory_bytes = 0;
 };
+
+/// The memory limit of the child process that reads an HDF5 file of `file_bytes` bytes:
+/// max_hdf5_memory_bytes if set, else 1 GiB + 8 * file_bytes (the file's image, libhdf5's copy
+/// of it, its values as doubles and as floats fit with room to spare).
+std::uint64_t Hdf5ReaderMemoryLimit(std::uint64_t file_bytes);
 
 /// The limits in force: the defaults, overridden by the environment variables above (a value
 /// that is not a positive integer is ignored with a note on stderr), or by SetInputLimits.

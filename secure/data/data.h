@@ -169,12 +169,26 @@ struct Hdf5Contents {
 ///   without demos, a demo without obs keys, or actions that are no (T,) or (T, k) float dataset.
 Hdf5Contents InspectHdf5(const std::string& path);
 
+/// HDF5 files are read in a child process (fork) under a memory limit (InputLimits::
+/// max_hdf5_memory_bytes; default 1 GiB + 8 times the file's size): libhdf5 1.10 itself crashes
+/// or allocates gigabytes on some malformed files. The child's death by a signal, or its
+/// memory limit, is one secure::Error naming the file; the decoded arrays come back through a
+/// pipe. Writing stays in this process.
 namespace internal {
 TrajectorySet ReadHdf5Trajectories(const std::string& path,
                                    const std::vector<std::string>& state_features,
                                    const std::vector<std::string>& action_features);
 StateSet ReadHdf5StateSet(const std::string& path, const std::vector<std::string>& features,
                           const std::string& label);
+// The same readers in this process, without the guard: for the guard's child, and the HDF5
+// fuzzer's in-process mode. A malformed file can crash the process.
+Hdf5Contents InspectHdf5InProcess(const std::string& path);
+TrajectorySet ReadHdf5TrajectoriesInProcess(const std::string& path,
+                                            const std::vector<std::string>& state_features,
+                                            const std::vector<std::string>& action_features);
+StateSet ReadHdf5StateSetInProcess(const std::string& path,
+                                   const std::vector<std::string>& features,
+                                   const std::string& label);
 }  // namespace internal
 
 /// Checks that a set has at least one state and only finite values; `what` names it in the

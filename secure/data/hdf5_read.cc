@@ -1,6 +1,8 @@
 // Reading demonstrations and state sets in robomimic's HDF5 layout (see data.h and
-// docs/FILE_FORMATS.md): InspectHdf5, ReadHdf5Trajectories, ReadHdf5StateSet. The HDF5 C API stays
-// in hdf5_*.cc: no public header includes hdf5.h.
+// docs/FILE_FORMATS.md), in this process: internal::InspectHdf5InProcess,
+// ReadHdf5TrajectoriesInProcess, ReadHdf5StateSetInProcess. The public readers run these in a
+// child process (hdf5_guard.cc: libhdf5 itself crashes on some malformed files). The HDF5 C API
+// stays in hdf5_*.cc: no public header includes hdf5.h.
 //
 // Files are read from memory (the bytes from ReadFile, opened through the core driver's file
 // image): reads share the CSV files' path handling (FIFOs, symlinks) and HDF5 never locks a file.
@@ -39,6 +41,8 @@ namespace {
 using hdf5::Handle;
 using hdf5::Hdf5Reason;
 using hdf5::QuietHdf5;
+using hdf5::IsIeeeFloat;
+using hdf5::TypeName;
 
 // Formats a value read from a file (shortest round trip).
 std::string Shown(double value) {
@@ -167,6 +171,12 @@ class Reader {
     SECURE_CHECK(type_class == H5T_FLOAT, path_ << ": " << where << ": data type is "
                                                 << TypeName(type.get(), type_class) << " (shape "
                                                 << shape << "), expected float32 or float64");
+    // A float type of another layout than IEEE binary32 / binary64 (a mutated file can declare
+    // e.g. a 4-billion-byte float): libhdf5's conversion would allocate by its size.
+    SECURE_CHECK(IsIeeeFloat(type.get()),
+                 path_ << ": " << where << ": data type is a float of " << H5Tget_size(type.get())
+                       << " bytes with precision " << H5Tget_precision(type.get())
+                       << ", expected IEEE float32 or float64");
     SECURE_CHECK(rank == 1 || rank == 2, path_ << ": " << where << ": shape " << shape
                                                << " has rank " << rank
                                                << ", expected (T,) or (T, k)");
@@ -198,6 +208,18 @@ class Reader {
                          << static_cast<double>(bytes) << " bytes each, over the input limit of "
                          << limit << " bytes (raise it with SECURE_MAX_INPUT_BYTES or "
                             "--max-input-bytes)");
+    }
+    // Contiguous data must lie within the file: libhdf5 sizes its read buffer by the declared
+    // storage (the fuzzer found 4 GB declared for 80 bytes of data in a 10 KB file).
+    if (plist.ok() && H5Pget_layout(plist.get()) == H5D_CONTIGUOUS) {
+      const hsize_t storage = H5Dget_storage_size(dataset.get());
+      const haddr_t offset = H5Dget_offset(dataset.get());
+      SECURE_CHECK(storage <= image_.size() &&
+                       (offset == HADDR_UNDEF || offset <= image_.size() - storage),
+                   path_ << ": " << where << ": its data (" << storage << " bytes at offset "
+                         << (offset == HADDR_UNDEF ? std::string("none") : std::to_string(offset))
+                         << ") lie beyond the end of the " << image_.size()
+                         << "-byte file (corrupt file?)");
     }
     *rows = static_cast<long>(dims[0]);
     *cols = static_cast<long>(width);
@@ -419,44 +441,6 @@ class Reader {
     return false;
   }
 
-  // "uint8", "int64", "float32", "string", ...: the numpy name where there is one.
-  static std::string TypeName(hid_t type, H5T_class_t c) {
-    const std::size_t bits = type >= 0 ? 8 * H5Tget_size(type) : 0;
-    if (c == H5T_INTEGER) {
-      return std::string(H5Tget_sign(type) == H5T_SGN_NONE ? "uint" : "int") +
-             std::to_string(bits);
-    }
-    if (c == H5T_FLOAT) return "float" + std::to_string(bits);
-    return ClassName(c);
-  }
-
-  static const char* ClassName(H5T_class_t c) {
-    switch (c) {
-      case H5T_INTEGER:
-        return "integer";
-      case H5T_FLOAT:
-        return "float";
-      case H5T_STRING:
-        return "string";
-      case H5T_BITFIELD:
-        return "bitfield";
-      case H5T_OPAQUE:
-        return "opaque";
-      case H5T_COMPOUND:
-        return "compound";
-      case H5T_REFERENCE:
-        return "reference";
-      case H5T_ENUM:
-        return "enum";
-      case H5T_VLEN:
-        return "variable-length";
-      case H5T_ARRAY:
-        return "array";
-      default:
-        return "unknown";
-    }
-  }
-
   QuietHdf5 quiet_;
   std::string path_;
   std::string image_;
@@ -595,7 +579,9 @@ TrajectorySet ReadDemos(const Reader& r, const std::vector<std::string>& state_f
 
 }  // namespace
 
-Hdf5Contents InspectHdf5(const std::string& path) {
+namespace internal {
+
+Hdf5Contents InspectHdf5InProcess(const std::string& path) {
   const Reader r(path);
   Hdf5Contents c;
   if (r.KindOf(r.file(), "data") != H5I_BADID) {
@@ -629,17 +615,16 @@ Hdf5Contents InspectHdf5(const std::string& path) {
   return c;
 }
 
-namespace internal {
-
-TrajectorySet ReadHdf5Trajectories(const std::string& path,
+TrajectorySet ReadHdf5TrajectoriesInProcess(const std::string& path,
                                    const std::vector<std::string>& state_features,
                                    const std::vector<std::string>& action_features) {
   const Reader r(path);
   return ReadDemos(r, state_features, action_features, true);
 }
 
-StateSet ReadHdf5StateSet(const std::string& path, const std::vector<std::string>& features,
-                          const std::string& label) {
+StateSet ReadHdf5StateSetInProcess(const std::string& path,
+                                   const std::vector<std::string>& features,
+                                   const std::string& label) {
   const Reader r(path);
   StateSet set;
   set.source = path;

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <mutex>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -32,6 +33,7 @@
 #include "secure/common/strings.h"
 #include "secure/data/data.h"
 #include "secure/data/internal/hdf5_handle.h"
+#include "secure/data/internal/hdf5_mutex.h"
 
 namespace secure::data {
 namespace {
@@ -335,6 +337,8 @@ void WriteHdf5(const std::string& path, const TrajectorySet* demos,
                const std::vector<LabelledStateSet>& sets) {
   SECURE_CHECK(demos != nullptr || !sets.empty(),
                "cannot write '" << path << "': no demonstrations and no state sets");
+  // One libhdf5 call sequence at a time, and never while a reader forks (hdf5_guard.cc).
+  const std::lock_guard<std::mutex> lock(hdf5::Hdf5LibraryMutex());
   Writer w(path);
   if (demos != nullptr) WriteDemos(w, path, *demos);
   WriteSets(w, path, sets);

@@ -185,4 +185,36 @@ TEST(CliHostileTest, NonsenseExperimentFlagsAreErrors) {
   EXPECT_FALSE(fs::exists(dir / "result.json"));
 }
 
+// The HDF5 files on which libhdf5 1.10.8 itself crashed or allocated gigabytes (hdf5_fuzz's
+// findings, tests/fuzz/corpus/hdf5_fuzz/): one line naming the file, exit 1, quickly; and the
+// reader's memory limit can be set by the flag.
+TEST(CliHostileTest, TheLibhdf5FindingsAreOneErrorLineEach) {
+  const fs::path dir = Dir("hdf5_findings");
+  const fs::path corpus = fs::path(SECURE_SOURCE_DIR) / "tests/fuzz/corpus/hdf5_fuzz";
+  for (const char* name :
+       {"oom-libhdf5-H5Dread-a", "oom-libhdf5-H5Dread-b", "segv-libhdf5-H5F__accum_read"}) {
+    const fs::path in = dir / (std::string(name) + ".h5");
+    fs::copy_file(corpus / name, in);
+    ExpectOneErrorLine(RunSecure("demos convert " + in.string() + " " + (dir / "out.csv").string()),
+                       in.string());
+    ExpectOneErrorLine(RunSecure("--max-hdf5-memory 1000000 demos convert " + in.string() + " " +
+                                 (dir / "out.csv").string()),
+                       in.string());
+    EXPECT_FALSE(fs::exists(dir / "out.csv"));
+  }
+  ExpectOneErrorLine(RunSecure("--max-hdf5-memory lots demos convert a.h5 b.csv"),
+                     "--max-hdf5-memory = 'lots', expected a positive integer");
+}
+
+// `experiment merge` on a directory that does not exist names it (and does not create it).
+TEST(CliHostileTest, MergeOfAMissingDirectorySaysItDoesNotExist) {
+  const fs::path missing = Dir("merge_missing") / "nowhere";
+  ExpectOneErrorLine(RunSecure("experiment merge " + missing.string()),
+                     "run directory '" + missing.string() + "' does not exist");
+  EXPECT_FALSE(fs::exists(missing));
+  ExpectOneErrorLine(RunSecure("experiment merge " + missing.string() + " --out " +
+                               (missing.parent_path() / "out").string()),
+                     "run directory '" + missing.string() + "' does not exist");
+}
+
 }  // namespace

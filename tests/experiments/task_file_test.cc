@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -78,6 +79,25 @@ TEST_F(TaskFileTest, AnEditedTaskFileIsRefusedByARerunAndAMerge) {
   task.erase("checksum");
   WriteFileAtomically(Task(), task.dump(2));
   EXPECT_HAS(ErrorOf([&] { Run(); }), Task() + ": no checksum");
+}
+
+// Issue 34, item 11: a task.json that is a directory, and a seed-K that is a dangling symbolic
+// link, are named as what they are (not a JSON "unexpected end of input", not "File exists").
+TEST_F(TaskFileTest, ATaskFileThatIsADirectoryAndADanglingSeedLinkAreNamed) {
+  std::filesystem::create_directories(Task());
+  std::string message = ErrorOf([&] { Run(); });
+  EXPECT_HAS(message, Task());
+  EXPECT_HAS(message, "is a directory, not a regular file");
+  message = ErrorOf([&] { MergeExperiment({PathOf("run")}); });
+  EXPECT_HAS(message, Task());
+  EXPECT_HAS(message, "is a directory, not a regular file");
+  std::filesystem::remove_all(PathOf("run"));
+  std::filesystem::create_directories(PathOf("run"));
+  std::filesystem::create_directory_symlink(PathOf("elsewhere"), PathOf("run/seed-0"));
+  message = ErrorOf([&] { Run(); });
+  EXPECT_HAS(message, PathOf("run/seed-0"));
+  EXPECT_HAS(message, "dangling symbolic link");
+  EXPECT_EQ(message.find('\n'), std::string::npos) << message;
 }
 
 }  // namespace

@@ -212,7 +212,16 @@ def main():
                          ("string_rate", lambda r: r["methods"]["bc"]["success_rate"].update(
                              mean="0.5")),
                          ("rate_7", lambda r: r["methods"]["bc"]["success_rate"]["per_seed"]
-                          .__setitem__(0, 7.0))):
+                          .__setitem__(0, 7.0)),
+                         # Issue 34: the other fields the page shows, typed and in range.
+                         ("empty_objects", lambda r: (r.clear(), r.update(experiment={},
+                                                                        methods={}))),
+                         ("negative_std", lambda r: r["methods"]["bc"]["success_rate"].update(
+                             std=-1)),
+                         ("string_seeds", lambda r: r["experiment"].setdefault(
+                             "options", {}).update(seeds="2")),
+                         ("string_p", lambda r: r["comparisons"]["secure_vs_airl"][
+                             "success_mann_whitney"].update(p_value="0.01"))):
         d = os.path.join(WORK, name)
         os.makedirs(d)
         r = json.loads(json.dumps(good))
@@ -220,7 +229,33 @@ def main():
         with open(os.path.join(d, "result.json"), "w") as f:
             json.dump(r, f)
         edited[name] = d
-    for path, named, what in ((edited["no_methods"], "result.json", "holds no method"),
+    # Garbage curve CSVs.
+    curve = os.path.join("seed-0", "bc_curve.csv")
+    for name, text in (("curve_garbage", "\x00\x01garbage\n"),
+                       ("curve_text", "epoch,train_nll\n1,0.5\n2,lots\n"),
+                       ("curve_nan", "epoch,train_nll\n1,nan\n"),
+                       ("curve_short_row", "epoch,train_nll\n1,0.5\n2\n"),
+                       ("curve_repeated", "epoch,epoch\n1,2\n"),
+                       ("curve_empty", "")):
+        d = os.path.join(WORK, name)
+        shutil.copytree(run_dir, d, ignore=shutil.ignore_patterns("report*"))
+        with open(os.path.join(d, curve), "w") as f:
+            f.write(text)
+        edited[name] = d
+    for path, named, what in ((edited["empty_objects"], "result.json", "holds no method"),
+                              (edited["negative_std"], "success_rate.std' = -1", "in [0, 1]"),
+                              (edited["string_seeds"], "options.seeds' = \"2\"", "an integer"),
+                              (edited["string_p"], "p_value' = \"0.01\"", "in [0, 1]"),
+                              (edited["curve_garbage"], curve + ": line 1: column 1",
+                               "not a column name"),
+                              (edited["curve_text"], curve + ": line 3: column 'train_nll'",
+                               "value \"lots\" is not a finite number"),
+                              (edited["curve_nan"], curve + ": line 2", "\"nan\" is not a finite"),
+                              (edited["curve_short_row"], curve + ": line 3", "1 cells, but"),
+                              (edited["curve_repeated"], curve + ": line 1: column 2",
+                               "is repeated"),
+                              (edited["curve_empty"], curve, "empty file"),
+                              (edited["no_methods"], "result.json", "holds no method"),
                               (edited["string_rate"], "success_rate.mean' = \"0.5\"",
                                "must be a rate in [0, 1]"),
                               (edited["rate_7"], "per_seed[0]' = 7.0", "must be a rate"),

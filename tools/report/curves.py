@@ -42,11 +42,22 @@ def clip_first_epochs(ax, ys):
                 va="top", fontsize=8, color="0.4")
 
 
+def check_curves(run_dir):
+    """Reads every seed's curve CSVs (a ReportError on a malformed one) before the report
+    writes anything."""
+    for d in seed_dirs(run_dir):
+        for file_name, _ in CURVE_FILES:
+            if os.path.lexists(os.path.join(d, file_name)):
+                read_curve(os.path.join(d, file_name))
+
+
 def curves_figure(page, run_dir):
     seeds = seed_dirs(run_dir)
     panels = []  # (title, column, [(seed, x, y)])
     for file_name, label in CURVE_FILES:
-        per_seed = [(os.path.basename(d), read_curve(os.path.join(d, file_name))) for d in seeds]
+        # A curve a seed does not have is skipped; one that is there must be well formed.
+        per_seed = [(os.path.basename(d), read_curve(os.path.join(d, file_name)))
+                    for d in seeds if os.path.lexists(os.path.join(d, file_name))]
         per_seed = [(s, c) for s, c in per_seed if c]
         if not per_seed:
             continue

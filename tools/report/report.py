@@ -26,7 +26,7 @@ import sys
 
 from barrier_picture import barrier_section
 from comparison import comparison_figure, table3, tests_table
-from curves import barrier_training_figure, curves_figure, variants_figure
+from curves import barrier_training_figure, check_curves, curves_figure, variants_figure
 from hints import paper_table3, report_hints
 from page import STYLE, Page, open_fifo_for_writing, output_kind, write_output
 from run_dir import ReportError, load_run
@@ -73,6 +73,7 @@ def finish_page(page, out_path, write_to, title):
 
 def build_report(run_dir, out_path, write_to=None):
     result = load_run(run_dir)
+    check_curves(run_dir)  # every input checked before anything is written
     exp = result["experiment"]
     domain = str(exp.get("domain", "?"))
     kind = str(exp.get("kind", "?"))

@@ -1,7 +1,7 @@
 #pragma once
 // Pieces of the HDF5 reader and writer (hdf5_read.cc, hdf5_write.cc): an owned HDF5 identifier,
-// HDF5's error printing turned off, and its innermost error message. INTERNAL: include only from
-// secure/data/hdf5_*.cc; no public header includes <hdf5.h>.
+// HDF5's error printing turned off, its innermost error message, and data types' names and
+// checks. INTERNAL: include only from secure/data/hdf5_*.cc; no public header includes <hdf5.h>.
 #include <hdf5.h>
 
 #include <string>
@@ -68,6 +68,52 @@ inline std::string Hdf5Reason() {
       },
       &reason);
   return reason.empty() ? std::string() : " (HDF5: " + Excerpt(reason) + ")";
+}
+
+// True for IEEE binary32 or binary64 in either byte order (what H5T_NATIVE_DOUBLE converts
+// from without a custom float conversion).
+inline bool IsIeeeFloat(hid_t type) {
+  for (hid_t ieee : {H5T_IEEE_F32LE, H5T_IEEE_F32BE, H5T_IEEE_F64LE, H5T_IEEE_F64BE})
+    if (H5Tequal(type, ieee) > 0) return true;
+  return false;
+}
+
+inline const char* ClassName(H5T_class_t c) {
+  switch (c) {
+    case H5T_INTEGER:
+      return "integer";
+    case H5T_FLOAT:
+      return "float";
+    case H5T_STRING:
+      return "string";
+    case H5T_BITFIELD:
+      return "bitfield";
+    case H5T_OPAQUE:
+      return "opaque";
+    case H5T_COMPOUND:
+      return "compound";
+    case H5T_REFERENCE:
+      return "reference";
+    case H5T_ENUM:
+      return "enum";
+    case H5T_VLEN:
+      return "variable-length";
+    case H5T_ARRAY:
+      return "array";
+    default:
+      return "unknown";
+  }
+}
+
+// "uint8", "int64", "float32", "string", ...: the numpy name where there is one.
+inline std::string TypeName(hid_t type, H5T_class_t c) {
+  const std::size_t bits = type >= 0 ? 8 * H5Tget_size(type) : 0;
+  if (c == H5T_INTEGER) {
+    return std::string(H5Tget_sign(type) == H5T_SGN_NONE ? "uint" : "int") +
+           std::to_string(bits);
+  }
+  if (c == H5T_FLOAT) return "float" + std::to_string(bits);
+  return ClassName(c);
 }
 
 }  // namespace secure::data::hdf5

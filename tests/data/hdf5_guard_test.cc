@@ -1,0 +1,145 @@
+// The HDF5 readers' guard (secure/data/hdf5_guard.cc, issue 34): files are read in a child
+// process with a memory limit, so libhdf5's own defects on malformed files (the hdf5_fuzz
+// findings, now regression inputs in tests/fuzz/corpus/hdf5_fuzz/) are one secure::Error naming
+// the file, and the data read through the guard are those read in this process.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <Eigen/Core>
+
+#include "secure/common/error.h"
+#include "secure/common/input_limits.h"
+#include "secure/data/data.h"
+#include "tests/data/hdf5_test_file.h"
+#include "tests/test_util.h"
+
+namespace secure::data {
+namespace {
+
+using secure::test::ErrorOf;
+using secure::test::Hdf5TestFile;
+
+class Hdf5GuardTest : public secure::test::TempDirTest {
+ protected:
+  void TearDown() override {
+    SetInputLimits(saved_);
+    TempDirTest::TearDown();
+  }
+  const InputLimits saved_ = GetInputLimits();
+};
+
+void ExpectOneLineNaming(const std::string& message, const std::string& path) {
+  EXPECT_NE(message.find(path), std::string::npos) << message;
+  EXPECT_EQ(message.find('\n'), std::string::npos) << "not one line: " << message;
+  EXPECT_FALSE(message.empty());
+}
+
+// A robomimic-style file of `rows` steps in 2 demos, written by our writer.
+TrajectorySet Demos(long rows) {
+  TrajectorySet set;
+  set.state_features = {"x", "v"};
+  set.action_features = {"a"};
+  set.states = Eigen::MatrixXf::Random(2, rows);
+  set.actions = Eigen::MatrixXf::Random(1, rows);
+  set.episode_begin = {0, rows / 2, rows};
+  return set;
+}
+
+// The three files on which libhdf5 1.10.8 crashed (SEGV in H5F__accum_read) or allocated
+// 2.3-2.6 GB (H5Dread): each is one error naming the file (the states alone may be intact, as may the first demo).
+TEST_F(Hdf5GuardTest, TheLibhdf5FindingsAreOneLineErrors) {
+  const std::filesystem::path corpus =
+      std::filesystem::path(SECURE_SOURCE_DIR) / "tests/fuzz/corpus/hdf5_fuzz";
+  int found = 0;
+  for (const char* name :
+       {"oom-libhdf5-H5Dread-a", "oom-libhdf5-H5Dread-b", "segv-libhdf5-H5F__accum_read"}) {
+    const std::string path = PathOf(std::string(name) + ".h5");
+    std::filesystem::copy_file(corpus / name, path);
+    ++found;
+    SCOPED_TRACE(name);
+    ExpectOneLineNaming(ErrorOf([&] { ReadTrajectories(path, {}, {}); }), path);
+    // The states alone, or the first demo's shapes, may be intact: read, or one error.
+    try {
+      EXPECT_GT(ReadStateSet(path, {}).size(), 0);
+    } catch (const Error& e) {
+      ExpectOneLineNaming(e.what(), path);
+    }
+    try {
+      EXPECT_TRUE(InspectHdf5(path).has_demonstrations);
+    } catch (const Error& e) {
+      ExpectOneLineNaming(e.what(), path);
+    }
+  }
+  EXPECT_EQ(found, 3);
+}
+
+// The oversized float type of the H5Dread findings is refused before libhdf5 converts it.
+TEST_F(Hdf5GuardTest, AFloatTypeThatIsNoIeeeFloatIsRefusedByName) {
+  const std::string path = PathOf("oom.h5");
+  std::filesystem::copy_file(
+      std::filesystem::path(SECURE_SOURCE_DIR) / "tests/fuzz/corpus/hdf5_fuzz/oom-libhdf5-H5Dread-a",
+      path);
+  const std::string message = ErrorOf([&] { ReadTrajectories(path, {}, {}); });
+  EXPECT_NE(message.find("expected IEEE float32 or float64"), std::string::npos) << message;
+}
+
+TEST_F(Hdf5GuardTest, TheGuardReturnsWhatTheReaderReadsInThisProcess) {
+  const std::string path = PathOf("demos.h5");
+  WriteTrajectories(path, Demos(50));
+  const TrajectorySet guarded = ReadTrajectories(path, {}, {});
+  const TrajectorySet here = internal::ReadHdf5TrajectoriesInProcess(path, {}, {});
+  EXPECT_EQ(guarded.source, path);
+  EXPECT_EQ(guarded.state_features, here.state_features);
+  EXPECT_EQ(guarded.action_features, here.action_features);
+  EXPECT_EQ(guarded.episode_begin, here.episode_begin);
+  EXPECT_EQ(guarded.states, here.states);  // one path reproducing itself: bit for bit
+  EXPECT_EQ(guarded.actions, here.actions);
+  const StateSet states = ReadStateSet(path, {"v"});
+  EXPECT_EQ(states.features, std::vector<std::string>{"v"});
+  EXPECT_EQ(states.states, here.states.row(1));
+  const Hdf5Contents c = InspectHdf5(path);
+  EXPECT_TRUE(c.has_demonstrations);
+  EXPECT_EQ(c.observation_features, internal::InspectHdf5InProcess(path).observation_features);
+}
+
+TEST_F(Hdf5GuardTest, TheReadersErrorsComeThroughUnchanged) {
+  const std::string path = PathOf("demos.h5");
+  WriteTrajectories(path, Demos(10));
+  const std::string guarded = ErrorOf([&] { ReadTrajectories(path, {"nope"}, {}); });
+  const std::string here =
+      ErrorOf([&] { internal::ReadHdf5TrajectoriesInProcess(path, {"nope"}, {}); });
+  EXPECT_EQ(guarded, here);
+  EXPECT_NE(guarded.find("no key or column 'nope'"), std::string::npos) << guarded;
+  // Refused before a child starts: no file, a directory.
+  ExpectOneLineNaming(ErrorOf([&] { ReadTrajectories(PathOf("missing.h5"), {}, {}); }),
+                      PathOf("missing.h5"));
+  std::filesystem::create_directories(PathOf("dir.h5"));
+  EXPECT_NE(ErrorOf([&] { ReadStateSet(PathOf("dir.h5"), {}); }).find("directory"),
+            std::string::npos);
+}
+
+TEST_F(Hdf5GuardTest, TheMemoryLimitIsStatedOverridableAndNamedWhenHit) {
+  EXPECT_EQ(InputLimits().max_hdf5_memory_bytes, 0u);  // the default: the formula below
+  InputLimits limits = saved_;
+  limits.max_hdf5_memory_bytes = 0;
+  SetInputLimits(limits);
+  EXPECT_EQ(Hdf5ReaderMemoryLimit(1000), (std::uint64_t{1} << 30) + 8000);
+  const std::string path = PathOf("big.h5");
+  WriteTrajectories(path, Demos(40'000));
+  ASSERT_GT(std::filesystem::file_size(path), 1u << 20);
+  limits.max_hdf5_memory_bytes = 1 << 20;  // less than the file's own image
+  SetInputLimits(limits);
+  EXPECT_EQ(Hdf5ReaderMemoryLimit(1000), 1u << 20);
+  const std::string message = ErrorOf([&] { ReadTrajectories(path, {}, {}); });
+  ExpectOneLineNaming(message, path);
+  EXPECT_NE(message.find("memory limit of 1048576 bytes"), std::string::npos) << message;
+  EXPECT_NE(message.find("SECURE_MAX_HDF5_MEMORY"), std::string::npos) << message;
+  limits.max_hdf5_memory_bytes = 0;
+  SetInputLimits(limits);
+  EXPECT_EQ(ReadTrajectories(path, {}, {}).num_steps(), 40'000);
+}
+
+}  // namespace
+}  // namespace secure::data
