@@ -545,6 +545,20 @@ std::map<Method, SeedResult> EvaluateWithTheGroundTruth(const std::vector<Method
   return EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 20, 7);
 }
 
+// SECURE and two other filters over 5 synthetic seeds (one 2 points lower in success with
+// varying danger, one 1 point higher), finished.
+Evaluation BesideSecure(Method lower, Method higher) {
+  Evaluation evaluation;
+  const std::vector<long> success = {80, 85, 78, 90, 83};
+  for (std::size_t k = 0; k < 5; ++k) {
+    evaluation.Add(Method::kSecure, Synthetic(success[k], 1));
+    evaluation.Add(lower, Synthetic(success[k] - 2, long(k)));
+    evaluation.Add(higher, Synthetic(success[k] + 1, 1));
+  }
+  evaluation.Finish();
+  return evaluation;
+}
+
 // The CBF-QP filter and the gradient-first shield: the proposal, nothing else; on the double
 // integrator with its ground truth the filter keeps the PD policy out of the obstacle as SECURE
 // does, and the seed records count what the projection decided.
@@ -577,14 +591,7 @@ TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
   EXPECT_LE(results.at(Method::kSecureQp).no_safe_action_decisions,
             results.at(Method::kSecure).no_safe_action_decisions);
 
-  Evaluation evaluation;
-  const std::vector<long> success = {80, 85, 78, 90, 83};
-  for (std::size_t k = 0; k < 5; ++k) {
-    evaluation.Add(Method::kSecure, Synthetic(success[k], 1));
-    evaluation.Add(Method::kCbfQp, Synthetic(success[k] - 2, long(k)));
-    evaluation.Add(Method::kSecureQp, Synthetic(success[k] + 1, 1));
-  }
-  evaluation.Finish();
+  const Evaluation evaluation = BesideSecure(Method::kCbfQp, Method::kSecureQp);
   const nlohmann::json j = evaluation.ToJson();
   EXPECT_TRUE(j["comparisons"].contains("cbf-qp_vs_secure"));
   EXPECT_TRUE(j["comparisons"]["secure-qp_vs_secure"].contains("dangerous_mann_whitney"));
@@ -621,14 +628,7 @@ TEST(PolicyEvalTest, FirstSafeAndCbfGradAreTheShieldWithTheirModes) {
   EXPECT_GT(first.decisions, 0);
   EXPECT_LE(first.mean_iterations, 20.0);
 
-  Evaluation evaluation;
-  const std::vector<long> success = {80, 85, 78, 90, 83};
-  for (std::size_t k = 0; k < 5; ++k) {
-    evaluation.Add(Method::kSecure, Synthetic(success[k], 1));
-    evaluation.Add(Method::kFirstSafe, Synthetic(success[k] - 2, long(k)));
-    evaluation.Add(Method::kCbfGrad, Synthetic(success[k] + 1, 1));
-  }
-  evaluation.Finish();
+  const Evaluation evaluation = BesideSecure(Method::kFirstSafe, Method::kCbfGrad);
   const nlohmann::json j = evaluation.ToJson();
   EXPECT_TRUE(j["comparisons"]["first-safe_vs_secure"].contains("dangerous_mann_whitney"));
   EXPECT_TRUE(j["comparisons"]["cbf-grad_vs_secure"].contains("success_tost"));

@@ -361,23 +361,18 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
 
   // The first-safe sampler: the policy's draw when safe (one evaluation), else the first safe
   // sample of a round (adaptive resampling here), else, with the policy's own sigma, the fallback.
-  Scenario first_safe_draw = none;
-  first_safe_draw.name = "first-safe aggregation, safe draw";
-  first_safe_draw.options.aggregation = Aggregation::kFirstSafe;
-  scenarios.push_back(first_safe_draw);
-  Scenario first_safe = resampling;
-  first_safe.name = "first-safe aggregation, resampling";
-  first_safe.options.aggregation = Aggregation::kFirstSafe;
-  scenarios.push_back(first_safe);
-  Scenario first_safe_none = resampling;
-  first_safe_none.name = "first-safe aggregation, resampling = none";
-  first_safe_none.options.aggregation = Aggregation::kFirstSafe;
-  first_safe_none.options.resampling = Resampling::kNone;
-  first_safe_none.options.max_iterations = 3;
-  first_safe_none.with_backup = true;
-  first_safe_none.backup = Vec({0.0f, -4.0f});
-  first_safe_none.expect_fallback = true;
-  scenarios.push_back(first_safe_none);
+  Scenario first_safe[3] = {none, resampling, resampling};
+  const char* const first_safe_names[3] = {"safe draw", "resampling", "resampling = none"};
+  for (int k = 0; k < 3; ++k) {
+    first_safe[k].name = std::string("first-safe aggregation, ") + first_safe_names[k];
+    first_safe[k].options.aggregation = Aggregation::kFirstSafe;
+  }
+  first_safe[2].options.resampling = Resampling::kNone;
+  first_safe[2].options.max_iterations = 3;
+  first_safe[2].with_backup = true;
+  first_safe[2].backup = Vec({0.0f, -4.0f});
+  first_safe[2].expect_fallback = true;
+  scenarios.insert(scenarios.end(), first_safe, first_safe + 3);
 
   Scenario no_resampling = resampling;
   no_resampling.name = "resampling = none";

@@ -165,13 +165,16 @@ RC_GTEST_PROP(QpShieldProperty, GradientFirstIsTheProjectionOrTheSamplingShields
   RC_ASSERT(d.intervened == e.intervened && d.bounded == e.bounded);
 }
 
-// The CBF-QP filter alone: safe exactly when the projection's exact g >= 0; otherwise it says
-// so (no_safe_action, fallback qp_projection, outcome rejected or infeasible).
-RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
+// The CBF-QP filter alone (qp-only) or the gradient refinement alone (refine, method cbf-grad):
+// safe exactly when its action's exact g >= 0; otherwise it says so (no_safe_action, fallback
+// qp_projection or refined_mean, outcome rejected, or infeasible for qp-only), with g < 0. Its
+// action stays in the box.
+void CheckAFilterAlone(Proposal proposal) {
   System s = RandomSystem();
   ShieldOptions o = RandomOptions();
-  o.proposal = Proposal::kQpOnly;
+  o.proposal = proposal;
   const Eigen::VectorXf mu = RandomVector(2, -5, 5), sigma = RandomVector(2, 0.05, 2.0);
+  if (proposal == Proposal::kRefine) o.refine_steps = *rc::gen::inRange(1, 8);
   Shield shield(o, *s.barrier, *s.dynamics);
   shield.SetActionBounds(Vec({-3, -3}), Vec({3, 3}));
   const Decision& d = shield.Decide(s.state, mu, sigma);
@@ -186,25 +189,41 @@ RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
     RC_ASSERT(d.g >= 0.0);
   } else {
     RC_ASSERT(d.status == Status::kNoSafeAction);
-    RC_ASSERT(d.fallback == Fallback::kQpProjection);
-    RC_ASSERT(d.qp == QpOutcome::kRejected || d.qp == QpOutcome::kInfeasible);
+    RC_ASSERT(d.fallback == (proposal == Proposal::kRefine ? Fallback::kRefinedMean
+                                                           : Fallback::kQpProjection));
+    RC_ASSERT(d.qp == QpOutcome::kRejected ||
+              (proposal == Proposal::kQpOnly && d.qp == QpOutcome::kInfeasible));
     RC_ASSERT(d.g < 0.0);
   }
 }
 
+RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
+  CheckAFilterAlone(Proposal::kQpOnly);
+}
+
+RC_GTEST_PROP(QpShieldProperty, RefineReportsTheExactCheckAndStaysInTheBox, ()) {
+  CheckAFilterAlone(Proposal::kRefine);
+}
+
 // h(s) = w . s + b with an integrator: the linearisation is exact, so the filter returns the
 // closed-form projection of mu onto {g >= 0}, and mu itself where mu is safe.
+// h(s) = w . s + 0.5 with w = (1, -2), and the integrator s' = s + 0.1 a.
+struct HalfSpace {
+  const Eigen::Vector2f w{1.0f, -2.0f};
+  FunctionBarrier barrier{2, "linear", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            return static_cast<double>(s[0] - 2.0f * s[1]) + 0.5;
+                          }};
+  const IntegratorDynamics dynamics{2, 0.1};
+};
+
 TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
-  const Eigen::Vector2f w(1.0f, -2.0f);
-  FunctionBarrier barrier(2, "linear", [&](const Eigen::Ref<const Eigen::VectorXf>& s) {
-    return static_cast<double>(w.dot(s)) + 0.5;
-  });
-  const IntegratorDynamics dynamics(2, 0.1);  // s' = s + 0.1 a
+  HalfSpace h;
+  const Eigen::Vector2f& w = h.w;
   ShieldOptions o;
   o.proposal = Proposal::kQpOnly;
   o.dt = 0.1;
   o.class_k_gain = 2.0;
-  Shield shield(o, barrier, dynamics);
+  Shield shield(o, h.barrier, h.dynamics);
   const Eigen::VectorXf state = Vec({0.2f, 0.3f});  // h = 0.2 - 0.6 + 0.5 = 0.1
   // g(a) = w . a + alpha(h) = w . a + 0.2: safe iff a0 - 2 a1 >= -0.2.
   const Eigen::VectorXf unsafe_mu = Vec({-1.0f, 1.0f});  // w . mu = -3
@@ -241,7 +260,7 @@ TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
 
 // A curved barrier (a disc, h concave): the tangent plane overestimates h, so the textbook
 // projection lands just outside the safe set and the exact check rejects it; re-linearising at
-// the projection (qp_iterations) or a margin recovers a safe action.
+// the projection (qp_iterations), a margin, or more refinement steps recover a safe action.
 TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
   FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
     return 1.0 - static_cast<double>(s.squaredNorm());
@@ -277,34 +296,16 @@ TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
     EXPECT_TRUE(d.safe()) << d.ToJson().dump();
     EXPECT_GE(d.iterations, 1);
   }
-}
-
-// The gradient refinement alone (proposal refine, method cbf-grad): safe exactly when an
-// iterate's exact g >= 0; otherwise it says so (no_safe_action, fallback refined_mean, outcome
-// rejected), with g < 0. Its action stays in the box.
-RC_GTEST_PROP(QpShieldProperty, RefineReportsTheExactCheckAndStaysInTheBox, ()) {
-  System s = RandomSystem();
-  ShieldOptions o = RandomOptions();
+  // The gradient refinement: one step lands just outside as the projection does; the next ones,
+  // re-linearised, reach g >= 0.
   o.proposal = Proposal::kRefine;
-  o.refine_steps = *rc::gen::inRange(1, 8);
-  const Eigen::VectorXf mu = RandomVector(2, -5, 5), sigma = RandomVector(2, 0.05, 2.0);
-  Shield shield(o, *s.barrier, *s.dynamics);
-  shield.SetActionBounds(Vec({-3, -3}), Vec({3, 3}));
-  const Decision& d = shield.Decide(s.state, mu, sigma);
-  RC_TAG(ToString(kQpOutcomeNames, d.qp));
-  RC_ASSERT(d.iterations == 0);
-  RC_ASSERT((d.action.array().abs() <= 3.0f).all());
-  const double g = IndependentG(s, o, d.action);
-  RC_LOG() << d.ToJson().dump() << " independent g " << g << "\n";
-  RC_ASSERT(std::abs(g - d.g) <= Tolerance(s.learned, g));
-  if (d.safe()) {
-    RC_ASSERT(d.qp == QpOutcome::kAccepted && d.fallback == Fallback::kNone);
-    RC_ASSERT(d.g >= 0.0);
-  } else {
-    RC_ASSERT(d.status == Status::kNoSafeAction);
-    RC_ASSERT(d.fallback == Fallback::kRefinedMean);
-    RC_ASSERT(d.qp == QpOutcome::kRejected);
-    RC_ASSERT(d.g < 0.0);
+  for (int steps : {1, 5}) {
+    o.refine_steps = steps;
+    Shield shield(o, barrier, dynamics);
+    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+    EXPECT_EQ(d.safe(), steps == 5) << d.ToJson().dump();
+    EXPECT_EQ(d.fallback, steps == 5 ? Fallback::kNone : Fallback::kRefinedMean);
+    if (steps == 1) EXPECT_LT(d.g, 0.0);
   }
 }
 
@@ -312,11 +313,10 @@ RC_GTEST_PROP(QpShieldProperty, RefineReportsTheExactCheckAndStaysInTheBox, ()) 
 // moves a violating mean onto g >= 0; with a box the clipped steps stay in it and still reach the
 // half-space; a box the half-space misses is reported.
 TEST(QpShieldTest, RefinementMovesAViolatingMeanIntoTheHalfSpaceWithinTheBox) {
-  const Eigen::Vector2f w(1.0f, -2.0f);
-  FunctionBarrier barrier(2, "linear", [&](const Eigen::Ref<const Eigen::VectorXf>& s) {
-    return static_cast<double>(w.dot(s)) + 0.5;
-  });
-  const IntegratorDynamics dynamics(2, 0.1);  // s' = s + 0.1 a
+  HalfSpace h;
+  const Eigen::Vector2f& w = h.w;
+  FunctionBarrier& barrier = h.barrier;
+  const IntegratorDynamics& dynamics = h.dynamics;
   ShieldOptions o;
   o.proposal = Proposal::kRefine;
   o.class_k_gain = 2.0;
@@ -378,34 +378,6 @@ TEST(QpShieldTest, RefinementMovesAViolatingMeanIntoTheHalfSpaceWithinTheBox) {
     EXPECT_TRUE(BitEqual(d.action, Vec({-0.5f, 0.5f})));  // the box corner of largest g
     EXPECT_NEAR(d.g, -1.5 + 0.2, 1e-4);
     EXPECT_EQ(d.ToJson()["fallback"], "refined_mean");
-  }
-}
-
-// The curved disc barrier of the test above: one step lands just outside (the tangent plane
-// overestimates h), the next ones, re-linearised, reach g >= 0.
-TEST(QpShieldTest, RefinementOnACurvedBarrierTakesMoreThanOneStep) {
-  FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
-    return 1.0 - static_cast<double>(s.squaredNorm());
-  });
-  const IntegratorDynamics dynamics(2, 0.1);
-  ShieldOptions o;
-  o.proposal = Proposal::kRefine;
-  const Eigen::VectorXf state = Vec({0.0f, 0.9f});
-  const Eigen::VectorXf mu = Vec({3.0f, 3.0f});
-  o.refine_steps = 1;
-  {
-    Shield shield(o, barrier, dynamics);
-    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
-    EXPECT_EQ(d.status, Status::kNoSafeAction) << d.ToJson().dump();
-    EXPECT_EQ(d.fallback, Fallback::kRefinedMean);
-    EXPECT_LT(d.g, 0.0);
-  }
-  o.refine_steps = 5;
-  {
-    Shield shield(o, barrier, dynamics);
-    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
-    EXPECT_EQ(d.status, Status::kSafe) << d.ToJson().dump();
-    EXPECT_GE(d.g, 0.0);
   }
 }
 
