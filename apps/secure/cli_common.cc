@@ -247,7 +247,8 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
         SECURE_SHIELD_FIELD_COPY(action_bounds));
   track(cmd->add_option("--proposal", proposal,
                         "none | qp (the CBF-QP projection of the mean first, Algorithms 1-2 if "
-                        "its exact g < 0) | qp-only (the CBF-QP filter alone)")
+                        "its exact g < 0) | qp-only (the CBF-QP filter alone) | refine (gradient "
+                        "refinement of the mean alone)")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(proposal));
   track(cmd->add_option("--qp-iterations", so->qp_iterations,
@@ -259,6 +260,10 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
                         "proposal: the projection asks the linearised g >= this margin")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(qp_margin));
+  track(cmd->add_option("--refine-steps", so->refine_steps,
+                        "proposal refine: gradient steps per decision at most")
+            ->capture_default_str(),
+        SECURE_SHIELD_FIELD_COPY(refine_steps));
   track(cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
             ->capture_default_str(),
         SECURE_SHIELD_FIELD_COPY(max_iterations));

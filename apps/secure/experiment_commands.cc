@@ -188,7 +188,8 @@ struct ExperimentCommand {
                     "per obstacle, the minimum over those in range) (default: the domain's)");
     methods_option = cmd->add_option("--methods", methods,
                     "comma-separated subset of bc, airl, secure, secure-random-safe, "
-                    "secure-no-resampling, bc+shield, secure-myopic, joint, cbf-qp, secure-qp (default: the "
+                    "secure-no-resampling, bc+shield, secure-myopic, joint, cbf-qp, secure-qp, first-safe, cbf-grad "
+                    "(default: the "
                     "experiment's)");
     cmd->add_option("--out", out,
                     "directory for the data, per-seed models and learning curves, result.json")

@@ -325,7 +325,8 @@ struct EvalCommand {
     CLI::App* cmd = app.add_subcommand(
         "eval",
         "Evaluate saved models on any domain: bc, airl, secure, the shield ablations, bc+shield, "
-        "secure-myopic, joint, cbf-qp (the CBF-QP filter), secure-qp (the gradient-first shield); success and dangerous rates over seeds, Mann-Whitney U and TOST "
+        "secure-myopic, joint, cbf-qp (the CBF-QP filter), secure-qp (the gradient-first shield), first-safe (the first-safe "
+        "sampler), cbf-grad (gradient refinement of the mean); success and dangerous rates over seeds, Mann-Whitney U and TOST "
         "of SECURE vs AIRL, Kruskal-Wallis + Dunn across the ablations. The shield flags marked "
         "=preset default to the domain's preset (`secure domains NAME` lists it)");
     cmd->add_option("--domain", domain,

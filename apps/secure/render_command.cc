@@ -58,7 +58,7 @@ struct RenderCommand {
     AddConfigFlag(cmd, *config);  // the domain's options: section <domain's>, key `domain`
     cmd->add_option("--method", method,
                     "one method: bc, airl, secure, secure-random-safe, secure-no-resampling, "
-                    "bc+shield, secure-myopic, joint, cbf-qp, secure-qp")
+                    "bc+shield, secure-myopic, joint, cbf-qp, secure-qp, first-safe, cbf-grad")
         ->required();
     cmd->add_option("--run", run_dir,
                     "a `secure demo --out` or `secure experiment --out` directory: the models of "

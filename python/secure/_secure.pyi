@@ -302,11 +302,11 @@ class Decision:
         ...
     @property
     def fallback(self) -> str:
-        """none | best_sample | backup_action | random_sample | qp_projection"""
+        """none | best_sample | backup_action | random_sample | qp_projection | refined_mean"""
         ...
     @property
     def qp(self) -> str:
-        """the CBF-QP projection (proposal='qp' or 'qp-only'): not_tried | accepted | rejected | infeasible"""
+        """the CBF-QP projection (proposal='qp' or 'qp-only') or the gradient refinement (proposal='refine'): not_tried | accepted | rejected | infeasible"""
         ...
     @property
     def seconds(self) -> float: ...
@@ -324,7 +324,8 @@ class Shield:
     sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
     'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore'),
     proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
-    alone), qp_iterations=1, qp_margin=0).
+    alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_margin=0,
+    refine_steps=5); aggregation may also be 'first-safe' (the first-safe sampler).
     The actuator box: action_low / action_high (arrays of action_dim; -inf / inf where unbounded),
     else the box of the environment a builtin model (Dynamics.builtin, env.dynamics) came from, else
     none. With a box every returned action lies in it: samples are clipped onto it

@@ -42,6 +42,11 @@ shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOption
   }
   if (method == Method::kCbfQp) options.proposal = shield::Proposal::kQpOnly;
   if (method == Method::kSecureQp) options.proposal = shield::Proposal::kQp;
+  if (method == Method::kFirstSafe) {
+    options.aggregation = shield::Aggregation::kFirstSafe;
+    options.resampling = shield::Resampling::kNone;  // the policy's own Gaussian, round after round
+  }
+  if (method == Method::kCbfGrad) options.proposal = shield::Proposal::kRefine;
   return options;
 }
 
@@ -420,7 +425,7 @@ void Evaluation::Finish() {
     };
   }
   // The other safety filters (issue 37) against SECURE: the same tests as SECURE vs AIRL.
-  for (Method m : {Method::kCbfQp, Method::kSecureQp}) {
+  for (Method m : kOtherFilters) {
     const auto other = methods_.find(m);
     if (secure == methods_.end() || other == methods_.end() || seeds < 2) continue;
     const std::vector<double> o_success = Successes(other->second);
@@ -536,7 +541,7 @@ std::string Evaluation::Table() const {
           << " at alpha " << options_.alpha << ")\n";
     }
   }
-  for (Method m : {Method::kCbfQp, Method::kSecureQp}) {
+  for (Method m : kOtherFilters) {
     const std::string name = ToString(kMethodNames, m);
     if (!comparisons_.contains(name + "_vs_secure")) continue;
     const nlohmann::json& c = comparisons_[name + "_vs_secure"];
@@ -560,7 +565,11 @@ std::string Evaluation::Table() const {
                                                              : "not shown equivalent")
           << " at alpha " << options_.alpha << ")";
     }
-    out << "; the CBF-QP projection decided " << decided << " of " << tried << " decisions\n";
+    if (tried > 0) {
+      out << "; the " << (m == Method::kCbfGrad ? "gradient refinement" : "CBF-QP projection")
+          << " decided " << decided << " of " << tried << " decisions";
+    }
+    out << "\n";
   }
   if (comparisons_.contains("ablations")) {
     const nlohmann::json& a = comparisons_["ablations"];

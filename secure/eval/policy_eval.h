@@ -20,6 +20,12 @@
 //                         action box, checked with the exact g; no sampling)
 //   secure-qp             SECURE with the gradient-first shield (proposal qp: the CBF-QP's
 //                         projection when its exact g >= 0, else Algorithms 1-2 unchanged)
+//   first-safe            AIRL policy + the first-safe sampler (CRABS-style; aggregation
+//                         first-safe, resampling none: the policy's draw if safe, else the first
+//                         safe draw from the policy's own Gaussian, up to the shield's budget)
+//   cbf-grad              AIRL policy + gradient refinement of the mean (MACBF-style; proposal
+//                         refine: projected gradient steps on max(0, -g) from the mean, checked
+//                         with the exact g; no sampling)
 // Unshielded methods sample a ~ N(mu(o), sigma) as the authors' evaluation does; shielded ones
 // pass (mu, sigma) to the shield and apply its action.
 //
@@ -69,8 +75,10 @@ enum class Method {
   kJoint,
   kCbfQp,
   kSecureQp,
+  kFirstSafe,
+  kCbfGrad,
 };
-inline constexpr EnumTable<Method, 10> kMethodNames{{
+inline constexpr EnumTable<Method, 12> kMethodNames{{
     {Method::kBc, "bc"},
     {Method::kAirl, "airl"},
     {Method::kSecure, "secure"},
@@ -81,7 +89,12 @@ inline constexpr EnumTable<Method, 10> kMethodNames{{
     {Method::kJoint, "joint"},
     {Method::kCbfQp, "cbf-qp"},
     {Method::kSecureQp, "secure-qp"},
+    {Method::kFirstSafe, "first-safe"},
+    {Method::kCbfGrad, "cbf-grad"},
 }};
+/// The other safety filters (issue 37), each compared with SECURE in the tables.
+inline constexpr Method kOtherFilters[] = {Method::kCbfQp, Method::kSecureQp, Method::kFirstSafe,
+                                           Method::kCbfGrad};
 
 /// The methods of the double-integrator pipeline (Table 3 and Figure 9), in table order; the
 /// Derby experiments add kSecureMyopic and kJoint.

@@ -9,16 +9,11 @@
 
 #include "secure/common/error.h"
 #include "secure/common/timer.h"
-#include "secure/shield/qp.h"
 
 namespace secure::shield {
 namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
-// The CBF-QP's allowance for float rounding in g, per unit of (1 + |h(s)|) / dt: g's float h
-// values are good to a few ulps, about 1e-6 of |h|; 1e-4 is far above that and far below any g
-// that matters.
-constexpr double kQpRoundingMargin = 1e-4;
 
 // The inverse normal CDF in double precision throughout (Boost.Math's default policy promotes
 // double to long double internally, which costs x87 arithmetic for no gain at float output).
@@ -230,96 +225,6 @@ void Shield::EvaluateG(const Eigen::Ref<const Eigen::VectorXf>& state, double h_
   for (Eigen::Index i = 0; i < k; ++i) g[i] = (static_cast<double>(h_next_[i]) - bound) * inv_dt;
 }
 
-bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
-                       const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state) {
-  const int n = action_dim_;
-  const double inv_dt = 1.0 / options_.dt;
-  const double alpha = ClassKValue(options_, h_state);
-  const double inf = std::numeric_limits<double>::infinity();
-  for (int r = 0; r < n; ++r) {
-    qp_mu_[r] = mu[r];
-    qp_low_[r] = bounds_active() ? static_cast<double>(low_[r]) : -inf;
-    qp_high_[r] = bounds_active() ? static_cast<double>(high_[r]) : inf;
-  }
-  // The first linearisation point: mu as the actuator applies it.
-  qp_actions_.col(0) = mu;
-  if (ClipToBox(qp_actions_.leftCols(1))) decision_.bounded = true;
-  for (int round = 0; round < options_.qp_iterations; ++round) {
-    // The point and its 2n neighbours (central differences of T in each action, inside the
-    // box: one-sided at a face), then grad h at the predicted state T(s, a0).
-    for (int r = 0; r < n; ++r) {
-      const float a0 = qp_actions_(r, 0);
-      const float step = 1e-2f * std::max(1.0f, std::abs(a0));
-      qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
-      qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
-      qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
-      qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
-    }
-    dynamics_.Step(state, qp_actions_, qp_next_);
-    barrier_.EvaluateGradient(qp_next_.leftCols(1), qp_h_, qp_gradient_);
-    // g at the point, as linearised: g0 = (h(T(s, a0)) - h(s)) / dt + alpha(h(s)).
-    const double g0 = (static_cast<double>(qp_h_[0]) - h_state) * inv_dt + alpha;
-    if (round == 0 && g0 >= options_.qp_margin) {
-      // mu satisfies the condition: the QP's answer is mu itself (clipped), checked exactly.
-      one_action_.col(0) = qp_actions_.col(0);
-      EvaluateG(state, h_state, one_action_, one_g_);
-      if (one_g_[0] >= 0.0) {
-        decision_.action = one_action_.col(0);
-        decision_.g = one_g_[0];
-        decision_.qp = QpOutcome::kAccepted;
-        return true;
-      }
-    }
-    decision_.intervened = true;  // the policy's mean failed the condition
-    for (int r = 0; r < n; ++r) {
-      const double width =
-          static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
-      if (width > 0) {
-        qp_jacobian_.col(r) =
-            (qp_next_.col(1 + 2 * r).cast<double>() - qp_next_.col(2 + 2 * r).cast<double>()) /
-            width;
-      } else {
-        qp_jacobian_.col(r).setZero();  // a box of zero width in this action
-      }
-    }
-    // g(a) ~ g0 + c . (a - a0) with c = J^T grad h / dt: the half-space c . a >= c . a0 - g0 +
-    // margin, where the margin adds to qp_margin what float rounding of h costs g (a projection
-    // exactly on the linearised boundary would otherwise fail the exact check half the time).
-    for (int r = 0; r < n; ++r) {  // a loop: Eigen would cast the gradient into a temporary
-      double dot = 0.0;
-      for (int i = 0; i < state_dim_; ++i)
-        dot += qp_jacobian_(i, r) * static_cast<double>(qp_gradient_(i, 0));
-      qp_normal_[r] = dot * inv_dt;
-    }
-    const double rounding = kQpRoundingMargin * (1.0 + std::abs(h_state)) * inv_dt;
-    double offset = options_.qp_margin + rounding - g0;
-    for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
-    QpResult result;
-    if (qp_normal_.allFinite() && std::isfinite(offset)) {
-      result = ProjectOntoHalfSpaceAndBox(qp_mu_, qp_normal_, offset, qp_low_, qp_high_,
-                                          qp_solution_, qp_scratch_);
-    } else {
-      // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
-      result.status = QpStatus::kInfeasible;
-      for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
-    }
-    one_action_.col(0) = qp_solution_.cast<float>();
-    ClipToBox(one_action_);  // rounding to float stays in the box
-    EvaluateG(state, h_state, one_action_, one_g_);
-    decision_.action = one_action_.col(0);
-    decision_.g = one_g_[0];
-    if (one_g_[0] >= 0.0) {
-      decision_.qp = QpOutcome::kAccepted;
-      return true;
-    }
-    decision_.qp =
-        result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
-    // Re-linearise at the projection (qp_iterations > 1).
-    qp_actions_.col(0) = one_action_.col(0);
-  }
-  return false;
-}
-
 void Shield::DrawRound() {
   const int m = options_.num_samples;
   switch (options_.sampler) {
@@ -405,9 +310,12 @@ void Shield::AdaptSigma(const Eigen::Ref<const Eigen::VectorXf>& state,
 void Shield::Aggregate(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
                        int num_safe) {
   const int m = options_.num_samples;
-  if (options_.aggregation == Aggregation::kRandomSafe) {
-    // Ablation 1: one safe sample, uniformly at random.
-    long pick = static_cast<long>(rng_.UniformIndex(static_cast<std::uint64_t>(num_safe)));
+  if (options_.aggregation == Aggregation::kRandomSafe ||
+      options_.aggregation == Aggregation::kFirstSafe) {
+    // Ablation 1: one safe sample, uniformly at random; the first-safe sampler: the first one.
+    long pick = options_.aggregation == Aggregation::kFirstSafe
+                    ? 0
+                    : static_cast<long>(rng_.UniformIndex(static_cast<std::uint64_t>(num_safe)));
     for (int i = 0; i < m; ++i) {
       if (g_[i] >= 0.0 && pick-- == 0) {
         decision_.action = samples_.col(i);
@@ -490,7 +398,7 @@ void Shield::FinishInvalid() {
   decision_.g = std::numeric_limits<double>::quiet_NaN();
 }
 
-// Decide: one function of about 160 lines, on purpose: it is the shield's hot path (Algorithms 1
+// Decide: one function of about 165 lines, on purpose: it is the shield's hot path (Algorithms 1
 // and 2 per control step), and its early returns and the order of its random draws (the policy's
 // draw or mean first, the rounds, the fallbacks) are the behaviour the tests pin bit for bit;
 // read in one place they can be checked against the paper's algorithms line by line.
@@ -532,18 +440,20 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
   }
 
   if (options_.proposal != Proposal::kNone) {
-    // The CBF-QP projection of mu first: the decision if its exact g >= 0.
-    if (ProposeQp(state, mu, h_state)) {
+    // The CBF-QP projection of mu (or its gradient refinement) first: the decision if its exact
+    // g >= 0.
+    const bool refine = options_.proposal == Proposal::kRefine;
+    if (refine ? RefineMean(state, mu, h_state) : ProposeQp(state, mu, h_state)) {
       decision_.status = Status::kSafe;
       decision_.safe_ratio = 1.0;
       decision_.distance_to_mean = (decision_.action - mu).norm();
       decision_.seconds = clock.Seconds();
       return decision_;
     }
-    if (options_.proposal == Proposal::kQpOnly) {
-      // The CBF-QP filter alone: its projection, reported unsafe.
+    if (options_.proposal == Proposal::kQpOnly || refine) {
+      // The CBF-QP filter (or the refinement) alone: its projection (last iterate), unsafe.
       decision_.status = Status::kNoSafeAction;
-      decision_.fallback = Fallback::kQpProjection;
+      decision_.fallback = refine ? Fallback::kRefinedMean : Fallback::kQpProjection;
       decision_.distance_to_mean = (decision_.action - mu).norm();
       decision_.seconds = clock.Seconds();
       return decision_;
@@ -559,6 +469,7 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
   best_action_ = mu;  // the fallback when nothing evaluated is finite: in the box, too
   ClipToBox(best_action_);
   const int m = options_.num_samples;
+  const bool first_safe = options_.aggregation == Aggregation::kFirstSafe;
   int num_safe = 0;
   bool enough = false;
   for (int iteration = 1; iteration <= options_.max_iterations; ++iteration) {
@@ -566,7 +477,7 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     DrawRound();
     const bool round_bounded = BoundRound();
     decision_.iterations = iteration;
-    if (iteration == 1 && options_.aggregation == Aggregation::kPolicyDraw &&
+    if (iteration == 1 && (options_.aggregation == Aggregation::kPolicyDraw || first_safe) &&
         !(bounds_active() && options_.action_bounds == ActionBounds::kReject && rejected_[0])) {
       // The policy's own draw alone first: if it is safe it is the decision, and the other
       // samples need no evaluation. Otherwise the round is scored as a whole, as for kMean.
@@ -607,14 +518,14 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
           options_.aggregation == Aggregation::kPolicyMean || !(g_[0] >= 0.0);
     }
     decision_.safe_ratio = static_cast<double>(num_safe) / m;
-    if (decision_.safe_ratio > options_.safe_ratio) {
+    if (decision_.safe_ratio > options_.safe_ratio || (first_safe && num_safe > 0)) {
       enough = true;
       break;
     }
     if (options_.time_budget_us > 0 && clock.Microseconds() >= options_.time_budget_us) break;
   }
 
-  if (!enough && options_.resampling == Resampling::kNone) {
+  if (!enough && options_.resampling == Resampling::kNone && !first_safe) {
     // Ablation 2 at its limit: a random sample of the last round, unchecked. Its status follows
     // its g, so an unsafe one is never reported as safe.
     const int i = static_cast<int>(rng_.UniformIndex(static_cast<std::uint64_t>(m)));

@@ -82,13 +82,21 @@ enum class Aggregation {
   // moves a safe mean toward the centre of the safe samples. Such a decision costs two barrier
   // evaluations, h(s) and h(T(s, mu)) (docs/SHIELD.md).
   kPolicyMean,
+  // Not in the paper: the first-safe sampler (CRABS-style; method first-safe). The policy's own
+  // draw (round 1's first sample) when its g >= 0, else the first sample of the round, in draw
+  // order, whose g >= 0: no mean, no re-check. A round with one safe sample is enough (safe_ratio
+  // is not used); with no safe sample the next round is drawn (resampling as set; the method uses
+  // none, i.e. the policy's own Gaussian), up to the budget, and then the fallback as for kMean
+  // (status kNoSafeAction, Fallback::kBestSample or kBackupAction; never a random sample).
+  kFirstSafe,
 };
-inline constexpr EnumTable<Aggregation, 5> kAggregationNames{{
+inline constexpr EnumTable<Aggregation, 6> kAggregationNames{{
     {Aggregation::kMean, "mean"},
     {Aggregation::kRandomSafe, "random-safe"},
     {Aggregation::kPolicyDraw, "policy-draw"},
     {Aggregation::kTopQ, "top-q"},
     {Aggregation::kPolicyMean, "policy-mean"},
+    {Aggregation::kFirstSafe, "first-safe"},
 }};
 
 /// What happens while too few samples are safe.
@@ -155,18 +163,29 @@ enum class Proposal {
   kQpOnly,  // the CBF-QP filter alone (method cbf-qp): the projection is the decision; when its
             // exact g < 0 (the linearisation misled it, or the half-space misses the box) the
             // status is kNoSafeAction with Fallback::kQpProjection. No sampling
+  // Gradient refinement of the mean alone (MACBF-style; method cbf-grad): from mu (clipped onto
+  // the box), up to refine_steps projected gradient steps on the hinge max(0, m - g(a)), with m
+  // = qp_margin plus the rounding allowance: a <- clip(a + (m - g(a)) / |c|^2 c), c = grad_a g
+  // = J^T grad h(T(s, a)) / dt linearised at a as above, without the coordinates held at a face
+  // of the box that c points out of (a Polyak step: on a condition affine in a it lands on g = m
+  // or on a new face). Every iterate is checked with the exact g; the first with
+  // g >= 0 is the decision. When none is, the status is kNoSafeAction with
+  // Fallback::kRefinedMean (the last iterate). No sampling
+  kRefine,
 };
-inline constexpr EnumTable<Proposal, 3> kProposalNames{{
+inline constexpr EnumTable<Proposal, 4> kProposalNames{{
     {Proposal::kNone, "none"},
     {Proposal::kQp, "qp"},
     {Proposal::kQpOnly, "qp-only"},
+    {Proposal::kRefine, "refine"},
 }};
 
-/// What the CBF-QP projection of a decision did (Decision::qp).
+/// What the CBF-QP projection (or, proposal = refine, the gradient refinement) of a decision did
+/// (Decision::qp).
 enum class QpOutcome {
   kNotTried,    // proposal = none, or the input was invalid
   kAccepted,    // its exact g >= 0: it is the decision
-  kRejected,    // its exact g < 0: the linearisation misled it
+  kRejected,    // its exact g < 0: the linearisation misled it (refine: no iterate had g >= 0)
   kInfeasible,  // the linearised half-space misses the box (the QP returned the box point of
                 // largest linearised g); its exact g < 0
 };
@@ -191,6 +210,8 @@ double QmcNormal(std::uint64_t word);
 inline constexpr int kMaxLookaheadSteps = 100;
 /// The largest ShieldOptions::qp_iterations.
 inline constexpr int kMaxQpIterations = 10;
+/// The largest ShieldOptions::refine_steps.
+inline constexpr int kMaxRefineSteps = 50;
 
 struct ShieldOptions {
   int num_samples = 64;     // M: actions drawn per iteration
@@ -228,6 +249,9 @@ struct ShieldOptions {
   // |h(s)|) / dt is always added, against float rounding.) The exact check is g >= 0 whatever
   // the margin.
   double qp_margin = 0.0;
+  // proposal = refine: gradient steps per decision at most (each a linearisation, a step and an
+  // exact check).
+  int refine_steps = 5;
 
   /// Throws secure::Error naming the field ("ShieldOptions::num_samples = 0, must be > 0").
   void Validate() const;
@@ -262,13 +286,15 @@ enum class Fallback {
   kBackupAction,  // the caller's backup action (its g was larger)
   kRandomSample,  // ablation 2's random sample of the last batch
   kQpProjection,  // proposal = qp-only: the CBF-QP's projection, whose exact g < 0
+  kRefinedMean,   // proposal = refine: the last gradient iterate, whose exact g < 0
 };
-inline constexpr EnumTable<Fallback, 5> kFallbackNames{{
+inline constexpr EnumTable<Fallback, 6> kFallbackNames{{
     {Fallback::kNone, "none"},
     {Fallback::kBestSample, "best_sample"},
     {Fallback::kBackupAction, "backup_action"},
     {Fallback::kRandomSample, "random_sample"},
     {Fallback::kQpProjection, "qp_projection"},
+    {Fallback::kRefinedMean, "refined_mean"},
 }};
 
 /// The outcome of one decision, with diagnostics. Owned by the Shield and overwritten by the
@@ -392,6 +418,14 @@ class Shield {
   // its exact g >= 0. h_state = h(s), finite.
   bool ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
                  const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state);
+  // The linearisation of g at a0 = qp_actions_.col(0) (in the box): T at a0 and its 2n
+  // neighbours (qp_next_), h and grad h at T(s, a0), the Jacobian, and the normal c = J^T grad h
+  // / dt (qp_normal_). Returns g(a0) from that h.
+  double Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
+  // proposal = refine: the gradient refinement of mu into decision_ (action, g, qp); returns
+  // whether an iterate's exact g >= 0 (shield_refine.cc).
+  bool RefineMean(const Eigen::Ref<const Eigen::VectorXf>& state,
+                  const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state);
   // Clips the columns of `actions` onto the box (bounds_active()); returns whether one moved.
   bool ClipToBox(Eigen::Ref<Eigen::MatrixXf> actions) const;
   // kSafe after one round, kSafeAfterResampling after more.

@@ -37,6 +37,8 @@ void ShieldOptions::Validate() const {
                      "qp_iterations", qp_iterations, "in [1, " << kMaxQpIterations << "]");
   SECURE_CHECK_FIELD(std::isfinite(qp_margin) && qp_margin >= 0, "ShieldOptions", "qp_margin",
                      qp_margin, ">= 0");
+  SECURE_CHECK_FIELD(refine_steps >= 1 && refine_steps <= kMaxRefineSteps, "ShieldOptions",
+                     "refine_steps", refine_steps, "in [1, " << kMaxRefineSteps << "]");
   SECURE_CHECK(proposal == Proposal::kNone || lookahead_steps == 1,
                "ShieldOptions::proposal = " << ToString(kProposalNames, proposal)
                                             << " linearises the one-step condition: it needs "
@@ -75,7 +77,11 @@ nlohmann::json ShieldOptions::ToJson() const {
   if (lookahead_steps != 1) json["lookahead_steps"] = lookahead_steps;
   if (proposal != Proposal::kNone) {
     json["proposal"] = ToString(kProposalNames, proposal);
-    json["qp_iterations"] = qp_iterations;
+    if (proposal == Proposal::kRefine) {
+      json["refine_steps"] = refine_steps;
+    } else {
+      json["qp_iterations"] = qp_iterations;
+    }
     json["qp_margin"] = qp_margin;
   }
   return json;
@@ -103,6 +109,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Enum("proposal", &proposal, kProposalNames)
       .Field("qp_iterations", &qp_iterations)
       .Field("qp_margin", &qp_margin)
+      .Field("refine_steps", &refine_steps)
       .Apply(node, source);
 }
 

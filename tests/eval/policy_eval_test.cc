@@ -533,6 +533,32 @@ TEST(EpisodeRunnerTest, APolicyWhoseSigmaDoesNotFitIsAnError) {
              "the policy's sigma has 3 values, expected 2");
 }
 
+// The PD policy (sigma 0.3) on the double integrator under the ground-truth barrier: 20 episodes,
+// seed 7, the default shield.
+std::map<Method, SeedResult> EvaluateWithTheGroundTruth(const std::vector<Method>& methods) {
+  const di::ReachAvoidOptions task;
+  di::ReachAvoidEnv env(task);
+  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  SeedModels models;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
+  return EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 20, 7);
+}
+
+// SECURE and two other filters over 5 synthetic seeds (one 2 points lower in success with
+// varying danger, one 1 point higher), finished.
+Evaluation BesideSecure(Method lower, Method higher) {
+  Evaluation evaluation;
+  const std::vector<long> success = {80, 85, 78, 90, 83};
+  for (std::size_t k = 0; k < 5; ++k) {
+    evaluation.Add(Method::kSecure, Synthetic(success[k], 1));
+    evaluation.Add(lower, Synthetic(success[k] - 2, long(k)));
+    evaluation.Add(higher, Synthetic(success[k] + 1, 1));
+  }
+  evaluation.Finish();
+  return evaluation;
+}
+
 // The CBF-QP filter and the gradient-first shield: the proposal, nothing else; on the double
 // integrator with its ground truth the filter keeps the PD policy out of the obstacle as SECURE
 // does, and the seed records count what the projection decided.
@@ -548,14 +574,8 @@ TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
             (std::vector<Method>{Method::kCbfQp, Method::kSecureQp}));
   EXPECT_TRUE(IsShielded(Method::kCbfQp) && IsShielded(Method::kSecureQp));
 
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
-  SeedModels models;
-  models.airl = &pd;
-  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
-  const auto results = EvaluateMethods(env, {Method::kSecure, Method::kCbfQp, Method::kSecureQp},
-                                       models, shield::ShieldOptions{}, 20, 7);
+  const auto results =
+      EvaluateWithTheGroundTruth({Method::kSecure, Method::kCbfQp, Method::kSecureQp});
   for (Method m : {Method::kCbfQp, Method::kSecureQp}) {
     const SeedResult& r = results.at(m);
     EXPECT_EQ(r.qp_tried, r.decisions) << ToString(kMethodNames, m);
@@ -571,18 +591,49 @@ TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
   EXPECT_LE(results.at(Method::kSecureQp).no_safe_action_decisions,
             results.at(Method::kSecure).no_safe_action_decisions);
 
-  Evaluation evaluation;
-  const std::vector<long> success = {80, 85, 78, 90, 83};
-  for (std::size_t k = 0; k < 5; ++k) {
-    evaluation.Add(Method::kSecure, Synthetic(success[k], 1));
-    evaluation.Add(Method::kCbfQp, Synthetic(success[k] - 2, long(k)));
-    evaluation.Add(Method::kSecureQp, Synthetic(success[k] + 1, 1));
-  }
-  evaluation.Finish();
+  const Evaluation evaluation = BesideSecure(Method::kCbfQp, Method::kSecureQp);
   const nlohmann::json j = evaluation.ToJson();
   EXPECT_TRUE(j["comparisons"].contains("cbf-qp_vs_secure"));
   EXPECT_TRUE(j["comparisons"]["secure-qp_vs_secure"].contains("dangerous_mann_whitney"));
   EXPECT_HAS(evaluation.Table(), "secure-qp vs SECURE: dangerous Mann-Whitney U");
+}
+
+// The first-safe sampler and the gradient refinement: the shield with aggregation first-safe and
+// the policy's own sigma, or with proposal refine; nothing else. On the double integrator with its
+// ground truth both keep the PD policy's decisions checked, and the tables compare them with
+// SECURE.
+TEST(PolicyEvalTest, FirstSafeAndCbfGradAreTheShieldWithTheirModes) {
+  shield::ShieldOptions base;
+  base.num_samples = 32;
+  shield::ShieldOptions expected = base;
+  expected.aggregation = shield::Aggregation::kFirstSafe;
+  expected.resampling = shield::Resampling::kNone;
+  EXPECT_EQ(ShieldOptionsFor(Method::kFirstSafe, base).ToJson(), expected.ToJson());
+  expected = base;
+  expected.proposal = shield::Proposal::kRefine;
+  EXPECT_EQ(ShieldOptionsFor(Method::kCbfGrad, base).ToJson(), expected.ToJson());
+  EXPECT_EQ(ParseMethods("first-safe,cbf-grad"),
+            (std::vector<Method>{Method::kFirstSafe, Method::kCbfGrad}));
+  EXPECT_TRUE(IsShielded(Method::kFirstSafe) && IsShielded(Method::kCbfGrad));
+
+  const auto results =
+      EvaluateWithTheGroundTruth({Method::kSecure, Method::kFirstSafe, Method::kCbfGrad});
+  const SeedResult& grad = results.at(Method::kCbfGrad);
+  EXPECT_EQ(grad.qp_tried, grad.decisions);
+  EXPECT_GT(grad.qp_decisions, grad.decisions / 2);
+  EXPECT_EQ(grad.qp_decisions + grad.qp_rejected, grad.qp_tried);
+  EXPECT_EQ(grad.no_safe_action_decisions, grad.qp_rejected);
+  const SeedResult& first = results.at(Method::kFirstSafe);
+  EXPECT_EQ(first.qp_tried, 0);
+  EXPECT_GT(first.decisions, 0);
+  EXPECT_LE(first.mean_iterations, 20.0);
+
+  const Evaluation evaluation = BesideSecure(Method::kFirstSafe, Method::kCbfGrad);
+  const nlohmann::json j = evaluation.ToJson();
+  EXPECT_TRUE(j["comparisons"]["first-safe_vs_secure"].contains("dangerous_mann_whitney"));
+  EXPECT_TRUE(j["comparisons"]["cbf-grad_vs_secure"].contains("success_tost"));
+  EXPECT_HAS(evaluation.Table(), "first-safe vs SECURE: dangerous Mann-Whitney U");
+  EXPECT_HAS(evaluation.Table(), "cbf-grad vs SECURE: dangerous Mann-Whitney U");
 }
 
 }  // namespace

@@ -359,6 +359,21 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
   policy_mean_safe.options.aggregation = Aggregation::kPolicyMean;
   scenarios.push_back(policy_mean_safe);
 
+  // The first-safe sampler: the policy's draw when safe (one evaluation), else the first safe
+  // sample of a round (adaptive resampling here), else, with the policy's own sigma, the fallback.
+  Scenario first_safe[3] = {none, resampling, resampling};
+  const char* const first_safe_names[3] = {"safe draw", "resampling", "resampling = none"};
+  for (int k = 0; k < 3; ++k) {
+    first_safe[k].name = std::string("first-safe aggregation, ") + first_safe_names[k];
+    first_safe[k].options.aggregation = Aggregation::kFirstSafe;
+  }
+  first_safe[2].options.resampling = Resampling::kNone;
+  first_safe[2].options.max_iterations = 3;
+  first_safe[2].with_backup = true;
+  first_safe[2].backup = Vec({0.0f, -4.0f});
+  first_safe[2].expect_fallback = true;
+  scenarios.insert(scenarios.end(), first_safe, first_safe + 3);
+
   Scenario no_resampling = resampling;
   no_resampling.name = "resampling = none";
   no_resampling.options.resampling = Resampling::kNone;
@@ -395,7 +410,7 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
 
   // The CBF-QP projection first (proposal qp: sampling follows a rejected one) or alone
   // (qp-only), with a safe and an unsafe mean, with and without the box; re-linearised too.
-  for (Proposal proposal : {Proposal::kQp, Proposal::kQpOnly}) {
+  for (Proposal proposal : {Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
     const std::string name = "proposal " + std::string(ToString(kProposalNames, proposal));
     Scenario safe = none;
     safe.name = name + ", safe mean";
@@ -540,6 +555,16 @@ TEST(ShieldAllocTest, PandaSizedLearnedBarrierDecisionsDoNotAllocate) {
   qp.name += ", proposal qp";
   qp.options.proposal = Proposal::kQp;
   ExpectNoAllocations(qp, barrier, dynamics, 50, note);
+  // The gradient refinement (proposal refine) and the first-safe sampler.
+  Scenario refine = s;
+  refine.name += ", proposal refine";
+  refine.options.proposal = Proposal::kRefine;
+  ExpectNoAllocations(refine, barrier, dynamics, 50, note);
+  Scenario first_safe = s;
+  first_safe.name += ", first-safe";
+  first_safe.options.aggregation = Aggregation::kFirstSafe;
+  first_safe.expect_resampling = false;  // a quarter of the draws are safe: round 1 has some
+  ExpectNoAllocations(first_safe, barrier, dynamics, 50, note);
 }
 
 // Top-q with AIRL's task value (policy::AirlActionValue: the reward and shaping MLPs on the
@@ -595,7 +620,7 @@ TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
   s.expect_resampling = true;
   const domains::derby::DerbyShieldModel model(0.1, 3.0, 3);
   ExpectNoAllocations(s, barrier, model, 300);
-  for (Proposal proposal : {Proposal::kQp, Proposal::kQpOnly}) {
+  for (Proposal proposal : {Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
     Scenario qp = s;
     qp.name += ", proposal " + std::string(ToString(kProposalNames, proposal));
     qp.options.proposal = proposal;

@@ -1,5 +1,5 @@
-// The CBF-QP projection in the shield (ShieldOptions::proposal): the gradient-first mode (qp) and
-// the CBF-QP filter alone (qp-only). Properties with RapidCheck over the double integrator (its
+// The CBF-QP projection in the shield (ShieldOptions::proposal): the gradient-first mode (qp),
+// the CBF-QP filter alone (qp-only) and the gradient refinement of the mean (refine). Properties with RapidCheck over the double integrator (its
 // ground truth, whose gradient is by finite differences, and a random barrier network) and Derby
 // (a random per-car barrier and its shield model); exact cases on an integrator.
 
@@ -165,13 +165,16 @@ RC_GTEST_PROP(QpShieldProperty, GradientFirstIsTheProjectionOrTheSamplingShields
   RC_ASSERT(d.intervened == e.intervened && d.bounded == e.bounded);
 }
 
-// The CBF-QP filter alone: safe exactly when the projection's exact g >= 0; otherwise it says
-// so (no_safe_action, fallback qp_projection, outcome rejected or infeasible).
-RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
+// The CBF-QP filter alone (qp-only) or the gradient refinement alone (refine, method cbf-grad):
+// safe exactly when its action's exact g >= 0; otherwise it says so (no_safe_action, fallback
+// qp_projection or refined_mean, outcome rejected, or infeasible for qp-only), with g < 0. Its
+// action stays in the box.
+void CheckAFilterAlone(Proposal proposal) {
   System s = RandomSystem();
   ShieldOptions o = RandomOptions();
-  o.proposal = Proposal::kQpOnly;
+  o.proposal = proposal;
   const Eigen::VectorXf mu = RandomVector(2, -5, 5), sigma = RandomVector(2, 0.05, 2.0);
+  if (proposal == Proposal::kRefine) o.refine_steps = *rc::gen::inRange(1, 8);
   Shield shield(o, *s.barrier, *s.dynamics);
   shield.SetActionBounds(Vec({-3, -3}), Vec({3, 3}));
   const Decision& d = shield.Decide(s.state, mu, sigma);
@@ -186,25 +189,41 @@ RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
     RC_ASSERT(d.g >= 0.0);
   } else {
     RC_ASSERT(d.status == Status::kNoSafeAction);
-    RC_ASSERT(d.fallback == Fallback::kQpProjection);
-    RC_ASSERT(d.qp == QpOutcome::kRejected || d.qp == QpOutcome::kInfeasible);
+    RC_ASSERT(d.fallback == (proposal == Proposal::kRefine ? Fallback::kRefinedMean
+                                                           : Fallback::kQpProjection));
+    RC_ASSERT(d.qp == QpOutcome::kRejected ||
+              (proposal == Proposal::kQpOnly && d.qp == QpOutcome::kInfeasible));
     RC_ASSERT(d.g < 0.0);
   }
 }
 
+RC_GTEST_PROP(QpShieldProperty, QpOnlyReportsTheExactCheck, ()) {
+  CheckAFilterAlone(Proposal::kQpOnly);
+}
+
+RC_GTEST_PROP(QpShieldProperty, RefineReportsTheExactCheckAndStaysInTheBox, ()) {
+  CheckAFilterAlone(Proposal::kRefine);
+}
+
 // h(s) = w . s + b with an integrator: the linearisation is exact, so the filter returns the
 // closed-form projection of mu onto {g >= 0}, and mu itself where mu is safe.
+// h(s) = w . s + 0.5 with w = (1, -2), and the integrator s' = s + 0.1 a.
+struct HalfSpace {
+  const Eigen::Vector2f w{1.0f, -2.0f};
+  FunctionBarrier barrier{2, "linear", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            return static_cast<double>(s[0] - 2.0f * s[1]) + 0.5;
+                          }};
+  const IntegratorDynamics dynamics{2, 0.1};
+};
+
 TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
-  const Eigen::Vector2f w(1.0f, -2.0f);
-  FunctionBarrier barrier(2, "linear", [&](const Eigen::Ref<const Eigen::VectorXf>& s) {
-    return static_cast<double>(w.dot(s)) + 0.5;
-  });
-  const IntegratorDynamics dynamics(2, 0.1);  // s' = s + 0.1 a
+  HalfSpace h;
+  const Eigen::Vector2f& w = h.w;
   ShieldOptions o;
   o.proposal = Proposal::kQpOnly;
   o.dt = 0.1;
   o.class_k_gain = 2.0;
-  Shield shield(o, barrier, dynamics);
+  Shield shield(o, h.barrier, h.dynamics);
   const Eigen::VectorXf state = Vec({0.2f, 0.3f});  // h = 0.2 - 0.6 + 0.5 = 0.1
   // g(a) = w . a + alpha(h) = w . a + 0.2: safe iff a0 - 2 a1 >= -0.2.
   const Eigen::VectorXf unsafe_mu = Vec({-1.0f, 1.0f});  // w . mu = -3
@@ -241,7 +260,7 @@ TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
 
 // A curved barrier (a disc, h concave): the tangent plane overestimates h, so the textbook
 // projection lands just outside the safe set and the exact check rejects it; re-linearising at
-// the projection (qp_iterations) or a margin recovers a safe action.
+// the projection (qp_iterations), a margin, or more refinement steps recover a safe action.
 TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
   FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
     return 1.0 - static_cast<double>(s.squaredNorm());
@@ -277,6 +296,89 @@ TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
     EXPECT_TRUE(d.safe()) << d.ToJson().dump();
     EXPECT_GE(d.iterations, 1);
   }
+  // The gradient refinement: one step lands just outside as the projection does; the next ones,
+  // re-linearised, reach g >= 0.
+  o.proposal = Proposal::kRefine;
+  for (int steps : {1, 5}) {
+    o.refine_steps = steps;
+    Shield shield(o, barrier, dynamics);
+    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+    EXPECT_EQ(d.safe(), steps == 5) << d.ToJson().dump();
+    EXPECT_EQ(d.fallback, steps == 5 ? Fallback::kNone : Fallback::kRefinedMean);
+    if (steps == 1) EXPECT_LT(d.g, 0.0);
+  }
+}
+
+// A constructed half-space (h(s) = w . s + b, an integrator: g affine in a): one Polyak step
+// moves a violating mean onto g >= 0; with a box the clipped steps stay in it and still reach the
+// half-space; a box the half-space misses is reported.
+TEST(QpShieldTest, RefinementMovesAViolatingMeanIntoTheHalfSpaceWithinTheBox) {
+  HalfSpace h;
+  const Eigen::Vector2f& w = h.w;
+  FunctionBarrier& barrier = h.barrier;
+  const IntegratorDynamics& dynamics = h.dynamics;
+  ShieldOptions o;
+  o.proposal = Proposal::kRefine;
+  o.class_k_gain = 2.0;
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f});  // h = 0.1; g(a) = w . a + 0.2
+  const Eigen::VectorXf mu = Vec({-1.0f, 1.0f});    // g = -2.8
+  {
+    o.refine_steps = 1;
+    Shield shield(o, barrier, dynamics);
+    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+    EXPECT_EQ(d.status, Status::kSafe) << d.ToJson().dump();
+    EXPECT_EQ(d.qp, QpOutcome::kAccepted);
+    EXPECT_TRUE(d.intervened);
+    EXPECT_EQ(d.iterations, 0);
+    EXPECT_GE(d.g, 0.0);
+    EXPECT_NEAR(d.g, 0.0, 1e-2);  // on the boundary, plus the rounding allowance
+    // Along the gradient w: the Euclidean projection of mu.
+    const Eigen::Vector2f expected = mu + (-0.2f - w.dot(mu)) / w.squaredNorm() * w;
+    EXPECT_NEAR(d.action[0], expected[0], 1e-3);
+    EXPECT_NEAR(d.action[1], expected[1], 1e-3);
+    EXPECT_EQ(d.ToJson()["qp"], "accepted");
+    // A safe mean is returned as it is, unchecked by any step.
+    const Decision& e = shield.Decide(state, Vec({1.0f, 0.0f}), Vec({0.1f, 0.1f}));
+    EXPECT_EQ(e.status, Status::kSafe);
+    EXPECT_FALSE(e.intervened);
+    EXPECT_TRUE(BitEqual(e.action, Vec({1.0f, 0.0f})));
+  }
+  {
+    // The box cuts the first step (to (-0.44, -0.12), below a1 >= 0.5): clipped to (-0.44, 0.5),
+    // g = -1.24; the second step holds a1 at its face and moves a0 alone onto g = 0.
+    o.refine_steps = 1;
+    for (int steps : {1, 2}) {
+      o.refine_steps = steps;
+      Shield shield(o, barrier, dynamics);
+      shield.SetActionBounds(Vec({-2.0f, 0.5f}), Vec({2.0f, 2.0f}));
+      const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+      EXPECT_EQ(d.safe(), steps == 2) << d.ToJson().dump();
+      EXPECT_GE(d.action[0], -2.0f);
+      EXPECT_LE(d.action[0], 2.0f);
+      EXPECT_GE(d.action[1], 0.5f);
+      EXPECT_LE(d.action[1], 2.0f);
+      if (steps == 1) {
+        EXPECT_NEAR(d.g, -1.24, 1e-3);
+      } else {
+        EXPECT_NEAR(d.action[0], 0.8, 1e-2);
+        EXPECT_EQ(d.action[1], 0.5f);
+        EXPECT_GE(d.g, 0.0);
+      }
+    }
+  }
+  {
+    // A box the half-space misses (w . a <= -1.5 there): every step fails, and it says so.
+    o.refine_steps = 5;
+    Shield shield(o, barrier, dynamics);
+    shield.SetActionBounds(Vec({-1.0f, 0.5f}), Vec({-0.5f, 1.0f}));
+    const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
+    EXPECT_EQ(d.status, Status::kNoSafeAction) << d.ToJson().dump();
+    EXPECT_EQ(d.fallback, Fallback::kRefinedMean);
+    EXPECT_EQ(d.qp, QpOutcome::kRejected);
+    EXPECT_TRUE(BitEqual(d.action, Vec({-0.5f, 0.5f})));  // the box corner of largest g
+    EXPECT_NEAR(d.g, -1.5 + 0.2, 1e-4);
+    EXPECT_EQ(d.ToJson()["fallback"], "refined_mean");
+  }
 }
 
 TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
@@ -300,6 +402,15 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
   EXPECT_EQ(y.qp_margin, 0.25);
   EXPECT_HAS(ErrorOf([&] { y.ApplyYaml(YAML::Load("{proposal: newton}"), "s.yaml"); }),
              "newton");
+  o.qp_margin = 0;
+  o.proposal = Proposal::kRefine;
+  EXPECT_EQ(o.ToJson()["refine_steps"], 5);
+  EXPECT_FALSE(o.ToJson().contains("qp_iterations"));
+  o.refine_steps = 0;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "refine_steps = 0");
+  y.ApplyYaml(YAML::Load("{proposal: refine, refine_steps: 7}"), "s.yaml");
+  EXPECT_EQ(y.proposal, Proposal::kRefine);
+  EXPECT_EQ(y.refine_steps, 7);
   Decision d;
   EXPECT_FALSE(d.ToJson().contains("qp"));
 }

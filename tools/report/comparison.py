@@ -14,10 +14,11 @@ METHOD_LABELS = {
     "bc": "BC", "airl": "AIRL", "secure": "SECURE", "secure-random-safe": "random safe",
     "secure-no-resampling": "no resampling", "bc+shield": "BC + shield",
     "secure-myopic": "myopic", "joint": "joint", "cbf-qp": "CBF-QP",
-    "secure-qp": "gradient-first",
+    "secure-qp": "gradient-first", "first-safe": "first-safe", "cbf-grad": "gradient refinement",
 }
 METHOD_ORDER = ["bc", "airl", "secure", "secure-random-safe", "secure-no-resampling",
-                "secure-myopic", "bc+shield", "joint", "cbf-qp", "secure-qp"]
+                "secure-myopic", "bc+shield", "joint", "cbf-qp", "secure-qp", "first-safe",
+                "cbf-grad"]
 SUCCESS_COLOR, DANGER_COLOR = "#2a9d8f", "#e76f51"
 
 
@@ -64,7 +65,8 @@ def significance_pairs(evaluation, names, metric):
     """[(method a, method b, p, test name)] the run computed for this metric."""
     out = []
     comp = evaluation.get("comparisons") or {}
-    # "<a>_vs_<b>": SECURE vs AIRL, and the other safety filters (cbf-qp, secure-qp) vs SECURE.
+    # "<a>_vs_<b>": SECURE vs AIRL, and the other safety filters (cbf-qp, secure-qp,
+    # first-safe, cbf-grad) vs SECURE.
     pairs = sorted((k for k in comp if k.endswith(("_vs_airl", "_vs_secure"))
                     and isinstance(comp[k], dict)), key=lambda k: (k != "secure_vs_airl", k))
     for name in pairs:

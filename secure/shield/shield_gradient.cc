@@ -1,0 +1,159 @@
+// The shield's gradient-based proposals (shield.h, Proposal): the linearisation of g at an action
+// (the barrier's gradient at the predicted state and the model's action Jacobian), the CBF-QP
+// projection of the policy's mean (proposal qp, qp-only) and the gradient refinement of the mean
+// (proposal refine). Each checks what it returns with the exact g, as every sample is checked.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "secure/shield/qp.h"
+#include "secure/shield/shield.h"
+
+namespace secure::shield {
+namespace {
+
+// The allowance for float rounding in g, per unit of (1 + |h(s)|) / dt: g's float h values are
+// good to a few ulps, about 1e-6 of |h|; 1e-4 is far above that and far below any g that
+// matters. Without it a projection exactly on the linearised boundary would fail the exact check
+// half the time.
+constexpr double kQpRoundingMargin = 1e-4;
+
+double RoundingMargin(double h_state, double dt) {
+  return kQpRoundingMargin * (1.0 + std::abs(h_state)) / dt;
+}
+
+// Records an exactly checked action (column 0 of `action`, its exact g) as the decision's;
+// returns whether it is accepted (g >= 0; a NaN g never is).
+bool Record(Decision& decision, const Eigen::MatrixXf& action, double g) {
+  decision.action = action.col(0);
+  decision.g = g;
+  if (!(g >= 0.0)) return false;
+  decision.qp = QpOutcome::kAccepted;
+  return true;
+}
+
+}  // namespace
+
+double Shield::Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
+  const int n = action_dim_;
+  const double inv_dt = 1.0 / options_.dt;
+  // The point and its 2n neighbours (central differences of T in each action, inside the box:
+  // one-sided at a face), then grad h at the predicted state T(s, a0).
+  for (int r = 0; r < n; ++r) {
+    const float a0 = qp_actions_(r, 0);
+    const float step = 1e-2f * std::max(1.0f, std::abs(a0));
+    qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
+    qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
+    qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
+    qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
+  }
+  dynamics_.Step(state, qp_actions_, qp_next_);
+  barrier_.EvaluateGradient(qp_next_.leftCols(1), qp_h_, qp_gradient_);
+  for (int r = 0; r < n; ++r) {
+    const double width =
+        static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
+    if (width > 0) {
+      qp_jacobian_.col(r) =
+          (qp_next_.col(1 + 2 * r).cast<double>() - qp_next_.col(2 + 2 * r).cast<double>()) /
+          width;
+    } else {
+      qp_jacobian_.col(r).setZero();  // a box of zero width in this action
+    }
+  }
+  // c = J^T grad h / dt: g(a) ~ g(a0) + c . (a - a0).
+  for (int r = 0; r < n; ++r) {  // a loop: Eigen would cast the gradient into a temporary
+    double dot = 0.0;
+    for (int i = 0; i < state_dim_; ++i)
+      dot += qp_jacobian_(i, r) * static_cast<double>(qp_gradient_(i, 0));
+    qp_normal_[r] = dot * inv_dt;
+  }
+  // g at the point, as linearised: g0 = (h(T(s, a0)) - h(s)) / dt + alpha(h(s)).
+  return (static_cast<double>(qp_h_[0]) - h_state) * inv_dt + ClassKValue(options_, h_state);
+}
+
+bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
+                       const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state) {
+  const int n = action_dim_;
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int r = 0; r < n; ++r) {
+    qp_mu_[r] = mu[r];
+    qp_low_[r] = bounds_active() ? static_cast<double>(low_[r]) : -inf;
+    qp_high_[r] = bounds_active() ? static_cast<double>(high_[r]) : inf;
+  }
+  // The first linearisation point: mu as the actuator applies it.
+  qp_actions_.col(0) = mu;
+  if (ClipToBox(qp_actions_.leftCols(1))) decision_.bounded = true;
+  for (int round = 0; round < options_.qp_iterations; ++round) {
+    const double g0 = Linearise(state, h_state);
+    if (round == 0 && g0 >= options_.qp_margin) {
+      // mu satisfies the condition: the QP's answer is mu itself (clipped), checked exactly.
+      one_action_.col(0) = qp_actions_.col(0);
+      EvaluateG(state, h_state, one_action_, one_g_);
+      if (Record(decision_, one_action_, one_g_[0])) return true;
+    }
+    decision_.intervened = true;  // the policy's mean failed the condition
+    // The half-space c . a >= c . a0 - g0 + margin, where the margin adds to qp_margin what float
+    // rounding of h costs g.
+    double offset = options_.qp_margin + RoundingMargin(h_state, options_.dt) - g0;
+    for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
+    QpResult result;
+    if (qp_normal_.allFinite() && std::isfinite(offset)) {
+      result = ProjectOntoHalfSpaceAndBox(qp_mu_, qp_normal_, offset, qp_low_, qp_high_,
+                                          qp_solution_, qp_scratch_);
+    } else {
+      // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
+      result.status = QpStatus::kInfeasible;
+      for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
+    }
+    one_action_.col(0) = qp_solution_.cast<float>();
+    ClipToBox(one_action_);  // rounding to float stays in the box
+    EvaluateG(state, h_state, one_action_, one_g_);
+    if (Record(decision_, one_action_, one_g_[0])) return true;
+    decision_.qp =
+        result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
+    // Re-linearise at the projection (qp_iterations > 1).
+    qp_actions_.col(0) = one_action_.col(0);
+  }
+  return false;
+}
+
+bool Shield::RefineMean(const Eigen::Ref<const Eigen::VectorXf>& state,
+                        const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state) {
+  const int n = action_dim_;
+  const double target = options_.qp_margin + RoundingMargin(h_state, options_.dt);
+  qp_actions_.col(0) = mu;
+  if (ClipToBox(qp_actions_.leftCols(1))) decision_.bounded = true;
+  decision_.qp = QpOutcome::kRejected;
+  for (int step = 0;; ++step) {
+    // The exact check of the iterate: the first one with g >= 0 is the decision.
+    one_action_.col(0) = qp_actions_.col(0);
+    EvaluateG(state, h_state, one_action_, one_g_);
+    if (Record(decision_, one_action_, one_g_[0])) return true;
+    decision_.intervened = true;  // the policy's mean failed the condition
+    if (step == options_.refine_steps) return false;
+    // One projected gradient step on the hinge max(0, target - g): a Polyak step along c = grad_a
+    // g, of the length that reaches g = target on the linearisation, then onto the box. A
+    // coordinate at a face of the box that c points out of is held (its part of c dropped), so
+    // the step's length is that of the coordinates that can move: on a condition affine in a,
+    // each step then reaches g = target or a new face.
+    const double g0 = Linearise(state, h_state);
+    double norm2 = 0.0;
+    for (int r = 0; r < n; ++r) {
+      const float a = qp_actions_(r, 0);
+      if (bounds_active() && ((a >= high_[r] && qp_normal_[r] > 0) ||
+                              (a <= low_[r] && qp_normal_[r] < 0))) {
+        qp_normal_[r] = 0.0;
+      }
+      norm2 += qp_normal_[r] * qp_normal_[r];
+    }
+    if (!(norm2 > 0) || !std::isfinite(norm2) || !std::isfinite(g0)) {
+      return false;  // no direction to move in (a flat or non-finite linearisation)
+    }
+    const double length = std::max(0.0, target - g0) / norm2;
+    for (int r = 0; r < n; ++r)
+      qp_actions_(r, 0) = static_cast<float>(qp_actions_(r, 0) + length * qp_normal_[r]);
+    ClipToBox(qp_actions_.leftCols(1));
+  }
+}
+
+}  // namespace secure::shield
