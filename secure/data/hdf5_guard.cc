@@ -144,6 +144,14 @@ std::uint64_t AddressSpaceBytes() {
   // Die of a crash plainly (no sanitizer or fuzzer handler inherited from the parent, no core
   // file): the parent reports it.
   for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT}) ::signal(sig, SIG_DFL);
+  // The child speaks only through the pipe: what libhdf5 or a sanitizer's allocator prints as
+  // it dies (an ASan build reports its own out-of-memory before aborting) must not add lines
+  // to the parent's one-line error.
+  const int null_fd = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  if (null_fd >= 0) {
+    ::dup2(null_fd, STDOUT_FILENO);
+    ::dup2(null_fd, STDERR_FILENO);
+  }
   struct rlimit no_core {0, 0};
   ::setrlimit(RLIMIT_CORE, &no_core);
   // The limit on top of what the parent had mapped (a sanitizer build maps terabytes of shadow).
@@ -232,7 +240,9 @@ std::string RunGuarded(const std::string& path, const std::function<void(Encoder
   }
   SECURE_CHECK(!reply.empty(), path << ": the HDF5 reader process exited with status "
                                     << (waited == pid ? WEXITSTATUS(status) : -1)
-                                    << " without a reply");
+                                    << " without a reply (a corrupt or malicious file, or one "
+                                       "needing more than "
+                                    << MemoryNote(limit) << ")");
   SECURE_CHECK(reply[0] != kNoMemory,
                path << ": reading the file needs more memory than " << MemoryNote(limit));
   if (reply[0] == kError) throw Error(reply.substr(1));
