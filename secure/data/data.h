@@ -8,6 +8,7 @@
 // for HDF5, the file, the dataset path, the row and the column.
 
 #include <Eigen/Core>
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -189,6 +190,10 @@ TrajectorySet ReadHdf5TrajectoriesInProcess(const std::string& path,
 StateSet ReadHdf5StateSetInProcess(const std::string& path,
                                    const std::vector<std::string>& features,
                                    const std::string& label);
+// The guard's child process with `work` in place of a reader (tests of the guard itself): what
+// `work` appends to its argument comes back; its exceptions and death are the readers' errors.
+std::string RunInHdf5ReaderProcess(const std::string& path,
+                                   const std::function<void(std::string*)>& work);
 }  // namespace internal
 
 /// Checks that a set has at least one state and only finite values; `what` names it in the

@@ -8,6 +8,7 @@
 // Hdf5LibraryMutex() while they use libhdf5 or fork, so a child never inherits it mid-call.
 
 #include <fcntl.h>
+#include <poll.h>
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -154,6 +155,13 @@ std::uint64_t AddressSpaceBytes() {
   }
   struct rlimit no_core {0, 0};
   ::setrlimit(RLIMIT_CORE, &no_core);
+  // Few descriptors: a process the child starts (a sanitizer's symbolizer) closes every
+  // descriptor up to this limit first, which takes minutes where the limit is 2^30.
+  struct rlimit files {};
+  if (::getrlimit(RLIMIT_NOFILE, &files) == 0 && files.rlim_cur > 1024) {
+    files.rlim_cur = 1024;
+    ::setrlimit(RLIMIT_NOFILE, &files);
+  }
   // The limit on top of what the parent had mapped (a sanitizer build maps terabytes of shadow).
   const std::uint64_t base = AddressSpaceBytes();
   struct rlimit as {};
@@ -189,6 +197,47 @@ std::string MemoryNote(std::uint64_t limit) {
          "or --max-hdf5-memory)";
 }
 
+// Reads the child's reply from `fd` until end of file or until the child has exited, whichever
+// comes first; then kills what is left of the child's process group and reaps the child. (A
+// process the child started, such as a sanitizer's symbolizer, may hold the pipe open after the
+// child died, and end of file alone would wait for it.) Returns waitpid's result.
+pid_t ReadReplyAndWait(int fd, pid_t pid, std::string* reply, int* status) {
+  // Whether the child has exited, left a zombie (WNOWAIT) so its process group stays its own.
+  const auto exited = [pid](int flags) {
+    siginfo_t info{};
+    int r = -1;
+    do {
+      r = ::waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOWAIT | flags);
+    } while (r < 0 && errno == EINTR);
+    // (waitid fails only if SIGCHLD is ignored; then end of file alone ends the reply.)
+    return r == 0 && info.si_pid == pid;
+  };
+  char buffer[1 << 16];
+  bool child_exited = false;
+  for (;;) {
+    struct pollfd p {fd, POLLIN, 0};
+    // After the child's exit, only what is already in the pipe is read.
+    const int ready = ::poll(&p, 1, child_exited ? 0 : 100);
+    if (ready < 0 && errno == EINTR) continue;
+    if (ready > 0) {
+      const ssize_t n = ::read(fd, buffer, sizeof buffer);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) break;
+      reply->append(buffer, static_cast<std::size_t>(n));
+      continue;
+    }
+    if (child_exited || ready < 0) break;
+    child_exited = exited(WNOHANG);
+  }
+  if (!child_exited) exited(0);
+  ::kill(-pid, SIGKILL);
+  pid_t waited = -1;
+  do {
+    waited = ::waitpid(pid, status, 0);
+  } while (waited < 0 && errno == EINTR);
+  return waited;
+}
+
 // Reads `path` with `read` in a child process; returns the child's reply (the tag, then the
 // payload). Throws the child's error, or one naming its death.
 std::string RunGuarded(const std::string& path, const std::function<void(Encoder&)>& read) {
@@ -204,11 +253,13 @@ std::string RunGuarded(const std::string& path, const std::function<void(Encoder
     std::lock_guard<std::mutex> lock(hdf5::Hdf5LibraryMutex());
     pid = ::fork();
     if (pid == 0) {
+      ::setpgid(0, 0);  // its own process group, which the parent kills after the reply
       ::close(fds[0]);
       RunChild(fds[1], limit, read);
     }
   }
   const int fork_error = errno;
+  if (pid > 0) ::setpgid(pid, pid);  // (as the child does: whichever runs first)
   ::close(fds[1]);
   if (pid < 0) {
     ::close(fds[0]);
@@ -216,19 +267,9 @@ std::string RunGuarded(const std::string& path, const std::function<void(Encoder
                       << std::strerror(fork_error) << ")");
   }
   std::string reply;
-  char buffer[1 << 16];
-  for (;;) {
-    const ssize_t n = ::read(fds[0], buffer, sizeof buffer);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;
-    reply.append(buffer, static_cast<std::size_t>(n));
-  }
-  ::close(fds[0]);
   int status = 0;
-  pid_t waited = -1;
-  do {
-    waited = ::waitpid(pid, &status, 0);
-  } while (waited < 0 && errno == EINTR);
+  const pid_t waited = ReadReplyAndWait(fds[0], pid, &reply, &status);
+  ::close(fds[0]);
   // (waitpid fails only if SIGCHLD is ignored; then the reply alone decides.)
   if (waited == pid && WIFSIGNALED(status)) {
     const int sig = WTERMSIG(status);
@@ -307,6 +348,11 @@ Hdf5Contents InspectHdf5(const std::string& path) {
 }
 
 namespace internal {
+
+std::string RunInHdf5ReaderProcess(const std::string& path,
+                                   const std::function<void(std::string*)>& work) {
+  return RunGuarded(path, [&](Encoder& e) { work(&e.bytes()); }).substr(1);
+}
 
 TrajectorySet ReadHdf5Trajectories(const std::string& path,
                                    const std::vector<std::string>& state_features,

@@ -2,7 +2,13 @@
 // process with a memory limit, so libhdf5's own defects on malformed files (the hdf5_fuzz
 // findings, now regression inputs in tests/fuzz/corpus/hdf5_fuzz/) are one secure::Error naming
 // the file, and the data read through the guard are those read in this process.
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -139,6 +145,47 @@ TEST_F(Hdf5GuardTest, TheMemoryLimitIsStatedOverridableAndNamedWhenHit) {
   limits.max_hdf5_memory_bytes = 0;
   SetInputLimits(limits);
   EXPECT_EQ(ReadTrajectories(path, {}, {}).num_steps(), 40'000);
+}
+
+// A process the reader's child starts (a sanitizer's symbolizer, say) may keep the reply's pipe
+// open after the child has died. The parent does not wait for it: the child's reply, or its
+// death, comes back as soon as the child is gone, and the straggler is killed with the child's
+// process group. (Without this, each call below took the grandchild's 120 s.)
+TEST_F(Hdf5GuardTest, AProcessTheChildStartedDoesNotHoldUpTheReply) {
+  const std::string path = Write("any.h5", "not read");
+  // Starts a grandchild that inherits the pipe and sleeps for 120 s; returns its pid.
+  const auto start_straggler = [] {
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      ::sleep(120);
+      ::_exit(0);
+    }
+    return pid;
+  };
+  // Whether `pid` is gone or dead (a zombie, until whoever adopted it reaps it).
+  const auto gone = [](const std::string& pid) {
+    std::ifstream stat("/proc/" + pid + "/stat");
+    std::string id, name, state;
+    if (!(stat >> id >> name >> state)) return true;
+    return state == "Z" || state == "X";
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string reply = internal::RunInHdf5ReaderProcess(
+      path, [&](std::string* out) { *out += std::to_string(start_straggler()); });
+  ASSERT_FALSE(reply.empty());
+  const std::string crash = ErrorOf([&] {
+    internal::RunInHdf5ReaderProcess(path, [&](std::string*) {
+      start_straggler();
+      ::raise(SIGABRT);
+    });
+  });
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(seconds, 60.0) << "the parent waited for the grandchildren";
+  EXPECT_HAS(crash, "crashed reading the file (signal 6, SIGABRT)");
+  ExpectOneLineNaming(crash, path);
+  for (int i = 0; i < 100 && !gone(reply); ++i) ::usleep(10'000);
+  EXPECT_TRUE(gone(reply)) << "grandchild " << reply << " still runs";
 }
 
 }  // namespace
