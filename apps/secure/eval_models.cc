@@ -130,8 +130,8 @@ void CheckOutputFile(const std::string& flag, const std::string& path) {
   const fs::path parent = fs::path(path).has_parent_path() ? fs::path(path).parent_path()
                                                            : fs::path(".");
   SECURE_CHECK(fs::is_directory(parent, ec),
-               flag << " = '" << path << "': the directory '" << parent.string()
-                    << "' does not exist");
+               flag << " = '" << path << "': '" << parent.string()
+                    << (fs::exists(parent, ec) ? "' is not a directory" : "' does not exist"));
   // A file is written next to its name and renamed over it (WriteFileAtomically): its
   // directory must be writable; a device or FIFO (/dev/stdout) is written directly.
   if (::access(parent.c_str(), W_OK) == 0) return;
