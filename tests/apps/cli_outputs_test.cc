@@ -164,13 +164,19 @@ TEST(CliTest, SameSeedGivesByteIdenticalModelFilesTimingStaysInTheJson) {
 // ------------------------------------------------------------------------------------------
 // `secure compare`: two `secure eval --json` results of the same episodes, paired by seed.
 
-TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
-  const std::string dir = (TempDir() / "compare").string();
+// A BC policy on the double integrator: 12 demonstrations and DIR/bc.model.
+void TrainDoubleIntegratorBc(const std::string& dir, int epochs) {
   Result r = RunCli("demos generate --domain double-integrator --episodes 12 --out " + dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = RunCli("policy train --algo bc --demos " + dir + "/demos.csv --out " + dir +
-             "/bc.model --epochs 3");
+             "/bc.model --epochs " + std::to_string(epochs));
   ASSERT_EQ(r.exit_code, 0) << r.err;
+}
+
+TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
+  const std::string dir = (TempDir() / "compare").string();
+  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 3));
+  Result r;
   const auto eval = [&](const std::string& name, const std::string& flags) {
     const Result e = RunCli("eval --domain double-integrator --bc " + dir +
                             "/bc.model --barrier ground-truth --methods bc,bc+shield --seeds 3 "
@@ -264,11 +270,8 @@ TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
 
 TEST(CliTest, EvalEpisodesOutHasARowPerEpisodeAndTheListsNameThem) {
   const std::string dir = (TempDir() / "episodes_out").string();
-  Result r = RunCli("demos generate --domain double-integrator --episodes 12 --out " + dir);
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = RunCli("policy train --algo bc --demos " + dir + "/demos.csv --out " + dir +
-             "/bc.model --epochs 2");
-  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
+  Result r;
   const std::string base = "eval --domain double-integrator --bc " + dir +
                            "/bc.model --barrier ground-truth --methods bc,bc+shield --seeds 2 "
                            "--first-seed 5 --episodes 4 --samples 16";

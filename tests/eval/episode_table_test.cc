@@ -1,7 +1,6 @@
 // Per-episode outcomes (SeedResult::episode_outcomes, eval/episode_table.h): they sum to the
 // seed's counts, the CSV has one row per method, seed and episode, the lists name the dangerous
-// episodes, and replaying a listed episode alone (the code path `secure render` uses) reproduces
-// its outcome.
+// episodes (render_test.cc: replaying a listed episode alone reproduces its outcome).
 #include "secure/eval/episode_table.h"
 
 #include <gtest/gtest.h>
@@ -14,9 +13,7 @@
 
 #include "domains/double_integrator/ground_truth_barrier.h"
 #include "domains/double_integrator/reach_avoid.h"
-#include "secure/eval/render.h"
 #include "tests/eval/pd_policy.h"
-#include "tests/eval/renderable_env.h"
 #include "tests/test_util.h"
 
 namespace secure::eval {
@@ -24,7 +21,6 @@ namespace {
 
 namespace di = domains::double_integrator;
 using test::ErrorOf;
-using test::RenderableEnv;
 
 // The PD policy straight through the obstacle, unshielded (airl) and under a shield whose barrier
 // is the ground truth of an obstacle half the real one's radius: it lets the policy into the
@@ -173,38 +169,6 @@ TEST(EpisodeOutcomesTest, TheListsNameEachSeedsDangerousEpisodesAndHowToRenderOn
       << lists;
   // Without a render command: the lists alone.
   EXPECT_EQ(EpisodeLists(evaluation, 3, nullptr).find("render one"), std::string::npos);
-}
-
-// A listed dangerous episode, played alone with its seed and index as `secure render` plays it
-// (RenderEpisode: RunMethod with EpisodeRunnerOptions::first_episode), has the same outcome.
-TEST(EpisodeOutcomesTest, ReplayingAListedDangerousEpisodeReproducesIt) {
-  const Fixture f;
-  const std::uint64_t seed = 4;
-  const Evaluation evaluation = f.Evaluate(seed, 1, 12);
-  int replayed = 0;
-  for (Method method : {Method::kAirl, Method::kSecure}) {
-    SCOPED_TRACE(ToString(kMethodNames, method));
-    const SeedResult& r = evaluation.methods().at(method).per_seed[0];
-    ASSERT_GT(r.dangerous, 0);
-    for (long episode : r.DangerousEpisodes()) {
-      const EpisodeOutcome& listed = r.episode_outcomes[static_cast<std::size_t>(episode)];
-      RenderableEnv env(std::make_unique<di::ReachAvoidEnv>(f.task));
-      long first_collision_frame = -1;
-      const RenderedEpisode replay = RenderEpisode(
-          env, method, f.models, shield::ShieldOptions{}, EvaluationSeed(seed), episode, 4, 2,
-          [&](domains::Frame&, const FrameInfo& info) {
-            if (info.collided && first_collision_frame < 0) first_collision_frame = info.step;
-          });
-      EXPECT_TRUE(replay.dangerous) << "episode " << episode;
-      EXPECT_EQ(replay.success, listed.success);
-      EXPECT_EQ(replay.steps, listed.steps);
-      EXPECT_EQ(replay.collision_events, listed.collision_events);
-      // Frame k shows the state after step k - 1 (0-based): the first dangerous step's frame.
-      EXPECT_EQ(first_collision_frame, listed.first_dangerous_step + 1);
-      ++replayed;
-    }
-  }
-  EXPECT_GT(replayed, 1);
 }
 
 TEST(EpisodeOutcomesTest, AResultWithoutOutcomesIsNamed) {
