@@ -2,8 +2,13 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <memory>
 
 #include "secure/common/error.h"
@@ -111,6 +116,48 @@ std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
   return std::make_unique<dynamics::LearnedModelEnvironment>(
       std::move(env), std::move(model), path,
       std::max(shield.num_samples, shield.num_probes), pessimism);
+}
+
+}  // namespace secure::cli
+
+namespace secure::cli {
+
+void CheckOutputFile(const std::string& flag, const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  SECURE_CHECK(!fs::is_directory(path, ec),
+               flag << " = '" << path << "': a directory, not a file");
+  const fs::path parent = fs::path(path).has_parent_path() ? fs::path(path).parent_path()
+                                                           : fs::path(".");
+  SECURE_CHECK(fs::is_directory(parent, ec),
+               flag << " = '" << path << "': '" << parent.string()
+                    << (fs::exists(parent, ec) ? "' is not a directory" : "' does not exist"));
+  // A file is written next to its name and renamed over it (WriteFileAtomically): its
+  // directory must be writable; a device or FIFO (/dev/stdout) is written directly.
+  if (::access(parent.c_str(), W_OK) == 0) return;
+  const int error = errno;
+  SECURE_CHECK(fs::exists(path, ec) && !fs::is_regular_file(path, ec) &&
+                   ::access(path.c_str(), W_OK) == 0,
+               flag << " = '" << path << "': cannot write in '" << parent.string()
+                    << "': " << std::strerror(error));
+}
+
+std::string GivenRenderFlags(const CLI::App& cmd) {
+  // The options of `secure eval` that `secure render` has too, with the same meaning.
+  static const std::vector<std::string> kNotRender = {
+      "domain", "config", "run",      "airl",         "bc",       "joint",   "methods",
+      "dynamics", "seeds", "first-seed", "episodes", "tost-bound", "json", "episodes-out",
+      "help",   "pessimism", "pessimism-kappa", "pessimism-linear"};
+  std::string out;
+  for (const CLI::Option* option : cmd.get_options()) {
+    if (option->count() == 0 || option->get_lnames().empty()) continue;
+    const std::string& name = option->get_lnames().front();
+    if (std::find(kNotRender.begin(), kNotRender.end(), name) != kNotRender.end()) continue;
+    out += " --" + name;
+    if (option->get_expected_min() == 0) continue;  // a flag
+    for (const std::string& value : option->results()) out += " " + value;
+  }
+  return out;
 }
 
 }  // namespace secure::cli

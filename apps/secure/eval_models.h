@@ -79,4 +79,13 @@ std::unique_ptr<domains::Environment> MakeLearnedModelEnvironment(
     std::unique_ptr<domains::Environment> env, const std::string& path,
     const shield::ShieldOptions& shield, const dynamics::PessimismOptions& pessimism = {});
 
+/// Checks, before any work, that `path` (the value of `flag`) can be written as a file: not a
+/// directory, in an existing directory that this process may write to. @throws secure::Error
+/// "<flag> = '<path>': <reason>".
+void CheckOutputFile(const std::string& flag, const std::string& path);
+
+/// The options given to `cmd` that `secure render` takes as they are (the shield flags,
+/// --barrier, --airl-reward), as " --name value ...", for a render command line to print.
+std::string GivenRenderFlags(const CLI::App& cmd);
+
 }  // namespace secure::cli

@@ -192,7 +192,8 @@ struct ExperimentCommand {
                     "(default: the "
                     "experiment's)");
     cmd->add_option("--out", out,
-                    "directory for the data, per-seed models and learning curves, result.json")
+                    "directory for the data, per-seed models and learning curves, result.json, "
+                    "episodes.csv (per-episode outcomes)")
         ->transform(DirectoryPath());
     cmd->add_option("--shard", shard,
                     "k/N: run only the seeds with index k mod N (0-based; needs --out), then "
@@ -314,12 +315,13 @@ struct MergeCommand {
         "merge",
         "The result of a sharded experiment (--shard, a SLURM array, mpirun): checks that the "
         "task files of RUN_DIR... (the shards' --out directories, or the one they shared) are "
-        "of one experiment, with every seed once, and writes result.json and the table an "
+        "of one experiment, with every seed once, and writes result.json, episodes.csv and the table an "
         "unsharded run writes");
     cmd->add_option("run_dirs", dirs, "the shards' run directories")
         ->required()
         ->transform(DirectoryPath());
-    cmd->add_option("--out", out, "where to write result.json (default: the first RUN_DIR)")
+    cmd->add_option("--out", out,
+                    "where to write result.json and episodes.csv (default: the first RUN_DIR)")
         ->transform(DirectoryPath());
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     cmd->callback([this] { Run(); });
@@ -369,6 +371,7 @@ struct MergeCommand {
     const RunDirectoryLock lock(target);  // not while a run (or a shard) still writes there
     const experiments::ExperimentResult result = experiments::MergeExperiment(dirs);
     WriteFileAtomically(target + "/result.json", result.ToJson().dump(2) + "\n");
+    const std::string episodes_not_written = experiments::WriteEpisodesFile(result, target);
     const int linked = LinkSeedDirectories(target);
     // Directories named twice (SH0 ./SH0) count once, as the merge reads them once.
     std::vector<std::filesystem::path> distinct;
@@ -381,12 +384,17 @@ struct MergeCommand {
               << ToString(experiments::kExperimentKindNames, result.kind) << " on " << result.domain
               << " from " << distinct.size() << " director"
               << (distinct.size() == 1 ? "y" : "ies")
-              << ", wrote " << target << "/result.json";
+              << ", wrote " << target << "/result.json"
+              << (episodes_not_written.empty() ? " and " + target + "/" +
+                                                     experiments::kEpisodesFile
+                                               : std::string());
     if (linked > 0)
       std::cerr << " and linked " << linked << " seed director" << (linked == 1 ? "y" : "ies")
                 << " of the shards into it (seed-K -> SHARD/seed-K: the models and curves "
                    "`secure report` draws)";
     std::cerr << "\n";
+    if (!episodes_not_written.empty())
+      std::cerr << "secure experiment merge: " << episodes_not_written << "\n";
     PrintResult(result, json, "experiment merge");
   }
 };

@@ -16,12 +16,14 @@
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
+#include "secure/common/atomic_file.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/progress.h"
 #include "secure/common/timer.h"
 #include "secure/data/data.h"
+#include "secure/eval/episode_table.h"
 #include "secure/eval/policy_eval.h"
 #include "secure/experiments/experiment.h"
 #include "secure/nn/model_file.h"
@@ -317,6 +319,8 @@ struct EvalCommand {
   PessimismFlags pessimism_flags;  // with --dynamics
   double tost_bound = 0.10;
   bool json = false;
+  std::string episodes_out;
+  CLI::App* command = nullptr;
 
   const Config* config = nullptr;
 
@@ -364,8 +368,32 @@ struct EvalCommand {
     cmd->add_option("--tost-bound", tost_bound, "TOST equivalence bound (fraction)")
         ->capture_default_str();
     shield_flags.Add(cmd, &shield, /*domain_preset=*/true);  // `secure domains NAME` lists it
-    cmd->add_flag("--json", json, "print every number as JSON");
+    cmd->add_flag("--json", json,
+                  "print every number as JSON (each seed's record lists its dangerous_episodes "
+                  "and failed_episodes)");
+    cmd->add_option("--episodes-out", episodes_out,
+                    "also write the per-episode outcomes as CSV: one row per method, seed and "
+                    "episode (success, dangerous, steps, first dangerous step, interventions, "
+                    "...; secure/eval/episode_table.h); the text output lists each seed's "
+                    "dangerous and failed episodes either way");
+    command = cmd;
     cmd->callback([this] { Run(); });
+  }
+
+  // The `secure render` command line of one episode, with the flags of this evaluation that it
+  // takes too ("" with --dynamics: render cannot replay an evaluation through a learned model).
+  std::string RenderCommand(eval::Method method, std::uint64_t seed, long episode) const {
+    if (!dynamics_path.empty()) return "";
+    const std::string& policy = eval::UsesBcPolicy(method)      ? bc_path
+                                : eval::UsesJointPolicy(method) ? joint_path
+                                                                : airl_path;
+    std::string line = "secure render --domain " + domain;
+    if (!config->path.empty()) line += " --config " + config->path;
+    if (!run_dir.empty()) line += " --run " + run_dir;
+    if (!policy.empty()) line += " --policy " + policy;
+    return line + GivenRenderFlags(*command) + " --seed " + std::to_string(seed) + " --episode " +
+           std::to_string(episode) + " --method " + ToString(eval::kMethodNames, method) +
+           " --frames-dir DIR";
   }
 
   void Run() {
@@ -382,6 +410,7 @@ struct EvalCommand {
     shield_options.Validate();
     SECURE_CHECK(!run_dir.empty() || !airl_path.empty() || !bc_path.empty() || !joint_path.empty(),
                  "give --run DIR or at least one of --airl, --bc, --joint");
+    if (!episodes_out.empty()) CheckOutputFile("--episodes-out", episodes_out);
     // The last seed, first_seed + seeds - 1, must not wrap around to 0.
     SECURE_CHECK(first_seed <= std::numeric_limits<std::uint64_t>::max() -
                                    static_cast<std::uint64_t>(seeds - 1),
@@ -416,6 +445,8 @@ struct EvalCommand {
       if (!json) std::cerr << "seed " << seed << " evaluated\n";
     }
     evaluation.Finish();
+    if (!episodes_out.empty())
+      WriteFileAtomically(episodes_out, eval::EpisodeCsv(evaluation, first_seed));
     if (json) {
       nlohmann::json r = evaluation.ToJson();
       r["command"] = "eval";
@@ -434,6 +465,11 @@ struct EvalCommand {
       PrintJson(r);
     } else {
       std::cout << evaluation.Table();
+      const std::string lists = eval::EpisodeLists(
+          evaluation, first_seed,
+          [this](eval::Method m, std::uint64_t s, long e) { return RenderCommand(m, s, e); });
+      if (!lists.empty()) std::cout << "\nDangerous and failed episodes:\n" << lists;
+      if (!episodes_out.empty()) std::cout << "\nper-episode outcomes: " << episodes_out << "\n";
     }
   }
 };

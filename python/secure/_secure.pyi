@@ -225,8 +225,11 @@ def run_episodes(env: Union[str, Any], policy: Policy, barrier: Optional[Barrier
     by `barrier` with the environment's shield model when given (keyword arguments: the shield's
     options; aggregation='top-q' with task_value=secure.AirlReward), else sampling the policy.
     Episode i draws from secure.episode_seed(seed, i). Returns
-    the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...).
-    Releases the GIL.
+    the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...,
+    dangerous_episodes and failed_episodes: the indices), with "episode_outcomes": a dict of int64
+    NumPy arrays, one entry per episode (episode, success, dangerous, steps, first_dangerous_step
+    (-1: none), collision_events, interventions, no_safe_action_decisions; summed they give the
+    counts). Releases the GIL.
     """
     ...
 

@@ -1,5 +1,7 @@
 // secure.Demonstrations, secure.Policy (load, mean, sample), secure.train_bc, secure.train_airl.
+#include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "python/src/common.h"
 #include "python/src/guard.h"
@@ -13,6 +15,32 @@
 #include "secure/policy/gaussian_policy.h"
 
 namespace secure::python {
+
+namespace {
+
+// SeedResult::episode_outcomes as columns: name -> int64 array (one entry per episode).
+py::dict EpisodeOutcomesToNumpy(const std::vector<eval::EpisodeOutcome>& outcomes) {
+  const auto column = [&](auto value) {
+    py::array_t<std::int64_t> a(static_cast<py::ssize_t>(outcomes.size()));
+    auto view = a.mutable_unchecked<1>();
+    for (std::size_t i = 0; i < outcomes.size(); ++i)
+      view(static_cast<py::ssize_t>(i)) = static_cast<std::int64_t>(value(outcomes[i]));
+    return a;
+  };
+  using E = const eval::EpisodeOutcome&;
+  py::dict d;
+  d["episode"] = column([](E e) { return e.episode; });
+  d["success"] = column([](E e) { return e.success ? 1 : 0; });
+  d["dangerous"] = column([](E e) { return e.dangerous ? 1 : 0; });
+  d["steps"] = column([](E e) { return e.steps; });
+  d["first_dangerous_step"] = column([](E e) { return e.first_dangerous_step; });
+  d["collision_events"] = column([](E e) { return e.collision_events; });
+  d["interventions"] = column([](E e) { return e.interventions; });
+  d["no_safe_action_decisions"] = column([](E e) { return e.no_safe_action_decisions; });
+  return d;
+}
+
+}  // namespace
 namespace {
 
 // Demonstrations from arrays: states (T, d), actions (T, n), episode (T,) labels (adjacent equal
@@ -341,7 +369,9 @@ with with_reward=True (policy, summary, secure.AirlReward). Releases the GIL.)do
           py::gil_scoped_release release;
           result = runner.Run(evaluate, shield ? &*shield : nullptr, episodes, seed);
         }
-        return ToPython(result.ToJson());
+        py::dict out = ToPython(result.ToJson());
+        out["episode_outcomes"] = EpisodeOutcomesToNumpy(result.episode_outcomes);
+        return out;
       },
       py::arg("env"), py::arg("policy"), py::arg("barrier") = nullptr, py::arg("episodes") = 1,
       py::arg("seed") = 0, py::arg("stop_on_collision") = false, py::kw_only(),
@@ -351,8 +381,11 @@ with the library's episode loop (eval::EpisodeRunner, as `secure eval` runs a me
 by `barrier` with the environment's shield model when given (keyword arguments: the shield's
 options; aggregation='top-q' with task_value=secure.AirlReward), else sampling the policy.
 Episode i draws from secure.episode_seed(seed, i). Returns
-the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...).
-Releases the GIL.)doc");
+the counts as a dict (successes, dangerous, steps, decisions, interventions, latency_us, ...,
+dangerous_episodes and failed_episodes: the indices), with "episode_outcomes": a dict of int64
+NumPy arrays, one entry per episode (episode, success, dangerous, steps, first_dangerous_step
+(-1: none), collision_events, interventions, no_safe_action_decisions; summed they give the
+counts). Releases the GIL.)doc");
 }
 
 }  // namespace secure::python

@@ -84,8 +84,9 @@ def test_airl_tiny(demos):
         secure.train_airl(demos, "double-integrator", iteration=1)
 
 
-def python_episodes(env, policy, shield, episodes, seed):
-    """secure.run_episodes (eval::EpisodeRunner) step by step in Python."""
+def python_episodes(env, policy, shield, episodes, seed, per_episode=None):
+    """secure.run_episodes (eval::EpisodeRunner) step by step in Python; each episode's
+    (success, dangerous, steps, first_dangerous_step, interventions) appended to `per_episode`."""
     counts = dict(successes=0, dangerous=0, collision_events=0, steps=0, decisions=0,
                   interventions=0)
     for i in range(episodes):
@@ -93,7 +94,9 @@ def python_episodes(env, policy, shield, episodes, seed):
         if shield is not None:
             shield.seed(env.rng.next_u64())
         collided = False
-        for _ in range(env.max_steps):
+        before = dict(counts)
+        first_dangerous_step = -1
+        for step in range(env.max_steps):
             if shield is not None:
                 shield.set_backup_action(env.backup_action(obs))
                 d = shield.decide(obs, policy.mean(obs), policy.sigma)
@@ -105,12 +108,18 @@ def python_episodes(env, policy, shield, episodes, seed):
             obs, reward, terminated, truncated, info = env.step(action)
             counts["steps"] += 1
             if info["collided"]:
+                if not collided:
+                    first_dangerous_step = step
                 collided = True
                 counts["collision_events"] += max(1, info["collisions"])
             if info["reached_goal"]:
                 counts["successes"] += 1
                 break
         counts["dangerous"] += collided
+        if per_episode is not None:
+            per_episode.append((counts["successes"] - before["successes"], int(collided),
+                                counts["steps"] - before["steps"], first_dangerous_step,
+                                counts["interventions"] - before["interventions"]))
     return counts
 
 
@@ -120,11 +129,22 @@ def test_run_episodes_equals_a_python_loop(demos, tiny_barrier, shielded):
     policy, _ = secure.train_bc(demos, hidden=[16], epochs=3, seed=2)
     env = secure.make_env("double-integrator", task={"max_steps": 60})
     shield = secure.Shield(barrier, env.dynamics) if shielded else None
-    ours = python_episodes(env, policy, shield, 3, seed=4)
+    rows = []
+    ours = python_episodes(env, policy, shield, 3, seed=4, per_episode=rows)
     theirs = secure.run_episodes(env, policy, barrier if shielded else None, episodes=3, seed=4)
     assert theirs["episodes"] == 3
     for key, value in ours.items():
         assert theirs[key] == value, key
+    # The per-episode outcomes: one entry per episode, as the Python loop saw them.
+    outcomes = theirs["episode_outcomes"]
+    np.testing.assert_array_equal(outcomes["episode"], [0, 1, 2])
+    for c, name in enumerate(("success", "dangerous", "steps", "first_dangerous_step",
+                              "interventions")):
+        assert outcomes[name].dtype == np.int64
+        np.testing.assert_array_equal(outcomes[name], [row[c] for row in rows], err_msg=name)
+    assert list(np.flatnonzero(outcomes["dangerous"])) == theirs["dangerous_episodes"]
+    assert list(np.flatnonzero(outcomes["success"] == 0)) == theirs["failed_episodes"]
+    assert outcomes["collision_events"].sum() == theirs["collision_events"]
 
 
 def test_top_q_shield_with_airls_reward(demos, tiny_barrier, tmp_path):

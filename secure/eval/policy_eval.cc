@@ -88,7 +88,25 @@ nlohmann::json SeedResult::ToJson() const {
     json["qp_decisions"] = qp_decisions;
     json["qp_rejected"] = qp_rejected;
   }
+  if (has_episode_outcomes()) {
+    json["dangerous_episodes"] = DangerousEpisodes();
+    json["failed_episodes"] = FailedEpisodes();
+  }
   return json;
+}
+
+std::vector<long> SeedResult::DangerousEpisodes() const {
+  std::vector<long> out;
+  for (const EpisodeOutcome& e : episode_outcomes)
+    if (e.dangerous) out.push_back(e.episode);
+  return out;
+}
+
+std::vector<long> SeedResult::FailedEpisodes() const {
+  std::vector<long> out;
+  for (const EpisodeOutcome& e : episode_outcomes)
+    if (!e.success) out.push_back(e.episode);
+  return out;
 }
 
 void EpisodePolicy::Sample(const Eigen::Ref<const Eigen::VectorXf>& observation, Rng& rng,
@@ -149,6 +167,7 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
   result.episodes = episodes;
   std::vector<double> latencies_us;
   latencies_us.reserve(static_cast<std::size_t>(episodes) * 64);
+  result.episode_outcomes.reserve(static_cast<std::size_t>(episodes));
   long steps_to_goal_sum = 0;
   long iterations_sum = 0;
   const Eigen::VectorXf& sigma = policy.sigma();
@@ -158,7 +177,8 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
     env_.Reset(rng, observation_);
     if (shield != nullptr) shield->Seed(rng.NextU64());
     if (observer != nullptr) observer->OnEpisodeStart(episode, observation_);
-    bool collided = false;
+    EpisodeOutcome& outcome_of_episode = result.episode_outcomes.emplace_back();
+    outcome_of_episode.episode = episode;
     for (int step = 0; step < env_.max_steps(); ++step) {
       const Stopwatch decision_clock;
       const shield::Decision* decision = nullptr;
@@ -175,10 +195,10 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
         decision = &d;
         ++result.decisions;
         iterations_sum += d.iterations;
-        if (d.intervened) ++result.interventions;
+        if (d.intervened) ++outcome_of_episode.interventions;
         switch (d.status) {
           case shield::Status::kSafeAfterResampling: ++result.resampled_decisions; break;
-          case shield::Status::kNoSafeAction: ++result.no_safe_action_decisions; break;
+          case shield::Status::kNoSafeAction: ++outcome_of_episode.no_safe_action_decisions; break;
           case shield::Status::kInvalidInput: ++result.invalid_input_decisions; break;
           case shield::Status::kSafe: break;
         }
@@ -195,22 +215,29 @@ SeedResult EpisodeRunner::Run(EpisodePolicy& policy, shield::Shield* shield, lon
         latencies_us.push_back(decision_clock.Microseconds());
       }
       const domains::StepOutcome outcome = env_.Step(action_, observation_);
-      ++result.steps;
+      ++outcome_of_episode.steps;
       if (observer != nullptr) {
         observer->OnStep(StepView{episode, step, observation_, action_, outcome, decision});
       }
       if (outcome.collided) {
-        collided = true;
-        result.collision_events += std::max(1, outcome.collisions);
+        if (!outcome_of_episode.dangerous) outcome_of_episode.first_dangerous_step = step;
+        outcome_of_episode.dangerous = true;
+        outcome_of_episode.collision_events += std::max(1, outcome.collisions);
         if (options_.stop_on_collision) break;
       }
       if (outcome.reached_goal) {
-        ++result.successes;
+        outcome_of_episode.success = true;
         steps_to_goal_sum += step + 1;
         break;
       }
     }
-    if (collided) ++result.dangerous;
+    // The seed's counts are the sums of its episodes'.
+    result.steps += outcome_of_episode.steps;
+    result.successes += outcome_of_episode.success ? 1 : 0;
+    result.dangerous += outcome_of_episode.dangerous ? 1 : 0;
+    result.collision_events += outcome_of_episode.collision_events;
+    result.interventions += outcome_of_episode.interventions;
+    result.no_safe_action_decisions += outcome_of_episode.no_safe_action_decisions;
     if (observer != nullptr) observer->OnEpisodeEnd(episode);
   }
   if (result.successes > 0) {

@@ -110,6 +110,20 @@ shield::ShieldOptions ShieldOptionsFor(Method method, const shield::ShieldOption
 /// "bc,airl,secure" -> methods; throws naming the unknown name and listing the valid ones.
 std::vector<Method> ParseMethods(const std::string& list);
 
+/// The outcome of one episode (`secure eval --episodes-out`, the experiment's episodes.csv):
+/// which episodes of a seed were dangerous or failed, to replay them (`secure render --episode`).
+struct EpisodeOutcome {
+  long episode = 0;                // its index in the seed's evaluation (`secure render --episode`)
+  bool success = false;            // reached the goal
+  bool dangerous = false;          // at least one collision (the domain's dangerous event)
+  int steps = 0;                   // environment steps
+  int first_dangerous_step = -1;   // 0-based index of the first step that collided; -1: none
+                                   // (the render's frame first_dangerous_step + 1 shows it)
+  long collision_events = 0;
+  long interventions = 0;          // decisions whose policy draw had g < 0 (0 unshielded)
+  long no_safe_action_decisions = 0;
+};
+
 /// The outcome of N episodes of one method with one seed.
 struct SeedResult {
   long episodes = 0;
@@ -140,12 +154,26 @@ struct SeedResult {
   static constexpr int kReferenceBatch = 128;
   static constexpr int kReferenceRepeats = 15;
   double seconds = 0.0;
+  // One per episode, in order (episode_outcomes[i].episode = the run's first episode + i); empty
+  // for a result read back from a task file written before they were recorded.
+  std::vector<EpisodeOutcome> episode_outcomes;
+
+  /// Whether episode_outcomes holds every episode.
+  bool has_episode_outcomes() const {
+    return episodes > 0 && episode_outcomes.size() == static_cast<std::size_t>(episodes);
+  }
+  /// The indices of the episodes that were dangerous / did not reach the goal (empty without
+  /// episode_outcomes).
+  std::vector<long> DangerousEpisodes() const;
+  std::vector<long> FailedEpisodes() const;
 
   double success_rate() const { return episodes ? double(successes) / double(episodes) : 0.0; }
   double dangerous_rate() const { return episodes ? double(dangerous) / double(episodes) : 0.0; }
   double interventions_per_episode() const {
     return episodes ? double(interventions) / double(episodes) : 0.0;
   }
+  /// The counts, rates and latencies; with episode_outcomes also "dangerous_episodes" and
+  /// "failed_episodes" (the indices: DangerousEpisodes(), FailedEpisodes()).
   nlohmann::json ToJson() const;
 };
 

@@ -214,6 +214,8 @@ ExperimentResult RunExperimentWithProgress(ExperimentKind kind, const Domain& do
   result.seconds = clock.Seconds();
   if (!o.output_dir.empty()) {
     WriteFileAtomically(o.output_dir + "/result.json", result.ToJson().dump(2) + "\n");
+    const std::string not_written = WriteEpisodesFile(result, o.output_dir);
+    if (!not_written.empty()) progress.Line([&](std::ostream& out) { out << not_written; });
   }
   return std::move(p.result);
 }

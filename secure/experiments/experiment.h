@@ -233,7 +233,22 @@ struct ExperimentResult {
   /// The per-seed closed-loop check of Table(): candidates tried, the selected one, its held-out
   /// rates and the verdict, and how many seeds were replaced or failed (empty when it was off).
   std::string ClosedLoopTable() const;
+  /// Whether every seed's results hold their per-episode outcomes (eval::SeedResult::
+  /// episode_outcomes; a seed reused from a task file written before they were recorded has none).
+  bool HasEpisodeOutcomes() const;
+  /// The per-episode outcomes, <output_dir>/episodes.csv: the CSV of `secure eval --episodes-out`
+  /// (secure/eval/episode_table.h; seed = the training seed, episode = the index `secure render
+  /// --episode` takes); kind sensitivity prefixes a column `variant`. The same bytes for a run
+  /// and for the merge of its shards. @throws secure::Error if !HasEpisodeOutcomes().
+  std::string EpisodesCsv() const;
 };
+
+/// The name of the per-episode outcomes file in a run directory.
+constexpr const char* kEpisodesFile = "episodes.csv";
+
+/// Writes result.EpisodesCsv() to <dir>/episodes.csv and returns "" or, when a seed has no
+/// per-episode outcomes, writes nothing and returns why (for the progress stream).
+std::string WriteEpisodesFile(const ExperimentResult& result, const std::string& dir);
 
 /// Runs one experiment of `kind` on `domain`; progress lines go to `progress` when
 /// options.verbose (may be null). @throws secure::Error on invalid options, or if any stage fails

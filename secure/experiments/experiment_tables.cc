@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "secure/common/atomic_file.h"
+#include "secure/eval/episode_table.h"
 #include "secure/experiments/internal/numbers.h"
 
 namespace secure::experiments {
@@ -177,6 +179,32 @@ std::string ExperimentResult::CheckTable() const {
              .dump()
       << ").\n";
   return out.str();
+}
+
+bool ExperimentResult::HasEpisodeOutcomes() const {
+  for (const auto& [name, evaluation] : evaluations)
+    if (!eval::HasEpisodeOutcomes(evaluation)) return false;
+  return true;
+}
+
+std::string ExperimentResult::EpisodesCsv() const {
+  const bool sensitivity = kind == ExperimentKind::kSensitivity;
+  std::string csv = eval::EpisodeCsvHeader(sensitivity);
+  for (const auto& [name, evaluation] : evaluations)
+    eval::AppendEpisodeCsvRows(evaluation, options.first_seed, sensitivity ? &name : nullptr,
+                               &csv);
+  return csv;
+}
+
+std::string WriteEpisodesFile(const ExperimentResult& result, const std::string& dir) {
+  if (!result.HasEpisodeOutcomes()) {
+    return std::string(kEpisodesFile) +
+           " not written: a seed's task file was written before per-episode outcomes were "
+           "recorded (remove its seed-K/task.json to recompute it, or replay the evaluation "
+           "with `secure eval --run " + dir + " --episodes-out FILE`)";
+  }
+  WriteFileAtomically(dir + "/" + kEpisodesFile, result.EpisodesCsv());
+  return "";
 }
 
 }  // namespace secure::experiments

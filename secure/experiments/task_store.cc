@@ -19,7 +19,79 @@
 namespace secure::experiments::internal {
 namespace {
 
-nlohmann::json SeedResultJson(const eval::SeedResult& r) { return r.ToJson(); }
+// The per-episode outcomes as columns (episode i of the seed's evaluation is entry i).
+constexpr const char* kEpisodeColumns[] = {"success",          "dangerous",
+                                           "steps",            "first_dangerous_step",
+                                           "collision_events", "interventions",
+                                           "no_safe_action_decisions"};
+
+long EpisodeColumn(const eval::EpisodeOutcome& e, int column) {
+  switch (column) {
+    case 0: return e.success ? 1 : 0;
+    case 1: return e.dangerous ? 1 : 0;
+    case 2: return e.steps;
+    case 3: return e.first_dangerous_step;
+    case 4: return e.collision_events;
+    case 5: return e.interventions;
+    default: return e.no_safe_action_decisions;
+  }
+}
+
+nlohmann::json SeedResultJson(const eval::SeedResult& r) {
+  nlohmann::json j = r.ToJson();
+  if (!r.has_episode_outcomes()) return j;
+  nlohmann::json columns = nlohmann::json::object();
+  for (int c = 0; c < 7; ++c) {
+    std::vector<long> values;
+    values.reserve(r.episode_outcomes.size());
+    for (const eval::EpisodeOutcome& e : r.episode_outcomes) values.push_back(EpisodeColumn(e, c));
+    columns[kEpisodeColumns[c]] = std::move(values);
+  }
+  j["episode_outcomes"] = std::move(columns);
+  return j;
+}
+
+// The per-episode outcomes of a task file's record (none in a task file written before they were
+// recorded); each column must have one value per episode, and sum to the seed's count.
+void EpisodeOutcomesFromJson(const nlohmann::json& j, eval::SeedResult* r) {
+  if (!j.contains("episode_outcomes")) return;
+  const nlohmann::json& columns = j.at("episode_outcomes");
+  const std::size_t n = static_cast<std::size_t>(std::max(0L, r->episodes));
+  r->episode_outcomes.resize(n);
+  for (int c = 0; c < 7; ++c) {
+    const std::vector<long> values = columns.at(kEpisodeColumns[c]).get<std::vector<long>>();
+    SECURE_CHECK(values.size() == n, "episode_outcomes." << kEpisodeColumns[c] << " has "
+                                                         << values.size() << " values, expected "
+                                                         << n << " (episodes)");
+    for (std::size_t i = 0; i < n; ++i) {
+      eval::EpisodeOutcome& e = r->episode_outcomes[i];
+      e.episode = static_cast<long>(i);
+      const long v = values[i];
+      switch (c) {
+        case 0: e.success = v != 0; break;
+        case 1: e.dangerous = v != 0; break;
+        case 2: e.steps = static_cast<int>(v); break;
+        case 3: e.first_dangerous_step = static_cast<int>(v); break;
+        case 4: e.collision_events = v; break;
+        case 5: e.interventions = v; break;
+        default: e.no_safe_action_decisions = v; break;
+      }
+    }
+  }
+}
+
+// The per-episode outcomes (if any) sum to the seed's counts; `where` names the record.
+void CheckEpisodeSums(const eval::SeedResult& r, const std::string& where) {
+  long sums[7] = {0, 0, 0, 0, 0, 0, 0};
+  for (const eval::EpisodeOutcome& e : r.episode_outcomes)
+    for (int c = 0; c < 7; ++c) sums[c] += c == 3 ? 0 : EpisodeColumn(e, c);
+  const long want[7] = {r.successes,       r.dangerous,     r.steps, 0,
+                        r.collision_events, r.interventions, r.no_safe_action_decisions};
+  for (int c = 0; c < 7; ++c)
+    SECURE_CHECK(sums[c] == want[c] || r.episode_outcomes.empty(),
+                 where << ": episode_outcomes." << kEpisodeColumns[c] << " sum to " << sums[c]
+                       << ", the seed's count is " << want[c]);
+}
 
 eval::SeedResult SeedResultFromJson(const nlohmann::json& j) {
   eval::SeedResult r;
@@ -46,6 +118,7 @@ eval::SeedResult SeedResultFromJson(const nlohmann::json& j) {
   r.latency_us.max = Number(l, "max");
   r.latency_us.mean = Number(l, "mean");
   r.seconds = Number(j, "seconds");
+  EpisodeOutcomesFromJson(j, &r);
   return r;
 }
 
@@ -181,8 +254,14 @@ SeedOutcome OutcomeFromTask(const nlohmann::json& task, const std::string& path,
   try {
     for (const nlohmann::json& per_variant : task["results"]) {
       std::map<eval::Method, eval::SeedResult> methods;
-      for (const auto& [name, r] : per_variant.items())
-        methods[FromString(eval::kMethodNames, name, "method")] = SeedResultFromJson(r);
+      for (const auto& [name, r] : per_variant.items()) {
+        try {
+          methods[FromString(eval::kMethodNames, name, "method")] = SeedResultFromJson(r);
+        } catch (const Error& e) {
+          SECURE_THROW(path << ": results[" << outcome.results.size() << "]." << name << ": "
+                            << e.what());
+        }
+      }
       outcome.results.push_back(std::move(methods));
     }
   } catch (const nlohmann::json::exception& e) {
@@ -209,6 +288,7 @@ SeedOutcome OutcomeFromTask(const nlohmann::json& task, const std::string& path,
                            << r.decisions << "]");
       SECURE_CHECK(r.steps >= 0 && r.decisions >= 0 && r.collision_events >= 0,
                    where << ": negative steps, decisions or collision events");
+      CheckEpisodeSums(r, where);
     }
   }
   outcome.summary = task["summary"];

@@ -3,6 +3,9 @@
 // byte-identical model files for a seed, `secure compare`.
 #include "tests/apps/cli_test_util.h"
 
+#include <map>
+#include <sstream>
+
 namespace {
 using namespace secure::test::cli;  // NOLINT(google-build-using-namespace): the files' helpers
 
@@ -161,13 +164,19 @@ TEST(CliTest, SameSeedGivesByteIdenticalModelFilesTimingStaysInTheJson) {
 // ------------------------------------------------------------------------------------------
 // `secure compare`: two `secure eval --json` results of the same episodes, paired by seed.
 
-TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
-  const std::string dir = (TempDir() / "compare").string();
+// A BC policy on the double integrator: 12 demonstrations and DIR/bc.model.
+void TrainDoubleIntegratorBc(const std::string& dir, int epochs) {
   Result r = RunCli("demos generate --domain double-integrator --episodes 12 --out " + dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = RunCli("policy train --algo bc --demos " + dir + "/demos.csv --out " + dir +
-             "/bc.model --epochs 3");
+             "/bc.model --epochs " + std::to_string(epochs));
   ASSERT_EQ(r.exit_code, 0) << r.err;
+}
+
+TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
+  const std::string dir = (TempDir() / "compare").string();
+  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 3));
+  Result r;
   const auto eval = [&](const std::string& name, const std::string& flags) {
     const Result e = RunCli("eval --domain double-integrator --bc " + dir +
                             "/bc.model --barrier ground-truth --methods bc,bc+shield --seeds 3 "
@@ -253,6 +262,80 @@ TEST(CliTest, CompareTwoShieldSettingsOnTheSameEpisodes) {
   const std::string bad = Write("compare_bad.yaml", "pipeline:\n  shield: {sampler: sobol}\n");
   ExpectOneErrorLine(RunCli("eval --domain double-integrator --bc x.model --config " + bad),
                      "compare_bad.yaml [pipeline] [shield]");
+}
+
+// ------------------------------------------------------------------------------------------
+// `secure eval --episodes-out` (issue 30): one row per method, seed and episode, summing to the
+// reported counts; the text output lists the dangerous and failed episodes with a render command.
+
+TEST(CliTest, EvalEpisodesOutHasARowPerEpisodeAndTheListsNameThem) {
+  const std::string dir = (TempDir() / "episodes_out").string();
+  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
+  Result r;
+  const std::string base = "eval --domain double-integrator --bc " + dir +
+                           "/bc.model --barrier ground-truth --methods bc,bc+shield --seeds 2 "
+                           "--first-seed 5 --episodes 4 --samples 16";
+  const std::string csv_path = dir + "/episodes.csv";
+  r = RunCli(base + " --json --episodes-out " + csv_path);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  std::ifstream in(csv_path);
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line, "method,seed,episode,success,dangerous,steps,first_dangerous_step,"
+                  "collision_events,interventions,no_safe_action_decisions");
+  std::map<std::string, std::vector<long>> successes, dangerous;  // "method/seed" -> episodes
+  int rows = 0;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream row(line);
+    for (std::string cell; std::getline(row, cell, ',');) cells.push_back(cell);
+    ASSERT_EQ(cells.size(), 10u) << line;
+    const std::string key = cells[0] + "/" + cells[1];
+    if (cells[3] == "1") successes[key].push_back(std::stol(cells[2]));
+    if (cells[4] == "1") dangerous[key].push_back(std::stol(cells[2]));
+    ++rows;
+  }
+  EXPECT_EQ(rows, 2 * 2 * 4);
+  long listed = 0;
+  for (const char* method : {"bc", "bc+shield"}) {
+    for (int k = 0; k < 2; ++k) {
+      const nlohmann::json& seed = j["methods"][method]["seeds"][k];
+      const std::string key = std::string(method) + "/" + std::to_string(5 + k);
+      EXPECT_EQ(static_cast<long>(successes[key].size()), seed["successes"].get<long>()) << key;
+      EXPECT_EQ(dangerous[key], seed["dangerous_episodes"].get<std::vector<long>>()) << key;
+      EXPECT_EQ(static_cast<long>(seed["failed_episodes"].size()),
+                4 - seed["successes"].get<long>());
+      listed += static_cast<long>(seed["failed_episodes"].size() + dangerous[key].size());
+    }
+  }
+  // The text output: after the table, a line per seed with dangerous or failed episodes.
+  r = RunCli(base);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  if (listed > 0) {
+    EXPECT_HAS(r.out, "Dangerous and failed episodes:");
+    EXPECT_HAS(r.out, "(render one: secure render --domain double-integrator --policy " + dir +
+                          "/bc.model --barrier ground-truth --samples 16 --seed ");
+  } else {
+    EXPECT_EQ(r.out.find("Dangerous and failed episodes"), std::string::npos);
+  }
+
+  // A directory, a file as a directory, a missing directory: one line naming the flag and value,
+  // before any episode is played.
+  ExpectOneErrorLine(RunCli(base + " --episodes-out " + dir),
+                     "--episodes-out = '" + dir + "': a directory, not a file");
+  ExpectOneErrorLine(RunCli(base + " --episodes-out " + csv_path + "/x.csv"),
+                     "--episodes-out = '" + csv_path + "/x.csv': '" + csv_path +
+                         "' is not a directory");
+  ExpectOneErrorLine(RunCli(base + " --episodes-out " + dir + "/no/such/x.csv"),
+                     "'" + dir + "/no/such' does not exist");
+  if (::geteuid() != 0) {  // root may write anywhere
+    std::filesystem::create_directories(dir + "/ro");
+    std::filesystem::permissions(dir + "/ro", std::filesystem::perms::owner_read |
+                                                  std::filesystem::perms::owner_exec);
+    ExpectOneErrorLine(RunCli(base + " --episodes-out " + dir + "/ro/x.csv"),
+                       "cannot write in '" + dir + "/ro'");
+  }
 }
 
 }  // namespace

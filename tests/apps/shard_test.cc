@@ -93,6 +93,9 @@ class ShardTest : public secure::test::TempDirTest {
     const nlohmann::json merged = nlohmann::json::parse(Slurp(result_dir / "result.json"));
     EXPECT_EQ(secure::test::WithoutTimings(merged), secure::test::WithoutTimings(reference_));
     EXPECT_EQ(merged["experiment"]["seeds"].size(), 3u);
+    // The per-episode outcomes: the same file as the unsharded run's.
+    EXPECT_TRUE(Slurp(result_dir / "episodes.csv") == Slurp(dir_ / "full" / "episodes.csv"));
+    EXPECT_FALSE(Slurp(result_dir / "episodes.csv").empty());
     EXPECT_EQ(TableWithoutTimings(m.out), TableWithoutTimings(reference_table_));
   }
 

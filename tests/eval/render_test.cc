@@ -131,6 +131,54 @@ TEST(RenderEpisodeTest, DrawsTheEpisodeTheEvaluationPlays) {
   EXPECT_TRUE(saw_dangerous);  // the unshielded straight path crosses the obstacle
 }
 
+// Issue 30: a dangerous episode that the evaluation lists (SeedResult::DangerousEpisodes, `secure
+// eval`'s lists and --episodes-out), played alone with its seed and index as `secure render`
+// plays it, has the listed outcome: dangerous, the same steps and collisions, and its first
+// collision in the frame after the listed first dangerous step.
+TEST(RenderEpisodeTest, ReplayingAListedDangerousEpisodeReproducesIt) {
+  // The PD policy straight through the obstacle, unshielded (airl) and under a shield whose
+  // barrier is the ground truth of an obstacle half the real one's radius: some SECURE episodes
+  // are dangerous too.
+  const di::ReachAvoidOptions task;
+  di::GroundTruth too_small = task.truth;
+  too_small.radius = 0.5 * task.truth.radius;
+  const policy::GaussianPolicy pd = test::PdPolicy(task, 0.4);
+  SeedModels models;
+  models.airl = &pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(too_small); };
+  const std::uint64_t seed = 4;
+  Evaluation evaluation;
+  for (const auto& [method, r] :
+       EvaluateMethods(di::ReachAvoidEnv(task), {Method::kAirl, Method::kSecure}, models,
+                       shield::ShieldOptions{}, 12, EvaluationSeed(seed)))
+    evaluation.Add(method, r);
+  evaluation.Finish();
+  int replayed = 0;
+  for (Method method : {Method::kAirl, Method::kSecure}) {
+    SCOPED_TRACE(ToString(kMethodNames, method));
+    const SeedResult& r = evaluation.methods().at(method).per_seed[0];
+    ASSERT_GT(r.dangerous, 0);
+    for (long episode : r.DangerousEpisodes()) {
+      const EpisodeOutcome& listed = r.episode_outcomes[static_cast<std::size_t>(episode)];
+      RenderableEnv env(std::make_unique<di::ReachAvoidEnv>(task));
+      long first_collision_frame = -1;
+      const RenderedEpisode replay = RenderEpisode(
+          env, method, models, shield::ShieldOptions{}, EvaluationSeed(seed), episode, 4, 2,
+          [&](domains::Frame&, const FrameInfo& info) {
+            if (info.collided && first_collision_frame < 0) first_collision_frame = info.step;
+          });
+      EXPECT_TRUE(replay.dangerous) << "episode " << episode;
+      EXPECT_EQ(replay.success, listed.success);
+      EXPECT_EQ(replay.steps, listed.steps);
+      EXPECT_EQ(replay.collision_events, listed.collision_events);
+      // Frame k shows the state after step k - 1 (0-based): the first dangerous step's frame.
+      EXPECT_EQ(first_collision_frame, listed.first_dangerous_step + 1);
+      ++replayed;
+    }
+  }
+  EXPECT_GT(replayed, 1);
+}
+
 // What each frame shows (for the overlay): the step, h of the state shown from the method's
 // barrier (unshielded methods too), the decision that led there (shielded only), the outcome.
 TEST(RenderEpisodeTest, FrameInfoDescribesTheStateShown) {

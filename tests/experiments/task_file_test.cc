@@ -5,6 +5,7 @@
 #include <boost/crc.hpp>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -79,6 +80,44 @@ TEST_F(TaskFileTest, AnEditedTaskFileIsRefusedByARerunAndAMerge) {
   task.erase("checksum");
   WriteFileAtomically(Task(), task.dump(2));
   EXPECT_HAS(ErrorOf([&] { Run(); }), Task() + ": no checksum");
+}
+
+// Per-episode outcomes (issue 30) travel in the task file: a rerun that reuses it and a merge
+// write the same <run>/episodes.csv; edited outcomes that no longer sum to the seed's counts are
+// refused; a task file from before they were recorded is still reused, and episodes.csv is then
+// not written (and the reason given), never written incomplete.
+TEST_F(TaskFileTest, EpisodeOutcomesAreKeptInTheTaskFileAndWrittenAsEpisodesCsv) {
+  const ExperimentResult first = Run();
+  ASSERT_TRUE(first.HasEpisodeOutcomes());
+  const std::string csv = ReadFile(PathOf("run/episodes.csv"));
+  EXPECT_EQ(csv, first.EpisodesCsv());
+  EXPECT_EQ(csv.substr(0, csv.find('\n')),
+            "method,seed,episode,success,dangerous,steps,first_dangerous_step,collision_events,"
+            "interventions,no_safe_action_decisions");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 1 + 3);  // bc, seed 0, 3 episodes
+  std::filesystem::remove(PathOf("run/episodes.csv"));
+  Run();  // reused from the task file
+  EXPECT_EQ(ReadFile(PathOf("run/episodes.csv")), csv);
+  EXPECT_EQ(MergeExperiment({PathOf("run")}).EpisodesCsv(), csv);
+
+  nlohmann::json task = nlohmann::json::parse(ReadFile(Task()));
+  nlohmann::json& steps = task["results"][0]["bc"]["episode_outcomes"]["steps"];
+  ASSERT_EQ(steps.size(), 3u);
+  steps[0] = steps[0].get<long>() + 1;
+  task["checksum"] = Crc(task);
+  WriteFileAtomically(Task(), task.dump(2));
+  EXPECT_HAS(ErrorOf([&] { MergeExperiment({PathOf("run")}); }),
+             Task() + ": results[0].bc: episode_outcomes.steps sum to");
+
+  task["results"][0]["bc"].erase("episode_outcomes");
+  task["checksum"] = Crc(task);
+  WriteFileAtomically(Task(), task.dump(2));
+  std::filesystem::remove(PathOf("run/episodes.csv"));
+  const ExperimentResult old = Run();
+  EXPECT_FALSE(old.HasEpisodeOutcomes());
+  EXPECT_FALSE(std::filesystem::exists(PathOf("run/episodes.csv")));
+  EXPECT_HAS(WriteEpisodesFile(old, PathOf("run")), "episodes.csv not written");
+  EXPECT_HAS(ErrorOf([&] { old.EpisodesCsv(); }), "no per-episode outcomes");
 }
 
 // Issue 34, item 11: a task.json that is a directory, and a seed-K that is a dangling symbolic
