@@ -159,6 +159,7 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
   loop.max_epochs = options.max_epochs;
   loop.num_samples = train.x.size(0);
   loop.batch_size = options.batch_size;
+  loop.even_batches = options.even_batches;
   loop.patience = options.patience;
   loop.learning_rate = options.learning_rate;
   loop.final_learning_rate = options.final_learning_rate;

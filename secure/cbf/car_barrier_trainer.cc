@@ -470,6 +470,7 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   loop.max_epochs = options.max_epochs;
   loop.num_samples = train.n_safe + train.n_nd;
   loop.batch_size = options.batch_size;
+  loop.even_batches = options.even_batches;
   loop.patience = options.patience;
   loop.learning_rate = options.learning_rate;
   loop.final_learning_rate = options.final_learning_rate;

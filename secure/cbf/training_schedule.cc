@@ -13,17 +13,17 @@
 namespace secure::cbf {
 
 const std::vector<std::string>& TrainingSchedule::Keys() {
-  static const std::vector<std::string> keys = {"learning_rate", "final_learning_rate",
-                                                "weight_decay",  "batch_size",
-                                                "max_epochs",    "patience",
-                                                "seed",          "validation_fraction",
-                                                "threads",       "verbose"};
+  static const std::vector<std::string> keys = {
+      "learning_rate", "final_learning_rate", "weight_decay",        "batch_size",
+      "even_batches",  "max_epochs",          "patience",            "seed",
+      "validation_fraction", "threads",       "verbose"};
   return keys;
 }
 
 void TrainingSchedule::AddFields(YamlFields* fields) {
   fields->Field("learning_rate", &learning_rate).Field("final_learning_rate", &final_learning_rate);
   fields->Field("weight_decay", &weight_decay).Field("batch_size", &batch_size);
+  fields->Field("even_batches", &even_batches);
   fields->Field("max_epochs", &max_epochs).Field("patience", &patience);
   fields->Field("validation_fraction", &validation_fraction).Field("seed", &seed);
   fields->Field("threads", &threads).Field("verbose", &verbose);
@@ -68,6 +68,7 @@ void TrainingSchedule::AddJson(nlohmann::json* json) const {
                 {"validation_fraction", validation_fraction},
                 {"seed", seed},
                 {"threads", threads}});
+  if (even_batches) (*json)["even_batches"] = true;
 }
 
 }  // namespace secure::cbf

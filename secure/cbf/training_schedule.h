@@ -25,6 +25,10 @@ struct TrainingSchedule {
                                       // (= learning_rate: constant)
   double weight_decay = 0.0;          // L2 on weights (Adam's coupled decay)
   int batch_size = 128;               // states per minibatch (both classes shuffled together)
+  bool even_batches = false;          // minibatches of near-equal sizes instead of batch_size
+                                      // and a small remainder (nn::TrainingLoopOptions); off
+                                      // by default: it changes every model whose training set
+                                      // is not a multiple of batch_size
   int max_epochs = 400;               // passes over the training split (the car trainer: 30)
   int patience = 0;                   // stop after this many epochs without a better validation
                                       // score (0: never stop early, keep the best checkpoint)
@@ -41,7 +45,8 @@ struct TrainingSchedule {
   bool ApplyYamlKey(const std::string& key, const YAML::Node& value, const std::string& source);
   /// Adds the fields' keys to a field table.
   void AddFields(YamlFields* fields);
-  /// Adds the fields (not verbose) to `json`, an object.
+  /// Adds the fields (not verbose) to `json`, an object; even_batches only when set (model and
+  /// job files written before it existed keep their bytes).
   void AddJson(nlohmann::json* json) const;
 };
 

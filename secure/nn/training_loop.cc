@@ -27,6 +27,19 @@ void TrainingLoopOptions::Validate() const {
   SECURE_CHECK_FIELD(patience >= 0, "TrainingLoopOptions", "patience", patience, ">= 0");
 }
 
+std::vector<long> BatchSizes(long num_samples, int batch_size, bool even_batches) {
+  const long count = (num_samples + batch_size - 1) / batch_size;
+  std::vector<long> sizes(static_cast<std::size_t>(count), batch_size);
+  if (count == 0) return sizes;
+  if (!even_batches) {
+    sizes.back() = num_samples - (count - 1) * batch_size;
+    return sizes;
+  }
+  const long base = num_samples / count, extra = num_samples % count;
+  for (long i = 0; i < count; ++i) sizes[static_cast<std::size_t>(i)] = base + (i < extra ? 1 : 0);
+  return sizes;
+}
+
 double CosineLearningRate(double initial, double final_rate, int epoch, int max_epochs) {
   // The trainers' schedule, term for term (their model files depend on the exact doubles).
   const double progress = static_cast<double>(epoch - 1) / std::max(1, max_epochs - 1);

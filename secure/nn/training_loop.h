@@ -19,7 +19,8 @@
 //
 // Per epoch, in this order: the learning rate of the epoch; a Fisher–Yates shuffle (secure::Rng,
 // the caller's stream) of the sample order, which carries over from epoch to epoch; minibatches
-// of batch_size samples in that order (the last one smaller); the epoch's evaluation and best
+// of batch_size samples in that order (the last one smaller; or, with even_batches, as many
+// minibatches of near-equal sizes); the epoch's evaluation and best
 // checkpoint; on_epoch; the patience check. After the last epoch the best checkpoint is restored.
 // The same inputs and seed give the same calls in the same order, so the numbers of a trainer
 // built on it are a function of its options and data only.
@@ -48,6 +49,10 @@ struct TrainingLoopOptions {
   int max_epochs = 1;    // > 0
   long num_samples = 0;  // training samples (indices 0 .. num_samples - 1), >= 0
   int batch_size = 1;    // samples per optimiser step, > 0
+  // false: minibatches of batch_size, the last one smaller (n = 260, batch_size = 128: 128, 128,
+  // 4). true: the same ceil(n / batch_size) minibatches, of near-equal sizes (87, 87, 86): no
+  // optimiser step on a handful of samples (BatchSizes).
+  bool even_batches = false;
   int patience = 0;      // stop after this many epochs in a row without a better score
                          // (0: never)
   // Cosine decay of the learning rate from learning_rate (epoch 1) to final_learning_rate (the
@@ -59,6 +64,11 @@ struct TrainingLoopOptions {
   /// Throws secure::Error naming the field and value.
   void Validate() const;
 };
+
+/// The sizes of one epoch's minibatches, in order: ceil(num_samples / batch_size) of them; with
+/// even_batches the first num_samples % count have one sample more than the others, else all
+/// but the last have batch_size. Empty when num_samples is 0.
+std::vector<long> BatchSizes(long num_samples, int batch_size, bool even_batches);
 
 /// The learning rate of epoch `epoch` (1-based) of `max_epochs`:
 /// final + 0.5 (initial - final) (1 + cos(pi p)), p = (epoch - 1) / max(1, max_epochs - 1).
@@ -128,15 +138,17 @@ TrainingLoopResult RunTrainingLoop(const TrainingLoopOptions& options, Rng& rng,
   const long n = options.num_samples;
   std::vector<std::int64_t> order(static_cast<std::size_t>(n));
   std::iota(order.begin(), order.end(), std::int64_t{0});
+  const std::vector<long> batches = BatchSizes(n, options.batch_size, options.even_batches);
   for (int epoch = 1; epoch <= options.max_epochs; ++epoch) {
     if (steps.set_learning_rate)
       steps.set_learning_rate(CosineLearningRate(options.learning_rate, options.final_learning_rate,
                                                  epoch, options.max_epochs));
     Shuffle(order.begin(), order.end(), rng);
     double epoch_loss = 0.0;
-    for (long first = 0; first < n; first += options.batch_size) {
-      const long m = std::min<long>(options.batch_size, n - first);
+    long first = 0;
+    for (const long m : batches) {
       epoch_loss += steps.train_batch(order.data() + first, m) * static_cast<double>(m);
+      first += m;
       ++result.steps;
     }
     epoch_loss /= static_cast<double>(n);

@@ -114,6 +114,27 @@ TEST(BarrierTrainerTest, SameSeedSameWeightsOtherSeedOtherWeights) {
   EXPECT_NE(a.mlp.layers[0].weight, c.mlp.layers[0].weight);
 }
 
+// even_batches (YAML key, JSON only when set): the same optimiser steps, cut into near-equal
+// minibatches (130 states in batches of 64: 44, 43, 43 instead of 64, 64, 2), so other weights.
+TEST(BarrierTrainerTest, EvenBatchesKeepTheStepsAndChangeTheMinibatches) {
+  const auto safe = Disk(false, 80, 1);
+  const auto nd = Disk(true, 50, 2);
+  BarrierTrainerOptions o = Fast();
+  o.max_epochs = 5;
+  o.validation_fraction = 0.0;
+  EXPECT_FALSE(o.ToJson().contains("even_batches"));  // earlier files keep their bytes
+  BarrierTrainingSummary plain_summary, even_summary;
+  const BarrierNet plain = TrainBarrier(o, safe, nd, &plain_summary);
+  o.ApplyYaml(YAML::Load("{even_batches: true}"), "cfg.yaml");
+  ASSERT_TRUE(o.even_batches);
+  EXPECT_EQ(o.ToJson()["even_batches"], true);
+  const BarrierNet even = TrainBarrier(o, safe, nd, &even_summary);
+  EXPECT_EQ(plain_summary.iterations, 5 * 3);
+  EXPECT_EQ(even_summary.iterations, 5 * 3);
+  EXPECT_NE(plain.mlp.layers[0].weight, even.mlp.layers[0].weight);
+  EXPECT_EQ(even.provenance["options"]["even_batches"], true);
+}
+
 TEST(BarrierTrainerTest, EarlyStoppingAndCallbackStop) {
   BarrierTrainerOptions o = Fast();
   o.max_epochs = 500;

@@ -205,6 +205,50 @@ TEST(TrainingLoopTest, ShufflingIsAPermutationPerEpochAndAFunctionOfTheSeed) {
   }
 }
 
+// Even batches: the same number of optimiser steps per epoch, none on a small remainder (the
+// label-efficiency experiment's 260 labels in batches of 128 left every third step on 4 states).
+TEST(TrainingLoopTest, EvenBatchesSplitTheEpochIntoNearEqualMinibatches) {
+  EXPECT_EQ(BatchSizes(260, 128, false), (std::vector<long>{128, 128, 4}));
+  EXPECT_EQ(BatchSizes(260, 128, true), (std::vector<long>{87, 87, 86}));
+  EXPECT_EQ(BatchSizes(256, 128, true), (std::vector<long>{128, 128}));  // a multiple: unchanged
+  EXPECT_EQ(BatchSizes(5, 128, true), (std::vector<long>{5}));
+  EXPECT_TRUE(BatchSizes(0, 4, true).empty());
+  for (long n = 1; n <= 300; ++n) {
+    for (int b : {1, 3, 7, 128}) {
+      const std::vector<long> even = BatchSizes(n, b, true), plain = BatchSizes(n, b, false);
+      ASSERT_EQ(even.size(), plain.size()) << n << " " << b;
+      EXPECT_EQ(std::accumulate(even.begin(), even.end(), 0L), n);
+      const auto [lo, hi] = std::minmax_element(even.begin(), even.end());
+      EXPECT_LE(*hi, b);
+      EXPECT_LE(*hi - *lo, 1) << n << " " << b;
+    }
+  }
+
+  auto run = [](bool even) {
+    Fake f;
+    f.scores.assign(3, 1.0);
+    Rng rng(5);
+    TrainingLoopOptions o = Options(3, 10, 4);
+    o.even_batches = even;
+    const TrainingLoopResult r = RunTrainingLoop(o, rng, f.Steps());
+    EXPECT_EQ(r.steps, 3 * 3);
+    return f.batches;
+  };
+  const auto even = run(true), plain = run(false);
+  ASSERT_EQ(even.size(), 3u);
+  for (std::size_t e = 0; e < even.size(); ++e) {
+    ASSERT_EQ(even[e].size(), 3u);
+    EXPECT_EQ(even[e][0].size(), 4u);  // 4, 3, 3 instead of 4, 4, 2
+    EXPECT_EQ(even[e][1].size(), 3u);
+    EXPECT_EQ(even[e][2].size(), 3u);
+    // The same shuffled order, cut at other places.
+    std::vector<std::int64_t> a, b;
+    for (const auto& batch : even[e]) a.insert(a.end(), batch.begin(), batch.end());
+    for (const auto& batch : plain[e]) b.insert(b.end(), batch.begin(), batch.end());
+    EXPECT_EQ(a, b);
+  }
+}
+
 TEST(TrainingLoopTest, CosineLearningRatePerEpoch) {
   Fake f;
   f.scores.assign(5, 1.0);
