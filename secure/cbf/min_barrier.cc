@@ -6,6 +6,15 @@
 #include "secure/common/error.h"
 
 namespace secure::cbf {
+namespace {
+
+// f(first, m) for the chunks [first, first + m) of n states, m <= chunk.
+template <typename F>
+void ForEachChunk(Eigen::Index n, Eigen::Index chunk, F&& f) {
+  for (Eigen::Index first = 0; first < n; first += chunk) f(first, std::min(chunk, n - first));
+}
+
+}  // namespace
 
 MinBarrier::MinBarrier(std::vector<std::unique_ptr<Barrier>> members, int chunk)
     : members_(std::move(members)) {
@@ -50,10 +59,7 @@ void MinBarrier::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states
 
 void MinBarrier::Minimum(const Eigen::Ref<const Eigen::MatrixXf>& states,
                          Eigen::Ref<Eigen::VectorXf> h, bool dense) {
-  const Eigen::Index n = states.cols();
-  const Eigen::Index chunk = scratch_h_.size();
-  for (Eigen::Index first = 0; first < n; first += chunk) {
-    const Eigen::Index m = std::min(chunk, n - first);
+  ForEachChunk(states.cols(), scratch_h_.size(), [&](Eigen::Index first, Eigen::Index m) {
     const auto block = states.middleCols(first, m);
     auto out = h.segment(first, m);
     auto scratch = scratch_h_.head(m);
@@ -66,7 +72,7 @@ void MinBarrier::Minimum(const Eigen::Ref<const Eigen::MatrixXf>& states,
       dense ? member.EvaluateDense(block, scratch) : member.Evaluate(block, scratch);
       out = out.cwiseMin(scratch);
     }
-  }
+  });
 }
 
 void MinBarrier::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
@@ -76,10 +82,7 @@ void MinBarrier::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& sta
     Barrier::DoEvaluateGradient(states, h, gradients);  // central differences of the minimum
     return;
   }
-  const Eigen::Index n = states.cols();
-  const Eigen::Index chunk = scratch_h_.size();
-  for (Eigen::Index first = 0; first < n; first += chunk) {
-    const Eigen::Index m = std::min(chunk, n - first);
+  ForEachChunk(states.cols(), scratch_h_.size(), [&](Eigen::Index first, Eigen::Index m) {
     const auto block = states.middleCols(first, m);
     auto out_h = h.segment(first, m);
     auto out_g = gradients.middleCols(first, m);
@@ -94,7 +97,7 @@ void MinBarrier::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& sta
         }
       }
     }
-  }
+  });
 }
 
 }  // namespace secure::cbf

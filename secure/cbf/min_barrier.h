@@ -30,10 +30,13 @@ class MinBarrier final : public Barrier {
   int members() const { return static_cast<int>(members_.size()); }
 
  protected:
+  /// The least member h, chunk by chunk (member 0 writes h, the others the scratch).
   void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
                   Eigen::Ref<Eigen::VectorXf> h) override;
+  /// The same with every member's EvaluateDense.
   void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
                        Eigen::Ref<Eigen::VectorXf> h) override;
+  /// The arg-min member's h and gradient (analytic members), else central differences.
   void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h,
                           Eigen::Ref<Eigen::MatrixXf> gradients) override;
