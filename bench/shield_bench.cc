@@ -228,7 +228,9 @@ class PandaDynamics final : public domains::DynamicsModel {
 // ---------------------------------------------------------------------------------------------
 // Cases.
 
-enum class Net { kDoubleIntegrator, kDerby, kPanda, kDoubleIntegratorTruth };
+// kPandaEnsemble3: the Panda net's case with an ensemble of 3 such nets (h = min over them,
+// cbf::MinBarrier): the cost of BarrierTrainerOptions::ensemble = 3 per decision.
+enum class Net { kDoubleIntegrator, kDerby, kPanda, kDoubleIntegratorTruth, kPandaEnsemble3 };
 enum class Regime { kNoResampling, kResampling };
 
 const char* NetName(Net net) {
@@ -241,6 +243,8 @@ const char* NetName(Net net) {
       return "Panda";
     case Net::kDoubleIntegratorTruth:
       return "DITruth";
+    case Net::kPandaEnsemble3:
+      return "Panda ensemble";
   }
   return "?";
 }
@@ -361,11 +365,14 @@ Case MakeCase(Net net, Regime regime, int m) {
       c.sigma = Vec({0.5f, 0.5f});
       break;
     }
-    case Net::kPanda: {
+    case Net::kPanda:
+    case Net::kPandaEnsemble3: {
       const nn::MlpSpec spec = PandaSpec();
       cbf::BarrierNet bn;
       bn.mlp = nn::RandomMlpParams(spec, /*seed=*/42);
       bn.normalizer = nn::Normalizer::Identity(spec.input_dim);
+      for (int k = 1; net == Net::kPandaEnsemble3 && k < 3; ++k)
+        bn.more_members.push_back({nn::RandomMlpParams(spec, 42 + k), bn.normalizer});
       for (int i = 0; i < spec.input_dim; ++i) bn.features.push_back("x" + std::to_string(i));
       c.params = bn.mlp;
       c.normalizer = bn.normalizer;
@@ -586,6 +593,8 @@ SECURE_SHIELD_CASE(Derby_NoResampling, Net::kDerby, Regime::kNoResampling);
 SECURE_SHIELD_CASE(Derby_Resampling, Net::kDerby, Regime::kResampling);
 SECURE_SHIELD_CASE(Panda_NoResampling, Net::kPanda, Regime::kNoResampling);
 SECURE_SHIELD_CASE(Panda_Resampling, Net::kPanda, Regime::kResampling);
+SECURE_SHIELD_CASE(PandaEnsemble3_NoResampling, Net::kPandaEnsemble3, Regime::kNoResampling);
+SECURE_SHIELD_CASE(PandaEnsemble3_Resampling, Net::kPandaEnsemble3, Regime::kResampling);
 SECURE_SHIELD_CASE(DITruth_NoResampling, Net::kDoubleIntegratorTruth, Regime::kNoResampling);
 SECURE_SHIELD_CASE(DITruth_Resampling, Net::kDoubleIntegratorTruth, Regime::kResampling);
 

@@ -200,7 +200,7 @@ struct CheckCommand {
                                             std::optional<cbf::CarBarrierNet>* per_obstacle) const {
     const std::string kind = nn::ReadModelFile(model).kind;
     const std::string where = "the " + domain + " domain";
-    if (kind == cbf::kBarrierModelKind) {
+    if (cbf::IsFlatBarrierKind(kind)) {
       *flat = cbf::BarrierNet::Load(model);
       return (*flat)->MakeEvaluatorFor(features, where, model);
     }
@@ -216,7 +216,8 @@ struct CheckCommand {
       return (*per_obstacle)->MakeEvaluator(256);
     }
     SECURE_THROW(model << ": kind '" << kind << "' is not a barrier (expected "
-                       << cbf::kBarrierModelKind << " or " << cbf::kCarBarrierModelKind << ")");
+                       << cbf::kBarrierModelKind << ", " << cbf::kBarrierEnsembleModelKind
+                       << " or " << cbf::kCarBarrierModelKind << ")");
   }
 
   void Run() {

@@ -68,6 +68,9 @@ class TrainerFlags {
     Bind(cmd, "--unsafe-margin", &Options::unsafe_margin, "hinge margin for near-dangerous states");
     Bind(cmd, "--safe-weight", &Options::safe_weight, "weight of the safe term");
     Bind(cmd, "--unsafe-weight", &Options::unsafe_weight, "weight of the near-dangerous term");
+    Bind(cmd, "--ensemble", &Options::ensemble,
+         "K: train K barriers from different initialisations (member k's seed derived from "
+         "--seed), h = min over them (model kind barrier_ensemble)");
     Bind(cmd, "--validation-fraction", &Options::validation_fraction,
          "fraction of each class held out for best-checkpoint selection");
     Bind(cmd, "--patience", &Options::patience, "early-stopping patience in epochs (0: off)");

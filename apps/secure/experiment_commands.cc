@@ -150,6 +150,8 @@ struct ExperimentCommand {
   CLI::Option* closed_loop_option = nullptr;
   int repair_rounds = 0;  // --closed-loop-repair R
   CLI::Option* repair_option = nullptr;
+  int barrier_ensemble = 1;  // --barrier-ensemble K (absent: the config's barrier.ensemble)
+  CLI::Option* ensemble_option = nullptr;
   const Config* config = nullptr;
   CLI::Option* seeds_option = nullptr;
   CLI::Option* methods_option = nullptr;
@@ -208,6 +210,10 @@ struct ExperimentCommand {
         "R: with --closed-loop, repair a failing candidate up to R times before replacing it: "
         "the states before its dangerous steps join the near-dangerous states and its barrier "
         "is retrained (closed_loop.repair_rounds)");
+    ensemble_option = cmd->add_option(
+        "--barrier-ensemble", barrier_ensemble,
+        "K: a flat barrier is the minimum over K barriers trained from different "
+        "initialisations on the same labels (barrier.ensemble; 1: one barrier)");
     shield_flags.Add(cmd, &shield, /*domain_preset=*/true);  // `secure domains NAME` lists it
     cmd->add_flag("--json", json, "print the result document (as `secure eval --json`)");
     AddProgressOption(cmd, &progress);
@@ -250,6 +256,13 @@ struct ExperimentCommand {
       options.barrier_kind = barrier == "per-car"
                                  ? experiments::BarrierKind::kPerObstacle
                                  : FromString(experiments::kBarrierKindNames, barrier, "--barrier");
+    }
+    if (ensemble_option->count() > 0) {
+      CheckRange("--barrier-ensemble", barrier_ensemble, 1, cbf::kMaxBarrierEnsemble);
+      SECURE_CHECK(options.barrier_kind == experiments::BarrierKind::kFlat,
+                   "--barrier-ensemble needs a flat barrier (the " << d->name()
+                                                                   << " domain's is per-obstacle)");
+      options.flat_barrier.ensemble = barrier_ensemble;
     }
     options.first_seed = first_seed;
     options.threads = threads;

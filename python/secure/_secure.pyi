@@ -52,7 +52,7 @@ class Barrier:
         ...
     @property
     def kind(self) -> str:
-        """'barrier_mlp' (flat), 'car_barrier' (per-obstacle) or 'ground_truth'."""
+        """'barrier_mlp' (flat), 'barrier_ensemble' (flat, the minimum over K MLPs: train_barrier(ensemble=K)), 'car_barrier' (per-obstacle) or 'ground_truth'."""
         ...
     @property
     def state_dim(self) -> int:

@@ -17,7 +17,9 @@ namespace {
 
 std::shared_ptr<Barrier> FromNet(cbf::BarrierNet net) {
   auto shared = std::make_shared<const cbf::BarrierNet>(std::move(net));
-  auto b = MakeBarrier(cbf::kBarrierModelKind, [shared] { return shared->MakeEvaluator(); });
+  const char* kind =
+      shared->more_members.empty() ? cbf::kBarrierModelKind : cbf::kBarrierEnsembleModelKind;
+  auto b = MakeBarrier(kind, [shared] { return shared->MakeEvaluator(); });
   b->net = shared;
   return b;
 }
@@ -36,10 +38,11 @@ std::shared_ptr<Barrier> Load(const std::string& path) {
     py::gil_scoped_release release;
     kind = nn::ReadModelFile(path).kind;
   }
-  if (kind == cbf::kBarrierModelKind) return FromNet(cbf::BarrierNet::Load(path));
+  if (cbf::IsFlatBarrierKind(kind)) return FromNet(cbf::BarrierNet::Load(path));
   if (kind == cbf::kCarBarrierModelKind) return FromCar(cbf::CarBarrierNet::Load(path));
   SECURE_THROW(path << ": a model of kind '" << kind << "', not a barrier (kinds "
-                    << cbf::kBarrierModelKind << ", " << cbf::kCarBarrierModelKind << ")");
+                    << cbf::kBarrierModelKind << ", " << cbf::kBarrierEnsembleModelKind << ", "
+                    << cbf::kCarBarrierModelKind << ")");
 }
 
 // A non-finite entry of the states: a ValueError naming the row and column.
@@ -95,7 +98,8 @@ Raises FileNotFoundError if there is no such file, ValueError (naming the file) 
 barrier model or is corrupt.)doc")
       .def_property_readonly(
           "kind", [](const Barrier& b) { return b.kind; },
-          "'barrier_mlp' (flat), 'car_barrier' (per-obstacle) or 'ground_truth'.")
+          "'barrier_mlp' (flat), 'barrier_ensemble' (flat, the minimum over K MLPs: "
+          "train_barrier(ensemble=K)), 'car_barrier' (per-obstacle) or 'ground_truth'.")
       .def_property_readonly("state_dim", &Barrier::state_dim,
                              "The width of a state: the columns of h's input.")
       .def_property_readonly(

@@ -136,7 +136,7 @@ std::vector<std::string> FeatureNames(py::handle names, int dim, const std::stri
 /// A barrier model (immutable, shared) and this Python object's own evaluator. Evaluations lock
 /// `mutex` (after releasing the GIL), so two Python threads never share the scratch memory.
 struct Barrier {
-  std::string kind;  // "barrier_mlp", "car_barrier", or "ground_truth"
+  std::string kind;  // "barrier_mlp", "barrier_ensemble", "car_barrier", or "ground_truth"
   std::shared_ptr<const cbf::BarrierNet> net;
   std::shared_ptr<const cbf::CarBarrierNet> car;
   std::function<std::unique_ptr<cbf::Barrier>()> factory;  // a fresh evaluator

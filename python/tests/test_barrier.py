@@ -124,3 +124,25 @@ def test_per_obstacle_barrier_on_derby(tmp_path):
     obs, _ = env.reset(seed=0)
     d = shield.decide(obs, np.zeros(env.action_dim), np.full(env.action_dim, 0.5))
     assert d.action.shape == (env.action_dim,)
+
+
+def test_ensemble_trains_loads_and_is_the_minimum(di_data, tmp_path):
+    safe, nd = di_data["safe"][:300], di_data["near_dangerous"][:300]
+    options = dict(hidden=[8], max_epochs=3, seed=5)
+    single, _ = secure.train_barrier(safe, nd, features=di_data["features"], **options)
+    ensemble, summary = secure.train_barrier(safe, nd, features=di_data["features"], ensemble=3,
+                                             **options)
+    assert ensemble.kind == "barrier_ensemble"
+    assert ensemble.describe().startswith("min of 3 barrier_mlp 4-8-1")
+    assert summary["members"] == 3
+    assert len(ensemble.provenance["member_summaries"]) == 3
+    states = di_data["safe"][:200]
+    # Member 0 is the single barrier of the same seed: the ensemble is never above it.
+    assert np.all(ensemble.h(states) <= single.h(states))
+    path = str(tmp_path / "ensemble.model")
+    ensemble.save(path)
+    loaded = secure.Barrier.load(path)
+    assert loaded.kind == "barrier_ensemble"
+    np.testing.assert_array_equal(loaded.h(states), ensemble.h(states))
+    with pytest.raises(ValueError, match="ensemble = 0, must be in"):
+        secure.train_barrier(safe, nd, ensemble=0)

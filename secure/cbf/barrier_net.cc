@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <sstream>
 
+#include "secure/cbf/min_barrier.h"
 #include "secure/common/error.h"
 #include "secure/common/strings.h"
 #include "secure/nn/model_file.h"
@@ -19,9 +20,9 @@ std::string DescribeSpec(const nn::MlpSpec& spec) {
   return t.str();
 }
 
-}  // namespace
-
-void BarrierNet::Validate(const std::string& what) const {
+// One member's MLP and normaliser, for a network input of `inputs` (the features).
+void ValidateMember(const nn::MlpParams& mlp, const nn::Normalizer& normalizer, int inputs,
+                    const std::string& what) {
   mlp.Validate(what);
   SECURE_CHECK(mlp.spec.output_dim == 1,
                what << ": barrier network has " << mlp.spec.output_dim << " outputs, expected 1");
@@ -29,9 +30,34 @@ void BarrierNet::Validate(const std::string& what) const {
   SECURE_CHECK(normalizer.dim() == mlp.spec.input_dim,
                what << ": normalizer has dimension " << normalizer.dim() << ", network input is "
                     << mlp.spec.input_dim);
+  SECURE_CHECK(mlp.spec.input_dim == inputs,
+               what << ": network input is " << mlp.spec.input_dim << ", member 0's is "
+                    << inputs);
+}
+
+// The names of member k's MLP and normaliser in a model file.
+std::string MlpName(int k) { return k == 0 ? "barrier" : "barrier" + std::to_string(k); }
+std::string NormalizerName(int k) { return k == 0 ? "input" : "input" + std::to_string(k); }
+
+}  // namespace
+
+BarrierMember BarrierNet::Member(int k) const {
+  SECURE_CHECK(k >= 0 && k < members(),
+               "BarrierNet::Member(" << k << "): the barrier has " << members() << " members");
+  if (k == 0) return {mlp, normalizer};
+  return more_members[static_cast<std::size_t>(k - 1)];
+}
+
+void BarrierNet::Validate(const std::string& what) const {
+  ValidateMember(mlp, normalizer, mlp.spec.input_dim, what);
   SECURE_CHECK(static_cast<int>(features.size()) == mlp.spec.input_dim,
                what << ": " << features.size() << " feature names for a network input of "
                     << mlp.spec.input_dim);
+  SECURE_CHECK(members() <= kMaxBarrierEnsemble,
+               what << ": " << members() << " members, at most " << kMaxBarrierEnsemble);
+  for (std::size_t k = 0; k < more_members.size(); ++k)
+    ValidateMember(more_members[k].mlp, more_members[k].normalizer, mlp.spec.input_dim,
+                   what + " member " + std::to_string(k + 1));
 }
 
 void BarrierNet::CheckFeatures(const std::vector<std::string>& data_features,
@@ -45,19 +71,24 @@ void BarrierNet::CheckFeatures(const std::vector<std::string>& data_features,
 void BarrierNet::Save(const std::string& path) const {
   Validate(path);
   nn::ModelFile file;
-  file.kind = kBarrierModelKind;
+  file.kind = more_members.empty() ? kBarrierModelKind : kBarrierEnsembleModelKind;
   file.metadata["features"] = features;
+  if (!more_members.empty()) file.metadata["members"] = members();
   file.metadata["provenance"] = provenance;
-  nn::AddMlp("barrier", mlp, &file);
-  nn::AddNormalizer("input", normalizer, &file);
+  for (int k = 0; k < members(); ++k) {
+    const BarrierMember m = Member(k);
+    nn::AddMlp(MlpName(k), m.mlp, &file);
+    nn::AddNormalizer(NormalizerName(k), m.normalizer, &file);
+  }
   nn::WriteModelFile(path, file);
 }
 
 BarrierNet BarrierNet::Load(const std::string& path) {
   const nn::ModelFile file = nn::ReadModelFile(path);
-  SECURE_CHECK(file.kind == kBarrierModelKind, path << ": holds a '" << file.kind
-                                                    << "' model, expected '" << kBarrierModelKind
-                                                    << "'");
+  const bool ensemble = file.kind == kBarrierEnsembleModelKind;
+  SECURE_CHECK(file.kind == kBarrierModelKind || ensemble,
+               path << ": holds a '" << file.kind << "' model, expected '" << kBarrierModelKind
+                    << "' or '" << kBarrierEnsembleModelKind << "'");
   BarrierNet net;
   SECURE_CHECK(file.metadata.contains("features") && file.metadata["features"].is_array(),
                path << ": metadata field 'features' is missing or not a list");
@@ -65,15 +96,42 @@ BarrierNet BarrierNet::Load(const std::string& path) {
     SECURE_CHECK(f.is_string(), path << ": metadata field 'features' holds a non-string");
     net.features.push_back(f.get<std::string>());
   }
+  int members = 1;
+  if (ensemble) {
+    const auto it = file.metadata.find("members");
+    SECURE_CHECK(it != file.metadata.end() && it->is_number_integer(),
+                 path << ": metadata field 'members' is missing or not an integer");
+    const long long k = it->get<long long>();
+    SECURE_CHECK(k >= 2 && k <= kMaxBarrierEnsemble,
+                 path << ": metadata field 'members' = " << k << ", must be in [2, "
+                      << kMaxBarrierEnsemble << "]");
+    members = static_cast<int>(k);
+  }
   if (file.metadata.contains("provenance")) net.provenance = file.metadata["provenance"];
-  net.mlp = nn::GetMlp("barrier", file, path);
-  net.normalizer = nn::GetNormalizer("input", file, path);
+  net.mlp = nn::GetMlp(MlpName(0), file, path);
+  net.normalizer = nn::GetNormalizer(NormalizerName(0), file, path);
+  for (int k = 1; k < members; ++k)
+    net.more_members.push_back(
+        {nn::GetMlp(MlpName(k), file, path), nn::GetNormalizer(NormalizerName(k), file, path)});
+  // An ensemble's tensors are all its members': more would be members no reader uses.
+  std::size_t expected = 0;
+  for (int k = 0; k < members; ++k) expected += 2 * net.Member(k).mlp.layers.size() + 2;
+  SECURE_CHECK(!ensemble || file.tensors.size() == expected,
+               path << ": holds " << file.tensors.size() << " tensors, but its " << members
+                    << " member(s) have " << expected << " (metadata field 'members' = "
+                    << members << ")");
   net.Validate(path);
   return net;
 }
 
 std::unique_ptr<Barrier> BarrierNet::MakeEvaluator(int chunk) const {
-  return std::make_unique<BarrierNetEvaluator>(*this, chunk);
+  if (more_members.empty()) return std::make_unique<BarrierNetEvaluator>(*this, chunk);
+  Validate();
+  std::vector<std::unique_ptr<Barrier>> evaluators;
+  evaluators.push_back(std::make_unique<BarrierNetEvaluator>(Member(0), chunk));
+  for (const BarrierMember& m : more_members)
+    evaluators.push_back(std::make_unique<BarrierNetEvaluator>(m, chunk));
+  return std::make_unique<MinBarrier>(std::move(evaluators), chunk);
 }
 
 std::unique_ptr<Barrier> BarrierNet::MakeEvaluatorFor(
@@ -87,11 +145,16 @@ std::unique_ptr<Barrier> BarrierNet::MakeEvaluatorFor(
 }
 
 BarrierNetEvaluator::BarrierNetEvaluator(const BarrierNet& net, int chunk)
-    : mlp_(net.mlp, net.normalizer),
+    : BarrierNetEvaluator(BarrierMember{net.mlp, net.normalizer}, chunk) {
+  net.Validate();
+}
+
+BarrierNetEvaluator::BarrierNetEvaluator(const BarrierMember& member, int chunk)
+    : mlp_(member.mlp, member.normalizer),
       workspace_(mlp_.MakeWorkspace(chunk)),
       gradient_workspace_(mlp_.MakeGradientWorkspace(std::min(chunk, kGradientChunk))),
-      description_(DescribeSpec(net.mlp.spec)) {
-  net.Validate();
+      description_(DescribeSpec(member.mlp.spec)) {
+  ValidateMember(member.mlp, member.normalizer, member.mlp.spec.input_dim, "barrier");
 }
 
 void BarrierNetEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,

@@ -85,12 +85,10 @@ data::StateSet ProjectRows(const data::StateSet& set, const std::vector<int>& ro
   return projected;
 }
 
-}  // namespace
-
-BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& all_safe,
-                        const data::StateSet& all_near_dangerous, BarrierTrainingSummary* summary,
-                        const BarrierEpochCallback& callback) {
-  options.Validate();
+// One MLP (the whole of TrainBarrier for ensemble = 1), seeded by options.seed.
+BarrierNet TrainMember(const BarrierTrainerOptions& options, const data::StateSet& all_safe,
+                       const data::StateSet& all_near_dangerous, BarrierTrainingSummary* summary,
+                       const BarrierEpochCallback& callback) {
   SECURE_CHECK(all_safe.features == all_near_dangerous.features,
                "safe states (" << all_safe.source << ") and near-dangerous states ("
                                << all_near_dangerous.source << ") have different features");
@@ -222,6 +220,52 @@ BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateS
                      {{"source", near_dangerous.source}, {"count", near_dangerous.size()}}}};
   net.Validate();
   if (summary != nullptr) *summary = s;
+  return net;
+}
+
+}  // namespace
+
+std::uint64_t EnsembleMemberSeed(std::uint64_t seed, int k) {
+  if (k == 0) return seed;
+  // SplitMix64 of the seed advanced k steps: distinct, well-mixed seeds for k = 1, 2, ...
+  std::uint64_t z = seed + 0x9e3779b97f4a7c15ULL * static_cast<std::uint64_t>(k);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& safe,
+                        const data::StateSet& near_dangerous, BarrierTrainingSummary* summary,
+                        const BarrierEpochCallback& callback) {
+  options.Validate();
+  if (options.ensemble == 1) return TrainMember(options, safe, near_dangerous, summary, callback);
+  const Stopwatch clock;
+  BarrierNet net;
+  BarrierTrainingSummary first;
+  nlohmann::json member_summaries = nlohmann::json::array();
+  for (int k = 0; k < options.ensemble; ++k) {
+    BarrierTrainerOptions member_options = options;
+    member_options.ensemble = 1;
+    member_options.seed = EnsembleMemberSeed(options.seed, k);
+    BarrierTrainingSummary s;
+    BarrierNet member = TrainMember(member_options, safe, near_dangerous, &s, callback);
+    member_summaries.push_back(nn::WithoutTiming(s.ToJson()));
+    if (k == 0) {
+      net = std::move(member);
+      first = s;
+    } else {
+      net.more_members.push_back({std::move(member.mlp), std::move(member.normalizer)});
+    }
+  }
+  // Member 0's provenance with the ensemble's options and every member's summary.
+  net.provenance["trainer"] = "secure::cbf::TrainBarrier (Eq. 4 hinge loss), ensemble of " +
+                              std::to_string(options.ensemble) + " (h = min over the members)";
+  net.provenance["options"] = options.ToJson();
+  net.provenance["member_summaries"] = std::move(member_summaries);
+  net.Validate();
+  first.wall_seconds = clock.Seconds();
+  first.members = options.ensemble;
+  if (summary != nullptr) *summary = first;
   return net;
 }
 

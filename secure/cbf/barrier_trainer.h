@@ -51,6 +51,12 @@ struct BarrierTrainerOptions : TrainingSchedule {
   double safe_weight = 1.0;     // extra weight on the safe term (> 0)
   double unsafe_weight = 1.0;   // extra weight on the near-dangerous term (> 0)
 
+  // Ensemble: K barriers trained on the same labels from different initialisations, member k
+  // with seed EnsembleMemberSeed(seed, k) (member 0: `seed`, today's barrier), h = min over the
+  // K (BarrierNet::more_members, model kind "barrier_ensemble"). 1: one barrier, the same bytes
+  // as before the option existed (ToJson leaves the field out).
+  int ensemble = 1;  // in [1, kMaxBarrierEnsemble]
+
   // Optimisation: the shared TrainingSchedule (learning_rate 3e-3 -> final_learning_rate 3e-5,
   // weight_decay 0, batch_size 128, max_epochs 400, patience 0, validation_fraction 0.1, seed,
   // threads 1: fastest for small nets, verbose: one progress line per few seconds).
@@ -74,11 +80,16 @@ struct BarrierTrainingSummary {
   long train_safe = 0, train_near_dangerous = 0, validation_safe = 0, validation_near_dangerous = 0;
   double wall_seconds = 0.0;
   std::string stop_reason;  // "max_epochs", "early_stopping", "callback"
+  int members = 1;          // an ensemble's K (the figures above are member 0's)
 
   std::string BriefReport() const;  // one line
   std::string FullReport() const;   // a small table
   nlohmann::json ToJson() const;
 };
+
+/// The training seed of ensemble member k of a barrier trained with `seed`: `seed` for k = 0,
+/// else a SplitMix64 mix of (seed, k) (a pure function, the same on every platform).
+std::uint64_t EnsembleMemberSeed(std::uint64_t seed, int k);
 
 /// Called after every epoch with (epoch, training loss, validation balanced accuracy); return
 /// false to stop training (the best checkpoint so far is kept).
@@ -87,7 +98,10 @@ using BarrierEpochCallback = std::function<bool(int epoch, double train_loss, do
 /// Trains a BarrierNet on `safe` and `near_dangerous` (same features, each non-empty and finite),
 /// projected to options.input_features when given (a name missing from the data is an error that
 /// names it and lists the data's features). The returned net records the options and summary in
-/// its provenance.
+/// its provenance. With options.ensemble = K > 1 it trains K members one after another (each
+/// with its own seed, hence its own initial weights, validation split and minibatch order);
+/// `summary` is member 0's with wall_seconds the whole training's, the provenance holds every
+/// member's summary ("member_summaries"); `callback` sees every member's epochs in turn.
 /// @throws secure::Error on invalid options or data (names the set and the problem).
 BarrierNet TrainBarrier(const BarrierTrainerOptions& options, const data::StateSet& safe,
                         const data::StateSet& near_dangerous, BarrierTrainingSummary* summary,

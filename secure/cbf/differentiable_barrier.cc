@@ -15,19 +15,23 @@ torch::Tensor VectorTensor(const Eigen::VectorXf& v) {
   return torch::from_blob(const_cast<float*>(v.data()), {v.size()}, torch::kFloat32).clone();
 }
 
-// BarrierNet: h(s) = mlp((s - mean) / scale), as BarrierNetEvaluator.
+// BarrierNet: h(s) = mlp((s - mean) / scale), as BarrierNetEvaluator; an ensemble's is the
+// minimum over its members (autograd passes the gradient of the arg-min member), as MinBarrier.
 class FlatDifferentiableBarrier final : public DifferentiableBarrier {
  public:
   // rows: the rows of a `state_dim`-row state the net reads (empty: all, state_dim ignored).
   FlatDifferentiableBarrier(const BarrierNet& net, const std::vector<int>& rows, int state_dim)
-      : state_dim_(rows.empty() ? net.state_dim() : state_dim), mlp_(nullptr) {
+      : state_dim_(rows.empty() ? net.state_dim() : state_dim) {
     net.Validate();
-    mlp_ = nn::TorchMlp(net.mlp.spec);
-    mlp_->LoadParams(net.mlp);
-    for (auto& p : mlp_->parameters()) p.requires_grad_(false);
-    mean_ = VectorTensor(net.normalizer.mean);
-    scale_ = VectorTensor(net.normalizer.scale);
+    for (int k = 0; k < net.members(); ++k) {
+      const BarrierMember m = net.Member(k);
+      nn::TorchMlp mlp(m.mlp.spec);
+      mlp->LoadParams(m.mlp);
+      for (auto& p : mlp->parameters()) p.requires_grad_(false);
+      members_.push_back({mlp, VectorTensor(m.normalizer.mean), VectorTensor(m.normalizer.scale)});
+    }
     std::ostringstream t;
+    if (net.members() > 1) t << "min of " << net.members() << " ";
     t << "barrier_mlp";
     const auto widths = net.mlp.spec.Widths();
     for (std::size_t i = 0; i < widths.size(); ++i) t << (i ? "-" : " ") << widths[i];
@@ -50,14 +54,22 @@ class FlatDifferentiableBarrier final : public DifferentiableBarrier {
  protected:
   torch::Tensor DoForward(const torch::Tensor& states) const override {
     const torch::Tensor read = rows_.defined() ? states.index_select(1, rows_) : states;
-    return mlp_->forward((read - mean_) / scale_).reshape({-1});
+    torch::Tensor h;
+    for (Member& m : members_) {
+      const torch::Tensor hk = m.mlp->forward((read - m.mean) / m.scale).reshape({-1});
+      h = h.defined() ? torch::minimum(h, hk) : hk;
+    }
+    return h;
   }
 
  private:
+  struct Member {
+    nn::TorchMlp mlp;
+    torch::Tensor mean, scale;
+  };
   int state_dim_;
   torch::Tensor rows_;  // undefined: all rows
-  mutable nn::TorchMlp mlp_;  // mutable: a forward pass changes no state
-  torch::Tensor mean_, scale_;
+  mutable std::vector<Member> members_;  // mutable: a forward pass changes no state
   std::string description_;
 };
 

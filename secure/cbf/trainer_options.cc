@@ -41,6 +41,8 @@ void BarrierTrainerOptions::Validate() const {
                      "safe_weight", safe_weight, "> 0");
   SECURE_CHECK_FIELD(std::isfinite(unsafe_weight) && unsafe_weight > 0, "BarrierTrainerOptions",
                      "unsafe_weight", unsafe_weight, "> 0");
+  SECURE_CHECK_FIELD(ensemble >= 1 && ensemble <= kMaxBarrierEnsemble, "BarrierTrainerOptions",
+                     "ensemble", ensemble, "in [1, " << kMaxBarrierEnsemble << "]");
   ValidateSchedule("BarrierTrainerOptions");
 }
 
@@ -48,7 +50,8 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
   SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier trainer options");
   static const std::set<std::string> known = [] {
     std::set<std::string> k = {"hidden",          "activation",  "safe_margin",   "unsafe_margin",
-                               "balance_classes", "safe_weight", "unsafe_weight", "input_features"};
+                               "balance_classes", "safe_weight", "unsafe_weight", "input_features",
+                               "ensemble"};
     k.insert(Keys().begin(), Keys().end());
     return k;
   }();
@@ -81,6 +84,8 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
       safe_weight = YamlValue<double>(v, key, source);
     } else if (key == "unsafe_weight") {
       unsafe_weight = YamlValue<double>(v, key, source);
+    } else if (key == "ensemble") {
+      ensemble = YamlValue<int>(v, key, source);
     } else {
       ApplyYamlKey(key, v, source);
     }
@@ -96,6 +101,8 @@ nlohmann::json BarrierTrainerOptions::ToJson() const {
                       {"balance_classes", balance_classes},
                       {"safe_weight", safe_weight},
                       {"unsafe_weight", unsafe_weight}};
+  // Only an ensemble names it: one barrier's options (and model bytes) are as before.
+  if (ensemble != 1) j["ensemble"] = ensemble;
   AddJson(&j);
   return j;
 }
@@ -126,6 +133,7 @@ std::string BarrierTrainingSummary::BriefReport() const {
   } else {
     s << kNoHeldOut;
   }
+  if (members > 1) s << " (member 0 of " << members << ")";
   s << ", " << Figure("%.2f", wall_seconds) << " s";
   return s.str();
 }
@@ -157,7 +165,7 @@ nlohmann::json BarrierTrainingSummary::ToJson() const {
     return nlohmann::json{
         {"safe", a.safe}, {"near_dangerous", a.near_dangerous}, {"balanced", a.Balanced()}};
   };
-  return {{"epochs", epochs},
+  nlohmann::json j = {{"epochs", epochs},
           {"best_epoch", best_epoch},
           {"iterations", iterations},
           {"train_loss", train_loss},
@@ -172,6 +180,9 @@ nlohmann::json BarrierTrainingSummary::ToJson() const {
            {{"safe", validation_safe}, {"near_dangerous", validation_near_dangerous}}},
           {"wall_seconds", wall_seconds},
           {"stop_reason", stop_reason}};
+  // Only an ensemble's summary (member 0's figures) says so: one barrier's is as before.
+  if (members > 1) j["members"] = members;
+  return j;
 }
 
 }  // namespace secure::cbf

@@ -342,5 +342,65 @@ TEST_F(BarrierTrainerFileTest, SameSeedGivesByteIdenticalModelFiles) {
   EXPECT_TRUE(sa.ToJson().contains("wall_seconds"));
 }
 
+// ensemble = K: K members, member k trained with EnsembleMemberSeed(seed, k); member 0 is the
+// barrier of ensemble = 1 (the same path reproducing itself: bitwise).
+TEST_F(BarrierTrainerFileTest, EnsembleOfThreeHasDistinctMembersAndMemberZeroIsTheSingleOne) {
+  const auto safe = Disk(false, 80, 1);
+  const auto nd = Disk(true, 60, 2);
+  BarrierTrainerOptions o = Fast();
+  o.max_epochs = 5;
+  o.seed = 17;
+  BarrierTrainingSummary single_summary, summary;
+  const BarrierNet single = TrainBarrier(o, safe, nd, &single_summary);
+  EXPECT_EQ(single.members(), 1);
+  EXPECT_FALSE(single.provenance["options"].contains("ensemble"));
+  EXPECT_FALSE(single_summary.ToJson().contains("members"));
+  o.ensemble = 3;
+  int epochs_seen = 0;
+  const BarrierNet net = TrainBarrier(o, safe, nd, &summary, [&](int, double, double) {
+    ++epochs_seen;
+    return true;
+  });
+  ASSERT_EQ(net.members(), 3);
+  EXPECT_EQ(epochs_seen, 15);  // every member's epochs
+  EXPECT_EQ(summary.members, 3);
+  EXPECT_NE(summary.BriefReport().find("(member 0 of 3)"), std::string::npos);
+  EXPECT_EQ(net.provenance["options"]["ensemble"], 3);
+  EXPECT_EQ(net.provenance["member_summaries"].size(), 3u);
+  for (std::size_t l = 0; l < single.mlp.layers.size(); ++l)
+    EXPECT_EQ(net.mlp.layers[l].weight, single.mlp.layers[l].weight) << "layer " << l;
+  EXPECT_EQ(net.normalizer.mean, single.normalizer.mean);
+  for (int a = 0; a < 3; ++a)
+    for (int b = a + 1; b < 3; ++b)
+      EXPECT_NE(net.Member(a).mlp.layers[0].weight, net.Member(b).mlp.layers[0].weight)
+          << "members " << a << " and " << b;
+  EXPECT_EQ(EnsembleMemberSeed(17, 0), 17u);
+  EXPECT_NE(EnsembleMemberSeed(17, 1), EnsembleMemberSeed(17, 2));
+  // h is the least member's.
+  const Eigen::MatrixXf states = Disk(false, 30, 5).states;
+  Eigen::VectorXf h(30), h0(30);
+  net.MakeEvaluator()->Evaluate(states, h);
+  single.MakeEvaluator()->Evaluate(states, h0);
+  EXPECT_TRUE((h.array() <= h0.array()).all());
+  // Deterministic bytes.
+  net.Save(PathOf("e1.model"));
+  TrainBarrier(o, safe, nd, nullptr).Save(PathOf("e2.model"));
+  EXPECT_TRUE(ReadFile(PathOf("e1.model")) == ReadFile(PathOf("e2.model")));
+  EXPECT_EQ(BarrierNet::Load(PathOf("e1.model")).members(), 3);
+}
+
+TEST(BarrierTrainerOptionsTest, EnsembleInYamlJsonAndValidate) {
+  BarrierTrainerOptions o;
+  EXPECT_EQ(o.ensemble, 1);
+  o.ApplyYaml(YAML::Load("{ensemble: 3}"), "cfg.yaml");
+  EXPECT_EQ(o.ensemble, 3);
+  EXPECT_EQ(o.ToJson()["ensemble"], 3);
+  o.ensemble = 0;
+  EXPECT_EQ(ErrorOf([&] { o.Validate(); }),
+            "BarrierTrainerOptions::ensemble = 0, must be in [1, 64]");
+  o.ensemble = 65;
+  EXPECT_THROW(o.Validate(), Error);
+}
+
 }  // namespace
 }  // namespace secure::cbf

@@ -120,5 +120,32 @@ TEST(DifferentiableBarrierTest, WrongShapesAndInvalidNetsAreRejected) {
   EXPECT_HAS(ErrorOf([&] { MakeDifferentiableBarrier(bad); }), "normalizer");
 }
 
+// An ensemble: the minimum over its members, as MinBarrier; the gradient is the arg-min
+// member's (MinBarrier's analytic gradient).
+TEST(DifferentiableBarrierTest, EnsembleIsTheMinimumWithTheArgMinMembersGradient) {
+  BarrierNet net = FlatNet();
+  for (unsigned long long seed : {21ULL, 22ULL}) {
+    BarrierMember m;
+    m.mlp = nn::RandomMlpParams({3, {8, 8}, 1, nn::Activation::kTanh}, seed);
+    m.normalizer = nn::Normalizer::Identity(3);
+    net.more_members.push_back(m);
+  }
+  const std::unique_ptr<DifferentiableBarrier> h = MakeDifferentiableBarrier(net);
+  EXPECT_NE(h->Describe().find("min of 3 barrier_mlp 3-8-8-1 tanh"), std::string::npos)
+      << h->Describe();
+  const Eigen::MatrixXf states = UniformStates(3, 40, -2, 2, 14);
+  Eigen::VectorXf h_eigen(40);
+  Eigen::MatrixXf g_eigen(3, 40);
+  net.MakeEvaluator()->EvaluateGradient(states, h_eigen, g_eigen);
+  torch::Tensor x = nn::ToTensor(states).requires_grad_(true);
+  const torch::Tensor values = h->Forward(x);
+  values.sum().backward();
+  const Eigen::MatrixXf grad = nn::ToEigen(x.grad());
+  for (int i = 0; i < 40; ++i) {
+    EXPECT_NEAR(values[i].item<double>(), h_eigen(i), 1e-5);
+    for (int r = 0; r < 3; ++r) EXPECT_NEAR(grad(r, i), g_eigen(r, i), 1e-4) << i << ", " << r;
+  }
+}
+
 }  // namespace
 }  // namespace secure::cbf

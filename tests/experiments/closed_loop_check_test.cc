@@ -9,6 +9,7 @@
 #include <string>
 
 #include "domains/derby/domain.h"
+#include "secure/cbf/barrier_net.h"
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/atomic_file.h"
 #include "secure/data/data.h"
@@ -224,6 +225,42 @@ TEST(ClosedLoopCheck, RepairAddsTheStatesBeforeDangerousStepsWhichReproduceWhenR
     }
   }
   EXPECT_GT(replayed, 0);
+  std::filesystem::remove_all(o.output_dir);
+}
+
+// A flat barrier ensemble (BarrierTrainerOptions::ensemble) through the check and its repair:
+// the candidate's barrier and the repaired one are ensembles of 2, the repair retrains both
+// members on the augmented labels, and the evaluated barrier is the repaired ensemble.
+TEST(ClosedLoopCheck, RepairRetrainsEveryMemberOfABarrierEnsemble) {
+  ExperimentOptions o = Tiny();
+  o.barrier_kind = BarrierKind::kFlat;
+  o.flat_barrier.hidden = {16, 16};
+  o.flat_barrier.max_epochs = 5;
+  o.flat_barrier.ensemble = 2;
+  o.closed_loop.enabled = true;
+  o.closed_loop.episodes = 12;
+  o.closed_loop.min_success = 0.0;
+  o.closed_loop.max_dangerous = 0.0;
+  o.closed_loop.max_candidates = 1;
+  o.closed_loop.repair_rounds = 1;
+  o.shield.class_k_gain = 1000.0;  // myopic: the tiny policy collides (the repair test above)
+  o.output_dir = Scratch("ensemble");
+  const ExperimentResult r =
+      RunExperiment(ExperimentKind::kMethodComparison, TinyDomain(), o, nullptr);
+  const nlohmann::json j = r.ToJson();
+  const nlohmann::json& candidate = j["experiment"]["seeds"][0]["closed_loop"]["candidates"][0];
+  EXPECT_EQ(candidate["barrier"]["members"], 2) << candidate.dump();
+  ASSERT_TRUE(candidate.contains("repairs")) << candidate.dump();
+  EXPECT_EQ(candidate["repairs"][0]["barrier"]["members"], 2);
+  const std::string files = o.output_dir + "/seed-0/candidate-0";
+  const cbf::BarrierNet before = cbf::BarrierNet::Load(files + "/barrier.model");
+  const cbf::BarrierNet after = cbf::BarrierNet::Load(files + "/barrier_repair_1.model");
+  ASSERT_EQ(before.members(), 2);
+  ASSERT_EQ(after.members(), 2);
+  for (int k = 0; k < 2; ++k)
+    EXPECT_NE(before.Member(k).mlp.layers[0].weight, after.Member(k).mlp.layers[0].weight) << k;
+  EXPECT_EQ(ReadFile(o.output_dir + "/seed-0/barrier.model"),
+            ReadFile(files + "/barrier_repair_1.model"));
   std::filesystem::remove_all(o.output_dir);
 }
 
