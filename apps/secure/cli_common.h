@@ -108,7 +108,7 @@ void CheckRange(const std::string& name, long value, long lo, long hi);
 /// of every error.
 int ReportError(const std::string& message);
 
-/// The global flags --max-input-bytes, --max-config-nodes, --max-hdf5-memory
+/// The global flags --max-input-bytes, --max-config-nodes, --max-hdf5-memory, --max-hdf5-seconds
 /// (input_limit_flags.cc): scanned from argv and applied at once (before the config file is
 /// read), and declared on `app`.
 void AddInputLimitFlags(CLI::App& app, int argc, char** argv);

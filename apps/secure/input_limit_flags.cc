@@ -1,5 +1,5 @@
 // The global flags that raise the input limits (secure/common/input_limits.h): --max-input-bytes,
-// --max-config-nodes and --max-hdf5-memory, given before the command (`secure
+// --max-config-nodes, --max-hdf5-memory and --max-hdf5-seconds, given before the command (`secure
 // --max-input-bytes 10000000000 demos convert ...`). They are applied before anything is read, the --config file included (which
 // is read before the command line is parsed), so they are scanned from argv here and also
 // declared to CLI11 (for --help and the value check).
@@ -34,7 +34,8 @@ void AddInputLimitFlags(CLI::App& app, int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg.empty() || arg[0] != '-') break;
-    for (const char* flag : {"--max-input-bytes", "--max-config-nodes", "--max-hdf5-memory"}) {
+    for (const char* flag : {"--max-input-bytes", "--max-config-nodes", "--max-hdf5-memory",
+                             "--max-hdf5-seconds"}) {
       std::string value;
       const std::string prefix = std::string(flag) + "=";
       if (arg == flag && i + 1 < argc) {
@@ -49,6 +50,8 @@ void AddInputLimitFlags(CLI::App& app, int argc, char** argv) {
         limits.max_input_bytes = v;
       } else if (std::strcmp(flag, "--max-hdf5-memory") == 0) {
         limits.max_hdf5_memory_bytes = v;
+      } else if (std::strcmp(flag, "--max-hdf5-seconds") == 0) {
+        limits.max_hdf5_seconds = v;
       } else {
         SECURE_CHECK(v <= 1'000'000'000ull, flag << " = " << v << ", must be at most 1000000000");
         limits.max_config_nodes = static_cast<long>(v);
@@ -62,6 +65,9 @@ void AddInputLimitFlags(CLI::App& app, int argc, char** argv) {
   app.add_option("--max-hdf5-memory", "memory, in bytes, of the child process that reads an "
                                       "HDF5 file (default 1 GiB + 8 x the file's size; env "
                                       "SECURE_MAX_HDF5_MEMORY); before the command");
+  app.add_option("--max-hdf5-seconds", "wall-clock seconds the child process that reads an "
+                                       "HDF5 file may take (default 600; env "
+                                       "SECURE_MAX_HDF5_SECONDS); before the command");
   app.add_option("--max-config-nodes", "most YAML nodes of a --config file with aliases expanded "
                                        "(default 100000; env SECURE_MAX_CONFIG_NODES); before "
                                        "the command");

@@ -50,6 +50,7 @@ InputLimits& Limits() {
     FromEnvironment("SECURE_MAX_CONFIG_NODES", &l.max_config_nodes);
     FromEnvironment("SECURE_MAX_CONFIG_DEPTH", &l.max_config_depth);
     FromEnvironment("SECURE_MAX_HDF5_MEMORY", &l.max_hdf5_memory_bytes);
+    FromEnvironment("SECURE_MAX_HDF5_SECONDS", &l.max_hdf5_seconds);
     return l;
   }();
   return limits;

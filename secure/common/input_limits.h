@@ -2,7 +2,8 @@
 // Resource limits on what the program reads (issue 34): no small input may exhaust memory or
 // hang a command. Each limit is stated here, with its default, and can be raised: by an
 // environment variable (read once, at the first use) or by a program calling SetInputLimits (the
-// CLI's global flags --max-input-bytes, --max-config-nodes, --max-hdf5-memory). tests/README.md lists them.
+// CLI's global flags --max-input-bytes, --max-config-nodes, --max-hdf5-memory,
+// --max-hdf5-seconds). tests/README.md lists them.
 //
 //   input file size      SECURE_MAX_INPUT_BYTES    4 GiB    every file read (CSV, model files,
 //                                                           HDF5, task.json, result.json)
@@ -14,6 +15,8 @@
 //   HDF5 reader memory   SECURE_MAX_HDF5_MEMORY    1 GiB +  address space the child process
 //                                                  8 x the  reading an HDF5 file may map beyond
 //                                                  file     its parent's (secure/data/data.h)
+//   HDF5 reader time     SECURE_MAX_HDF5_SECONDS   600      wall-clock seconds that child may
+//                                                           take before it is killed
 //
 // Inputs must also be regular files (a FIFO would block, /dev/zero never ends): see
 // CheckRegularInputFile.
@@ -29,6 +32,9 @@ struct InputLimits {
   int max_config_depth = 64;
   // 0: 1 GiB plus 8 times the size of the file read (Hdf5ReaderMemoryLimit).
   std::uint64_t max_hdf5_memory_bytes = 0;
+  // Wall-clock seconds the child process reading one HDF5 file may take (a malformed file can
+  // send libhdf5 into a loop; a child stuck after fork must not hang the command).
+  std::uint64_t max_hdf5_seconds = 600;
 };
 
 /// The memory limit of the child process that reads an HDF5 file of `file_bytes` bytes:

@@ -3,8 +3,9 @@
 // malformed files (tests/fuzz/findings/hdf5_fuzz/). The child (fork) limits its address space
 // (RLIMIT_AS: what it has plus Hdf5ReaderMemoryLimit), turns off core dumps, runs the in-process
 // reader (hdf5_read.cc) and sends the decoded arrays, or the reader's one-line error, through a
-// pipe. The parent turns the child's death by a signal, or an allocation over its limit, into one
-// secure::Error naming the file. Writing (hdf5_write.cc) stays in this process; both sides hold
+// pipe. The parent turns the child's death by a signal, an allocation over its limit, or a read
+// longer than its time limit (GetInputLimits().max_hdf5_seconds), into one secure::Error naming
+// the file. Writing (hdf5_write.cc) stays in this process; both sides hold
 // Hdf5LibraryMutex() while they use libhdf5 or fork, so a child never inherits it mid-call.
 
 #include <fcntl.h>
@@ -14,7 +15,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -197,45 +200,68 @@ std::string MemoryNote(std::uint64_t limit) {
          "or --max-hdf5-memory)";
 }
 
-// Reads the child's reply from `fd` until end of file or until the child has exited, whichever
-// comes first; then kills what is left of the child's process group and reaps the child. (A
-// process the child started, such as a sanitizer's symbolizer, may hold the pipe open after the
-// child died, and end of file alone would wait for it.) Returns waitpid's result.
-pid_t ReadReplyAndWait(int fd, pid_t pid, std::string* reply, int* status) {
+// What ReadReplyAndWait saw: waitpid's result and status, and whether the deadline passed first.
+struct ChildEnd {
+  pid_t waited = -1;
+  int status = 0;
+  bool timed_out = false;
+};
+
+// Reads the child's reply from `fd` until end of file and the child's exit, or until the child
+// has exited and the pipe holds nothing more, or until `deadline`, whichever comes first; then
+// kills what is left of the child's process group and reaps the child. (A process the child
+// started, such as a sanitizer's symbolizer, may hold the pipe open after the child died, and end
+// of file alone would wait for it; a child stuck in a loop of libhdf5's, or in a lock another
+// thread held at fork, would never exit.)
+ChildEnd ReadReplyAndWait(int fd, pid_t pid, std::chrono::steady_clock::time_point deadline,
+                          std::string* reply) {
   // Whether the child has exited, left a zombie (WNOWAIT) so its process group stays its own.
-  const auto exited = [pid](int flags) {
+  // (waitid fails only if SIGCHLD is ignored: then there is nothing to wait for, and the reply
+  // alone decides.)
+  const auto exited = [pid] {
     siginfo_t info{};
     int r = -1;
     do {
-      r = ::waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOWAIT | flags);
+      r = ::waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOWAIT | WNOHANG);
     } while (r < 0 && errno == EINTR);
-    // (waitid fails only if SIGCHLD is ignored; then end of file alone ends the reply.)
-    return r == 0 && info.si_pid == pid;
+    return r < 0 || info.si_pid == pid;
   };
   char buffer[1 << 16];
-  bool child_exited = false;
-  for (;;) {
-    struct pollfd p {fd, POLLIN, 0};
-    // After the child's exit, only what is already in the pipe is read.
-    const int ready = ::poll(&p, 1, child_exited ? 0 : 100);
-    if (ready < 0 && errno == EINTR) continue;
-    if (ready > 0) {
-      const ssize_t n = ::read(fd, buffer, sizeof buffer);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) break;
-      reply->append(buffer, static_cast<std::size_t>(n));
-      continue;
+  bool pipe_open = true, child_exited = false;
+  ChildEnd end;
+  while (pipe_open || !child_exited) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
+    if (!child_exited && left.count() <= 0) {
+      end.timed_out = true;
+      break;
     }
-    if (child_exited || ready < 0) break;
-    child_exited = exited(WNOHANG);
+    // After the child's exit, only what is already in the pipe is read.
+    const int tick = child_exited ? 0
+                                  : static_cast<int>(std::clamp<long long>(left.count(), 1, 100));
+    if (pipe_open) {
+      struct pollfd p {fd, POLLIN, 0};
+      const int ready = ::poll(&p, 1, tick);
+      if (ready < 0 && errno == EINTR) continue;
+      if (ready > 0) {
+        const ssize_t n = ::read(fd, buffer, sizeof buffer);
+        if (n < 0 && errno == EINTR) continue;
+        if (n > 0) {
+          reply->append(buffer, static_cast<std::size_t>(n));
+          continue;
+        }
+      }
+      if (ready != 0 || child_exited) pipe_open = false;  // end of file, an error, or drained
+    } else {
+      ::usleep(static_cast<useconds_t>(tick) * 1000);
+    }
+    if (!child_exited) child_exited = exited();
   }
-  if (!child_exited) exited(0);
   ::kill(-pid, SIGKILL);
-  pid_t waited = -1;
   do {
-    waited = ::waitpid(pid, status, 0);
-  } while (waited < 0 && errno == EINTR);
-  return waited;
+    end.waited = ::waitpid(pid, &end.status, 0);
+  } while (end.waited < 0 && errno == EINTR);
+  return end;
 }
 
 // Reads `path` with `read` in a child process; returns the child's reply (the tag, then the
@@ -244,6 +270,11 @@ std::string RunGuarded(const std::string& path, const std::function<void(Encoder
   // Missing files, FIFOs, devices and oversized files are refused here, without a child.
   const std::uint64_t file_bytes = CheckRegularInputFile(path);
   const std::uint64_t limit = Hdf5ReaderMemoryLimit(file_bytes);
+  // The time limit counts from here (capped at ten years, so that the clock cannot overflow).
+  const std::uint64_t seconds = std::min<std::uint64_t>(GetInputLimits().max_hdf5_seconds,
+                                                        std::uint64_t{10} * 365 * 24 * 3600);
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::seconds(static_cast<long long>(seconds));
   int fds[2];
   SECURE_CHECK(::pipe2(fds, O_CLOEXEC) == 0,
                path << ": cannot start the HDF5 reader process (pipe: " << std::strerror(errno)
@@ -267,9 +298,15 @@ std::string RunGuarded(const std::string& path, const std::function<void(Encoder
                       << std::strerror(fork_error) << ")");
   }
   std::string reply;
-  int status = 0;
-  const pid_t waited = ReadReplyAndWait(fds[0], pid, &reply, &status);
+  const ChildEnd end = ReadReplyAndWait(fds[0], pid, deadline, &reply);
   ::close(fds[0]);
+  const pid_t waited = end.waited;
+  const int status = end.status;
+  SECURE_CHECK(!end.timed_out,
+               path << ": the HDF5 reader process took longer than " << seconds
+                    << " s and was stopped (a corrupt or malicious file, or a large one on a slow "
+                       "disk: raise the limit with SECURE_MAX_HDF5_SECONDS or "
+                       "--max-hdf5-seconds)");
   // (waitpid fails only if SIGCHLD is ignored; then the reply alone decides.)
   if (waited == pid && WIFSIGNALED(status)) {
     const int sig = WTERMSIG(status);

@@ -147,6 +147,37 @@ TEST_F(Hdf5GuardTest, TheMemoryLimitIsStatedOverridableAndNamedWhenHit) {
   EXPECT_EQ(ReadTrajectories(path, {}, {}).num_steps(), 40'000);
 }
 
+// A child that never answers (libhdf5 in a loop on a malformed file, or stuck in a lock another
+// thread held at fork) is killed at the time limit, and the error names the file and the limit.
+TEST_F(Hdf5GuardTest, AChildThatTakesTooLongIsStoppedAtTheTimeLimit) {
+  EXPECT_EQ(InputLimits().max_hdf5_seconds, 600u);
+  const std::string path = Write("slow.h5", "not read");
+  InputLimits limits = saved_;
+  limits.max_hdf5_seconds = 1;
+  SetInputLimits(limits);
+  std::string pid_file = PathOf("child.pid");
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string message = ErrorOf([&] {
+    internal::RunInHdf5ReaderProcess(path, [&](std::string*) {
+      std::ofstream(pid_file) << ::getpid();
+      ::sleep(120);
+    });
+  });
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_GE(seconds, 1.0);
+  EXPECT_LT(seconds, 60.0);
+  ExpectOneLineNaming(message, path);
+  EXPECT_HAS(message, "took longer than 1 s");
+  EXPECT_HAS(message, "SECURE_MAX_HDF5_SECONDS");
+  std::string pid;
+  std::ifstream(pid_file) >> pid;
+  ASSERT_FALSE(pid.empty());
+  EXPECT_FALSE(std::filesystem::exists("/proc/" + pid)) << "the child " << pid << " still runs";
+  // A child that answers in time is not affected by the limit.
+  EXPECT_EQ(internal::RunInHdf5ReaderProcess(path, [](std::string* out) { *out += "ok"; }), "ok");
+}
+
 // A process the reader's child starts (a sanitizer's symbolizer, say) may keep the reply's pipe
 // open after the child has died. The parent does not wait for it: the child's reply, or its
 // death, comes back as soon as the child is gone, and the straggler is killed with the child's
