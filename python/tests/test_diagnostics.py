@@ -32,6 +32,7 @@ def test_shield_directions_records_both_shields_at_every_decision(di_data, tiny_
     for r in rows:
         assert r["qp"] in ("not_tried", "accepted", "rejected", "infeasible"), r["qp"]
         assert r["correction_qp"] >= 0 and r["correction_secure"] >= 0
+        assert r["g_qp"] == r["g_qp"] and r["g_secure"] == r["g_secure"]  # finite, not NaN
         assert -1.0 - 1e-6 <= r["cos"] <= 1.0 + 1e-6 or r["cos"] != r["cos"]  # NaN: no correction
 
 

@@ -6,7 +6,8 @@ proposal 'qp'; --follow secure: the sampling shield), and at every decision asks
 an action at the same state. Where the policy's mean fails the check (g(mu) < 0) it records:
   - the angle between the two corrections (a_qp - mu) and (a_secure - mu): does the barrier's
     gradient point where the sampling shield goes?
-  - their sizes, and the QP's status (accepted / rejected by the exact g / infeasible);
+  - their sizes, g at each action, and the QP's status (accepted / rejected by the exact g /
+    infeasible);
   - for the action taken, h at the true next state against h at the shield model's prediction:
     is the shield model wrong in the states that this shield visits?
 
@@ -64,7 +65,8 @@ def run_seed(args, shield_options, seed):
             n_qp, n_s = float(np.linalg.norm(c_qp)), float(np.linalg.norm(c_s))
             rows.append(dict(
                 seed=seed, episode=episode, step=step, g_mu=g_mu, qp=by_qp.qp,
-                correction_qp=n_qp, correction_secure=n_s,
+                correction_qp=n_qp, correction_secure=n_s, g_qp=float(by_qp.g),
+                g_secure=float(by_sampling.g),
                 cos=float(c_qp @ c_s / (n_qp * n_s)) if min(n_qp, n_s) > 1e-9 else float("nan"),
                 h_true=h(obs), h_predicted=h_predicted, collided=bool(info.get("collided", False))))
             if terminated or truncated:
@@ -85,6 +87,7 @@ def summarise(rows, label):
           f"decisions with g(mu) < 0: cos(QP, SECURE correction) median {quantile(cos, .5):+.2f}, "
           f"p10 {quantile(cos, .1):+.2f}, share < 0 {sum(c < 0 for c in cos) / max(1, len(cos)):.2f}; "
           f"|a - mu| QP {med('correction_qp'):.3f}, SECURE {med('correction_secure'):.3f}; "
+          f"g at the action QP {med('g_qp'):+.2f}, SECURE {med('g_secure'):+.2f}; "
           f"h(true next) - h(predicted) median {quantile(error, .5):+.4f}, p10 {quantile(error, .1):+.4f}; "
           f"predicted h >= 0 but true h < 0: {miss} ({miss / max(1, len(intervened)):.1%}); QP {qp}")
 
