@@ -36,7 +36,7 @@ def main():
     data = np.loadtxt(args.source, delimiter=',', skiprows=1, dtype=np.float64, ndmin=2)
     if not np.isfinite(data).all():
         row = int(np.nonzero(~np.isfinite(data).all(axis=1))[0][0]) + 2
-        sys.exit(f'{args.source}: row {row}: a non-finite value')
+        sys.exit(f"{args.source}: line {row}: a non-finite value")
     episode = data[:, header.index('episode')]
     obs_cols = [c for c in header if c not in ('episode', 'step', 'ax', 'ay')]
     if len(obs_cols) != EGO_FEATURES + CARS * CAR_FEATURES:
