@@ -8,6 +8,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "domains/franka/arm_sim.h"
 #include "domains/franka/human_arm.h"
 #include "domains/franka/mujoco_model.h"
 #include "domains/franka/offscreen_renderer.h"
@@ -109,11 +110,7 @@ SECURE_YAML_JSON_FROM_FIELDS(PersonOptions)
 
 void CoffeePlacingOptions::Validate() const {
   const char* o = "CoffeePlacingOptions";
-  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
-                     "in [1, 100000]");
-  tracking.Validate(o);
-  SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
-                     "action_scale", action_scale, "in (0, 0.2] m");
+  ArmTaskOptions::Validate(o);
   for (int k = 0; k < 3; ++k) {
     SECURE_CHECK_FIELD(Finite(start[k]) && std::abs(start[k]) <= 1, o, "start", start[k],
                        "within 1 m of the origin");
@@ -140,10 +137,8 @@ void CoffeePlacingOptions::Validate() const {
 
 YamlFields CoffeePlacingOptions::Fields() {
   YamlFields fields;
-  tracking.AddFields(&fields);
-  fields.Field("max_steps", &max_steps)
-      .Field("action_scale", &action_scale)
-      .Field("start", &start)
+  ArmTaskOptions::AddFields(&fields);
+  fields.Field("start", &start)
       .Field("start_noise", &start_noise)
       .Field("target", &target)
       .Field("target_half_size", &target_half_size)
@@ -160,22 +155,18 @@ SECURE_YAML_JSON_FROM_FIELDS(CoffeePlacingOptions)
 // ---------------------------------------------------------------------------------------------
 // The simulation
 
-struct CoffeePlacingSim::Impl {
-  franka::MujocoModel model;
-  franka::MujocoData data;
-  franka::PandaArm arm;
+struct CoffeePlacingSim::Impl : franka::ArmSim {
   franka::HumanArmCapsules capsules;
   int cup = -1;  // the cup's mocap index
 
   Impl(franka::MujocoModel m, const franka::HumanArmCapsules& c)
-      : model(std::move(m)), data(model), arm(model.get(), "coffee-placing"), capsules(c) {}
+      : ArmSim(std::move(m), "coffee-placing"), capsules(c) {}
 };
 
 CoffeePlacingSim::CoffeePlacingSim(const CoffeePlacingOptions& options)
     : options_((options.Validate(), options)) {
-  franka::MujocoModel m = franka::MujocoModel::Copy(CoffeePlacingModel());
+  franka::MujocoModel m = franka::TaskModel(CoffeePlacingModel(), options_.tracking);
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   const franka::HumanArmCapsules capsules(raw, options_.person.Geometry(), "coffee-placing");
   const int cup_body = mj_name2id(raw, mjOBJ_BODY, "cup");
   SECURE_CHECK(cup_body >= 0 && raw->body_mocapid[cup_body] >= 0,
@@ -231,21 +222,13 @@ void CoffeePlacingSim::Reset(Rng& rng) {
 void CoffeePlacingSim::Step(const Eigen::Ref<const Eigen::Vector4f>& action) {
   const mjModel* m = impl_->model.get();
   mjData* d = impl_->data.get();
-  Eigen::Vector4d a;
-  for (int k = 0; k < 4; ++k) {
-    SECURE_CHECK(std::isfinite(action[k]),
-                 "coffee-placing: action[" << k << "] = " << action[k] << " is not finite");
-    a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
-  }
+  const Eigen::Vector4d a = franka::ClipAction<4>(action, "coffee-placing");
   mjtNum v[6];
   mj_objectVelocity(m, d, mjOBJ_SITE, impl_->arm.tcp(), v, 0);
   const double vx_before = v[3];
-  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
-  Eigen::Vector3d target = ee + options_.action_scale * a.head<3>();
   // The cup stops at the table.
-  target.z() = std::max(target.z(), options_.target[2] + kCupDrop);
-  impl_->arm.Track(m, d, target, options_.tracking);
-  franka::CheckWarnings(d, "coffee-placing", "a step");
+  franka::StepTool(impl_->arm, m, d, options_, a.head<3>(), options_.target[2] + kCupDrop,
+                   "coffee-placing");
   mj_objectVelocity(m, d, mjOBJ_SITE, impl_->arm.tcp(), v, 0);
   tilt_ =
       std::clamp(tilt_ + options_.tilt_scale * a[3] + options_.tilt_coupling * (v[3] - vx_before),
@@ -264,18 +247,8 @@ bool CoffeePlacingSim::Placed() const {
 }
 
 void CoffeePlacingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
-  SECURE_CHECK(o.size() == kObservationDim, "coffee-placing: observation has "
-                                                << o.size() << " entries, expected "
-                                                << kObservationDim);
-  const mjModel* m = impl_->model.get();
-  mjData* d = impl_->data.get();
-  const int tcp = impl_->arm.tcp();
-  mjtNum v[6];
-  mj_objectVelocity(m, d, mjOBJ_SITE, tcp, v, 0);
-  for (int k = 0; k < 3; ++k) {
-    o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
-    o[kEeVel + k] = static_cast<float>(v[3 + k]);
-  }
+  franka::CheckObservationSize(o.size(), kObservationDim, "coffee-placing");
+  franka::ObserveTool(impl_->model.get(), impl_->data.get(), impl_->arm.tcp(), kEePos, kEeVel, o);
   franka::WriteHumanArm(arm_, wrist_vel_, elbow_vel_, kWrist, o);
   o[kTilt] = static_cast<float>(tilt_);
   o[kClearance] = static_cast<float>(clearance_);

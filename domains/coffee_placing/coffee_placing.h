@@ -42,16 +42,9 @@
 #include "domains/franka/human_arm.h"
 #include "domains/franka/person.h"
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
-
-namespace YAML {
-class Node;
-}
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::coffee_placing {
 
@@ -104,12 +97,8 @@ struct PersonOptions : franka::PersonArmOptions {
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
 
-struct CoffeePlacingOptions {
-  int max_steps = 150;
-  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
-  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
-  franka::ArmTracking tracking;
-  double action_scale = 0.05;    // m of end-effector target offset per unit action
+/// max_steps [150], the controller's constants (tracking) and action_scale: franka::ArmTaskOptions.
+struct CoffeePlacingOptions : franka::ArmTaskOptions {
   Vec3 start = {0.32, -0.18, 0.22};  // the tool centre point at reset (m)
   double start_noise = 0.02;         // m, uniform per axis at reset
   Vec3 target = {0.02, -0.18, 0.0};  // the target square's centre on the table (m)

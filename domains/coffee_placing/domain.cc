@@ -45,9 +45,7 @@ void CoffeePlacingDomainOptions::Validate() const {
   demonstrations.Validate();
   labels.Validate();
   const char* o = "CoffeePlacingDomainOptions";
-  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.tracking.control_period) < 1e-12, o,
-                     "shield_model.dt", shield_model.dt,
-                     "the control period (" << task.tracking.control_period << " s)");
+  shield_model.CheckControlPeriod(o, task.tracking.control_period);
   SECURE_CHECK_FIELD(
       std::isfinite(margin_distance) && margin_distance >= 0 && margin_distance <= 0.5, o,
       "margin_distance", margin_distance, "in [0, 0.5] m");
@@ -169,9 +167,7 @@ void CoffeePlacingDomain::CheckHeldOut(std::uint64_t data_seed, long count, data
       ParticipantData(o, MeanParticipant(o.population), data_seed ^ kCheckDataSalt);
   *safe = std::move(d.safe);
   *near_dangerous = std::move(d.near_dangerous);
-  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
-  safe->source += seed;
-  near_dangerous->source += seed;
+  franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
 cbf::BarrierCheckProblem CoffeePlacingDomain::MakeCheckProblem(
@@ -216,12 +212,6 @@ cbf::BarrierCheckProblem CoffeePlacingDomain::MakeCheckProblem(
   return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
 }
 
-cbf::BarrierCheckOptions CoffeeCheckDefaults() {
-  cbf::BarrierCheckOptions c;
-  c.action_grid = 5;
-  return c;
-}
-
 std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(
     const experiments::PopulationOptions& options) const {
   return std::make_unique<CoffeePopulation>(options_, options);
@@ -237,7 +227,6 @@ experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
   // The user study was measured with alpha dt = 0.2 (docs/RESULTS.md); the arm preset's 0.8 has
   // not been tried on this domain.
   o.shield.class_k_gain = 5.0;
-  o.check = CoffeeCheckDefaults();
   return o;
 }
 

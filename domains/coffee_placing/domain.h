@@ -7,12 +7,9 @@
 
 #include "domains/coffee_placing/coffee_placing.h"
 #include "domains/coffee_placing/participants.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/options_domain.h"
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::coffee_placing {
 
@@ -108,10 +105,6 @@ class CoffeePlacingDomain final : public experiments::OptionsDomain<CoffeePlacin
 /// The barrier's input: the end-effector position and velocity, the cup's tilt, the person's
 /// wrist and hand tip, the wrist velocity and the clearance (17 features).
 const std::vector<std::string>& BarrierFeatures();
-
-/// The barrier check's defaults on coffee-placing: cbf::BarrierCheckOptions with a 5-point action
-/// grid per axis (625 actions + the random ones per max_a g; 7^4 = 2401 would be the default).
-cbf::BarrierCheckOptions CoffeeCheckDefaults();
 
 /// A participant's data (GenerateData of the population and of the domain): demonstrations from
 /// `data_seed`, labelled states from data_seed + 1.

@@ -42,15 +42,8 @@
 
 #include "domains/coffee_placing/coffee_placing.h"
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/data/data.h"
-
-namespace YAML {
-class Node;
-}
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::coffee_placing {
 

@@ -58,12 +58,9 @@
 #include <vector>
 
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
-
-namespace YAML {
-class Node;
-}
 
 namespace secure::domains::derby {
 

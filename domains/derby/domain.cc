@@ -10,6 +10,7 @@
 #include "secure/common/option_check.h"
 #include "secure/common/rng.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/experiments/check_problem.h"
 
 namespace secure::domains::derby {
 namespace {
@@ -181,33 +182,13 @@ cbf::BarrierCheckProblem MakeDerbyCheckProblem(const DerbyOptions& task,
                                                const data::StateSet& safe,
                                                const data::StateSet& near_dangerous,
                                                std::unique_ptr<DynamicsModel>* dynamics) {
-  SECURE_CHECK(safe.states.rows() == kObservationDim &&
-                   near_dangerous.states.rows() == kObservationDim,
-               "the Derby barrier check needs observations of "
-                   << kObservationDim << " values; got " << safe.states.rows() << " ("
-                   << safe.source << ") and " << near_dangerous.states.rows() << " ("
-                   << near_dangerous.source << ")");
-  data::CheckNonEmptyFinite(safe, "Derby barrier check: safe states");
-  data::CheckNonEmptyFinite(near_dangerous, "Derby barrier check: near-dangerous states");
   task.Validate();
-  shield_options.Validate();
+  cbf::BarrierCheckProblem p = experiments::CheckProblemBase(
+      "Derby", kObservationDim, kActionDim, task.accel_bound, shield_options, safe, near_dangerous);
   *dynamics =
       std::make_unique<DerbyShieldModel>(task.dt, task.accel_bound, task.lookahead_steps);
-  cbf::BarrierCheckProblem p;
-  p.action_lo = Eigen::VectorXf::Constant(kActionDim, -float(task.accel_bound));
-  p.action_hi = Eigen::VectorXf::Constant(kActionDim, float(task.accel_bound));
-  p.dt = shield_options.dt;
-  p.class_k = [shield_options](double h) { return shield::ClassKValue(shield_options, h); };
-  p.class_k_description = ToString(shield::kClassKNames, shield_options.class_k) +
-                          ", k = " + std::to_string(shield_options.class_k_gain);
-  p.near_dangerous = near_dangerous;
-  p.held_out_safe = safe;
-  p.held_out_near_dangerous = near_dangerous;
-  const Eigen::MatrixXf safe_states = safe.states, nd_states = near_dangerous.states;
-  p.sample_region = [safe_states, nd_states](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
-    const bool from_safe = rng.Uniform() < 0.5;
-    const Eigen::MatrixXf& pool = from_safe ? safe_states : nd_states;
-    s = pool.col(static_cast<long>(rng.UniformIndex(static_cast<std::uint64_t>(pool.cols()))));
+  // The region's noise on a held-out observation: ego velocity, every observed car.
+  const auto perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
     s[2] += static_cast<float>(0.1 * rng.Normal());
     s[3] += static_cast<float>(0.1 * rng.Normal());
     for (int c = 0; c < kObservedCars; ++c) {
@@ -218,6 +199,7 @@ cbf::BarrierCheckProblem MakeDerbyCheckProblem(const DerbyOptions& task,
       s[b + 3] += static_cast<float>(0.05 * rng.Normal());
     }
   };
+  p.sample_region = experiments::PerturbedHeldOutRegion(safe, near_dangerous, perturb);
   const double r2 = task.collision_radius * task.collision_radius;
   p.is_unsafe = [r2](const Eigen::Ref<const Eigen::VectorXf>& s) {
     for (int c = 0; c < kObservedCars; ++c) {

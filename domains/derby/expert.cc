@@ -343,24 +343,19 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
     Rng rng = DerbyAttemptRng(demo.seed, attempt);
     env.Reset(rng, observation);
     expert.BeginEpisode(rng);
-    collector.BeginEpisode();
-    int reached_at = 0;
-    bool collided = false;
     double episode_min = env.NearestCarDistance();
-    for (int step = 1; step <= horizon; ++step) {
-      expert.Act(env, rng, action);
-      for (int i = 0; i < kActionDim; ++i)  // the applied action (the expert's is in the box)
-        applied[i] = std::clamp(action[i], -bound, bound);
-      collector.Record(observation, applied);
-      const StepOutcome outcome = env.Step(action, observation);
-      episode_min = std::min<double>(episode_min, env.NearestCarDistance());
-      if (outcome.collided) {
-        collided = true;
-        break;
-      }
-      if (outcome.reached_goal && reached_at == 0) reached_at = step;
-    }
-    if (collided) {
+    const RecordedEpisode episode = RecordEpisode(
+        env, collector, horizon, /*stop_at_goal=*/false, observation, action, applied,
+        [&](const Eigen::VectorXf&, Eigen::Vector2f& a, Eigen::Vector2f& recorded) {
+          expert.Act(env, rng, a);
+          for (int i = 0; i < kActionDim; ++i)  // the applied action (the expert's is in the box)
+            recorded[i] = std::clamp(a[i], -bound, bound);
+        },
+        [&](const StepOutcome&) {
+          episode_min = std::min<double>(episode_min, env.NearestCarDistance());
+        });
+    const int reached_at = episode.reached_at;
+    if (episode.collided) {
       ++out.discarded_collisions;
       continue;
     }

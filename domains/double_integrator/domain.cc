@@ -6,12 +6,12 @@
 
 #include "domains/double_integrator/ground_truth_barrier.h"
 #include "domains/double_integrator/table1.h"
-#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/rng.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/experiments/check_problem.h"
 
 namespace secure::domains::double_integrator {
 namespace {
@@ -159,24 +159,10 @@ cbf::BarrierCheckProblem DoubleIntegratorDomain::MakeCheckProblem(
 cbf::BarrierCheckProblem MakeDoubleIntegratorCheckProblem(
     const ReachAvoidOptions& task, const shield::ShieldOptions& shield, const data::StateSet& safe,
     const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) {
-  SECURE_CHECK(safe.states.rows() == kStateDim && near_dangerous.states.rows() == kStateDim,
-               "the double-integrator barrier check needs states of "
-                   << kStateDim << " values; got " << safe.states.rows() << " (" << safe.source
-                   << ") and " << near_dangerous.states.rows() << " (" << near_dangerous.source
-                   << ")");
-  data::CheckNonEmptyFinite(safe, "double-integrator barrier check: safe states");
-  data::CheckNonEmptyFinite(near_dangerous,
-                            "double-integrator barrier check: near-dangerous states");
   task.Validate();
-  shield.Validate();
+  cbf::BarrierCheckProblem p = experiments::CheckProblemBase(
+      "double-integrator", kStateDim, kActionDim, task.accel_bound, shield, safe, near_dangerous);
   *dynamics = std::make_unique<ClippedDoubleIntegrator>(shield.dt, task.accel_bound);
-  cbf::BarrierCheckProblem p;
-  p.action_lo = Eigen::VectorXf::Constant(kActionDim, -static_cast<float>(task.accel_bound));
-  p.action_hi = Eigen::VectorXf::Constant(kActionDim, static_cast<float>(task.accel_bound));
-  p.dt = shield.dt;
-  p.class_k = [shield](double h) { return shield::ClassKValue(shield, h); };
-  p.class_k_description = ToString(shield::kClassKNames, shield.class_k) +
-                          ", k = " + std::to_string(shield.class_k_gain);
   const StateBox box;
   p.sample_region = [box](Rng& rng, Eigen::Ref<Eigen::VectorXf> state) {
     for (int i = 0; i < kStateDim; ++i)
@@ -192,9 +178,6 @@ cbf::BarrierCheckProblem MakeDoubleIntegratorCheckProblem(
   };
   p.is_unsafe_description = "ground truth h*(s) < 0";
   p.region_description = "the validation box x, y in [0, 10), vx, vy in [-1.5, 1.5)";
-  p.near_dangerous = near_dangerous;
-  p.held_out_safe = safe;
-  p.held_out_near_dangerous = near_dangerous;
   return p;
 }
 

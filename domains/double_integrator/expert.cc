@@ -303,33 +303,25 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
   DemonstrationCollector collector("expert demonstrations (seed " + std::to_string(demo.seed) + ")",
                                    StateFeatures(), ActionFeatures());
   Eigen::Vector4f observation;
-  Eigen::Vector2f action;
+  Eigen::Vector2f action, applied;
   long kept = 0;
   while (kept < demo.episodes && out.attempted < max_attempts) {
     Rng rng = AttemptRng(demo.seed, out.attempted);
     ++out.attempted;
     env.Reset(rng, observation);
     expert.BeginEpisode(rng);
-    collector.BeginEpisode();
-    int reached_at = 0;  // first step whose state is in the goal; 0 = never
-    bool collided = false;
-    for (int step = 1; step <= horizon; ++step) {
-      expert.Act(observation, rng, action);
-      // The action the environment applies: the clipped one (the expert's is inside the box).
-      const Eigen::Vector2f applied = action.cwiseMax(-static_cast<float>(task.accel_bound))
-                                          .cwiseMin(static_cast<float>(task.accel_bound));
-      collector.Record(observation, applied);
-      const StepOutcome outcome = env.Step(action, observation);
-      if (outcome.collided) {
-        collided = true;
-        break;  // discarded anyway
-      }
-      if (outcome.reached_goal && reached_at == 0) {
-        reached_at = step;
-        if (demo.stop_at_goal) break;
-      }
-    }
-    if (collided) {
+    const RecordedEpisode episode = RecordEpisode(
+        env, collector, horizon, demo.stop_at_goal, observation, action, applied,
+        [&](const Eigen::Vector4f& o, Eigen::Vector2f& a, Eigen::Vector2f& recorded) {
+          expert.Act(o, rng, a);
+          // The action the environment applies: the clipped one (the expert's is inside the box).
+          recorded = a.cwiseMax(-static_cast<float>(task.accel_bound))
+                         .cwiseMin(static_cast<float>(task.accel_bound));
+        },
+        [](const StepOutcome&) {});
+    // The first step whose state is in the goal; 0 = never. A collision stopped the episode.
+    const int reached_at = episode.reached_at;
+    if (episode.collided) {
       ++out.discarded_collisions;
       continue;
     }

@@ -47,13 +47,10 @@
 #include <string>
 #include <vector>
 
-#include "secure/common/rng.h"
 #include "domains/double_integrator/double_integrator.h"
+#include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/domains/environment.h"
-
-namespace YAML {
-class Node;
-}
 
 namespace secure::domains::double_integrator {
 

@@ -2,8 +2,8 @@
 
 #include <utility>
 
-#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
+#include "secure/experiments/check_problem.h"
 
 namespace secure::domains::franka {
 
@@ -32,43 +32,23 @@ cbf::BarrierCheckProblem ArmCheckProblem(const ArmCheckSpec& spec,
   SECURE_CHECK(environment != nullptr, "the " << spec.domain << " barrier check: no environment");
   SECURE_CHECK(static_cast<bool>(spec.perturb),
                "the " << spec.domain << " barrier check: no region perturbation");
-  const int d = environment->observation_dim(), n = environment->action_dim();
-  SECURE_CHECK(safe.states.rows() == d && near_dangerous.states.rows() == d,
-               "the " << spec.domain << " barrier check needs observations of " << d
-                      << " values; got " << safe.states.rows() << " (" << safe.source << ") and "
-                      << near_dangerous.states.rows() << " (" << near_dangerous.source << ")");
-  data::CheckNonEmptyFinite(safe, "the " + spec.domain + " barrier check: safe states");
-  data::CheckNonEmptyFinite(near_dangerous,
-                            "the " + spec.domain + " barrier check: near-dangerous states");
-  shield.Validate();
+  cbf::BarrierCheckProblem p =
+      experiments::CheckProblemBase(spec.domain, environment->observation_dim(),
+                                    environment->action_dim(), 1.0, shield, safe, near_dangerous);
   *dynamics = std::make_unique<OwnedShieldModel>(std::move(environment));
-
-  cbf::BarrierCheckProblem p;
-  p.action_lo = Eigen::VectorXf::Constant(n, -1.0f);
-  p.action_hi = Eigen::VectorXf::Constant(n, 1.0f);
-  p.dt = shield.dt;
-  p.class_k = [shield](double h) { return shield::ClassKValue(shield, h); };
-  p.class_k_description = ToString(shield::kClassKNames, shield.class_k) +
-                          ", k = " + std::to_string(shield.class_k_gain);
-  p.near_dangerous = near_dangerous;
-  p.held_out_safe = safe;
-  p.held_out_near_dangerous = near_dangerous;
-  const Eigen::MatrixXf safe_states = safe.states, nd_states = near_dangerous.states;
-  const auto perturb = spec.perturb;
-  const auto project = spec.project;
-  p.sample_region = [safe_states, nd_states, perturb, project](Rng& rng,
-                                                               Eigen::Ref<Eigen::VectorXf> s) {
-    const bool from_safe = rng.Uniform() < 0.5;
-    const Eigen::MatrixXf& pool = from_safe ? safe_states : nd_states;
-    s = pool.col(static_cast<long>(rng.UniformIndex(static_cast<std::uint64_t>(pool.cols()))));
-    perturb(rng, s);
-    if (project) project(s);
-  };
-  p.project = project;
+  p.sample_region =
+      experiments::PerturbedHeldOutRegion(safe, near_dangerous, spec.perturb, spec.project);
+  p.project = spec.project;
   p.is_unsafe = spec.is_unsafe;
   p.is_unsafe_description = spec.is_unsafe ? spec.is_unsafe_description : "";
   p.region_description = spec.region_description;
   return p;
+}
+
+void MarkHeldOut(std::uint64_t data_seed, data::StateSet* safe, data::StateSet* near_dangerous) {
+  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
+  safe->source += seed;
+  near_dangerous->source += seed;
 }
 
 }  // namespace secure::domains::franka

@@ -6,6 +6,7 @@
 // plug-in's own noise. Each plug-in adds its perturbation, its unsafe test (computed from the
 // observation) and its descriptions. Includes no MuJoCo header.
 #include <Eigen/Core>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -70,6 +71,10 @@ cbf::BarrierCheckProblem ArmCheckProblem(const ArmCheckSpec& spec,
                                          const data::StateSet& safe,
                                          const data::StateSet& near_dangerous,
                                          std::unique_ptr<DynamicsModel>* dynamics);
+
+/// Marks held-out check states (Domain::CheckHeldOut) in their sources: appends
+/// " (held out, data_seed N)" to safe->source and near_dangerous->source.
+void MarkHeldOut(std::uint64_t data_seed, data::StateSet* safe, data::StateSet* near_dangerous);
 
 /// Adds N(0, sd^2) to each of the `count` features from `offset`.
 void AddNoise(Rng& rng, double sd, int offset, int count, Eigen::Ref<Eigen::VectorXf> state);

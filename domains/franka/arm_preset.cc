@@ -26,11 +26,14 @@ experiments::ExperimentOptions ArmExperimentPreset(experiments::Profile profile,
   o.shield.dt = control_period;
   o.shield.class_k_gain = 20.0;
   o.shield.probe_extent = 1.0;
-  // The pre-deployment barrier check runs per seed (check_enabled, the default): each plug-in
-  // gives its problem (Domain::MakeCheckProblem, arm_check.h) and its defaults (o.check).
   // Statistics: 10 seeds x 100 episodes.
   o.seeds = 10;
   o.episodes = 100;
+  // The pre-deployment barrier check runs per seed (check_enabled, the default): each plug-in
+  // gives its problem (Domain::MakeCheckProblem, arm_check.h). Its defaults: a 5-point action
+  // grid per axis (125 actions for the 3-d actions, 625 for coffee-placing's 4-d ones, + the
+  // random ones per max_a g; the default 7 points would be 2401 for 4-d actions).
+  o.check.action_grid = 5;
   if (profile == experiments::Profile::kQuick) {
     o.seeds = 2;
     o.episodes = 5;

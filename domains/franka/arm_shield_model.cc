@@ -23,6 +23,11 @@ void PersonShieldModelOptions::Validate(const char* o) const {
   SECURE_CHECK_FIELD(std::isfinite(dt) && dt > 0, o, "dt", dt, "> 0 s");
 }
 
+void PersonShieldModelOptions::CheckControlPeriod(const char* owner, double control_period) const {
+  SECURE_CHECK_FIELD(std::abs(dt - control_period) < 1e-12, owner, "shield_model.dt", dt,
+                     "the control period (" << control_period << " s)");
+}
+
 YamlFields PersonShieldModelOptions::Fields() {
   YamlFields fields;
   AddFields(&fields);

@@ -11,14 +11,7 @@
 #include <algorithm>
 #include <nlohmann/json.hpp>
 #include <string>
-
-namespace YAML {
-class Node;
-}  // namespace YAML
-
-namespace secure {
-class YamlFields;
-}  // namespace secure
+#include "secure/common/yaml_fwd.h"
 
 namespace secure::domains::franka {
 
@@ -58,6 +51,9 @@ struct PersonShieldModelOptions : EndEffectorGains {
 
   /// @throws secure::Error naming `owner`, the field, value and rule.
   void Validate(const char* owner) const;
+  /// The plug-in's domain options' check that dt is the task's control period: @throws
+  /// secure::Error "owner::shield_model.dt = value, must be the control period (... s)".
+  void CheckControlPeriod(const char* owner, double control_period) const;
   /// The field table (position_gain, velocity_gain, dt): ApplyYaml and ToJson.
   YamlFields Fields();
   nlohmann::json ToJson() const;

@@ -29,4 +29,17 @@ void ArmTracking::AddFields(YamlFields* fields) {
       .Field("ik_damping", &ik_damping);
 }
 
+void ArmTaskOptions::Validate(const char* o) const {
+  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
+                     "in [1, 100000]");
+  tracking.Validate(o);
+  SECURE_CHECK_FIELD(std::isfinite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
+                     "action_scale", action_scale, "in (0, 0.2] m");
+}
+
+void ArmTaskOptions::AddFields(YamlFields* fields) {
+  tracking.AddFields(fields);
+  fields->Field("max_steps", &max_steps).Field("action_scale", &action_scale);
+}
+
 }  // namespace secure::domains::franka

@@ -13,10 +13,7 @@
 
 #include "domains/franka/human_arm.h"
 #include "secure/common/rng.h"
-
-namespace secure {
-class YamlFields;
-}  // namespace secure
+#include "secure/common/yaml_fwd.h"
 
 namespace secure::domains::franka {
 

@@ -191,38 +191,28 @@ KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions&
   DemonstrationCollector collector(
       "scripted kitchen-cutting demonstrations (seed " + std::to_string(options.seed) + ")",
       ObservationFeatures(), ActionFeatures());
-  Eigen::VectorXf o(kObservationDim), next(kObservationDim), a(kActionDim);
+  Eigen::VectorXf o(kObservationDim), a(kActionDim);
   int attempt = 0;
   for (; attempt < options.max_attempts && collector.kept_steps() < options.states; ++attempt) {
     Rng episode_rng(rng.NextU64());
     const double stroke = Draw(episode_rng, options.stroke_speed);
     const double travel = Draw(episode_rng, options.travel_speed);
     env.Reset(episode_rng, o);
-    collector.BeginEpisode();
-    bool success = false, dangerous = false;
-    for (int t = 0; t < task.max_steps; ++t) {
-      const Eigen::Vector3f clean = DemonstratorAction(task, options, o, stroke, travel);
-      for (int k = 0; k < kActionDim; ++k)
-        a[k] =
-            std::clamp(clean[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
-                       -1.0f, 1.0f);
-      collector.Record(o, a);
-      const StepOutcome r = env.Step(a, next);
-      o = next;
-      if (r.collided) {
-        dangerous = true;
-        break;
-      }
-      if (r.reached_goal) {
-        success = true;
-        break;
-      }
-    }
-    if (dangerous) {
+    const RecordedEpisode episode = RecordEpisode(
+        env, collector, task.max_steps, /*stop_at_goal=*/true, o, a, a,
+        [&](const Eigen::VectorXf& obs, Eigen::VectorXf& act, Eigen::VectorXf&) {
+          const Eigen::Vector3f clean = DemonstratorAction(task, options, obs, stroke, travel);
+          for (int k = 0; k < kActionDim; ++k)
+            act[k] = std::clamp(
+                clean[k] + static_cast<float>(options.action_noise * episode_rng.Normal()), -1.0f,
+                1.0f);
+        },
+        [](const StepOutcome&) {});
+    if (episode.collided) {
       ++out.discarded_dangerous;
       continue;
     }
-    if (!success) {
+    if (episode.reached_at == 0) {
       ++out.discarded_failed;
       continue;
     }

@@ -39,15 +39,8 @@
 
 #include "domains/kitchen_cutting/kitchen_cutting.h"
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/data/data.h"
-
-namespace YAML {
-class Node;
-}
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::kitchen_cutting {
 

@@ -45,9 +45,7 @@ void KitchenCuttingDomainOptions::Validate() const {
   demonstrations.Validate();
   safe.Validate();
   near_dangerous.Validate();
-  SECURE_CHECK_FIELD(std::abs(shield_model.dt - task.tracking.control_period) < 1e-12,
-                     "KitchenCuttingDomainOptions", "shield_model.dt", shield_model.dt,
-                     "the control period (" << task.tracking.control_period << " s)");
+  shield_model.CheckControlPeriod("KitchenCuttingDomainOptions", task.tracking.control_period);
 }
 
 YamlFields KitchenCuttingDomainOptions::Fields() {
@@ -156,9 +154,7 @@ void KitchenCuttingDomain::CheckHeldOut(std::uint64_t data_seed, long count, dat
   nd_options.count = count;
   *safe = KitchenSafeStates(demos, safe_options, rng);
   *near_dangerous = KitchenNearDangerousStates(options_.task, demos, nd_options, rng);
-  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
-  safe->source += seed;
-  near_dangerous->source += seed;
+  franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
 cbf::BarrierCheckProblem KitchenCuttingDomain::MakeCheckProblem(
@@ -216,12 +212,6 @@ double ObservedEdgeClearance(const KitchenCuttingOptions& task,
   return EdgeToArmDistance(task.human, edge, arm);
 }
 
-cbf::BarrierCheckOptions KitchenCheckDefaults() {
-  cbf::BarrierCheckOptions c;
-  c.action_grid = 5;
-  return c;
-}
-
 std::optional<experiments::PaperTable3> KitchenCuttingDomain::PaperReference() const {
   const double none = std::nan("");
   experiments::PaperTable3 t;
@@ -240,7 +230,6 @@ experiments::ExperimentOptions KitchenCuttingDomain::Preset() const {
   // Table 2's knife-cutting barrier: 32-128-128-256-256-256-256-128-128-32, tanh.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
   o.flat_barrier.input_features = BarrierFeatures();
-  o.check = KitchenCheckDefaults();
   return o;
 }
 

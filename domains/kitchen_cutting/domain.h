@@ -6,12 +6,9 @@
 
 #include "domains/kitchen_cutting/data.h"
 #include "domains/kitchen_cutting/kitchen_cutting.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/options_domain.h"
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::kitchen_cutting {
 
@@ -93,9 +90,5 @@ const std::vector<std::string>& BarrierFeatures();
 /// (KitchenCuttingSim::Dangerous measures the same with the knife's simulated orientation).
 double ObservedEdgeClearance(const KitchenCuttingOptions& task,
                              const Eigen::Ref<const Eigen::VectorXf>& observation);
-
-/// The barrier check's defaults on kitchen-cutting: cbf::BarrierCheckOptions with a 5-point
-/// action grid per axis (125 actions + the random ones per max_a g).
-cbf::BarrierCheckOptions KitchenCheckDefaults();
 
 }  // namespace secure::domains::kitchen_cutting

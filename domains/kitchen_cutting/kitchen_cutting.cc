@@ -8,6 +8,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "domains/franka/arm_sim.h"
 #include "domains/franka/human_arm.h"
 #include "domains/franka/mujoco_model.h"
 #include "domains/franka/offscreen_renderer.h"
@@ -106,11 +107,7 @@ SECURE_YAML_JSON_FROM_FIELDS(HumanArmOptions)
 
 void KitchenCuttingOptions::Validate() const {
   const char* o = "KitchenCuttingOptions";
-  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
-                     "in [1, 100000]");
-  tracking.Validate(o);
-  SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
-                     "action_scale", action_scale, "in (0, 0.2] m");
+  ArmTaskOptions::Validate(o);
   SECURE_CHECK_FIELD(
       Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
       "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
@@ -133,10 +130,8 @@ void KitchenCuttingOptions::Validate() const {
 
 YamlFields KitchenCuttingOptions::Fields() {
   YamlFields fields;
-  tracking.AddFields(&fields);
-  fields.Field("max_steps", &max_steps)
-      .Field("action_scale", &action_scale)
-      .Field("initial_joint_noise", &initial_joint_noise)
+  ArmTaskOptions::AddFields(&fields);
+  fields.Field("initial_joint_noise", &initial_joint_noise)
       .Field("board_top", &board_top)
       .Field("cut_line_x", &cut_line_x)
       .Field("cut_line_y", &cut_line_y)
@@ -154,22 +149,18 @@ SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingOptions)
 // ---------------------------------------------------------------------------------------------
 // The simulation
 
-struct KitchenCuttingSim::Impl {
-  franka::MujocoModel model;
-  franka::MujocoData data;
-  franka::PandaArm arm;
+struct KitchenCuttingSim::Impl : franka::ArmSim {
   franka::HumanArmCapsules capsules;  // the person's arm (upper arm, forearm, hand)
   int blade = -1, knife = -1;
 
   Impl(franka::MujocoModel m, const franka::HumanArmCapsules& c)
-      : model(std::move(m)), data(model), arm(model.get(), "kitchen-cutting"), capsules(c) {}
+      : ArmSim(std::move(m), "kitchen-cutting"), capsules(c) {}
 };
 
 KitchenCuttingSim::KitchenCuttingSim(const KitchenCuttingOptions& options)
     : options_((options.Validate(), options)) {
-  franka::MujocoModel m = franka::MujocoModel::Copy(KitchenCuttingModel());
+  franka::MujocoModel m = franka::TaskModel(KitchenCuttingModel(), options_.tracking);
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   // The person's capsules take the options' sizes (each runs along its body's z from 0 to L).
   const franka::HumanArmCapsules capsules(raw, options_.human.Geometry(), "kitchen-cutting");
   impl_ = std::make_unique<Impl>(std::move(m), capsules);
@@ -227,9 +218,7 @@ void KitchenCuttingSim::Reset(Rng& rng) {
   const mjModel* m = impl_->model.get();
   mjData* d = impl_->data.get();
   mj_resetData(m, d);
-  std::array<double, franka::kArmJoints> q = franka::kNeutralJoints;
-  for (double& v : q) v += options_.initial_joint_noise * (2.0 * rng.Uniform() - 1.0);
-  impl_->arm.SetJoints(d, q);
+  impl_->arm.SetJoints(d, franka::NoisyNeutralJoints(options_.initial_joint_noise, rng));
   franka::UpdateKinematics(m, d);
   path_ = DrawReachPath(options_.human, rng);
   extrapolate_ = false;
@@ -241,58 +230,33 @@ void KitchenCuttingSim::Reset(Rng& rng) {
 void KitchenCuttingSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
   const mjModel* m = impl_->model.get();
   mjData* d = impl_->data.get();
-  Eigen::Vector3d a;
-  for (int k = 0; k < 3; ++k) {
-    SECURE_CHECK(std::isfinite(action[k]),
-                 "kitchen-cutting: action[" << k << "] = " << action[k] << " is not finite");
-    a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
-  }
-  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * impl_->arm.tcp());
-  Eigen::Vector3d target = ee + options_.action_scale * a;
+  const Eigen::Vector3d a = franka::ClipAction<3>(action, "kitchen-cutting");
   // The blade stops at the board.
-  target.z() = std::max(target.z(), options_.board_top + kBladeDrop);
-  impl_->arm.Track(m, d, target, options_.tracking);
-  franka::CheckWarnings(d, "kitchen-cutting", "a step");
+  franka::StepTool(impl_->arm, m, d, options_, a, options_.board_top + kBladeDrop,
+                   "kitchen-cutting");
   UpdateHuman();
   UpdateProgress();
 }
 
 void KitchenCuttingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
-  SECURE_CHECK(o.size() == kObservationDim, "kitchen-cutting: observation has "
-                                                << o.size() << " entries, expected "
-                                                << kObservationDim);
-  const mjModel* m = impl_->model.get();
-  mjData* d = impl_->data.get();
-  const int tcp = impl_->arm.tcp();
-  mjtNum v[6];
-  mj_objectVelocity(m, d, mjOBJ_SITE, tcp, v, 0);
-  for (int k = 0; k < 3; ++k) {
-    o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
-    o[kEeVel + k] = static_cast<float>(v[3 + k]);
+  franka::CheckObservationSize(o.size(), kObservationDim, "kitchen-cutting");
+  const mjData* d = impl_->data.get();
+  franka::ObserveTool(impl_->model.get(), impl_->data.get(), impl_->arm.tcp(), kEePos, kEeVel, o);
+  for (int k = 0; k < 3; ++k)
     o[kBlade + k] = static_cast<float>(d->site_xpos[3 * impl_->blade + k]);
-  }
   franka::WriteHumanArm(arm_, wrist_vel_, elbow_vel_, kWrist, o);
   o[kStrokes] = static_cast<float>(strokes_) / static_cast<float>(options_.strokes_required);
   o[kLifted] = lifted_ ? 1.0f : 0.0f;
 }
 
 double KitchenCuttingSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) {
-  SECURE_CHECK(o.size() == kObservationDim, "kitchen-cutting: observation has "
-                                                << o.size() << " entries, expected "
-                                                << kObservationDim);
-  for (int k = 0; k < kObservationDim; ++k) {
-    SECURE_CHECK(std::isfinite(o[k]), "kitchen-cutting: observation " << ObservationFeatures()[k]
-                                                                      << " = " << o[k]
-                                                                      << " is not finite");
-  }
+  franka::CheckObservation(o, ObservationFeatures(), "kitchen-cutting");
   const mjModel* m = impl_->model.get();
   mjData* d = impl_->data.get();
   mj_resetData(m, d);
   impl_->arm.SetJoints(d, franka::kNeutralJoints);
   franka::UpdateKinematics(m, d);
-  const double error =
-      impl_->arm.PlaceTool(m, d, Eigen::Vector3d(o[kEePos], o[kEePos + 1], o[kEePos + 2]));
-  impl_->arm.SetToolVelocity(m, d, Eigen::Vector3d(o[kEeVel], o[kEeVel + 1], o[kEeVel + 2]));
+  const double error = franka::PlaceObservedTool(impl_->arm, m, d, o, kEePos, kEeVel);
   franka::UpdateKinematics(m, d);
   extrapolate_ = true;
   t0_ = d->time;

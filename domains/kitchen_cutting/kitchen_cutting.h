@@ -44,16 +44,9 @@
 #include "domains/franka/human_arm.h"
 #include "domains/franka/person.h"
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
-
-namespace YAML {
-class Node;
-}
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::kitchen_cutting {
 
@@ -90,12 +83,9 @@ struct HumanArmOptions : franka::PersonArmOptions {
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
 
-struct KitchenCuttingOptions {
-  int max_steps = 200;
-  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
-  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
-  franka::ArmTracking tracking;
-  double action_scale = 0.05;    // m of end-effector target offset per unit action
+/// max_steps [200], the controller's constants (tracking) and action_scale: franka::ArmTaskOptions.
+struct KitchenCuttingOptions : franka::ArmTaskOptions {
+  KitchenCuttingOptions() { max_steps = 200; }
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   // The cut (the board's top is at board_top; the knife is fixed by the model: blade 0.16 m
   // long, its edge blade_drop below the tool centre point).

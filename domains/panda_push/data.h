@@ -34,15 +34,8 @@
 #include "domains/panda_push/panda_push.h"
 #include "secure/common/enum_strings.h"
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/data/data.h"
-
-namespace YAML {
-class Node;
-}
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::panda_push {
 

@@ -206,9 +206,7 @@ void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::St
   *safe = PandaSafeStates(demos, safe_options, rng);
   *near_dangerous =
       PandaNearDangerousStates(options_.task, demos, nd_options, ContinuationOptions(), rng);
-  const std::string seed = " (held out, data_seed " + std::to_string(data_seed) + ")";
-  safe->source += seed;
-  near_dangerous->source += seed;
+  franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
 cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
@@ -253,7 +251,6 @@ experiments::ExperimentOptions PandaPushDomain::Preset() const {
   // observation features.
   o.flat_barrier.hidden = {32, 128, 128, 256, 256, 256, 256, 128, 128, 32};
   o.flat_barrier.input_features = BarrierFeatures();
-  o.check = PandaPushCheckDefaults();
   // The shield returns the policy's mean where it is safe (docs/SHIELD.md, `policy-mean`), and
   // Algorithm 1's mean of the safe samples elsewhere: over 30 seeds +0.7 points of success against
   // Algorithm 1 on the same models, no more topples (docs/RESULTS.md, Panda, "The policy's mean").
@@ -266,12 +263,6 @@ double ObservedBlockTilt(const Eigen::Ref<const Eigen::VectorXf>& o) {
                                                 << kObservationDim << " values, got " << o.size());
   const double c = std::cos(double(o[kBlockEuler])) * std::cos(double(o[kBlockEuler + 1]));
   return std::acos(std::clamp(c, -1.0, 1.0));
-}
-
-cbf::BarrierCheckOptions PandaPushCheckDefaults() {
-  cbf::BarrierCheckOptions c;
-  c.action_grid = 5;
-  return c;
 }
 
 }  // namespace secure::domains::panda_push

@@ -6,12 +6,9 @@
 
 #include "domains/panda_push/data.h"
 #include "domains/panda_push/panda_push.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/options_domain.h"
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::panda_push {
 
@@ -122,9 +119,5 @@ const std::vector<std::string>& BarrierFeatures();
 /// z axis and the world's, acos(cos(roll) cos(pitch)) for R = Rz(yaw) Ry(pitch) Rx(roll)
 /// (PandaPushSim::BlockTilt of the observed state).
 double ObservedBlockTilt(const Eigen::Ref<const Eigen::VectorXf>& observation);
-
-/// The barrier check's defaults on panda-push: cbf::BarrierCheckOptions with a 5-point action
-/// grid per axis (125 actions + the random ones per max_a g; about 1 s per Table 2 barrier).
-cbf::BarrierCheckOptions PandaPushCheckDefaults();
 
 }  // namespace secure::domains::panda_push

@@ -10,14 +10,15 @@
 #include <mutex>
 #include <sstream>
 
+#include "domains/franka/arm_sim.h"
 #include "domains/franka/mujoco_model.h"
-#include "secure/dynamics/ensemble.h"
-#include "secure/dynamics/learned_environment.h"
 #include "domains/franka/offscreen_renderer.h"
 #include "domains/franka/panda_arm.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
+#include "secure/dynamics/ensemble.h"
+#include "secure/dynamics/learned_environment.h"
 
 namespace secure::domains::panda_push {
 // The model text (generated from panda_push.xml by CMake: panda_push_xml.cc).
@@ -62,11 +63,7 @@ const std::vector<std::string>& ActionFeatures() {
 
 void PandaPushOptions::Validate() const {
   const char* o = "PandaPushOptions";
-  SECURE_CHECK_FIELD(max_steps > 0 && max_steps <= 100000, o, "max_steps", max_steps,
-                     "in [1, 100000]");
-  tracking.Validate(o);
-  SECURE_CHECK_FIELD(Finite(action_scale) && action_scale > 0 && action_scale <= 0.2, o,
-                     "action_scale", action_scale, "in (0, 0.2] m");
+  ArmTaskOptions::Validate(o);
   SECURE_CHECK_FIELD(
       Finite(initial_joint_noise) && initial_joint_noise >= 0 && initial_joint_noise <= 0.2, o,
       "initial_joint_noise", initial_joint_noise, "in [0, 0.2] rad");
@@ -88,10 +85,8 @@ void PandaPushOptions::Validate() const {
 
 YamlFields PandaPushOptions::Fields() {
   YamlFields fields;
-  tracking.AddFields(&fields);
-  fields.Field("max_steps", &max_steps)
-      .Field("action_scale", &action_scale)
-      .Field("initial_joint_noise", &initial_joint_noise)
+  ArmTaskOptions::AddFields(&fields);
+  fields.Field("initial_joint_noise", &initial_joint_noise)
       .Field("block_start", &block_start)
       .Field("target", &target)
       .Field("success_radius", &success_radius)
@@ -106,21 +101,17 @@ SECURE_YAML_JSON_FROM_FIELDS(PandaPushOptions)
 // ---------------------------------------------------------------------------------------------
 // The simulation
 
-struct PandaPushSim::Impl {
-  franka::MujocoModel model;  // this simulation's copy (options applied)
-  franka::MujocoData data;
-  franka::PandaArm arm;
+// The model is this simulation's copy (options applied).
+struct PandaPushSim::Impl : franka::ArmSim {
   int block_body = -1, block_qpos = -1, block_dof = -1;
 
-  explicit Impl(franka::MujocoModel m)
-      : model(std::move(m)), data(model), arm(model.get(), "panda-push") {}
+  explicit Impl(franka::MujocoModel m) : ArmSim(std::move(m), "panda-push") {}
 };
 
 PandaPushSim::PandaPushSim(const PandaPushOptions& options)
     : options_((options.Validate(), options)) {
-  franka::MujocoModel m = franka::MujocoModel::Copy(PandaPushModel());
+  franka::MujocoModel m = franka::TaskModel(PandaPushModel(), options_.tracking);
   mjModel* raw = m.get();
-  raw->opt.timestep = options_.tracking.control_period / options_.tracking.substeps;
   for (int p = 0; p < raw->npair; ++p) {
     const std::string name = mj_id2name(raw, mjOBJ_PAIR, p) ? mj_id2name(raw, mjOBJ_PAIR, p) : "";
     if (name == "block_table") {
@@ -163,41 +154,26 @@ void PandaPushSim::ResetTo(const std::array<double, kArmJoints>& joints) {
 }
 
 void PandaPushSim::Reset(Rng& rng) {
-  std::array<double, kArmJoints> q = kNeutralJoints;
-  for (double& v : q) v += options_.initial_joint_noise * (2.0 * rng.Uniform() - 1.0);
-  ResetTo(q);
+  ResetTo(franka::NoisyNeutralJoints(options_.initial_joint_noise, rng));
 }
 
 void PandaPushSim::Step(const Eigen::Ref<const Eigen::Vector3f>& action) {
   Impl& s = *impl_;
   const mjModel* m = s.model.get();
   mjData* d = s.data.get();
-  Eigen::Vector3d a;
-  for (int k = 0; k < 3; ++k) {
-    SECURE_CHECK(std::isfinite(action[k]),
-                 "panda-push: action[" << k << "] = " << action[k] << " is not finite");
-    a[k] = std::clamp(static_cast<double>(action[k]), -1.0, 1.0);
-  }
-  // The end-effector target (kinematics are current: every public call leaves them so), tracked
-  // for one control period.
-  const Eigen::Map<const Eigen::Vector3d> ee(d->site_xpos + 3 * s.arm.tcp());
-  Eigen::Vector3d target = ee + options_.action_scale * a;
-  target.z() = std::max(target.z(), 0.0);
-  s.arm.Track(m, d, target, options_.tracking);
-  franka::CheckWarnings(d, "panda-push", "a step");
+  const Eigen::Vector3d a = franka::ClipAction<3>(action, "panda-push");
+  // The end-effector target (kinematics are current: every public call leaves them so), kept
+  // above the table, tracked for one control period.
+  franka::StepTool(s.arm, m, d, options_, a, 0.0, "panda-push");
 }
 
 void PandaPushSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
-  SECURE_CHECK(o.size() == kObservationDim,
-               "panda-push: observation has " << o.size() << " entries, expected 18");
+  franka::CheckObservationSize(o.size(), kObservationDim, "panda-push");
   const Impl& s = *impl_;
   const mjModel* m = s.model.get();
   mjData* d = s.data.get();
-  const int tcp = s.arm.tcp();
+  franka::ObserveTool(m, d, s.arm.tcp(), kEePos, kEeVel, o);
   mjtNum v[6];
-  for (int k = 0; k < 3; ++k) o[kEePos + k] = static_cast<float>(d->site_xpos[3 * tcp + k]);
-  mj_objectVelocity(m, d, mjOBJ_SITE, tcp, v, 0);
-  for (int k = 0; k < 3; ++k) o[kEeVel + k] = static_cast<float>(v[3 + k]);
   for (int k = 0; k < 3; ++k) o[kBlockPos + k] = static_cast<float>(d->xpos[3 * s.block_body + k]);
   const mjtNum* r = d->xmat + 9 * s.block_body;  // row-major
   o[kBlockEuler + 0] = static_cast<float>(std::atan2(r[7], r[8]));
@@ -209,22 +185,14 @@ void PandaPushSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
 }
 
 double PandaPushSim::SetObservation(const Eigen::Ref<const Eigen::VectorXf>& o) {
-  SECURE_CHECK(o.size() == kObservationDim,
-               "panda-push: observation has " << o.size() << " entries, expected 18");
-  for (int k = 0; k < kObservationDim; ++k) {
-    SECURE_CHECK(std::isfinite(o[k]), "panda-push: observation " << ObservationFeatures()[k]
-                                                                 << " = " << o[k]
-                                                                 << " is not finite");
-  }
+  franka::CheckObservation(o, ObservationFeatures(), "panda-push");
   Impl& s = *impl_;
   const mjModel* m = s.model.get();
   mjData* d = s.data.get();
   ResetTo(kNeutralJoints);
   // The arm: IK from the neutral posture to the end-effector position, hand down, with the joint
   // velocities that give the end-effector velocity (no rotation).
-  const double error =
-      s.arm.PlaceTool(m, d, Eigen::Vector3d(o[kEePos], o[kEePos + 1], o[kEePos + 2]));
-  s.arm.SetToolVelocity(m, d, Eigen::Vector3d(o[kEeVel], o[kEeVel + 1], o[kEeVel + 2]));
+  const double error = franka::PlaceObservedTool(s.arm, m, d, o, kEePos, kEeVel);
   // The block: R = Rz(yaw) Ry(pitch) Rx(roll).
   for (int k = 0; k < 3; ++k) d->qpos[s.block_qpos + k] = o[kBlockPos + k];
   const Eigen::Quaterniond q = Eigen::AngleAxisd(o[kBlockEuler + 2], Eigen::Vector3d::UnitZ()) *

@@ -43,20 +43,13 @@
 #include "domains/franka/arm_shield_model.h"
 #include "domains/franka/arm_tracking.h"
 #include "secure/common/rng.h"
+#include "secure/common/yaml_fwd.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
-
-namespace YAML {
-class Node;
-}
 
 namespace secure::dynamics {
 class EnsembleModel;
 }  // namespace secure::dynamics
-
-namespace secure {
-class YamlFields;
-}
 
 namespace secure::domains::panda_push {
 
@@ -76,12 +69,8 @@ const std::vector<std::string>& ActionFeatures();
 inline constexpr std::array<double, kArmJoints> kNeutralJoints = {0.0, 0.11, 0.0, -2.55,
                                                                   0.0, 2.6,  0.79};
 
-struct PandaPushOptions {
-  int max_steps = 150;
-  // control_period (s per Step()), substeps, tracking_omega, ik_damping: the controller's
-  // constants, shared by the Franka plug-ins (YAML keys and JSON fields at this level).
-  franka::ArmTracking tracking;
-  double action_scale = 0.05;         // m of end-effector target offset per unit action
+/// max_steps [150], the controller's constants (tracking) and action_scale: franka::ArmTaskOptions.
+struct PandaPushOptions : franka::ArmTaskOptions {
   double initial_joint_noise = 0.02;  // rad, uniform per joint at reset
   std::array<double, 3> block_start = {0.40, 0.0, 0.20};
   std::array<double, 3> target = {0.55, 0.0, 0.20};

@@ -12,11 +12,16 @@
 //     if (good) c.KeepEpisode();
 //   }
 //   data::TrajectorySet set = c.Finish();
+//
+// RecordEpisode runs one episode of a demonstrator into a collector: the step loop with its
+// stops (a collision; the goal, if the generator stops there) that the generators share.
 #include <Eigen/Core>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "secure/data/data.h"
+#include "secure/domains/environment.h"
 
 namespace secure::domains {
 
@@ -48,5 +53,40 @@ class DemonstrationCollector {
   std::vector<float> states_, actions_;                  // kept, column-major
   std::vector<float> episode_states_, episode_actions_;  // the episode under way
 };
+
+/// How a recorded episode ended.
+struct RecordedEpisode {
+  bool collided = false;  // a step collided (the episode stopped there)
+  int reached_at = 0;     // the first step (1, 2, ...) whose outcome reached the goal; 0 = never
+};
+
+/// Records one episode of a demonstrator in `collector` (BeginEpisode first), from `observation`
+/// (the environment's state after its Reset; updated in place): for step = 1, ..., horizon,
+/// `act(observation, action, recorded)` sets the action to step with and the one to record (the
+/// action the environment applies, e.g. clipped; it may be `action` itself), then Record, Step,
+/// and `after_step(outcome)`. Stops at a collision, and with stop_at_goal at the first step that
+/// reaches the goal. The demonstrator, its noise and what to keep stay the caller's.
+template <typename Env, typename Observation, typename Action, typename Act, typename AfterStep>
+RecordedEpisode RecordEpisode(Env& environment, DemonstrationCollector& collector, int horizon,
+                              bool stop_at_goal, Observation& observation, Action& action,
+                              Action& recorded, Act&& act, AfterStep&& after_step) {
+  collector.BeginEpisode();
+  RecordedEpisode episode;
+  for (int step = 1; step <= horizon; ++step) {
+    act(observation, action, recorded);
+    collector.Record(observation, recorded);
+    const StepOutcome outcome = environment.Step(action, observation);
+    after_step(outcome);
+    if (outcome.collided) {
+      episode.collided = true;
+      break;
+    }
+    if (outcome.reached_goal && episode.reached_at == 0) {
+      episode.reached_at = step;
+      if (stop_at_goal) break;
+    }
+  }
+  return episode;
+}
 
 }  // namespace secure::domains
