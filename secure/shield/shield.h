@@ -249,6 +249,12 @@ struct ShieldOptions {
   // |h(s)|) / dt is always added, against float rounding.) The exact check is g >= 0 whatever
   // the margin.
   double qp_margin = 0.0;
+  // proposal = qp: the trust region of the projection. A projection farther than this from mu
+  // (Euclidean, in action units) is not taken: the QP with the constraint |a - mu| <= qp_max_step
+  // is infeasible, and Algorithms 1-2 decide. 0: no limit. On Panda the projection's step was
+  // 2.6-3.3x the sampling shield's correction and took the arm where the shield model is wrong
+  // (docs/RESULTS.md, issue 37).
+  double qp_max_step = 0.0;
   // proposal = refine: gradient steps per decision at most (each a linearisation, a step and an
   // exact check).
   int refine_steps = 5;

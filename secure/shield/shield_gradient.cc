@@ -105,6 +105,13 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
       result.status = QpStatus::kInfeasible;
       for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
     }
+    if (options_.qp_max_step > 0 && result.status != QpStatus::kInfeasible &&
+        (qp_solution_ - qp_mu_).norm() > options_.qp_max_step) {
+      // Beyond the trust region: the QP with |a - mu| <= qp_max_step is infeasible, and
+      // sampling decides (proposal qp only; ShieldOptions::Validate).
+      decision_.qp = QpOutcome::kInfeasible;
+      return false;
+    }
     one_action_.col(0) = qp_solution_.cast<float>();
     ClipToBox(one_action_);  // rounding to float stays in the box
     EvaluateG(state, h_state, one_action_, one_g_);

@@ -258,6 +258,48 @@ TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
   EXPECT_EQ(f.ToJson()["qp"], "infeasible");
 }
 
+// The projection's trust region (qp_max_step): a projection farther from mu than the limit is
+// not taken, the outcome says infeasible, and Algorithms 1-2 decide; within the limit nothing
+// changes.
+TEST(QpShieldTest, AProjectionBeyondTheTrustRegionFallsBackToSampling) {
+  HalfSpace h;
+  const Eigen::Vector2f& w = h.w;
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f});
+  const Eigen::VectorXf unsafe_mu = Vec({-1.0f, 1.0f});
+  const Eigen::Vector2f projection =
+      unsafe_mu + (-0.2f - w.dot(unsafe_mu)) / w.squaredNorm() * w;
+  const double step = (projection - Eigen::Vector2f(unsafe_mu)).norm();  // 2.8 / sqrt(5) = 1.25
+  ASSERT_NEAR(step, 2.8 / std::sqrt(5.0), 1e-5);
+  ShieldOptions o;
+  o.proposal = Proposal::kQp;
+  o.dt = 0.1;
+  o.class_k_gain = 2.0;
+  o.qp_max_step = step + 0.05;  // just beyond: the projection is taken
+  Shield within(o, h.barrier, h.dynamics);
+  const Decision& d = within.Decide(state, unsafe_mu, Vec({0.5f, 0.5f}));
+  EXPECT_EQ(d.qp, QpOutcome::kAccepted);
+  EXPECT_EQ(d.iterations, 0);
+  EXPECT_NEAR(d.action[0], projection[0], 1e-3);
+  EXPECT_NEAR(d.action[1], projection[1], 1e-3);
+
+  o.qp_max_step = step - 0.05;  // just short: sampling decides
+  Shield capped(o, h.barrier, h.dynamics);
+  const Decision& e = capped.Decide(state, unsafe_mu, Vec({0.5f, 0.5f}));
+  EXPECT_EQ(e.qp, QpOutcome::kInfeasible) << e.ToJson().dump();
+  EXPECT_GE(e.iterations, 1) << e.ToJson().dump();
+  // Algorithms 1-2 find safe draws (after widening sigma): a safe status.
+  EXPECT_TRUE(e.status == Status::kSafe || e.status == Status::kSafeAfterResampling)
+      << e.ToJson().dump();
+  EXPECT_GE(e.g, 0.0);
+  EXPECT_GT((e.action - Eigen::VectorXf(projection)).norm(), 1e-3);
+  EXPECT_EQ(e.ToJson()["qp"], "infeasible");
+
+  // A mean that passes is never affected.
+  const Decision& f = capped.Decide(state, Vec({1.0f, 0.0f}), Vec({0.5f, 0.5f}));
+  EXPECT_EQ(f.qp, QpOutcome::kAccepted);
+  EXPECT_FALSE(f.intervened);
+}
+
 // A curved barrier (a disc, h concave): the tangent plane overestimates h, so the textbook
 // projection lands just outside the safe set and the exact check rejects it; re-linearising at
 // the projection (qp_iterations), a margin, or more refinement steps recover a safe action.
@@ -403,6 +445,17 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
   EXPECT_HAS(ErrorOf([&] { y.ApplyYaml(YAML::Load("{proposal: newton}"), "s.yaml"); }),
              "newton");
   o.qp_margin = 0;
+  EXPECT_FALSE(o.ToJson().contains("qp_max_step"));  // absent unless set (runs keep identity)
+  o.qp_max_step = 0.3;
+  EXPECT_EQ(o.ToJson()["qp_max_step"], 0.3);
+  o.qp_max_step = -1;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_max_step = -1");
+  o.qp_max_step = 0.3;
+  o.proposal = Proposal::kQpOnly;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "acts only with proposal = qp");
+  y.ApplyYaml(YAML::Load("{proposal: qp, qp_max_step: 0.25}"), "s.yaml");
+  EXPECT_EQ(y.qp_max_step, 0.25);
+  o.qp_max_step = 0;
   o.proposal = Proposal::kRefine;
   EXPECT_EQ(o.ToJson()["refine_steps"], 5);
   EXPECT_FALSE(o.ToJson().contains("qp_iterations"));
