@@ -251,7 +251,8 @@ struct ShieldOptions {
   double qp_margin = 0.0;
   // proposal = qp: the trust region of the projection. A projection farther than this from mu
   // (Euclidean, in action units) is not taken: the QP with the constraint |a - mu| <= qp_max_step
-  // is infeasible, and Algorithms 1-2 decide. 0: no limit. On Panda the projection's step was
+  // is infeasible, and Algorithms 1-2 decide. 0: no limit. Ignored by the other proposals
+  // (qp-only and refine have no sampling to fall back to). On Panda the projection's step was
   // 2.6-3.3x the sampling shield's correction and took the arm where the shield model is wrong
   // (docs/RESULTS.md, issue 37).
   double qp_max_step = 0.0;

@@ -105,10 +105,11 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
       result.status = QpStatus::kInfeasible;
       for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
     }
-    if (options_.qp_max_step > 0 && result.status != QpStatus::kInfeasible &&
+    if (options_.qp_max_step > 0 && options_.proposal == Proposal::kQp &&
+        result.status != QpStatus::kInfeasible &&
         (qp_solution_ - qp_mu_).norm() > options_.qp_max_step) {
       // Beyond the trust region: the QP with |a - mu| <= qp_max_step is infeasible, and
-      // sampling decides (proposal qp only; ShieldOptions::Validate).
+      // sampling decides (proposal qp only: the filters alone have nothing to fall back to).
       decision_.qp = QpOutcome::kInfeasible;
       return false;
     }

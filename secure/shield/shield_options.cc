@@ -39,11 +39,6 @@ void ShieldOptions::Validate() const {
                      qp_margin, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(qp_max_step) && qp_max_step >= 0, "ShieldOptions",
                      "qp_max_step", qp_max_step, ">= 0 (0: no limit)");
-  SECURE_CHECK(qp_max_step == 0 || proposal == Proposal::kQp,
-               "ShieldOptions::qp_max_step = " << qp_max_step
-                                               << " acts only with proposal = qp (a projection "
-                                                  "beyond it falls back to sampling), not "
-                                               << ToString(kProposalNames, proposal));
   SECURE_CHECK_FIELD(refine_steps >= 1 && refine_steps <= kMaxRefineSteps, "ShieldOptions",
                      "refine_steps", refine_steps, "in [1, " << kMaxRefineSteps << "]");
   SECURE_CHECK(proposal == Proposal::kNone || lookahead_steps == 1,
@@ -90,7 +85,8 @@ nlohmann::json ShieldOptions::ToJson() const {
       json["qp_iterations"] = qp_iterations;
     }
     json["qp_margin"] = qp_margin;
-    if (qp_max_step > 0) json["qp_max_step"] = qp_max_step;  // (absent: no limit, as before)
+    // (absent: no limit, as before; it acts only with proposal = qp)
+    if (qp_max_step > 0 && proposal == Proposal::kQp) json["qp_max_step"] = qp_max_step;
   }
   return json;
 }
