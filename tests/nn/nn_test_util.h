@@ -62,7 +62,7 @@ struct Case {
 inline std::vector<Case> Architectures() {
   std::vector<Case> cases;
   for (Activation a : {Activation::kRelu, Activation::kTanh}) {
-    const std::string act = ToString(kActivationNames, a);
+    const std::string act = secure::ToString(kActivationNames, a);
     cases.push_back({"linear_" + act, Spec(3, {}, 2, a)});
     cases.push_back({"di_" + act, Spec(4, {64, 64, 64}, 1, a)});
     cases.push_back({"derby_" + act, Spec(4, {64, 128, 64}, 1, a)});
