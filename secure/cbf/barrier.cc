@@ -103,16 +103,6 @@ std::string SelectRows::Describe() const {
   return s.str();
 }
 
-void SelectRows::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                            Eigen::Ref<Eigen::VectorXf> h) {
-  Gathered(states, h, /*dense=*/false);
-}
-
-void SelectRows::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                 Eigen::Ref<Eigen::VectorXf> h) {
-  Gathered(states, h, /*dense=*/true);
-}
-
 void SelectRows::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
                                     Eigen::Ref<Eigen::VectorXf> h,
                                     Eigen::Ref<Eigen::MatrixXf> gradients) {
@@ -135,8 +125,8 @@ void SelectRows::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& sta
   }
 }
 
-void SelectRows::Gathered(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                          Eigen::Ref<Eigen::VectorXf> h, bool dense) {
+void SelectRows::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                  Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   const Eigen::Index n = states.cols();
   const Eigen::Index chunk = buffer_.cols();
   const Eigen::Index d = static_cast<Eigen::Index>(rows_.size());

@@ -80,12 +80,30 @@ std::vector<int> FeatureRows(const std::vector<std::string>& wanted,
                              const std::vector<std::string>& available, const std::string& source,
                              const std::string& reader);
 
+/// A barrier that may skip work by state: Evaluate and EvaluateDense both come to
+/// DoEvaluateStates, with `dense` telling it not to skip (SelectRows, MinBarrier, the
+/// per-obstacle evaluator, the dynamics ensemble's pessimistic barrier).
+class SkippingBarrier : public Barrier {
+ protected:
+  /// h of `states` (checked dimensions); dense: skip no work by state (Barrier::EvaluateDense).
+  virtual void DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                Eigen::Ref<Eigen::VectorXf> h, bool dense) = 0;
+  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                  Eigen::Ref<Eigen::VectorXf> h) final {
+    DoEvaluateStates(states, h, /*dense=*/false);
+  }
+  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                       Eigen::Ref<Eigen::VectorXf> h) final {
+    DoEvaluateStates(states, h, /*dense=*/true);
+  }
+};
+
 /// A barrier on wider states: h(s) = inner(s[rows]), i.e. the inner barrier reads rows[k] of a
 /// `state_dim`-row state as its k-th row. The rows are gathered into a buffer preallocated for
 /// `chunk` states (larger batches go in chunks), so Evaluate allocates nothing. E.g. a barrier
 /// trained on 9 of the 18 features of an observation, evaluated on whole observations
 /// (BarrierNet::MakeEvaluatorFor).
-class SelectRows final : public Barrier {
+class SelectRows final : public SkippingBarrier {
  public:
   /// @throws secure::Error if rows.size() != inner->state_dim(), a row is outside
   ///   [0, state_dim) or chunk < 1.
@@ -99,17 +117,14 @@ class SelectRows final : public Barrier {
   bool analytic_gradient() const override { return inner_->analytic_gradient(); }
 
  protected:
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                  Eigen::Ref<Eigen::VectorXf> h) override;
-  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                       Eigen::Ref<Eigen::VectorXf> h) override;
+  /// The inner barrier's h on the gathered rows.
+  void DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                        Eigen::Ref<Eigen::VectorXf> h, bool dense) override;
   void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h,
                           Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
-  void Gathered(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
-                bool dense);
   std::unique_ptr<Barrier> inner_;
   int state_dim_;
   std::vector<int> rows_;

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <optional>
 
+#include "secure/cbf/internal/two_class_training.h"
 #include "secure/common/error.h"
 #include "secure/common/progress.h"
 #include "secure/common/rng.h"
@@ -12,6 +13,7 @@
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
 #include "secure/nn/torch_threads.h"
+#include "secure/nn/torch_training.h"
 #include "secure/nn/training_loop.h"
 
 namespace secure::cbf {
@@ -110,16 +112,10 @@ BarrierNet TrainMember(const BarrierTrainerOptions& options, const data::StateSe
   const nn::ScopedTorchThreads threads(options.threads);
   Rng rng(options.seed);
 
-  const auto [safe_split, nd_split] = data::SplitTwoClassesForValidation(
-      safe.size(), near_dangerous.size(), options.validation_fraction, rng);
-  const bool has_validation = !safe_split.validation.empty();
-  const Eigen::MatrixXf train_safe = data::SelectColumns(safe.states, safe_split.train);
-  const Eigen::MatrixXf train_nd = data::SelectColumns(near_dangerous.states, nd_split.train);
-  const Eigen::MatrixXf val_safe = data::SelectColumns(safe.states, safe_split.validation);
-  const Eigen::MatrixXf val_nd = data::SelectColumns(near_dangerous.states, nd_split.validation);
+  const internal::TwoClassSplit split(safe, near_dangerous, options.validation_fraction, rng);
 
-  Eigen::MatrixXf train_all(safe.dim(), train_safe.cols() + train_nd.cols());
-  train_all << train_safe, train_nd;
+  Eigen::MatrixXf train_all(safe.dim(), split.train_safe.cols() + split.train_nd.cols());
+  train_all << split.train_safe, split.train_nd;
   BarrierNet net;
   net.features = safe.features;
   net.normalizer = nn::Normalizer::Fit(train_all);
@@ -128,11 +124,12 @@ BarrierNet TrainMember(const BarrierTrainerOptions& options, const data::StateSe
   const double n_train = static_cast<double>(train_all.cols());
   double w_safe = options.safe_weight, w_nd = options.unsafe_weight;
   if (options.balance_classes) {
-    w_safe *= n_train / (2.0 * static_cast<double>(train_safe.cols()));
-    w_nd *= n_train / (2.0 * static_cast<double>(train_nd.cols()));
+    w_safe *= n_train / (2.0 * static_cast<double>(split.train_safe.cols()));
+    w_nd *= n_train / (2.0 * static_cast<double>(split.train_nd.cols()));
   }
-  const Batch train = MakeBatch(train_safe, train_nd, net.normalizer, options, w_safe, w_nd);
-  const Batch val = MakeBatch(val_safe, val_nd, net.normalizer, options, w_safe, w_nd);
+  const Batch train =
+      MakeBatch(split.train_safe, split.train_nd, net.normalizer, options, w_safe, w_nd);
+  const Batch val = MakeBatch(split.val_safe, split.val_nd, net.normalizer, options, w_safe, w_nd);
 
   nn::MlpSpec spec;
   spec.input_dim = safe.dim();
@@ -147,63 +144,45 @@ BarrierNet TrainMember(const BarrierTrainerOptions& options, const data::StateSe
       torch::optim::AdamOptions(options.learning_rate).weight_decay(options.weight_decay));
 
   BarrierTrainingSummary s;
-  s.train_safe = train_safe.cols();
-  s.train_near_dangerous = train_nd.cols();
-  s.validation_safe = val_safe.cols();
-  s.validation_near_dangerous = val_nd.cols();
+  s.train_safe = split.train_safe.cols();
+  s.train_near_dangerous = split.train_nd.cols();
+  s.validation_safe = split.val_safe.cols();
+  s.validation_near_dangerous = split.val_nd.cols();
   nn::MlpParams best_params;
 
-  nn::TrainingLoopOptions loop;
-  loop.max_epochs = options.max_epochs;
-  loop.num_samples = train.x.size(0);
-  loop.batch_size = options.batch_size;
-  loop.even_batches = options.even_batches;
-  loop.patience = options.patience;
-  loop.learning_rate = options.learning_rate;
-  loop.final_learning_rate = options.final_learning_rate;
-  loop.name = "cbf::TrainBarrier";
+  const nn::TrainingLoopOptions loop = options.LoopOptions(train.x.size(0), "cbf::TrainBarrier");
   nn::TrainingSteps<Score> steps;
-  steps.set_learning_rate = [&](double lr) {
-    for (auto& group : optimizer.param_groups())
-      static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
-  };
-  steps.train_batch = [&](const std::int64_t* indices, long m) {
-    const torch::Tensor idx =
-        torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
-    const torch::Tensor h = model->forward(train.x.index_select(0, idx)).squeeze(1);
-    const torch::Tensor loss =
-        HingeLoss(h, train.y.index_select(0, idx), train.w.index_select(0, idx),
-                  train.margin.index_select(0, idx));
-    optimizer.zero_grad();
-    loss.backward();
-    optimizer.step();
-    return loss.item<double>();
-  };
+  nn::UseAdam(
+      optimizer,
+      [&](const torch::Tensor& idx) {
+        const torch::Tensor h = model->forward(train.x.index_select(0, idx)).squeeze(1);
+        return HingeLoss(h, train.y.index_select(0, idx), train.w.index_select(0, idx),
+                         train.margin.index_select(0, idx));
+      },
+      &steps);
   // Best checkpoint on the validation split (or on the training split without one).
-  steps.evaluate = [&](int) { return Evaluate(model, has_validation ? val : train); };
+  steps.evaluate = [&](int) { return Evaluate(model, split.has_validation ? val : train); };
   steps.better = Better;
   steps.save_best = [&] { best_params = model->ToParams(); };
   steps.restore_best = [&] { model->LoadParams(best_params); };
   steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
     if (options.verbose && (r.epoch % 50 == 0 || r.epoch == options.max_epochs)) {
       PrintStatusLineF("[cbf train] epoch %d/%d loss %.5f %s balanced acc %.4f (best %.4f @ %d)\n",
-                       r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
-                       r.score->accuracy.Balanced(), r.best->accuracy.Balanced(), r.best_epoch);
+                       r.epoch, options.max_epochs, r.train_loss,
+                       split.has_validation ? "val" : "train", r.score->accuracy.Balanced(),
+                       r.best->accuracy.Balanced(), r.best_epoch);
     }
     if (callback && !callback(r.epoch, r.train_loss, r.score->accuracy.Balanced()))
       return nn::EpochDecision::kStop;
     return nn::EpochDecision::kContinue;
   };
   const nn::TrainingLoopResult result = nn::RunTrainingLoop(loop, rng, steps);
-  s.epochs = result.epochs;
-  s.best_epoch = result.best_epoch;
-  s.iterations = result.steps;
-  s.stop_reason = nn::ToString(result.stop_reason);
+  internal::RecordLoop(result, &s);
 
   const Score train_score = Evaluate(model, train);
   s.train_loss = train_score.loss;
   s.train_accuracy = train_score.accuracy;
-  if (has_validation) {
+  if (split.has_validation) {
     const Score val_score = Evaluate(model, val);
     s.validation_loss = val_score.loss;
     s.validation_accuracy = val_score.accuracy;
@@ -212,12 +191,8 @@ BarrierNet TrainMember(const BarrierTrainerOptions& options, const data::StateSe
 
   net.mlp = std::move(best_params);
   // The summary without its wall-clock time: same seed and data, same model file bytes.
-  net.provenance = {{"trainer", "secure::cbf::TrainBarrier (Eq. 4 hinge loss)"},
-                    {"options", options.ToJson()},
-                    {"summary", nn::WithoutTiming(s.ToJson())},
-                    {"safe_states", {{"source", safe.source}, {"count", safe.size()}}},
-                    {"near_dangerous_states",
-                     {{"source", near_dangerous.source}, {"count", near_dangerous.size()}}}};
+  net.provenance = internal::TrainingProvenance("secure::cbf::TrainBarrier (Eq. 4 hinge loss)",
+                                                options.ToJson(), s.ToJson(), safe, near_dangerous);
   net.Validate();
   if (summary != nullptr) *summary = s;
   return net;

@@ -89,13 +89,19 @@ void ObstacleLayout::Validate(const std::string& what) const {
                                     << ", beyond layout.obs_dim = " << obs_dim);
 }
 
+const std::array<ObstacleLayout::Field, 6> ObstacleLayout::kFields = {{
+    {"obs_dim", &ObstacleLayout::obs_dim},
+    {"first_obstacle_offset", &ObstacleLayout::first_obstacle_offset},
+    {"obstacle_stride", &ObstacleLayout::obstacle_stride},
+    {"num_obstacles", &ObstacleLayout::num_obstacles},
+    {"position_offset", &ObstacleLayout::position_offset},
+    {"velocity_offset", &ObstacleLayout::velocity_offset},
+}};
+
 nlohmann::json ObstacleLayout::ToJson() const {
-  return {{"obs_dim", obs_dim},
-          {"first_obstacle_offset", first_obstacle_offset},
-          {"obstacle_stride", obstacle_stride},
-          {"num_obstacles", num_obstacles},
-          {"position_offset", position_offset},
-          {"velocity_offset", velocity_offset}};
+  nlohmann::json j = nlohmann::json::object();
+  for (const Field& f : kFields) j[f.name] = this->*f.member;
+  return j;
 }
 
 ObstacleLayout ObstacleLayout::FromJson(const nlohmann::json& j, const std::string& source) {
@@ -103,20 +109,15 @@ ObstacleLayout ObstacleLayout::FromJson(const nlohmann::json& j, const std::stri
                source << ": metadata field 'input.layout' = " << j.dump() << ", must be an object");
   const std::string path = "input.layout";
   ObstacleLayout l;
-  l.obs_dim = IntField(j, "obs_dim", path, source);
-  l.first_obstacle_offset = IntField(j, "first_obstacle_offset", path, source);
-  l.obstacle_stride = IntField(j, "obstacle_stride", path, source);
-  l.num_obstacles = IntField(j, "num_obstacles", path, source);
-  l.position_offset = IntField(j, "position_offset", path, source);
-  l.velocity_offset = IntField(j, "velocity_offset", path, source);
+  for (const Field& f : kFields) l.*f.member = IntField(j, f.name, path, source);
   l.Validate(source);
   return l;
 }
 
 bool ObstacleLayout::operator==(const ObstacleLayout& o) const {
-  return obs_dim == o.obs_dim && first_obstacle_offset == o.first_obstacle_offset &&
-         obstacle_stride == o.obstacle_stride && num_obstacles == o.num_obstacles &&
-         position_offset == o.position_offset && velocity_offset == o.velocity_offset;
+  for (const Field& f : kFields)
+    if (this->*f.member != o.*f.member) return false;
+  return true;
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -341,18 +342,8 @@ CarBarrierEvaluator::CarBarrierEvaluator(const CarBarrierNet& net, int max_state
   active_gradients_.resize(net.input.feature_dim(), gradient_chunk);
 }
 
-void CarBarrierEvaluator::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                     Eigen::Ref<Eigen::VectorXf> h) {
-  EvaluateChunks(states, h, /*dense=*/false);
-}
-
-void CarBarrierEvaluator::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                          Eigen::Ref<Eigen::VectorXf> h) {
-  EvaluateChunks(states, h, /*dense=*/true);
-}
-
-void CarBarrierEvaluator::EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                         Eigen::Ref<Eigen::VectorXf> h, bool dense) {
+void CarBarrierEvaluator::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                           Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   const Eigen::Index n = states.cols();
   const int k = layout_.num_obstacles;
   for (Eigen::Index first = 0; first < n; first += max_states_) {

@@ -32,6 +32,7 @@
 // internal/car_barrier_torch.h.
 
 #include <Eigen/Core>
+#include <array>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -61,6 +62,14 @@ struct ObstacleLayout {
   int num_obstacles = 0;
   int position_offset = 0;
   int velocity_offset = 0;
+
+  /// The fields above by name, in order: ToJson, FromJson, operator== and the trainer's YAML
+  /// reader go through this one list.
+  struct Field {
+    const char* name;
+    int ObstacleLayout::*member;
+  };
+  static const std::array<Field, 6> kFields;
 
   /// False for the default-constructed (all-zero) layout, which Validate() rejects.
   bool IsSet() const { return *this != ObstacleLayout{}; }
@@ -155,7 +164,7 @@ struct CarBarrierNet {
 /// InferenceMlp forward over them, and min-reduces per state. No allocation after construction.
 /// EvaluateDense gathers every car, in range or not, and masks afterwards (the authors' masked
 /// network's work, the same values).
-class CarBarrierEvaluator final : public Barrier {
+class CarBarrierEvaluator final : public SkippingBarrier {
  public:
   CarBarrierEvaluator(const CarBarrierNet& net, int max_states);
   int state_dim() const override { return layout_.obs_dim; }
@@ -170,17 +179,14 @@ class CarBarrierEvaluator final : public Barrier {
   static constexpr int kGradientChunk = 64;
 
  protected:
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                  Eigen::Ref<Eigen::VectorXf> h) override;
-  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                       Eigen::Ref<Eigen::VectorXf> h) override;
+  /// Chunk by chunk; dense: every car's MLP, masked afterwards (else only the in-range cars).
+  void DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                        Eigen::Ref<Eigen::VectorXf> h, bool dense) override;
   void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h,
                           Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
-  void EvaluateChunks(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                      Eigen::Ref<Eigen::VectorXf> h, bool dense);
   ObstacleLayout layout_;
   bool use_velocity_;
   float r_, big_r_, eps_, cap_;

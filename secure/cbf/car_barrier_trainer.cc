@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "secure/cbf/internal/car_barrier_torch.h"
+#include "secure/cbf/internal/two_class_training.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/progress.h"
@@ -19,6 +20,7 @@
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
 #include "secure/nn/torch_threads.h"
+#include "secure/nn/torch_training.h"
 #include "secure/nn/training_loop.h"
 
 namespace secure::cbf {
@@ -179,11 +181,7 @@ void CarBarrierTrainerOptions::Validate() const {
   // An unset layout passes here (a domain whose barrier is flat carries these options unused);
   // TrainCarBarrier requires it.
   input.Validate("CarBarrierTrainerOptions::input", /*allow_unset_layout=*/true);
-  SECURE_CHECK_FIELD(!hidden.empty(), "CarBarrierTrainerOptions", "hidden", "[]",
-                     "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < hidden.size(); ++i)
-    SECURE_CHECK_FIELD(hidden[i] > 0, "CarBarrierTrainerOptions", "hidden[" << i << "]", hidden[i],
-                       "> 0");
+  CheckLayerWidths(hidden, "CarBarrierTrainerOptions", "hidden");
   if (cap.has_value())
     SECURE_CHECK_FIELD(std::isfinite(*cap) && *cap >= 0, "CarBarrierTrainerOptions", "cap", *cap,
                        ">= 0 (or unset: the safe margin)");
@@ -209,9 +207,6 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
     k.insert(Keys().begin(), Keys().end());
     return k;
   }();
-  static const std::set<std::string> layout_keys = {"obs_dim",         "first_obstacle_offset",
-                                                    "obstacle_stride", "num_obstacles",
-                                                    "position_offset", "velocity_offset"};
   for (const auto& item : node) {
     const std::string key = YamlKey(item.first, source);
     SECURE_CHECK(known.count(key),
@@ -223,16 +218,12 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
       SECURE_CHECK(v.IsMap(), source << ": field 'layout' must be a mapping");
       for (const auto& l : v) {
         const std::string lk = YamlKey(l.first, source);
-        SECURE_CHECK(layout_keys.count(lk),
+        const auto field =
+            std::find_if(ObstacleLayout::kFields.begin(), ObstacleLayout::kFields.end(),
+                         [&](const ObstacleLayout::Field& f) { return lk == f.name; });
+        SECURE_CHECK(field != ObstacleLayout::kFields.end(),
                      source << ": unknown field 'layout." << lk << "' in the car barrier options");
-        const int value = YamlValue<int>(l.second, "layout." + lk, source);
-        ObstacleLayout& lay = input.layout;
-        if (lk == "obs_dim") lay.obs_dim = value;
-        if (lk == "first_obstacle_offset") lay.first_obstacle_offset = value;
-        if (lk == "obstacle_stride") lay.obstacle_stride = value;
-        if (lk == "num_obstacles") lay.num_obstacles = value;
-        if (lk == "position_offset") lay.position_offset = value;
-        if (lk == "velocity_offset") lay.velocity_offset = value;
+        input.layout.*field->member = YamlValue<int>(l.second, "layout." + lk, source);
       }
     } else if (key == "collision_radius") {
       input.collision_radius = YamlValue<double>(v, key, source);
@@ -243,9 +234,7 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
     } else if (key == "use_velocity") {
       input.use_velocity = YamlValue<bool>(v, key, source);
     } else if (key == "hidden") {
-      SECURE_CHECK(v.IsSequence(), source << ": field 'hidden' must be a list of layer widths");
-      hidden.clear();
-      for (const auto& w : v) hidden.push_back(YamlValue<int>(w, "hidden", source));
+      hidden = YamlWidths(v, key, source);
     } else if (key == "activation") {
       activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
                               source + ": activation");
@@ -410,22 +399,16 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   const nn::ScopedTorchThreads threads(options.threads);
   Rng rng(options.seed);
 
-  const auto [safe_split, nd_split] = data::SplitTwoClassesForValidation(
-      safe.size(), near_dangerous.size(), options.validation_fraction, rng);
-  const bool has_validation = !safe_split.validation.empty();
-  const Eigen::MatrixXf train_safe = data::SelectColumns(safe.states, safe_split.train);
-  const Eigen::MatrixXf train_nd = data::SelectColumns(near_dangerous.states, nd_split.train);
-  const Eigen::MatrixXf val_safe = data::SelectColumns(safe.states, safe_split.validation);
-  const Eigen::MatrixXf val_nd = data::SelectColumns(near_dangerous.states, nd_split.validation);
+  const internal::TwoClassSplit split(safe, near_dangerous, options.validation_fraction, rng);
 
-  const double n_train = static_cast<double>(train_safe.cols() + train_nd.cols());
+  const double n_train = static_cast<double>(split.train_safe.cols() + split.train_nd.cols());
   double w_safe = 1.0, w_nd = 1.0;
   if (options.balance_classes) {
-    w_safe = n_train / (2.0 * static_cast<double>(train_safe.cols()));
-    w_nd = n_train / (2.0 * static_cast<double>(train_nd.cols()));
+    w_safe = n_train / (2.0 * static_cast<double>(split.train_safe.cols()));
+    w_nd = n_train / (2.0 * static_cast<double>(split.train_nd.cols()));
   }
-  const Data train = MakeData(options.input, train_safe, train_nd, w_safe, w_nd);
-  const Data val = MakeData(options.input, val_safe, val_nd, w_safe, w_nd);
+  const Data train = MakeData(options.input, split.train_safe, split.train_nd, w_safe, w_nd);
+  const Data val = MakeData(options.input, split.val_safe, split.val_nd, w_safe, w_nd);
 
   // Normaliser on the in-range training entries.
   const int fdim = options.input.feature_dim();
@@ -459,64 +442,48 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   s.validation_near_dangerous = val.n_nd;
   s.train_safe_entries = train.safe.sum().item<long>();
   s.train_danger_entries = train.danger.sum().item<long>();
-  if (has_validation) {
+  if (split.has_validation) {
     s.validation_safe_entries = val.safe.sum().item<long>();
     s.validation_danger_entries = val.danger.sum().item<long>();
   }
   s.cap = cap;
   nn::MlpParams best_params;
 
-  nn::TrainingLoopOptions loop;
-  loop.max_epochs = options.max_epochs;
-  loop.num_samples = train.n_safe + train.n_nd;
-  loop.batch_size = options.batch_size;
-  loop.even_batches = options.even_batches;
-  loop.patience = options.patience;
-  loop.learning_rate = options.learning_rate;
-  loop.final_learning_rate = options.final_learning_rate;
-  loop.name = "cbf::TrainCarBarrier";
+  const nn::TrainingLoopOptions loop =
+      options.LoopOptions(train.n_safe + train.n_nd, "cbf::TrainCarBarrier");
   nn::TrainingSteps<Score> steps;
-  steps.set_learning_rate = [&](double lr) {
-    for (auto& group : optimizer.param_groups())
-      static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
+  nn::UseAdam(
+      optimizer,
+      [&](const torch::Tensor& idx) {
+        const torch::Tensor entry_h = model->EntryValues(train.features.index_select(0, idx));
+        return Loss(entry_h, train.danger.index_select(0, idx), train.safe.index_select(0, idx),
+                    train.weight.index_select(0, idx), options);
+      },
+      &steps);
+  steps.evaluate = [&](int) {
+    return Evaluate(model, split.has_validation ? val : train, options);
   };
-  steps.train_batch = [&](const std::int64_t* indices, long m) {
-    const torch::Tensor idx =
-        torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
-    const torch::Tensor entry_h = model->EntryValues(train.features.index_select(0, idx));
-    const torch::Tensor loss =
-        Loss(entry_h, train.danger.index_select(0, idx), train.safe.index_select(0, idx),
-             train.weight.index_select(0, idx), options);
-    optimizer.zero_grad();
-    loss.backward();
-    optimizer.step();
-    return loss.item<double>();
-  };
-  steps.evaluate = [&](int) { return Evaluate(model, has_validation ? val : train, options); };
   steps.better = Better;
   steps.save_best = [&] { best_params = model->MlpParams(); };
   steps.restore_best = [&] { model->LoadMlpParams(best_params); };
   steps.on_epoch = [&](const nn::EpochReport<Score>& r) {
     if (options.verbose && (r.epoch % 10 == 0 || r.epoch == options.max_epochs)) {
       PrintStatusLineF("[car cbf train] epoch %d/%d loss %.5f %s state acc %.4f (best %.4f @ %d)\n",
-                       r.epoch, options.max_epochs, r.train_loss, has_validation ? "val" : "train",
-                       r.score->accuracy.states.Balanced(), r.best->accuracy.states.Balanced(),
-                       r.best_epoch);
+                       r.epoch, options.max_epochs, r.train_loss,
+                       split.has_validation ? "val" : "train", r.score->accuracy.states.Balanced(),
+                       r.best->accuracy.states.Balanced(), r.best_epoch);
     }
     if (callback && !callback(r.epoch, r.train_loss, r.score->accuracy.states.Balanced()))
       return nn::EpochDecision::kStop;
     return nn::EpochDecision::kContinue;
   };
   const nn::TrainingLoopResult result = nn::RunTrainingLoop(loop, rng, steps);
-  s.epochs = result.epochs;
-  s.best_epoch = result.best_epoch;
-  s.iterations = result.steps;
-  s.stop_reason = nn::ToString(result.stop_reason);
+  internal::RecordLoop(result, &s);
 
   const Score train_score = Evaluate(model, train, options);
   s.train_loss = train_score.loss;
   s.train_accuracy = train_score.accuracy;
-  if (has_validation) {
+  if (split.has_validation) {
     const Score val_score = Evaluate(model, val, options);
     s.validation_loss = val_score.loss;
     s.validation_accuracy = val_score.accuracy;
@@ -526,12 +493,9 @@ CarBarrierNet TrainCarBarrier(const CarBarrierTrainerOptions& options, const dat
   CarBarrierNet net = model->ToNet();
   net.features = safe.features;
   // The summary without its wall-clock time: same seed and data, same model file bytes.
-  net.provenance = {{"trainer", "secure::cbf::TrainCarBarrier (per-car hinge loss, §3.1)"},
-                    {"options", options.ToJson()},
-                    {"summary", nn::WithoutTiming(s.ToJson())},
-                    {"safe_states", {{"source", safe.source}, {"count", safe.size()}}},
-                    {"near_dangerous_states",
-                     {{"source", near_dangerous.source}, {"count", near_dangerous.size()}}}};
+  net.provenance =
+      internal::TrainingProvenance("secure::cbf::TrainCarBarrier (per-car hinge loss, §3.1)",
+                                   options.ToJson(), s.ToJson(), safe, near_dangerous);
   net.Validate();
   if (summary != nullptr) *summary = s;
   return net;

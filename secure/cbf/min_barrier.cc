@@ -47,18 +47,8 @@ MinBarrier::MinBarrier(std::vector<std::unique_ptr<Barrier>> members, int chunk)
   if (analytic_) scratch_gradients_.resize(state_dim_, chunk);
 }
 
-void MinBarrier::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                            Eigen::Ref<Eigen::VectorXf> h) {
-  Minimum(states, h, /*dense=*/false);
-}
-
-void MinBarrier::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                 Eigen::Ref<Eigen::VectorXf> h) {
-  Minimum(states, h, /*dense=*/true);
-}
-
-void MinBarrier::Minimum(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                         Eigen::Ref<Eigen::VectorXf> h, bool dense) {
+void MinBarrier::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                  Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   ForEachChunk(states.cols(), scratch_h_.size(), [&](Eigen::Index first, Eigen::Index m) {
     const auto block = states.middleCols(first, m);
     auto out = h.segment(first, m);

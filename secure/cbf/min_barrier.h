@@ -12,7 +12,7 @@
 
 namespace secure::cbf {
 
-class MinBarrier final : public Barrier {
+class MinBarrier final : public SkippingBarrier {
  public:
   /// Members of one state_dim; scratch for `chunk` states is allocated here (larger batches go
   /// in chunks), so Evaluate, EvaluateDense and the analytic EvaluateGradient allocate nothing.
@@ -30,20 +30,16 @@ class MinBarrier final : public Barrier {
   int members() const { return static_cast<int>(members_.size()); }
 
  protected:
-  /// The least member h, chunk by chunk (member 0 writes h, the others the scratch).
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                  Eigen::Ref<Eigen::VectorXf> h) override;
-  /// The same with every member's EvaluateDense.
-  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                       Eigen::Ref<Eigen::VectorXf> h) override;
+  /// The least member h, chunk by chunk (member 0 writes h, the others the scratch); dense:
+  /// with every member's EvaluateDense.
+  void DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                        Eigen::Ref<Eigen::VectorXf> h, bool dense) override;
   /// The arg-min member's h and gradient (analytic members), else central differences.
   void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
                           Eigen::Ref<Eigen::VectorXf> h,
                           Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
-  void Minimum(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
-               bool dense);
   std::vector<std::unique_ptr<Barrier>> members_;
   int state_dim_ = 0;
   bool analytic_ = true;

@@ -17,22 +17,8 @@
 namespace secure::cbf {
 
 void BarrierTrainerOptions::Validate() const {
-  for (std::size_t k = 0; k < input_features.size(); ++k) {
-    SECURE_CHECK_FIELD(!input_features[k].empty(), "BarrierTrainerOptions",
-                       "input_features[" << k << "]", "''", "a non-empty feature name");
-    for (std::size_t i = 0; i < k; ++i)
-      SECURE_CHECK_FIELD(input_features[i] != input_features[k], "BarrierTrainerOptions",
-                         "input_features[" << k << "]", "'" << input_features[k] << "'",
-                         "a name not given before (it is also input_features[" << i << "])");
-  }
-  SECURE_CHECK_FIELD(!hidden.empty(), "BarrierTrainerOptions", "hidden", "[]",
-                     "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < hidden.size(); ++i) {
-    SECURE_CHECK_FIELD(hidden[i] > 0, "BarrierTrainerOptions", "hidden[" << i << "]", hidden[i],
-                       "> 0");
-    SECURE_CHECK_FIELD(hidden[i] <= kMaxLayerWidth, "BarrierTrainerOptions", "hidden[" << i << "]",
-                       hidden[i], "in [1, " << kMaxLayerWidth << "]");
-  }
+  CheckFeatureNames(input_features, "BarrierTrainerOptions", "input_features");
+  CheckLayerWidths(hidden, "BarrierTrainerOptions", "hidden");
   SECURE_CHECK_FIELD(std::isfinite(safe_margin) && safe_margin >= 0, "BarrierTrainerOptions",
                      "safe_margin", safe_margin, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(unsafe_margin) && unsafe_margin >= 0, "BarrierTrainerOptions",
@@ -62,15 +48,9 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
                         << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
     const YAML::Node& v = item.second;
     if (key == "input_features") {
-      SECURE_CHECK(v.IsSequence(),
-                   source << ": field 'input_features' must be a list of feature names");
-      input_features.clear();
-      for (const auto& f : v)
-        input_features.push_back(YamlValue<std::string>(f, "input_features", source));
+      input_features = YamlList<std::string>(v, key, source, "feature names");
     } else if (key == "hidden") {
-      SECURE_CHECK(v.IsSequence(), source << ": field 'hidden' must be a list of layer widths");
-      hidden.clear();
-      for (const auto& w : v) hidden.push_back(YamlValue<int>(w, "hidden", source));
+      hidden = YamlWidths(v, key, source);
     } else if (key == "activation") {
       activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
                               source + ": activation");

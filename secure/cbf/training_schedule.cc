@@ -12,6 +12,12 @@
 
 namespace secure::cbf {
 
+nn::TrainingLoopOptions TrainingSchedule::LoopOptions(long num_samples, const char* name) const {
+  // In the order TrainingLoopOptions declares its fields.
+  return nn::TrainingLoopOptions{max_epochs, num_samples,   batch_size,          even_batches,
+                                 patience,   learning_rate, final_learning_rate, name};
+}
+
 const std::vector<std::string>& TrainingSchedule::Keys() {
   static const std::vector<std::string> keys = {
       "learning_rate", "final_learning_rate", "weight_decay",        "batch_size",

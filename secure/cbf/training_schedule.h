@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "secure/nn/training_loop.h"
+
 namespace YAML {
 class Node;
 }
@@ -37,6 +39,9 @@ struct TrainingSchedule {
   int threads = 1;                    // LibTorch (and OpenBLAS) intra-op threads
   bool verbose = false;               // progress lines on stderr
 
+  /// nn::RunTrainingLoop's options from these fields, for `num_samples` training samples; its
+  /// errors name `name` ("cbf::TrainBarrier").
+  nn::TrainingLoopOptions LoopOptions(long num_samples, const char* name) const;
   /// The YAML keys of the fields above (AddFields' keys).
   static const std::vector<std::string>& Keys();
   /// Throws secure::Error "owner::field = value, must be ..." for the first field out of range.

@@ -6,6 +6,7 @@
 
 #include <string>
 #include <type_traits>
+#include <vector>
 
 #include "secure/common/error.h"
 
@@ -34,6 +35,23 @@ T YamlValue(const YAML::Node& node, const std::string& key, const std::string& s
                             : std::is_floating_point_v<T> ? "number"
                                                           : "value"));
   }
+}
+
+/// A YAML sequence of T (e.g. layer widths, feature names); anything else is an error
+/// "source: field 'key' must be a list of <what>".
+template <typename T>
+std::vector<T> YamlList(const YAML::Node& node, const std::string& key, const std::string& source,
+                        const char* what) {
+  SECURE_CHECK(node.IsSequence(), source << ": field '" << key << "' must be a list of " << what);
+  std::vector<T> values;
+  for (const auto& v : node) values.push_back(YamlValue<T>(v, key, source));
+  return values;
+}
+
+/// An MLP's hidden layer widths: YamlList<int> "... must be a list of layer widths".
+inline std::vector<int> YamlWidths(const YAML::Node& node, const std::string& key,
+                                   const std::string& source) {
+  return YamlList<int>(node, key, source, "layer widths");
 }
 
 }  // namespace secure

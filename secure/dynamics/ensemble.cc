@@ -250,8 +250,8 @@ std::string PessimisticBarrier::Describe() const {
          std::to_string(model_.num_members()) + " members of the learned dynamics";
 }
 
-void PessimisticBarrier::EvaluateMin(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                     Eigen::Ref<Eigen::VectorXf> h, bool dense) {
+void PessimisticBarrier::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                          Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   if (!model_.IsLastStep(states)) {
     if (dense)
       inner_->EvaluateDense(states, h);
@@ -317,16 +317,6 @@ void PessimisticBarrier::AggregateMembers(Eigen::Index m, Eigen::Ref<Eigen::Vect
     for (int j = 0; j < k; ++j) sum_sq += (hm[j * m + i] - mean) * (hm[j * m + i] - mean);
     h[i] = static_cast<float>(mean - options_.kappa * std::sqrt(sum_sq / k));
   }
-}
-
-void PessimisticBarrier::DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                    Eigen::Ref<Eigen::VectorXf> h) {
-  EvaluateMin(states, h, false);
-}
-
-void PessimisticBarrier::DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                         Eigen::Ref<Eigen::VectorXf> h) {
-  EvaluateMin(states, h, true);
 }
 
 std::unique_ptr<cbf::Barrier> ForShieldModel(std::unique_ptr<cbf::Barrier> barrier,

@@ -149,7 +149,7 @@ class EnsembleModel final : public domains::DynamicsModel {
 /// h(s⁺) pessimistic over the ensemble: on the next states `model` last wrote, the members'
 /// h(member's s⁺) aggregated by `options` (default: the minimum; the inner barrier sees K·M
 /// columns at once); on other states, inner h.
-class PessimisticBarrier final : public cbf::Barrier {
+class PessimisticBarrier final : public cbf::SkippingBarrier {
  public:
   /// `model` must outlive this barrier; `inner` reads model.state_dim() rows.
   /// @throws secure::Error if the state dimensions differ or the options are invalid.
@@ -160,14 +160,10 @@ class PessimisticBarrier final : public cbf::Barrier {
   cbf::Barrier& inner() { return *inner_; }
 
  protected:
-  void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                  Eigen::Ref<Eigen::VectorXf> h) override;
-  void DoEvaluateDense(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                       Eigen::Ref<Eigen::VectorXf> h) override;
+  void DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                        Eigen::Ref<Eigen::VectorXf> h, bool dense) override;
 
  private:
-  void EvaluateMin(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Ref<Eigen::VectorXf> h,
-                   bool dense);
   // h_members_ for the linear path: h(s̄⁺_i) + ∇h(s)·(s⁺_ik − s̄⁺_i).
   void LinearMembers(const Eigen::Ref<const Eigen::MatrixXf>& states,
                      Eigen::Ref<Eigen::VectorXf> h, bool dense);

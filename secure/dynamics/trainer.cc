@@ -16,6 +16,7 @@
 #include "secure/data/data.h"
 #include "secure/nn/model_file.h"
 #include "secure/nn/torch_mlp.h"
+#include "secure/nn/torch_training.h"
 #include "secure/nn/training_loop.h"
 
 namespace secure::dynamics {
@@ -169,20 +170,12 @@ EnsembleDynamics TrainDynamics(const DynamicsTrainerOptions& options, const Tran
     loop.final_learning_rate = options.final_learning_rate;
     loop.name = "dynamics::TrainDynamics";
     nn::TrainingSteps<double> steps;
-    steps.set_learning_rate = [&](double lr) {
-      for (auto& group : optimizer.param_groups())
-        static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
-    };
-    steps.train_batch = [&](const std::int64_t* indices, long m) {
-      const torch::Tensor idx =
-          torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
-      const torch::Tensor loss =
-          torch::mse_loss(net->forward(xt.index_select(0, idx)), yt.index_select(0, idx));
-      optimizer.zero_grad();
-      loss.backward();
-      optimizer.step();
-      return loss.item<double>();
-    };
+    nn::UseAdam(
+        optimizer,
+        [&](const torch::Tensor& idx) {
+          return torch::mse_loss(net->forward(xt.index_select(0, idx)), yt.index_select(0, idx));
+        },
+        &steps);
     steps.evaluate = [&](int) { return Mse(net, xv, yv); };
     steps.better = [](double candidate, double best_loss) { return candidate < best_loss; };
     steps.baseline = std::numeric_limits<double>::infinity();

@@ -16,13 +16,7 @@ namespace secure::policy {
 namespace {
 
 void CheckWidths(const std::vector<int>& widths, const char* field) {
-  SECURE_CHECK_FIELD(!widths.empty(), "AirlOptions", field, "[]",
-                     "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < widths.size(); ++i) {
-    SECURE_CHECK_FIELD(widths[i] > 0, "AirlOptions", field << "[" << i << "]", widths[i], "> 0");
-    SECURE_CHECK_FIELD(widths[i] <= kMaxLayerWidth, "AirlOptions", field << "[" << i << "]",
-                       widths[i], "in [1, " << kMaxLayerWidth << "]");
-  }
+  CheckLayerWidths(widths, "AirlOptions", field);
 }
 
 void CheckPositive(double x, const char* field) {

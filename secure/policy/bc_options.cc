@@ -19,13 +19,7 @@ nlohmann::json NumberOrNull(double x) { return std::isfinite(x) ? nlohmann::json
 }  // namespace
 
 void BcOptions::Validate() const {
-  SECURE_CHECK_FIELD(!hidden.empty(), "BcOptions", "hidden", "[]",
-                     "a non-empty list of layer widths");
-  for (std::size_t i = 0; i < hidden.size(); ++i) {
-    SECURE_CHECK_FIELD(hidden[i] > 0, "BcOptions", "hidden[" << i << "]", hidden[i], "> 0");
-    SECURE_CHECK_FIELD(hidden[i] <= kMaxLayerWidth, "BcOptions", "hidden[" << i << "]", hidden[i],
-                       "in [1, " << kMaxLayerWidth << "]");
-  }
+  CheckLayerWidths(hidden, "BcOptions", "hidden");
   SECURE_CHECK_FIELD(std::isfinite(learning_rate) && learning_rate > 0, "BcOptions",
                      "learning_rate", learning_rate, "> 0");
   SECURE_CHECK_FIELD(std::isfinite(final_learning_rate) && final_learning_rate > 0 &&
@@ -40,14 +34,7 @@ void BcOptions::Validate() const {
       std::isfinite(validation_fraction) && validation_fraction >= 0 && validation_fraction < 1,
       "BcOptions", "validation_fraction", validation_fraction, "in [0, 1)");
   SECURE_CHECK_FIELD(std::isfinite(min_log_std), "BcOptions", "min_log_std", min_log_std, "finite");
-  for (std::size_t i = 0; i < input_features.size(); ++i) {
-    SECURE_CHECK_FIELD(!input_features[i].empty(), "BcOptions", "input_features[" << i << "]",
-                       "''", "a feature name");
-    for (std::size_t j = 0; j < i; ++j)
-      SECURE_CHECK_FIELD(input_features[j] != input_features[i], "BcOptions",
-                         "input_features[" << i << "]", "'" << input_features[i] << "'",
-                         "distinct from the other input features");
-  }
+  CheckFeatureNames(input_features, "BcOptions", "input_features");
 }
 
 void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {

@@ -16,6 +16,7 @@
 #include "secure/common/strings.h"
 #include "secure/common/timer.h"
 #include "secure/nn/model_file.h"
+#include "secure/nn/torch_training.h"
 #include "secure/nn/training_loop.h"
 #include "secure/policy/internal/torch_policy.h"
 
@@ -181,17 +182,12 @@ GaussianPolicy TrainBc(const BcOptions& options, const data::TrajectorySet& demo
   loop.final_learning_rate = options.final_learning_rate;
   loop.name = "policy::TrainBc";
   nn::TrainingSteps<Score> steps;
-  steps.set_learning_rate = [&](double lr) { internal::SetLearningRate(optimizer, lr); };
-  steps.train_batch = [&](const std::int64_t* indices, long m) {
-    const torch::Tensor idx =
-        torch::from_blob(const_cast<std::int64_t*>(indices), {m}, torch::kInt64);
-    const torch::Tensor loss =
-        -model->LogProb(train.x.index_select(0, idx), train.a.index_select(0, idx)).mean();
-    optimizer.zero_grad();
-    loss.backward();
-    optimizer.step();
-    return loss.item<double>();
-  };
+  nn::UseAdam(
+      optimizer,
+      [&](const torch::Tensor& idx) {
+        return -model->LogProb(train.x.index_select(0, idx), train.a.index_select(0, idx)).mean();
+      },
+      &steps);
   // Validation NLL and action MSE (the action MSE on the training pairs without a validation
   // split).
   steps.evaluate = [&](int) {

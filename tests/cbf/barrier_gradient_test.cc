@@ -26,6 +26,7 @@
 #include "secure/nn/inference_mlp.h"
 #include "secure/nn/mlp.h"
 #include "secure/nn/torch_mlp.h"
+#include "tests/nn/nn_test_util.h"
 #include "tests/test_util.h"
 
 namespace secure::cbf {
@@ -33,12 +34,9 @@ namespace {
 
 using secure::test::ErrorOf;
 
+// (dim x n) states, uniform in [lo, hi) per row, seeded (the nn tests' RandomInputs).
 Eigen::MatrixXf UniformStates(int dim, int n, double lo, double hi, std::uint64_t seed) {
-  Rng rng(seed);
-  Eigen::MatrixXf s(dim, n);
-  for (int c = 0; c < n; ++c)
-    for (int r = 0; r < dim; ++r) s(r, c) = static_cast<float>(rng.Uniform(lo, hi));
-  return s;
+  return nn::test::RandomInputs(dim, n, seed, lo, hi);
 }
 
 BarrierNet FlatNet(int dim, std::vector<int> hidden, nn::Activation act, std::uint64_t seed) {

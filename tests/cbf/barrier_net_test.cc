@@ -1,5 +1,6 @@
-#include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier_net.h"
+#include "domains/double_integrator/ground_truth_barrier.h"
+#include "tests/nn/nn_test_util.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -58,13 +59,7 @@ TEST(BarrierNetTest, SaveLoadRoundTripIsExact) {
   net.Save(path);
   const BarrierNet loaded = BarrierNet::Load(path);
   EXPECT_EQ(loaded.features, net.features);
-  EXPECT_TRUE(loaded.mlp.spec == net.mlp.spec);
-  for (std::size_t l = 0; l < net.mlp.layers.size(); ++l) {
-    EXPECT_EQ(loaded.mlp.layers[l].weight, net.mlp.layers[l].weight);
-    EXPECT_EQ(loaded.mlp.layers[l].bias, net.mlp.layers[l].bias);
-  }
-  EXPECT_EQ(loaded.normalizer.mean, net.normalizer.mean);
-  EXPECT_EQ(loaded.normalizer.scale, net.normalizer.scale);
+  nn::test::ExpectSameMlp(loaded.mlp, loaded.normalizer, net.mlp, net.normalizer);
   EXPECT_EQ(loaded.provenance["note"], "round trip");
   const Eigen::MatrixXf states = Eigen::MatrixXf::Random(5, 20);
   Eigen::VectorXf a(20), b(20);

@@ -1,4 +1,5 @@
 #include "secure/cbf/barrier_trainer.h"
+#include "tests/nn/nn_test_util.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -107,10 +108,7 @@ TEST(BarrierTrainerTest, SameSeedSameWeightsOtherSeedOtherWeights) {
   const BarrierNet b = TrainBarrier(o, safe, nd, nullptr);
   o.seed = 1;
   const BarrierNet c = TrainBarrier(o, safe, nd, nullptr);
-  for (std::size_t l = 0; l < a.mlp.layers.size(); ++l) {
-    EXPECT_EQ(a.mlp.layers[l].weight, b.mlp.layers[l].weight) << "layer " << l;
-    EXPECT_EQ(a.mlp.layers[l].bias, b.mlp.layers[l].bias) << "layer " << l;
-  }
+  nn::test::ExpectSameMlp(a.mlp, a.normalizer, b.mlp, b.normalizer);
   EXPECT_NE(a.mlp.layers[0].weight, c.mlp.layers[0].weight);
 }
 
@@ -255,12 +253,7 @@ TEST(BarrierTrainerTest, InputFeaturesSelectAndOrderTheColumns) {
   EXPECT_EQ(net.state_dim(), 2);
   EXPECT_EQ(net.provenance["options"]["input_features"], nlohmann::json({"px", "py"}));
   // Training on the selected columns is training on those data: the same weights.
-  EXPECT_EQ(net.normalizer.mean, reference.normalizer.mean);
-  EXPECT_EQ(net.normalizer.scale, reference.normalizer.scale);
-  for (std::size_t l = 0; l < net.mlp.layers.size(); ++l) {
-    EXPECT_EQ(net.mlp.layers[l].weight, reference.mlp.layers[l].weight) << "layer " << l;
-    EXPECT_EQ(net.mlp.layers[l].bias, reference.mlp.layers[l].bias) << "layer " << l;
-  }
+  nn::test::ExpectSameMlp(net.mlp, net.normalizer, reference.mlp, reference.normalizer);
   // On the wide states, h equals h on the projected states exactly.
   Eigen::VectorXf h_wide(wide_safe.size()), h_projected(safe.size());
   const std::unique_ptr<Barrier> wide = net.MakeEvaluatorFor(wide_safe.features, "wide states");

@@ -1,4 +1,5 @@
 #include "secure/cbf/car_barrier.h"
+#include "tests/nn/nn_test_util.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -330,13 +331,7 @@ TEST(CarBarrierTest, SaveLoadRoundTripIsBitwise) {
   EXPECT_TRUE(loaded.input == net.input);
   EXPECT_EQ(loaded.cap, net.cap);
   EXPECT_EQ(loaded.features, net.features);
-  EXPECT_TRUE(loaded.mlp.spec == net.mlp.spec);
-  for (std::size_t l = 0; l < net.mlp.layers.size(); ++l) {
-    EXPECT_EQ(loaded.mlp.layers[l].weight, net.mlp.layers[l].weight);
-    EXPECT_EQ(loaded.mlp.layers[l].bias, net.mlp.layers[l].bias);
-  }
-  EXPECT_EQ(loaded.normalizer.mean, net.normalizer.mean);
-  EXPECT_EQ(loaded.normalizer.scale, net.normalizer.scale);
+  nn::test::ExpectSameMlp(loaded.mlp, loaded.normalizer, net.mlp, net.normalizer);
   EXPECT_EQ(loaded.provenance["note"], "round trip");
   EXPECT_EQ(loaded.Describe(), net.Describe());
   const Eigen::MatrixXf obs = Eigen::MatrixXf::Random(60, 40);

@@ -1,5 +1,6 @@
 #include "secure/cbf/car_barrier_trainer.h"
 #include "tests/cbf/synthetic_derby_observations.h"
+#include "tests/nn/nn_test_util.h"
 #include "tests/test_util.h"
 
 #include <gtest/gtest.h>
@@ -79,11 +80,7 @@ TEST(CarBarrierTrainerTest, DeterministicForASeedAlsoConcurrently) {
   std::thread t2([&] { b = TrainCarBarrier(o, safe, nd, &sb); });
   t1.join();
   t2.join();
-  for (std::size_t l = 0; l < a.mlp.layers.size(); ++l) {
-    EXPECT_EQ(a.mlp.layers[l].weight, b.mlp.layers[l].weight);
-    EXPECT_EQ(a.mlp.layers[l].bias, b.mlp.layers[l].bias);
-  }
-  EXPECT_EQ(a.normalizer.mean, b.normalizer.mean);
+  nn::test::ExpectSameMlp(a.mlp, a.normalizer, b.mlp, b.normalizer);
   EXPECT_EQ(sa.train_loss, sb.train_loss);
   o.seed = 1;
   c = TrainCarBarrier(o, safe, nd, &sc);

@@ -34,4 +34,13 @@ inline policy::GaussianPolicy PdPolicy(const domains::double_integrator::ReachAv
   return p;
 }
 
+// The double integrator's reach-avoid task (default options), its environment and the PD policy
+// above with noise `sigma`: the evaluation tests' usual setup.
+struct PdOnReachAvoid {
+  explicit PdOnReachAvoid(double sigma) : env(task), pd(PdPolicy(task, sigma)) {}
+  const domains::double_integrator::ReachAvoidOptions task;
+  domains::double_integrator::ReachAvoidEnv env;
+  const policy::GaussianPolicy pd;
+};
+
 }  // namespace secure::test

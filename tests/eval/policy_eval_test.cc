@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -20,16 +21,17 @@ namespace {
 namespace di = domains::double_integrator;
 using test::ErrorOf;
 
+using test::PdOnReachAvoid;
 using test::PdPolicy;
 
 TEST(PolicyEvalTest, ShieldWithGroundTruthPreventsTheCollisionsOfTheUnshieldedPolicy) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  PdOnReachAvoid s(0.3);
   SeedModels models;
-  models.airl = &pd;
-  models.make_barrier = [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(task.truth); };
-  const auto results = EvaluateMethods(env, {Method::kAirl, Method::kSecure}, models,
+  models.airl = &s.pd;
+  models.make_barrier = [&] {
+    return std::make_unique<domains::double_integrator::GroundTruthBarrier>(s.task.truth);
+  };
+  const auto results = EvaluateMethods(s.env, {Method::kAirl, Method::kSecure}, models,
                                        shield::ShieldOptions{}, 40, 7);
   const SeedResult& plain = results.at(Method::kAirl);
   const SeedResult& shielded = results.at(Method::kSecure);
@@ -78,14 +80,12 @@ class CountingBarrier final : public cbf::Barrier {
 // The reference forward is timed once per seed with the dense evaluation (nothing skipped) on
 // kReferenceBatch states, a warm-up and kReferenceRepeats timed; the decisions never use it.
 TEST(PolicyEvalTest, TheReferenceForwardIsADenseForwardOfTheReferenceBatch) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  PdOnReachAvoid s(0.3);
   SeedModels models;
-  models.airl = &pd;
+  models.airl = &s.pd;
   EvaluationCounts counts;
-  models.make_barrier = [&] { return std::make_unique<CountingBarrier>(task, counts); };
-  EpisodeRunner runner(env);
+  models.make_barrier = [&] { return std::make_unique<CountingBarrier>(s.task, counts); };
+  EpisodeRunner runner(s.env);
   const SeedResult r = RunMethod(runner, Method::kSecure, models, shield::ShieldOptions{}, 3, 7);
   EXPECT_GT(r.reference_forward_latency_us, 0.0);
   EXPECT_EQ(counts.dense_calls, 1 + SeedResult::kReferenceRepeats);
@@ -93,23 +93,23 @@ TEST(PolicyEvalTest, TheReferenceForwardIsADenseForwardOfTheReferenceBatch) {
   EXPECT_GT(r.decisions, 0);
   EXPECT_GE(counts.sparse_calls, r.decisions);  // h(s) of every decision, at least
   // Unshielded methods time no reference.
-  EpisodeRunner plain_runner(env);
+  EpisodeRunner plain_runner(s.env);
   EXPECT_EQ(RunMethod(plain_runner, Method::kAirl, models, shield::ShieldOptions{}, 3, 7)
                 .reference_forward_latency_us,
             0.0);
 }
 
 TEST(PolicyEvalTest, SameSeedGivesTheSameEpisodes) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.5);
+  PdOnReachAvoid s(0.5);
   SeedModels models;
-  models.bc = &pd;
-  models.make_barrier = [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(task.truth); };
+  models.bc = &s.pd;
+  models.make_barrier = [&] {
+    return std::make_unique<domains::double_integrator::GroundTruthBarrier>(s.task.truth);
+  };
   const std::vector<Method> methods = {Method::kBc, Method::kBcShield};
-  const auto a = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 3);
-  const auto b = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 3);
-  const auto c = EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 10, 4);
+  const auto a = EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 10, 3);
+  const auto b = EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 10, 3);
+  const auto c = EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 10, 4);
   for (Method m : methods) {
     EXPECT_EQ(a.at(m).steps, b.at(m).steps);
     EXPECT_EQ(a.at(m).successes, b.at(m).successes);
@@ -120,32 +120,28 @@ TEST(PolicyEvalTest, SameSeedGivesTheSameEpisodes) {
 }
 
 TEST(PolicyEvalTest, MissingModelsAreNamed) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  PdOnReachAvoid s(0.3);
   SeedModels models;
-  models.bc = &pd;
+  models.bc = &s.pd;
   EXPECT_HAS(ErrorOf([&] {
-               EvaluateMethods(env, {Method::kAirl}, models, shield::ShieldOptions{}, 1, 0);
+               EvaluateMethods(s.env, {Method::kAirl}, models, shield::ShieldOptions{}, 1, 0);
              }),
              "method 'airl' needs a AIRL policy");
   EXPECT_HAS(ErrorOf([&] {
-               EvaluateMethods(env, {Method::kBcShield}, models, shield::ShieldOptions{}, 1, 0);
+               EvaluateMethods(s.env, {Method::kBcShield}, models, shield::ShieldOptions{}, 1, 0);
              }),
              "method 'bc+shield' needs a barrier");
   EXPECT_HAS(ErrorOf([&] {
-               EvaluateMethods(env, {Method::kJoint}, models, shield::ShieldOptions{}, 1, 0);
+               EvaluateMethods(s.env, {Method::kJoint}, models, shield::ShieldOptions{}, 1, 0);
              }),
              "method 'joint' needs a joint policy");
 }
 
 TEST(PolicyEvalTest, TheJointPolicyIsUsedUnshielded) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  PdOnReachAvoid s(0.3);
   SeedModels models;
-  models.joint = &pd;
-  const auto r = EvaluateMethods(env, {Method::kJoint}, models, shield::ShieldOptions{}, 3, 7);
+  models.joint = &s.pd;
+  const auto r = EvaluateMethods(s.env, {Method::kJoint}, models, shield::ShieldOptions{}, 3, 7);
   EXPECT_EQ(r.at(Method::kJoint).episodes, 3);
   EXPECT_EQ(r.at(Method::kJoint).decisions, 0);  // no shield
   EXPECT_FALSE(IsShielded(Method::kJoint));
@@ -308,17 +304,15 @@ shield::ShieldOptions IgnoreTheBox() {
 // ignored (as it was then); with the box (clip, the default since 2026-12-03) the shielded
 // counts are the same: the double integrator's shield model clips as its actuator does.
 TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
+  PdOnReachAvoid s(0.4);
   SeedModels models;
-  models.bc = &pd;
-  models.airl = &pd;
-  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
+  models.bc = &s.pd;
+  models.airl = &s.pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(s.task.truth); };
   for (const shield::ShieldOptions& options : {IgnoreTheBox(), shield::ShieldOptions{}}) {
     SCOPED_TRACE(options.ToJson().dump());
     const auto r = EvaluateMethods(
-        env, {Method::kAirl, Method::kSecure, Method::kSecureNoResampling, Method::kSecureMyopic},
+        s.env, {Method::kAirl, Method::kSecure, Method::kSecureNoResampling, Method::kSecureMyopic},
         models, options, 25, 0x5eed);
     const SeedResult& airl = r.at(Method::kAirl);
     EXPECT_EQ(airl.steps, 2883);
@@ -393,12 +387,10 @@ class Recorder final : public StepObserver {
 };
 
 TEST(EpisodeRunnerTest, TheObserverSeesEveryEpisodeAndStep) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
-  policy::PolicyEvaluator evaluator(pd);
-  EpisodeRunner runner(env);
-  Recorder plain(env);
+  PdOnReachAvoid s(0.4);
+  policy::PolicyEvaluator evaluator(s.pd);
+  EpisodeRunner runner(s.env);
+  Recorder plain(s.env);
   const SeedResult a = runner.Run(evaluator, nullptr, 6, 11, &plain);
   EXPECT_EQ(plain.starts, 6);
   EXPECT_EQ(plain.ends, 6);
@@ -410,9 +402,9 @@ TEST(EpisodeRunnerTest, TheObserverSeesEveryEpisodeAndStep) {
   EXPECT_EQ(unobserved.steps, a.steps);
   EXPECT_EQ(unobserved.collision_events, a.collision_events);
 
-  di::GroundTruthBarrier barrier(task.truth);
-  shield::Shield shield(shield::ShieldOptions{}, barrier, env.ShieldModel());
-  Recorder shielded(env);
+  di::GroundTruthBarrier barrier(s.task.truth);
+  shield::Shield shield(shield::ShieldOptions{}, barrier, s.env.ShieldModel());
+  Recorder shielded(s.env);
   const SeedResult b = runner.Run(evaluator, &shield, 4, 11, &shielded);
   EXPECT_EQ(shielded.ends, 4);
   EXPECT_EQ(shielded.steps, b.steps);
@@ -424,19 +416,17 @@ TEST(EpisodeRunnerTest, TheObserverSeesEveryEpisodeAndStep) {
 }
 
 TEST(EpisodeRunnerTest, StopOnCollisionEndsTheEpisodeAtTheFirstCollision) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
-  policy::PolicyEvaluator evaluator(pd);
-  EpisodeRunner going_on(env);
+  PdOnReachAvoid s(0.4);
+  policy::PolicyEvaluator evaluator(s.pd);
+  EpisodeRunner going_on(s.env);
   const SeedResult a = going_on.Run(evaluator, nullptr, 10, 5);
   ASSERT_GT(a.collision_events, a.dangerous);  // default: the episodes continue
   EXPECT_FALSE(going_on.options().stop_on_collision);
 
   EpisodeRunnerOptions options;
   options.stop_on_collision = true;
-  EpisodeRunner stopping(env, options);
-  Recorder recorder(env);
+  EpisodeRunner stopping(s.env, options);
+  Recorder recorder(s.env);
   const SeedResult b = stopping.Run(evaluator, nullptr, 10, 5, &recorder);
   EXPECT_EQ(b.dangerous, a.dangerous);         // the same episodes collide (same streams)...
   EXPECT_EQ(b.collision_events, b.dangerous);  // ...and end there
@@ -463,11 +453,9 @@ class HandPd final : public EpisodePolicy {
 };
 
 TEST(EpisodeRunnerTest, AnEpisodePolicyRunsLikeTheGaussianPolicyItWraps) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
-  policy::PolicyEvaluator evaluator(pd);
-  EpisodeRunner runner(env);
+  PdOnReachAvoid s(0.4);
+  policy::PolicyEvaluator evaluator(s.pd);
+  EpisodeRunner runner(s.env);
   HandPd hand(evaluator);
   // Unshielded: the default Sample() draws one Normal per action dimension, in order, as
   // PolicyEvaluator::Sample does, so the episodes are the same.
@@ -478,8 +466,8 @@ TEST(EpisodeRunnerTest, AnEpisodePolicyRunsLikeTheGaussianPolicyItWraps) {
   EXPECT_EQ(a.mean_steps_to_goal, b.mean_steps_to_goal);
   EXPECT_EQ(hand.calls, b.steps);
   // Shielded: (mu, sigma) go to the shield.
-  di::GroundTruthBarrier barrier(task.truth);
-  shield::Shield shield(shield::ShieldOptions{}, barrier, env.ShieldModel());
+  di::GroundTruthBarrier barrier(s.task.truth);
+  shield::Shield shield(shield::ShieldOptions{}, barrier, s.env.ShieldModel());
   const SeedResult c = runner.Run(evaluator, &shield, 4, 21);
   const SeedResult d = runner.Run(hand, &shield, 4, 21);
   EXPECT_EQ(c.steps, d.steps);
@@ -488,27 +476,25 @@ TEST(EpisodeRunnerTest, AnEpisodePolicyRunsLikeTheGaussianPolicyItWraps) {
 }
 
 TEST(EpisodeRunnerTest, TheEpisodeSeedOptionChoosesTheStreams) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.4);
-  policy::PolicyEvaluator evaluator(pd);
+  PdOnReachAvoid s(0.4);
+  policy::PolicyEvaluator evaluator(s.pd);
   EpisodeRunnerOptions options;
   options.episode_seed = [](std::uint64_t seed, long) { return seed; };  // one stream for all
-  EpisodeRunner same(env, options);
-  Recorder r(env);
+  EpisodeRunner same(s.env, options);
+  Recorder r(s.env);
   same.Run(evaluator, nullptr, 3, 9, &r);
   EXPECT_EQ(r.start_observations[0], r.start_observations[1]);
   EXPECT_EQ(r.start_observations[0], r.start_observations[2]);
   EXPECT_EQ(r.episode_lengths[0], r.episode_lengths[2]);
   // The default: EpisodeSeed, a stream per episode.
-  EpisodeRunner runner(env);
-  Recorder d(env);
+  EpisodeRunner runner(s.env);
+  Recorder d(s.env);
   runner.Run(evaluator, nullptr, 2, 9, &d);
   EXPECT_NE(d.start_observations[0], d.start_observations[1]);
   EXPECT_EQ(runner.options().episode_seed, &EpisodeSeed);
 
   options.episode_seed = nullptr;
-  EXPECT_HAS(ErrorOf([&] { EpisodeRunner bad(env, options); }), "episode_seed = null");
+  EXPECT_HAS(ErrorOf([&] { EpisodeRunner bad(s.env, options); }), "episode_seed = null");
 }
 
 // A policy whose sigma has the wrong size.
@@ -536,13 +522,11 @@ TEST(EpisodeRunnerTest, APolicyWhoseSigmaDoesNotFitIsAnError) {
 // The PD policy (sigma 0.3) on the double integrator under the ground-truth barrier: 20 episodes,
 // seed 7, the default shield.
 std::map<Method, SeedResult> EvaluateWithTheGroundTruth(const std::vector<Method>& methods) {
-  const di::ReachAvoidOptions task;
-  di::ReachAvoidEnv env(task);
-  const policy::GaussianPolicy pd = PdPolicy(task, 0.3);
+  PdOnReachAvoid s(0.3);
   SeedModels models;
-  models.airl = &pd;
-  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(task.truth); };
-  return EvaluateMethods(env, methods, models, shield::ShieldOptions{}, 20, 7);
+  models.airl = &s.pd;
+  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(s.task.truth); };
+  return EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 20, 7);
 }
 
 // SECURE and two other filters over 5 synthetic seeds (one 2 points lower in success with
@@ -559,20 +543,50 @@ Evaluation BesideSecure(Method lower, Method higher) {
   return evaluation;
 }
 
+// A shield method and what it changes in the shield's options.
+struct ShieldMode {
+  Method method;
+  std::function<void(shield::ShieldOptions*)> apply;
+};
+
+// Each mode's method is the shield with the base options changed by `apply`, nothing else; it is
+// shielded, and `names` parses to the modes' methods.
+void ExpectShieldModes(const std::vector<ShieldMode>& modes, const std::string& names) {
+  shield::ShieldOptions base;
+  base.num_samples = 32;
+  std::vector<Method> methods;
+  for (const ShieldMode& mode : modes) {
+    shield::ShieldOptions expected = base;
+    mode.apply(&expected);
+    EXPECT_EQ(ShieldOptionsFor(mode.method, base).ToJson(), expected.ToJson())
+        << ToString(kMethodNames, mode.method);
+    EXPECT_TRUE(IsShielded(mode.method)) << ToString(kMethodNames, mode.method);
+    methods.push_back(mode.method);
+  }
+  EXPECT_EQ(ParseMethods(names), methods);
+}
+
+// The JSON and the table compare `lower` and `higher` with SECURE.
+void ExpectComparedWithSecure(Method lower, Method higher) {
+  const Evaluation evaluation = BesideSecure(lower, higher);
+  const nlohmann::json j = evaluation.ToJson();
+  for (Method m : {lower, higher}) {
+    const std::string name = ToString(kMethodNames, m);
+    ASSERT_TRUE(j["comparisons"].contains(name + "_vs_secure")) << name;
+    EXPECT_TRUE(j["comparisons"][name + "_vs_secure"].contains("dangerous_mann_whitney")) << name;
+    EXPECT_TRUE(j["comparisons"][name + "_vs_secure"].contains("success_tost")) << name;
+    EXPECT_HAS(evaluation.Table(), name + " vs SECURE: dangerous Mann-Whitney U");
+  }
+}
+
 // The CBF-QP filter and the gradient-first shield: the proposal, nothing else; on the double
 // integrator with its ground truth the filter keeps the PD policy out of the obstacle as SECURE
 // does, and the seed records count what the projection decided.
 TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
-  shield::ShieldOptions base;
-  base.num_samples = 32;
-  shield::ShieldOptions expected = base;
-  expected.proposal = shield::Proposal::kQpOnly;
-  EXPECT_EQ(ShieldOptionsFor(Method::kCbfQp, base).ToJson(), expected.ToJson());
-  expected.proposal = shield::Proposal::kQp;
-  EXPECT_EQ(ShieldOptionsFor(Method::kSecureQp, base).ToJson(), expected.ToJson());
-  EXPECT_EQ(ParseMethods("cbf-qp,secure-qp"),
-            (std::vector<Method>{Method::kCbfQp, Method::kSecureQp}));
-  EXPECT_TRUE(IsShielded(Method::kCbfQp) && IsShielded(Method::kSecureQp));
+  ExpectShieldModes(
+      {{Method::kCbfQp, [](shield::ShieldOptions* o) { o->proposal = shield::Proposal::kQpOnly; }},
+       {Method::kSecureQp, [](shield::ShieldOptions* o) { o->proposal = shield::Proposal::kQp; }}},
+      "cbf-qp,secure-qp");
 
   const auto results =
       EvaluateWithTheGroundTruth({Method::kSecure, Method::kCbfQp, Method::kSecureQp});
@@ -591,11 +605,7 @@ TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
   EXPECT_LE(results.at(Method::kSecureQp).no_safe_action_decisions,
             results.at(Method::kSecure).no_safe_action_decisions);
 
-  const Evaluation evaluation = BesideSecure(Method::kCbfQp, Method::kSecureQp);
-  const nlohmann::json j = evaluation.ToJson();
-  EXPECT_TRUE(j["comparisons"].contains("cbf-qp_vs_secure"));
-  EXPECT_TRUE(j["comparisons"]["secure-qp_vs_secure"].contains("dangerous_mann_whitney"));
-  EXPECT_HAS(evaluation.Table(), "secure-qp vs SECURE: dangerous Mann-Whitney U");
+  ExpectComparedWithSecure(Method::kCbfQp, Method::kSecureQp);
 }
 
 // The first-safe sampler and the gradient refinement: the shield with aggregation first-safe and
@@ -603,18 +613,14 @@ TEST(PolicyEvalTest, TheQpMethodsAreTheShieldWithAProposal) {
 // ground truth both keep the PD policy's decisions checked, and the tables compare them with
 // SECURE.
 TEST(PolicyEvalTest, FirstSafeAndCbfGradAreTheShieldWithTheirModes) {
-  shield::ShieldOptions base;
-  base.num_samples = 32;
-  shield::ShieldOptions expected = base;
-  expected.aggregation = shield::Aggregation::kFirstSafe;
-  expected.resampling = shield::Resampling::kNone;
-  EXPECT_EQ(ShieldOptionsFor(Method::kFirstSafe, base).ToJson(), expected.ToJson());
-  expected = base;
-  expected.proposal = shield::Proposal::kRefine;
-  EXPECT_EQ(ShieldOptionsFor(Method::kCbfGrad, base).ToJson(), expected.ToJson());
-  EXPECT_EQ(ParseMethods("first-safe,cbf-grad"),
-            (std::vector<Method>{Method::kFirstSafe, Method::kCbfGrad}));
-  EXPECT_TRUE(IsShielded(Method::kFirstSafe) && IsShielded(Method::kCbfGrad));
+  ExpectShieldModes({{Method::kFirstSafe,
+                      [](shield::ShieldOptions* o) {
+                        o->aggregation = shield::Aggregation::kFirstSafe;
+                        o->resampling = shield::Resampling::kNone;
+                      }},
+                     {Method::kCbfGrad,
+                      [](shield::ShieldOptions* o) { o->proposal = shield::Proposal::kRefine; }}},
+                    "first-safe,cbf-grad");
 
   const auto results =
       EvaluateWithTheGroundTruth({Method::kSecure, Method::kFirstSafe, Method::kCbfGrad});
@@ -628,12 +634,7 @@ TEST(PolicyEvalTest, FirstSafeAndCbfGradAreTheShieldWithTheirModes) {
   EXPECT_GT(first.decisions, 0);
   EXPECT_LE(first.mean_iterations, 20.0);
 
-  const Evaluation evaluation = BesideSecure(Method::kFirstSafe, Method::kCbfGrad);
-  const nlohmann::json j = evaluation.ToJson();
-  EXPECT_TRUE(j["comparisons"]["first-safe_vs_secure"].contains("dangerous_mann_whitney"));
-  EXPECT_TRUE(j["comparisons"]["cbf-grad_vs_secure"].contains("success_tost"));
-  EXPECT_HAS(evaluation.Table(), "first-safe vs SECURE: dangerous Mann-Whitney U");
-  EXPECT_HAS(evaluation.Table(), "cbf-grad vs SECURE: dangerous Mann-Whitney U");
+  ExpectComparedWithSecure(Method::kFirstSafe, Method::kCbfGrad);
 }
 
 }  // namespace

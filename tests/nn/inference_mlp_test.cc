@@ -18,6 +18,8 @@ namespace secure::nn {
 namespace {
 
 using secure::test::ErrorOf;
+using test::Architectures;
+using test::Case;
 using test::kPandaHidden;
 using test::RandomInputs;
 using test::Spec;
@@ -63,24 +65,6 @@ Eigen::MatrixXf Forward(const InferenceMlp& mlp, const Eigen::MatrixXf& x, int m
   Eigen::MatrixXf y(mlp.output_dim(), x.cols());
   mlp.Forward(x, ws, y);
   return y;
-}
-
-struct Case {
-  std::string name;
-  MlpSpec spec;
-};
-
-std::vector<Case> Architectures() {
-  std::vector<Case> cases;
-  for (Activation a : {Activation::kRelu, Activation::kTanh}) {
-    const std::string act = ToString(kActivationNames, a);
-    cases.push_back({"linear_" + act, Spec(3, {}, 2, a)});
-    cases.push_back({"di_" + act, Spec(4, {64, 64, 64}, 1, a)});
-    cases.push_back({"derby_" + act, Spec(4, {64, 128, 64}, 1, a)});
-    cases.push_back({"panda_" + act, Spec(9, kPandaHidden, 1, a)});
-    cases.push_back({"narrow_wide_multi_out_" + act, Spec(5, {3, 40, 7}, 3, a)});
-  }
-  return cases;
 }
 
 TEST(InferenceMlpTest, MatchesReferenceForwardForAllArchitecturesAndBatchSizes) {

@@ -20,7 +20,8 @@ namespace secure::nn {
 namespace {
 
 using secure::test::ErrorOf;
-using test::kPandaHidden;
+using test::Architectures;
+using test::Case;
 using test::RandomInputs;
 using test::Spec;
 
@@ -48,23 +49,6 @@ Eigen::MatrixXf EigenForward(const MlpParams& params, const Eigen::MatrixXf& x) 
 Eigen::MatrixXf TorchForward(TorchMlp& model, const Eigen::MatrixXf& x) {
   torch::NoGradGuard no_grad;
   return ToEigen(model->forward(ToTensor(x)));
-}
-
-struct Case {
-  std::string name;
-  MlpSpec spec;
-};
-
-std::vector<Case> Architectures() {
-  std::vector<Case> cases;
-  for (Activation a : {Activation::kRelu, Activation::kTanh}) {
-    const std::string act = ToString(kActivationNames, a);
-    cases.push_back({"di_" + act, Spec(4, {64, 64, 64}, 1, a)});
-    cases.push_back({"panda_" + act, Spec(9, kPandaHidden, 1, a)});
-    cases.push_back({"derby_" + act, Spec(4, {64, 128, 64}, 1, a)});
-    cases.push_back({"linear_multi_out_" + act, Spec(3, {}, 2, a)});
-  }
-  return cases;
 }
 
 // The requirement: the Eigen evaluator is numerically equal to the LibTorch forward,

@@ -6,11 +6,14 @@ namespace secure::policy {
 namespace {
 using namespace test;  // NOLINT(google-build-using-namespace): the trainer tests' helpers
 
-class AirlFileTest : public secure::test::TempDirTest {};
-
-TEST_F(AirlFileTest, ResumeFromACheckpointGivesTheSamePolicyBitwise) {
+// Every test trains on the same 10 expert episodes (seed 2) of the point mass.
+class AirlFileTest : public secure::test::TempDirTest {
+ protected:
   const data::TrajectorySet demos = ExpertDemos(10, 2);
   const PointMassEnv env;
+};
+
+TEST_F(AirlFileTest, ResumeFromACheckpointGivesTheSamePolicyBitwise) {
   const GaussianPolicy uninterrupted = TrainAirl(SmallAirl(), demos, env, nullptr, nullptr);
 
   // Stop after 3 iterations with the option, resume to the end.
@@ -58,8 +61,6 @@ TEST_F(AirlFileTest, ResumeFromACheckpointGivesTheSamePolicyBitwise) {
 }
 
 TEST_F(AirlFileTest, IncompatibleOrBrokenCheckpointsAreRejected) {
-  const data::TrajectorySet demos = ExpertDemos(10, 2);
-  const PointMassEnv env;
   AirlOptions o = SmallAirl();
   o.iterations = 1;
   o.checkpoint_path = PathOf("airl.ckpt");
@@ -86,8 +87,6 @@ TEST_F(AirlFileTest, IncompatibleOrBrokenCheckpointsAreRejected) {
 // (which the LibTorch archive itself does not notice) or a truncated file is an error naming the
 // file, never a silently different model. So is a checkpoint of an older format version.
 TEST_F(AirlFileTest, CorruptTruncatedOrOldCheckpointsAreRejectedNamingTheFile) {
-  const data::TrajectorySet demos = ExpertDemos(10, 2);
-  const PointMassEnv env;
   AirlOptions o = SmallAirl();
   o.iterations = 2;
   o.checkpoint_path = PathOf("airl.ckpt");
@@ -151,8 +150,6 @@ TEST_F(AirlFileTest, CorruptTruncatedOrOldCheckpointsAreRejectedNamingTheFile) {
 // A run cannot be shortened: resuming a checkpoint with more completed iterations than
 // `iterations` is an error; with exactly as many it returns the checkpoint's policy.
 TEST_F(AirlFileTest, ResumingWithFewerIterationsThanTheCheckpointIsAnError) {
-  const data::TrajectorySet demos = ExpertDemos(10, 2);
-  const PointMassEnv env;
   AirlOptions o = SmallAirl();
   o.iterations = 3;
   o.checkpoint_path = PathOf("airl.ckpt");
@@ -173,8 +170,6 @@ TEST_F(AirlFileTest, ResumingWithFewerIterationsThanTheCheckpointIsAnError) {
 // Timing is in the summary (and --json), not in the model file: two identical runs write
 // identical model files.
 TEST_F(AirlFileTest, IdenticalRunsWriteIdenticalModelFiles) {
-  const data::TrajectorySet demos = ExpertDemos(10, 2);
-  const PointMassEnv env;
   AirlOptions o = SmallAirl();
   o.iterations = 2;
   AirlSummary s;
@@ -196,8 +191,6 @@ TEST_F(AirlFileTest, IdenticalRunsWriteIdenticalModelFiles) {
 // aggregation: the policy's inputs and normaliser, the RL discount, the same bytes for the same
 // seed, and a Q that varies with the next state.
 TEST_F(AirlFileTest, ExportsTheRewardAndShapingNetworksAsARewardModel) {
-  const data::TrajectorySet demos = ExpertDemos(10, 2);
-  const PointMassEnv env;
   AirlOptions o = SmallAirl();
   o.gamma = 0.97;
   AirlRewardModel a, b;
@@ -228,13 +221,12 @@ TEST_F(AirlFileTest, WritesTheLearningCurveEveryIteration) {
   o.iterations = 3;
   o.curve_path = PathOf("curve.csv");
   int calls = 0;
-  TrainAirl(
-      o, ExpertDemos(10, 2), PointMassEnv(), nullptr, nullptr, [&](const AirlIterationStats& s) {
-        ++calls;
-        // Already on disk when the callback runs.
-        EXPECT_EQ(Lines(ReadFile(o.curve_path)).size(), static_cast<std::size_t>(s.iteration + 1));
-        return true;
-      });
+  TrainAirl(o, demos, env, nullptr, nullptr, [&](const AirlIterationStats& s) {
+    ++calls;
+    // Already on disk when the callback runs.
+    EXPECT_EQ(Lines(ReadFile(o.curve_path)).size(), static_cast<std::size_t>(s.iteration + 1));
+    return true;
+  });
   EXPECT_EQ(calls, 3);
   const auto lines = Lines(ReadFile(o.curve_path));
   ASSERT_EQ(lines.size(), 4u);

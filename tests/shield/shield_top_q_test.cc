@@ -43,16 +43,23 @@ struct OpenPlane {
   LinearActionValue value{Vec({1.0f, 0.0f})};
 };
 
+// The top-q shield's decision on the open plane at the origin with mu = 0, sigma = 1, ranked by
+// `value`.
+Decision DecideAtTheOrigin(OpenPlane& sys, ShieldOptions options, ActionValue* value) {
+  options.aggregation = Aggregation::kTopQ;
+  Shield shield(options, sys.barrier, sys.dynamics);
+  shield.SetActionValue(value);
+  const Eigen::VectorXf zero = Vec({0.0f, 0.0f});
+  return shield.Decide(zero, zero, Vec({1.0f, 1.0f}));
+}
+
 TEST(ShieldTopQTest, AveragesTheSafeSamplesOfHighestQ) {
   OpenPlane sys;
   const Eigen::VectorXf state = Vec({0.0f, 0.0f}), mu = Vec({0.0f, 0.0f}),
                         sigma = Vec({1.0f, 1.0f});
   ShieldOptions options;
-  options.aggregation = Aggregation::kTopQ;
   options.seed = 5;
-  Shield shield(options, sys.barrier, sys.dynamics);
-  shield.SetActionValue(&sys.value);
-  const Decision d = shield.Decide(state, mu, sigma);
+  const Decision d = DecideAtTheOrigin(sys, options, &sys.value);
   ASSERT_EQ(d.status, Status::kSafe) << d.ToJson().dump();
   EXPECT_GE(d.g, 0.0);
   // One Q evaluation of the round's M predicted next states.
@@ -189,14 +196,9 @@ TEST(ShieldTopQTest, ANanQRanksLast) {
     std::string Describe() const override { return "NaN above 0"; }
   } value;
   OpenPlane sys;
-  const Eigen::VectorXf state = Vec({0.0f, 0.0f}), mu = Vec({0.0f, 0.0f}),
-                        sigma = Vec({1.0f, 1.0f});
   ShieldOptions options;
-  options.aggregation = Aggregation::kTopQ;
   options.top_q_fraction = 0.2;
-  Shield shield(options, sys.barrier, sys.dynamics);
-  shield.SetActionValue(&value);
-  const Decision d = shield.Decide(state, mu, sigma);
+  const Decision d = DecideAtTheOrigin(sys, options, &value);
   ASSERT_TRUE(d.safe());
   EXPECT_LE(d.action[0], 0.0f);
   EXPECT_GT(d.action[0], -0.6f);

@@ -440,29 +440,37 @@ TEST(AdjustPValuesTest, EmptyAndBadInput) {
              "AdjustPValues: p_values[0] = -0.1");
 }
 
-TEST(PairwiseWilcoxonTest, ExactPairsWithHolmMatchScipy) {
-  // Each pair: stats.wilcoxon(col(T, i), col(T, j)) (exact: no zeros, no ties); Holm by its
-  // definition on the six p-values (sorted ascending, p_(r) (m - r + 1), running maximum).
-  struct Row {
-    int i, j;
-    double statistic, p, holm;
-  };
-  const std::vector<Row> expected = {
-      {0, 1, 3.0, 0.00244140625, 0.00732421875},  {0, 2, 3.0, 0.00244140625, 0.00732421875},
-      {0, 3, 0.0, 0.00048828125, 0.0029296875},   {1, 2, 0.0, 0.00048828125, 0.0029296875},
-      {1, 3, 13.0, 0.04248046875, 0.04248046875}, {2, 3, 0.0, 0.00048828125, 0.0029296875}};
-  const PairwiseWilcoxonResult r = PairwiseWilcoxon(kTimes);
-  EXPECT_EQ(r.adjustment, "holm");
+// A pair of conditions i < j with SciPy's statistic, p-value and Holm-adjusted p-value.
+struct ScipyPair {
+  int i, j;
+  double statistic, p, holm;
+};
+
+// `r` holds the `expected` pairs in order, each by `method`.
+void ExpectPairs(const PairwiseWilcoxonResult& r, const std::vector<ScipyPair>& expected,
+                 const char* method) {
   ASSERT_EQ(r.pairs.size(), expected.size());
   for (std::size_t k = 0; k < expected.size(); ++k) {
     SCOPED_TRACE(k);
     EXPECT_EQ(r.pairs[k].i, expected[k].i);
     EXPECT_EQ(r.pairs[k].j, expected[k].j);
-    EXPECT_EQ(r.pairs[k].method, "exact");
+    EXPECT_EQ(r.pairs[k].method, method);
     EXPECT_EQ(r.pairs[k].statistic, expected[k].statistic);
     EXPECT_REL(r.pairs[k].p_value, expected[k].p, kRefTol);
     EXPECT_REL(r.pairs[k].p_adjusted, expected[k].holm, kRefTol);
   }
+}
+
+TEST(PairwiseWilcoxonTest, ExactPairsWithHolmMatchScipy) {
+  // Each pair: stats.wilcoxon(col(T, i), col(T, j)) (exact: no zeros, no ties); Holm by its
+  // definition on the six p-values (sorted ascending, p_(r) (m - r + 1), running maximum).
+  const std::vector<ScipyPair> expected = {
+      {0, 1, 3.0, 0.00244140625, 0.00732421875},  {0, 2, 3.0, 0.00244140625, 0.00732421875},
+      {0, 3, 0.0, 0.00048828125, 0.0029296875},   {1, 2, 0.0, 0.00048828125, 0.0029296875},
+      {1, 3, 13.0, 0.04248046875, 0.04248046875}, {2, 3, 0.0, 0.00048828125, 0.0029296875}};
+  const PairwiseWilcoxonResult r = PairwiseWilcoxon(kTimes);
+  EXPECT_EQ(r.adjustment, "holm");
+  ExpectPairs(r, expected, "exact");
   // Condition 0 is slower than 1 for 10 of 12 participants; 3 is the fastest for everyone.
   EXPECT_GT(r.pairs[0].rank_biserial, 0);
   EXPECT_EQ(r.pairs[2].rank_biserial, 1.0);
@@ -472,27 +480,15 @@ TEST(PairwiseWilcoxonTest, ExactPairsWithHolmMatchScipy) {
 TEST(PairwiseWilcoxonTest, RatingsWithZerosAndTiesMatchScipyApprox) {
   // Every pair has zeros or ties: stats.wilcoxon(col(L, i), col(L, j), method='approx'), which
   // for (0,1), (0,2), (1,3) (with zeros) is also SciPy's default; Holm as above.
-  struct Row {
-    int i, j;
-    double statistic, p, holm;
-  };
-  const std::vector<Row> expected = {{0, 1, 0.0, 0.005749708623335458, 0.017249125870006373},
-                                     {0, 2, 0.0, 0.00829921599528076, 0.017249125870006373},
-                                     {0, 3, 0.0, 0.0013155275236832191, 0.007893165142099316},
-                                     {1, 2, 0.0, 0.0015321013954196188, 0.007893165142099316},
-                                     {1, 3, 4.0, 0.05878172135535886, 0.05878172135535886},
-                                     {2, 3, 0.0, 0.0016885456987832165, 0.007893165142099316}};
+  const std::vector<ScipyPair> expected = {
+      {0, 1, 0.0, 0.005749708623335458, 0.017249125870006373},
+      {0, 2, 0.0, 0.00829921599528076, 0.017249125870006373},
+      {0, 3, 0.0, 0.0013155275236832191, 0.007893165142099316},
+      {1, 2, 0.0, 0.0015321013954196188, 0.007893165142099316},
+      {1, 3, 4.0, 0.05878172135535886, 0.05878172135535886},
+      {2, 3, 0.0, 0.0016885456987832165, 0.007893165142099316}};
   const PairwiseWilcoxonResult r = PairwiseWilcoxon(kRatings);
-  ASSERT_EQ(r.pairs.size(), expected.size());
-  for (std::size_t k = 0; k < expected.size(); ++k) {
-    SCOPED_TRACE(k);
-    EXPECT_EQ(r.pairs[k].i, expected[k].i);
-    EXPECT_EQ(r.pairs[k].j, expected[k].j);
-    EXPECT_EQ(r.pairs[k].method, "asymptotic");
-    EXPECT_EQ(r.pairs[k].statistic, expected[k].statistic);
-    EXPECT_REL(r.pairs[k].p_value, expected[k].p, kRefTol);
-    EXPECT_REL(r.pairs[k].p_adjusted, expected[k].holm, kRefTol);
-  }
+  ExpectPairs(r, expected, "asymptotic");
 }
 
 TEST(PairwiseWilcoxonTest, AgreesWithSingleTestsAndOtherAdjustments) {

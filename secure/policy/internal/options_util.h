@@ -13,22 +13,11 @@
 namespace secure::policy::internal {
 
 using secure::YamlValue;
-
-inline std::vector<int> YamlWidths(const YAML::Node& node, const std::string& key,
-                                   const std::string& source) {
-  SECURE_CHECK(node.IsSequence(),
-               source << ": field '" << key << "' must be a list of layer widths");
-  std::vector<int> widths;
-  for (const auto& w : node) widths.push_back(YamlValue<int>(w, key, source));
-  return widths;
-}
+using secure::YamlWidths;
 
 inline std::vector<std::string> YamlStrings(const YAML::Node& node, const std::string& key,
                                             const std::string& source) {
-  SECURE_CHECK(node.IsSequence(), source << ": field '" << key << "' must be a list of names");
-  std::vector<std::string> names;
-  for (const auto& n : node) names.push_back(YamlValue<std::string>(n, key, source));
-  return names;
+  return YamlList<std::string>(node, key, source, "names");
 }
 
 inline std::string WidthsString(const std::vector<int>& widths) {

@@ -129,10 +129,4 @@ inline torch::Tensor IndexTensor(const std::vector<std::int64_t>& indices) {
   return torch::tensor(indices, torch::kInt64);
 }
 
-/// Sets the learning rate of every parameter group of an Adam optimiser.
-inline void SetLearningRate(torch::optim::Adam& optimizer, double lr) {
-  for (auto& group : optimizer.param_groups())
-    static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
-}
-
 }  // namespace secure::policy::internal
