@@ -78,6 +78,14 @@ std::unique_ptr<experiments::Domain> MakeConfiguredDomain(
     const std::string& name, bool quick, const Config& config,
     experiments::ExperimentOptions* options = nullptr);
 
+/// Adds `--domain` bound to `domain`, its help "<what>: <the registered domains>" (the list from
+/// experiments::DomainRegistry, so a new plug-in appears in every command's help). The
+/// vector overload takes the flag repeated.
+CLI::Option* AddDomainOption(CLI::App* cmd, std::string* domain,
+                             const std::string& what = "the domain");
+CLI::Option* AddDomainOption(CLI::App* cmd, std::vector<std::string>* domains,
+                             const std::string& what);
+
 /// Rejects a negative value for an unsigned 64-bit seed (which CLI11 would wrap around to
 /// 2^64 - 1).
 const CLI::Validator& NonNegativeSeed();
