@@ -33,12 +33,6 @@
 namespace secure::cli {
 namespace {
 
-// The registered domains that have a barrier check, sorted ("derby, double-integrator").
-std::string CheckDomainList() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasCheck(); });
-}
-
 // The registered domains whose experiments train a per-obstacle barrier (the kind of a
 // `car_barrier` model file).
 std::string PerObstacleDomainList() {
@@ -109,8 +103,7 @@ struct CheckCommand {
                         PerObstacleDomainList() + ")")
         ->required()
         ->check(CLI::ExistingFile);
-    cmd->add_option("--domain", domain, "a domain with a barrier check: " + CheckDomainList())
-        ->required();
+    AddDomainOption(cmd, &domain, kBarrierCheck)->required();
     cmd->add_flag("--quick", quick,
                   "the domain's small profile (its data sizes and preset, as `secure experiment "
                   "--quick`: the check of a quick experiment's barrier)");
@@ -219,7 +212,7 @@ struct CheckCommand {
     config->Check();
     experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
     SECURE_CHECK(registry.Has(domain),
-                 "--domain = '" << domain << "', must be one of: " << CheckDomainList());
+                 "--domain = '" << domain << "', must be one of: " << DomainsWith(kBarrierCheck));
     SECURE_CHECK(safe_path.empty() == nd_path.empty(),
                  "cbf check: --safe-states and --near-dangerous-states go together");
     if (held_out_opt->count() > 0) CheckRange("--held-out", held_out, 1, kMaxStates);
@@ -230,9 +223,7 @@ struct CheckCommand {
     // given.
     const std::unique_ptr<experiments::Domain> d =
         registry.Make(domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
-    SECURE_CHECK(d->HasCheck(), "the " << domain
-                                       << " domain has no barrier check (domains with one: "
-                                       << CheckDomainList() << ")");
+    RequireCapability(*d, domain, kBarrierCheck);
     experiments::ExperimentOptions e = experiments::ReadSection(config->root, config->path, *d);
     task_flags.ApplyTo(d.get(), *config);  // the ground-truth section, the task flags; Validate
     ApplyShieldFlags(&e.shield);

@@ -138,6 +138,32 @@ CLI::Option* AddDomainOption(CLI::App* cmd, std::vector<std::string>* domains,
                          what + ": " + experiments::DomainRegistry::Global().NameList());
 }
 
+const DomainCapability kBarrierCheck{&experiments::Domain::HasCheck, "barrier check"};
+const DomainCapability kGroundTruth{&experiments::Domain::HasGroundTruth, "ground truth"};
+const DomainCapability kLabeller{&experiments::Domain::HasLabeller, "labeller"};
+const DomainCapability kLabelCheck{&experiments::Domain::HasLabelCheck, "label check"};
+const DomainCapability kShieldRun{&experiments::Domain::HasShieldRun, "shield run"};
+const DomainCapability kPopulation{&experiments::Domain::HasPopulation, "population"};
+
+std::string DomainsWith(const DomainCapability& capability) {
+  return experiments::DomainRegistry::Global().ListOffering(
+      [&capability](const experiments::Domain& d) { return (d.*capability.offers)(); });
+}
+
+CLI::Option* AddDomainOption(CLI::App* cmd, std::string* domain,
+                             const DomainCapability& capability) {
+  return cmd->add_option("--domain", *domain,
+                         "a domain with a " + capability.name + ": " + DomainsWith(capability));
+}
+
+void RequireCapability(const experiments::Domain& domain, const std::string& name,
+                       const DomainCapability& capability, const std::string& prefix,
+                       const std::string& why) {
+  SECURE_CHECK((domain.*capability.offers)(),
+               prefix << "the " << name << " domain has no " << capability.name << " (" << why
+                      << "domains with one: " << DomainsWith(capability) << ")");
+}
+
 const CLI::Validator& NonNegativeSeed() {
   static const CLI::Validator validator(
       [](std::string& value) -> std::string {

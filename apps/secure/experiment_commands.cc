@@ -431,8 +431,7 @@ struct UserStudyCommand {
     AddConfigFlag(cmd, cfg);
     cmd->add_option("--domain", domain,
                     "a domain with participants (default: the first registered one): " +
-                        experiments::DomainRegistry::Global().ListOffering(
-                            [](const experiments::Domain& d) { return d.HasPopulation(); }));
+                        DomainsWith(kPopulation));
     cmd->add_flag("--quick", quick, "the small profile (3 participants x 3 episodes, small data)");
     participants_option = cmd->add_option("--participants", participants,
                                           "participants, 2 to 1000 (default 12)");
