@@ -33,12 +33,6 @@
 namespace secure::cli {
 namespace {
 
-// The registered domains that have a barrier check, sorted ("derby, double-integrator").
-std::string CheckDomainList() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasCheck(); });
-}
-
 // The registered domains whose experiments train a per-obstacle barrier (the kind of a
 // `car_barrier` model file).
 std::string PerObstacleDomainList() {
@@ -79,6 +73,20 @@ struct CheckCommand {
         option, [this, field](cbf::BarrierCheckOptions* to) { field(*to) = field(parsed); });
     return option;
   }
+  // The same for a plain field of the options.
+  template <typename T>
+  CLI::Option* Bind(CLI::App* cmd, const std::string& name, T cbf::BarrierCheckOptions::*member,
+                    const std::string& help) {
+    return Bind(
+        cmd, name, [member](cbf::BarrierCheckOptions& o) -> T& { return o.*member; }, help);
+  }
+  // ... and for a threshold.
+  CLI::Option* Bind(CLI::App* cmd, const std::string& name, double cbf::CheckThresholds::*member,
+                    const std::string& help) {
+    return Bind(
+        cmd, name,
+        [member](cbf::BarrierCheckOptions& o) -> double& { return o.thresholds.*member; }, help);
+  }
 
   void Register(CLI::App& app, const Config& cfg) {
     config = &cfg;
@@ -95,8 +103,7 @@ struct CheckCommand {
                         PerObstacleDomainList() + ")")
         ->required()
         ->check(CLI::ExistingFile);
-    cmd->add_option("--domain", domain, "a domain with a barrier check: " + CheckDomainList())
-        ->required();
+    AddDomainOption(cmd, &domain, kBarrierCheck)->required();
     cmd->add_flag("--quick", quick,
                   "the domain's small profile (its data sizes and preset, as `secure experiment "
                   "--quick`: the check of a quick experiment's barrier)");
@@ -114,49 +121,30 @@ struct CheckCommand {
                                   "experiment data_seed, so that a saved seed's barrier gets "
                                   "the check its experiment recorded)");
     cmd->add_option("--out", out, "CSV of the worst counterexamples (docs/FILE_FORMATS.md)");
-    Bind(
-        cmd, "--seed", [](cbf::BarrierCheckOptions & o) -> auto& { return o.seed; },
-        "seed of the check's sampling and search")
+    Bind(cmd, "--seed", &cbf::BarrierCheckOptions::seed, "seed of the check's sampling and search")
         ->check(NonNegativeSeed());
-    Bind(
-        cmd, "--region-samples",
-        [](cbf::BarrierCheckOptions & o) -> auto& { return o.region_samples; },
-        "states sampled from the region");
-    Bind(
-        cmd, "--near-samples", [](cbf::BarrierCheckOptions & o) -> auto& { return o.near_samples; },
-        "states sampled near near-dangerous ones");
-    Bind(
-        cmd, "--near-radius", [](cbf::BarrierCheckOptions & o) -> auto& { return o.near_radius; },
-        "(b): half-width of the box around a near-dangerous state, in per-feature std units");
-    Bind(
-        cmd, "--action-grid", [](cbf::BarrierCheckOptions & o) -> auto& { return o.action_grid; },
-        "max_a g: grid points per action dimension");
-    Bind(
-        cmd, "--action-samples",
-        [](cbf::BarrierCheckOptions & o) -> auto& { return o.action_samples; },
-        "max_a g: random actions (and per refinement round)");
-    Bind(
-        cmd, "--search-starts",
-        [](cbf::BarrierCheckOptions & o) -> auto& { return o.search_starts; },
-        "local search starts per kind");
-    Bind(
-        cmd, "--search-steps", [](cbf::BarrierCheckOptions & o) -> auto& { return o.search_steps; },
-        "local search iterations per start");
-    Bind(
-        cmd, "--worst", [](cbf::BarrierCheckOptions & o) -> auto& { return o.worst_examples; },
-        "counterexamples kept per kind");
-    Bind(
-        cmd, "--max-rate-a",
-        [](cbf::BarrierCheckOptions & o) -> auto& { return o.thresholds.no_safe_action; },
-        "threshold tau_a on rate (a) (default 0.01)");
-    Bind(
-        cmd, "--max-rate-b",
-        [](cbf::BarrierCheckOptions & o) -> auto& { return o.thresholds.near_dangerous; },
-        "threshold tau_b on rate (b) (default 0.05)");
-    Bind(
-        cmd, "--max-rate-c",
-        [](cbf::BarrierCheckOptions & o) -> auto& { return o.thresholds.unsafe; },
-        "threshold tau_c on rate (c) (default 0.01)");
+    Bind(cmd, "--region-samples", &cbf::BarrierCheckOptions::region_samples,
+         "states sampled from the region");
+    Bind(cmd, "--near-samples", &cbf::BarrierCheckOptions::near_samples,
+         "states sampled near near-dangerous ones");
+    Bind(cmd, "--near-radius", &cbf::BarrierCheckOptions::near_radius,
+         "(b): half-width of the box around a near-dangerous state, in per-feature std units");
+    Bind(cmd, "--action-grid", &cbf::BarrierCheckOptions::action_grid,
+         "max_a g: grid points per action dimension");
+    Bind(cmd, "--action-samples", &cbf::BarrierCheckOptions::action_samples,
+         "max_a g: random actions (and per refinement round)");
+    Bind(cmd, "--search-starts", &cbf::BarrierCheckOptions::search_starts,
+         "local search starts per kind");
+    Bind(cmd, "--search-steps", &cbf::BarrierCheckOptions::search_steps,
+         "local search iterations per start");
+    Bind(cmd, "--worst", &cbf::BarrierCheckOptions::worst_examples,
+         "counterexamples kept per kind");
+    Bind(cmd, "--max-rate-a", &cbf::CheckThresholds::no_safe_action,
+         "threshold tau_a on rate (a) (default 0.01)");
+    Bind(cmd, "--max-rate-b", &cbf::CheckThresholds::near_dangerous,
+         "threshold tau_b on rate (b) (default 0.05)");
+    Bind(cmd, "--max-rate-c", &cbf::CheckThresholds::unsafe,
+         "threshold tau_c on rate (c) (default 0.01)");
     class_k_opt = cmd->add_option("--class-k", class_k,
                                   "the shield's class-K function: linear | cubic (default: the "
                                   "domain's shield)");
@@ -224,7 +212,7 @@ struct CheckCommand {
     config->Check();
     experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
     SECURE_CHECK(registry.Has(domain),
-                 "--domain = '" << domain << "', must be one of: " << CheckDomainList());
+                 "--domain = '" << domain << "', must be one of: " << DomainsWith(kBarrierCheck));
     SECURE_CHECK(safe_path.empty() == nd_path.empty(),
                  "cbf check: --safe-states and --near-dangerous-states go together");
     if (held_out_opt->count() > 0) CheckRange("--held-out", held_out, 1, kMaxStates);
@@ -235,9 +223,7 @@ struct CheckCommand {
     // given.
     const std::unique_ptr<experiments::Domain> d =
         registry.Make(domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
-    SECURE_CHECK(d->HasCheck(), "the " << domain
-                                       << " domain has no barrier check (domains with one: "
-                                       << CheckDomainList() << ")");
+    RequireCapability(*d, domain, kBarrierCheck);
     experiments::ExperimentOptions e = experiments::ReadSection(config->root, config->path, *d);
     task_flags.ApplyTo(d.get(), *config);  // the ground-truth section, the task flags; Validate
     ApplyShieldFlags(&e.shield);

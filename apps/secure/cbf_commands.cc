@@ -26,13 +26,6 @@
 namespace secure::cli {
 namespace {
 
-// The registered domains with a ground truth (reference barrier, validation grid, labelled
-// sampler), for the help and the errors.
-std::string GroundTruthDomains() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasGroundTruth(); });
-}
-
 // The domain `name` (full profile) with a ground truth, its task options from `flags` and the
 // config's ground-truth section. @throws secure::Error naming the domains with one if it has
 // none.
@@ -41,9 +34,7 @@ std::unique_ptr<experiments::Domain> MakeGroundTruthDomain(const std::string& na
                                                            const TaskFlags& flags,
                                                            const Config& config) {
   std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(name);
-  SECURE_CHECK(d->HasGroundTruth(), command << ": the " << name
-                                            << " domain has no ground truth (domains with one: "
-                                            << GroundTruthDomains() << ")");
+  RequireCapability(*d, name, kGroundTruth, command + ": ");
   flags.ApplyTo(d.get(), config);
   return d;
 }
@@ -161,11 +152,11 @@ struct TrainCommand {
     this->config = &config;
     config_error.Capture([&] { trainer_yaml = config.Section("trainer"); });
     AddConfigFlag(cmd, config);
-    cmd->add_option("--domain", domain,
-                    "sample labelled states from a domain's ground truth: " +
-                        GroundTruthDomains() +
-                        " (trainer options then start from the domain's ground-truth preset, "
-                        "`secure domains NAME`)");
+    cmd->add_option(
+        "--domain", domain,
+        "sample labelled states from a domain's ground truth: " + DomainsWith(kGroundTruth) +
+            " (trainer options then start from the domain's ground-truth preset, "
+            "`secure domains NAME`)");
     cmd->add_option("--safe-states", safe_path,
                     "safe states: a CSV (header row) or an HDF5 file (.h5, .hdf5; its set "
                     "safety/safe, or its only set)");
@@ -363,8 +354,7 @@ struct ValidateCommand {
     this->config = &config;
     AddConfigFlag(cmd, config);  // the domain's ground-truth section (double_integrator:)
     cmd->add_option("--model", model, "barrier model file")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--domain", domain, "a domain with a ground truth: " + GroundTruthDomains())
-        ->required();
+    AddDomainOption(cmd, &domain, kGroundTruth)->required();
     task_flags.AddGeometry(cmd);
     cmd->add_option("--threads", validation.threads, "worker threads")->capture_default_str();
     cmd->add_flag("--json", json, "print the result as JSON");
@@ -493,8 +483,7 @@ struct Table1Command {
         break;
       }
     }
-    cmd->add_option("--domain", domain, "a domain with a ground truth: " + GroundTruthDomains())
-        ->capture_default_str();
+    AddDomainOption(cmd, &domain, kGroundTruth)->capture_default_str();
     cmd->add_option("--seeds", options.seeds, "number of training seeds")->capture_default_str();
     AddSeedOption(cmd, "--first-seed", &options.first_seed, "seed of the first run");
     cmd->add_option("--safe", options.n_safe, "safe training states")->capture_default_str();

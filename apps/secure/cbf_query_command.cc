@@ -19,15 +19,6 @@
 namespace secure::cli {
 namespace {
 
-std::string LabellerDomains() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasLabeller(); });
-}
-std::string ShieldRunDomains() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasShieldRun(); });
-}
-
 // Writes the chosen pool states: query (rank, 0 = ask first), pool_row (0-based column of the
 // pool), the pool's features, h (ensemble: mean; absent without a model), spread, score.
 void WriteQueries(const std::string& path, const data::StateSet& pool,
@@ -78,7 +69,7 @@ struct QueryCommand {
     cmd->add_option("--domain", domain,
                     "shield-relevant without --pool: the pool is the states a shielded run of "
                     "this domain visits with the (first) model as barrier: " +
-                        ShieldRunDomains());
+                        DomainsWith(kShieldRun));
     cmd->add_option("--episodes", episodes, "episodes of that shielded run")
         ->capture_default_str();
     cmd->add_option("--k", options.k, "states to propose")->capture_default_str();
@@ -114,10 +105,7 @@ struct QueryCommand {
       CheckRange("--episodes", episodes, 1, kMaxEpisodes);
       const std::unique_ptr<experiments::Domain> d =
           experiments::DomainRegistry::Global().Make(domain);
-      SECURE_CHECK(d->HasShieldRun(), "cbf query: the " << domain
-                                                        << " domain has no shield run (domains "
-                                                           "with one: "
-                                                        << ShieldRunDomains() << ")");
+      RequireCapability(*d, domain, kShieldRun, "cbf query: ");
       experiments::ShieldRunRequest request = d->ShieldRunPreset();
       request.episodes = episodes;
       request.seed = seed;
@@ -172,8 +160,7 @@ struct LabelCommand {
         "A domain's simulated person labels a CSV of states (e.g. `cbf query` output): writes it "
         "with a `label` column (1 safe, 0 near-dangerous, -1 cannot say) for `cbf train "
         "--augment-from`");
-    cmd->add_option("--domain", domain, "a domain with a labeller: " + LabellerDomains())
-        ->required();
+    AddDomainOption(cmd, &domain, kLabeller)->required();
     cmd->add_option("--states", states, "CSV of states (the domain's observation features)")
         ->required()
         ->check(CLI::ExistingFile);
@@ -186,10 +173,7 @@ struct LabelCommand {
   void Run() {
     const std::unique_ptr<experiments::Domain> d =
         experiments::DomainRegistry::Global().Make(domain);
-    SECURE_CHECK(d->HasLabeller(), "cbf label: the " << domain
-                                                     << " domain has no labeller (domains with "
-                                                        "one: "
-                                                     << LabellerDomains() << ")");
+    RequireCapability(*d, domain, kLabeller, "cbf label: ");
     const std::vector<std::string> features = d->MakeEnvironment()->ObservationFeatures();
     const data::NumericTable all = data::ReadCsv(states);
     // The domain's features by name, every column kept in the output.

@@ -127,6 +127,43 @@ shield::ShieldOptions OverlayShieldFlags(shield::ShieldOptions from_file, const 
   return from_file;
 }
 
+CLI::Option* AddDomainOption(CLI::App* cmd, std::string* domain, const std::string& what) {
+  return cmd->add_option("--domain", *domain,
+                         what + ": " + experiments::DomainRegistry::Global().NameList());
+}
+
+CLI::Option* AddDomainOption(CLI::App* cmd, std::vector<std::string>* domains,
+                             const std::string& what) {
+  return cmd->add_option("--domain", *domains,
+                         what + ": " + experiments::DomainRegistry::Global().NameList());
+}
+
+const DomainCapability kBarrierCheck{&experiments::Domain::HasCheck, "barrier check"};
+const DomainCapability kGroundTruth{&experiments::Domain::HasGroundTruth, "ground truth"};
+const DomainCapability kLabeller{&experiments::Domain::HasLabeller, "labeller"};
+const DomainCapability kLabelCheck{&experiments::Domain::HasLabelCheck, "label check"};
+const DomainCapability kShieldRun{&experiments::Domain::HasShieldRun, "shield run"};
+const DomainCapability kPopulation{&experiments::Domain::HasPopulation, "population"};
+
+std::string DomainsWith(const DomainCapability& capability) {
+  return experiments::DomainRegistry::Global().ListOffering(
+      [&capability](const experiments::Domain& d) { return (d.*capability.offers)(); });
+}
+
+CLI::Option* AddDomainOption(CLI::App* cmd, std::string* domain,
+                             const DomainCapability& capability) {
+  return cmd->add_option("--domain", *domain,
+                         "a domain with a " + capability.name + ": " + DomainsWith(capability));
+}
+
+void RequireCapability(const experiments::Domain& domain, const std::string& name,
+                       const DomainCapability& capability, const std::string& prefix,
+                       const std::string& why) {
+  SECURE_CHECK((domain.*capability.offers)(),
+               prefix << "the " << name << " domain has no " << capability.name << " (" << why
+                      << "domains with one: " << DomainsWith(capability) << ")");
+}
+
 const CLI::Validator& NonNegativeSeed() {
   static const CLI::Validator validator(
       [](std::string& value) -> std::string {
@@ -195,6 +232,20 @@ int ReportError(const std::string& message) {
   return 1;
 }
 
+namespace {
+// One shield flag: `--<flag>` bound to `bound` (the field itself, or the string an enum field is
+// parsed from), and the copy of `field` that OverlayGiven makes when the flag was given.
+template <typename Bound, typename Field>
+std::pair<CLI::Option*, std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>>
+ShieldFlag(CLI::App* cmd, const std::string& flag, Bound* bound,
+           Field shield::ShieldOptions::*field, const std::string& help) {
+  return {cmd->add_option(flag, *bound, help)->capture_default_str(),
+          [field](const shield::ShieldOptions& from, shield::ShieldOptions* to) {
+            to->*field = from.*field;
+          }};
+}
+}  // namespace
+
 void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_preset) {
   class_k = ToString(shield::kClassKNames, so->class_k);
   aggregation = ToString(shield::kAggregationNames, so->aggregation);
@@ -202,86 +253,53 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
   sampler = ToString(shield::kSamplerNames, so->sampler);
   action_bounds = ToString(shield::kActionBoundsNames, so->action_bounds);
   proposal = ToString(shield::kProposalNames, so->proposal);
-  using Copy = std::function<void(const shield::ShieldOptions&, shield::ShieldOptions*)>;
-  // The default shown: the general one, or "preset" where the chosen domain's preset applies.
-  auto track = [this, domain_preset](CLI::Option* option, Copy copy) {
-    if (domain_preset) option->default_str("preset");
-    given_.emplace_back(option, copy);
+  using O = shield::ShieldOptions;
+  // The flags in help order; each binds its field (or the enum's string) and copies its field.
+  const std::vector<std::pair<CLI::Option*, std::function<void(const O&, O*)>>> flags = {
+      ShieldFlag(cmd, "--samples", &so->num_samples, &O::num_samples, "M: actions drawn per round"),
+      ShieldFlag(cmd, "--safe-ratio", &so->safe_ratio, &O::safe_ratio,
+                 "rho0: resample while #safe / M <= rho0"),
+      ShieldFlag(cmd, "--class-k", &class_k, &O::class_k, "class-K function: linear | cubic"),
+      ShieldFlag(cmd, "--class-k-gain", &so->class_k_gain, &O::class_k_gain,
+                 "k in alpha(h) (linear: keep k dt < 1)"),
+      ShieldFlag(cmd, "--aggregation", &aggregation, &O::aggregation,
+                 "mean | random-safe | policy-draw | top-q (AIRL's task value) | policy-mean"),
+      ShieldFlag(cmd, "--top-q-fraction", &so->top_q_fraction, &O::top_q_fraction,
+                 "aggregation top-q: the fraction of the safe samples averaged"),
+      ShieldFlag(cmd, "--lookahead-steps", &so->lookahead_steps, &O::lookahead_steps,
+                 "H: the CBF condition H control periods ahead, the action held"),
+      ShieldFlag(cmd, "--resampling", &resampling, &O::resampling, "adaptive | none"),
+      ShieldFlag(cmd, "--sampler", &sampler, &O::sampler,
+                 "how each round's M actions are drawn: iid | antithetic | qmc"),
+      ShieldFlag(cmd, "--action-bounds", &action_bounds, &O::action_bounds,
+                 "the environment's actuator box: clip (samples clipped onto it) | reject "
+                 "(samples outside count unsafe) | ignore (decisions may leave it)"),
+      ShieldFlag(cmd, "--proposal", &proposal, &O::proposal,
+                 "none | qp (the CBF-QP projection of the mean first, Algorithms 1-2 if its exact "
+                 "g < 0) | qp-only (the CBF-QP filter alone) | refine (gradient refinement of "
+                 "the mean alone)"),
+      ShieldFlag(cmd, "--qp-iterations", &so->qp_iterations, &O::qp_iterations,
+                 "proposal: linearisations per decision (re-linearised at a rejected "
+                 "projection)"),
+      ShieldFlag(cmd, "--qp-margin", &so->qp_margin, &O::qp_margin,
+                 "proposal: the projection asks the linearised g >= this margin"),
+      ShieldFlag(cmd, "--refine-steps", &so->refine_steps, &O::refine_steps,
+                 "proposal refine: gradient steps per decision at most"),
+      ShieldFlag(cmd, "--max-iterations", &so->max_iterations, &O::max_iterations,
+                 "sampling rounds per decision"),
+      ShieldFlag(cmd, "--time-budget-us", &so->time_budget_us, &O::time_budget_us,
+                 "wall-time budget per decision in microseconds (0: none)"),
+      ShieldFlag(cmd, "--probes", &so->num_probes, &O::num_probes,
+                 "N: probe actions per adaptive step"),
+      ShieldFlag(cmd, "--probe-extent", &so->probe_extent, &O::probe_extent,
+                 "R: probes are uniform in mu + [-R, R]^n"),
+      ShieldFlag(cmd, "--sigma-step", &so->sigma_step, &O::sigma_step,
+                 "alpha_sigma: sigma widening step"),
   };
-#define SECURE_SHIELD_FIELD_COPY(field) \
-  [](const shield::ShieldOptions& from, shield::ShieldOptions* to) { to->field = from.field; }
-  track(cmd->add_option("--samples", so->num_samples, "M: actions drawn per round")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(num_samples));
-  track(cmd->add_option("--safe-ratio", so->safe_ratio, "rho0: resample while #safe / M <= rho0")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(safe_ratio));
-  track(cmd->add_option("--class-k", class_k, "class-K function: linear | cubic")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(class_k));
-  track(cmd->add_option("--class-k-gain", so->class_k_gain, "k in alpha(h) (linear: keep k dt < 1)")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(class_k_gain));
-  track(cmd->add_option("--aggregation", aggregation,
-                        "mean | random-safe | policy-draw | top-q (AIRL's task value) | policy-mean")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(aggregation));
-  track(cmd->add_option("--top-q-fraction", so->top_q_fraction,
-                        "aggregation top-q: the fraction of the safe samples averaged")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(top_q_fraction));
-  track(cmd->add_option("--lookahead-steps", so->lookahead_steps,
-                        "H: the CBF condition H control periods ahead, the action held")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(lookahead_steps));
-  track(cmd->add_option("--resampling", resampling, "adaptive | none")->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(resampling));
-  track(cmd->add_option("--sampler", sampler,
-                        "how each round's M actions are drawn: iid | antithetic | qmc")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(sampler));
-  track(cmd->add_option("--action-bounds", action_bounds,
-                        "the environment's actuator box: clip (samples clipped onto it) | reject "
-                        "(samples outside count unsafe) | ignore (decisions may leave it)")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(action_bounds));
-  track(cmd->add_option("--proposal", proposal,
-                        "none | qp (the CBF-QP projection of the mean first, Algorithms 1-2 if "
-                        "its exact g < 0) | qp-only (the CBF-QP filter alone) | refine (gradient "
-                        "refinement of the mean alone)")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(proposal));
-  track(cmd->add_option("--qp-iterations", so->qp_iterations,
-                        "proposal: linearisations per decision (re-linearised at a rejected "
-                        "projection)")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(qp_iterations));
-  track(cmd->add_option("--qp-margin", so->qp_margin,
-                        "proposal: the projection asks the linearised g >= this margin")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(qp_margin));
-  track(cmd->add_option("--refine-steps", so->refine_steps,
-                        "proposal refine: gradient steps per decision at most")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(refine_steps));
-  track(cmd->add_option("--max-iterations", so->max_iterations, "sampling rounds per decision")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(max_iterations));
-  track(cmd->add_option("--time-budget-us", so->time_budget_us,
-                        "wall-time budget per decision in microseconds (0: none)")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(time_budget_us));
-  track(cmd->add_option("--probes", so->num_probes, "N: probe actions per adaptive step")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(num_probes));
-  track(
-      cmd->add_option("--probe-extent", so->probe_extent, "R: probes are uniform in mu + [-R, R]^n")
-          ->capture_default_str(),
-      SECURE_SHIELD_FIELD_COPY(probe_extent));
-  track(cmd->add_option("--sigma-step", so->sigma_step, "alpha_sigma: sigma widening step")
-            ->capture_default_str(),
-        SECURE_SHIELD_FIELD_COPY(sigma_step));
-#undef SECURE_SHIELD_FIELD_COPY
+  // The default shown: the general one, or "preset" where the chosen domain's preset applies.
+  if (domain_preset)
+    for (const auto& flag : flags) flag.first->default_str("preset");
+  given_.insert(given_.end(), flags.begin(), flags.end());
 }
 
 void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {

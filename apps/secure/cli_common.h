@@ -78,6 +78,34 @@ std::unique_ptr<experiments::Domain> MakeConfiguredDomain(
     const std::string& name, bool quick, const Config& config,
     experiments::ExperimentOptions* options = nullptr);
 
+/// Adds `--domain` bound to `domain`, its help "<what>: <the registered domains>" (the list from
+/// experiments::DomainRegistry, so a new plug-in appears in every command's help). The
+/// vector overload takes the flag repeated.
+CLI::Option* AddDomainOption(CLI::App* cmd, std::string* domain,
+                             const std::string& what = "the domain");
+CLI::Option* AddDomainOption(CLI::App* cmd, std::vector<std::string>* domains,
+                             const std::string& what);
+
+/// A capability a domain may offer (Domain::HasCheck, HasGroundTruth, ...) and its name in the
+/// help and the errors ("a domain with a barrier check", "the derby domain has no barrier
+/// check").
+struct DomainCapability {
+  bool (experiments::Domain::*offers)() const;
+  std::string name;
+};
+extern const DomainCapability kBarrierCheck, kGroundTruth, kLabeller, kLabelCheck, kShieldRun,
+    kPopulation;
+/// The registered domains that offer `capability`: "a | b".
+std::string DomainsWith(const DomainCapability& capability);
+/// `--domain` with the help "a domain with a <name>: <the domains that offer it>".
+CLI::Option* AddDomainOption(CLI::App* cmd, std::string* domain,
+                             const DomainCapability& capability);
+/// Throws "<prefix>the <name> domain has no <capability> (<why>domains with one: a | b)" unless
+/// `domain` offers it.
+void RequireCapability(const experiments::Domain& domain, const std::string& name,
+                       const DomainCapability& capability, const std::string& prefix = "",
+                       const std::string& why = "");
+
 /// Rejects a negative value for an unsigned 64-bit seed (which CLI11 would wrap around to
 /// 2^64 - 1).
 const CLI::Validator& NonNegativeSeed();

@@ -57,10 +57,9 @@ struct ConvertCommand {
     cmd->add_option("--action-features", action_features,
                     "comma-separated action columns (CSV demonstrations: which columns are "
                     "actions; HDF5: which to keep; default: the --domain's, else all of HDF5)");
-    cmd->add_option("--domain", domain,
+    AddDomainOption(cmd, &domain,
                     "CSV demonstrations: take the action columns (and, without --obs-keys, the "
-                    "observation columns) from this domain: " +
-                        experiments::DomainRegistry::Global().NameList());
+                    "observation columns) from this domain");
     cmd->add_option("--label", label,
                     "the state set: its label in an HDF5 input (safety/<label>) or output "
                     "(default: the input file's stem)");

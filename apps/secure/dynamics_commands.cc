@@ -220,9 +220,7 @@ struct DynamicsTrainCommand {
                     "with an episode column (demos.csv, `dynamics collect`)")
         ->required();
     cmd->add_option("--out", out, "output model file")->required();
-    cmd->add_option("--domain", domain,
-                    "take the features from this domain (observation, action): " +
-                        experiments::DomainRegistry::Global().NameList());
+    AddDomainOption(cmd, &domain, "take the features from this domain (observation, action)");
     cmd->add_option("--state-features", state_features, "comma-separated state columns");
     cmd->add_option("--action-features", action_features, "comma-separated action columns");
     cmd->add_option("--members", options.members, "K, ensemble members")->capture_default_str();
@@ -358,9 +356,7 @@ struct DynamicsCollectCommand {
         "collect", "Exploratory rollouts in a domain's environment, recorded as (s, a, s') "
                    "trajectories for `dynamics train` (the actions applied, as executed)");
     AddConfigFlag(cmd, cfg);
-    cmd->add_option("--domain", domain,
-                    "the domain: " + experiments::DomainRegistry::Global().NameList())
-        ->required();
+    AddDomainOption(cmd, &domain)->required();
     cmd->add_option("--out", out, "output CSV (episode, step, observation, action)")->required();
     cmd->add_option("--policy", policy_path,
                     "a Gaussian policy (e.g. BC) whose mean + noise x sigma is applied; without "

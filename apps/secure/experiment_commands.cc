@@ -168,10 +168,7 @@ struct ExperimentCommand {
     command_name = (parent.get_name() == "experiment" ? "experiment " : "") + name;
     CLI::App* cmd = parent.add_subcommand(name, description);
     AddConfigFlag(cmd, cfg);
-    const experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
-    if (fixed_domain.empty()) {
-      cmd->add_option("--domain", domain, "the domain: " + registry.NameList())->required();
-    }
+    if (fixed_domain.empty()) AddDomainOption(cmd, &domain)->required();
     cmd->add_flag("--quick", quick,
                   "the domain's small profile (2 seeds, few episodes, short training)");
     seeds_option = cmd->add_option(
@@ -434,8 +431,7 @@ struct UserStudyCommand {
     AddConfigFlag(cmd, cfg);
     cmd->add_option("--domain", domain,
                     "a domain with participants (default: the first registered one): " +
-                        experiments::DomainRegistry::Global().ListOffering(
-                            [](const experiments::Domain& d) { return d.HasPopulation(); }));
+                        DomainsWith(kPopulation));
     cmd->add_flag("--quick", quick, "the small profile (3 participants x 3 episodes, small data)");
     participants_option = cmd->add_option("--participants", participants,
                                           "participants, 2 to 1000 (default 12)");

@@ -14,12 +14,6 @@
 namespace secure::cli {
 namespace {
 
-// The registered domains with a label check (Domain::HasLabelCheck).
-std::string LabelCheckDomains() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasLabelCheck(); });
-}
-
 struct CheckLabelsCommand {
   const Config* config = nullptr;
   std::string domain;
@@ -34,9 +28,7 @@ struct CheckLabelsCommand {
         "check-labels",
         "Check the safe and near-dangerous labels of a domain's data against its physics: "
         "simulate forward from each labelled state and count dangerous events");
-    cmd->add_option("--domain", domain,
-                    "a domain with a label check: " + LabelCheckDomains())
-        ->required();
+    AddDomainOption(cmd, &domain, kLabelCheck)->required();
     cmd->add_flag("--quick", quick, "the domain's small profile");
     AddConfigFlag(cmd, cfg);  // the domain's options: section <domain's>, key `domain`
     seed_option = AddSeedOption(cmd, "--seed", &seed,
@@ -50,10 +42,8 @@ struct CheckLabelsCommand {
     config->Check();
     CheckRange("--max-states", max_states, 1, 100000000);
     const std::unique_ptr<experiments::Domain> d = MakeConfiguredDomain(domain, quick, *config);
-    SECURE_CHECK(d->HasLabelCheck(), "the " << domain
-                                            << " domain has no label check (it cannot simulate "
-                                               "forward from a labelled state; domains with one: "
-                                            << LabelCheckDomains() << ")");
+    RequireCapability(*d, domain, kLabelCheck, "",
+                      "it cannot simulate forward from a labelled state; ");
     const std::uint64_t data_seed = seed_option->count() > 0 ? seed : d->Preset().data_seed;
     const std::vector<experiments::LabelCheckRow> rows = d->CheckLabels(data_seed, max_states);
     if (json) {

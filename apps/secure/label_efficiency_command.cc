@@ -37,8 +37,7 @@ struct LabelEfficiencyCommand {
         "labelled by the domain's simulated person, retraining each round; Table 1's errors "
         "(with a ground truth) and closed-loop dangerous / success rates (with a shield run) "
         "against labels used. Domains with a labeller: " +
-            experiments::DomainRegistry::Global().ListOffering(
-                [](const experiments::Domain& d) { return d.HasLabeller(); }));
+            DomainsWith(kLabeller));
     AddConfigFlag(cmd, cfg);  // its `trainer:` section: the barrier trainer's options
     cmd->add_option("--domain", domain, "the domain")->required();
     cmd->add_flag("--quick", quick, "the small profile (2 seeds, 2 rounds of 10, small pool)");
@@ -73,13 +72,7 @@ struct LabelEfficiencyCommand {
   void Run() {
     const std::unique_ptr<experiments::Domain> d = experiments::DomainRegistry::Global().Make(
         domain, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
-    SECURE_CHECK(d->HasLabeller(), "experiment label-efficiency: the "
-                                       << domain << " domain has no labeller (domains with one: "
-                                       << experiments::DomainRegistry::Global().ListOffering(
-                                              [](const experiments::Domain& x) {
-                                                return x.HasLabeller();
-                                              })
-                                       << ")");
+    RequireCapability(*d, domain, kLabeller, "experiment label-efficiency: ");
     experiments::LabelEfficiencyOptions o = experiments::LabelEfficiencyOptions::For(
         *d, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
     config->Check();

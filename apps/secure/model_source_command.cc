@@ -81,9 +81,7 @@ struct ModelSourceCommand {
         "SECURE with the domain's hand-written shield model vs a learned dynamics ensemble "
         "(pessimistic over its members), on a run's models (same seeds, barriers, policies, "
         "episodes); paired TOST of the success and dangerous rates");
-    cmd->add_option("--domain", domain,
-                    "the domain: " + experiments::DomainRegistry::Global().NameList())
-        ->required();
+    AddDomainOption(cmd, &domain)->required();
     AddConfigFlag(cmd, cfg);
     cmd->add_option("--run", run_dir,
                     "a `secure experiment method-comparison --out` directory (seed-<k>/"

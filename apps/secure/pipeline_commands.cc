@@ -4,10 +4,12 @@
 //   secure eval                   saved models of any domain over seeds (every method)
 // Every stage reads and writes files, so users can bring their own data at any stage.
 #include <cmath>
+#include <functional>
 #include <iostream>
 #include <limits>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "cli_common.h"
@@ -42,51 +44,71 @@ struct DemosGenerateCommand {
   std::string domain, out;
   // The data flags. Each given flag becomes one of the domain's own option keys (the table in
   // docs/ADDING_A_DOMAIN.md, "The data flags"); a domain without that key rejects it by name.
-  // Flags not given leave the domain's values.
+  // Flags not given leave the domain's values. Each flag's key is named once, in Register: its
+  // help shows it and Run writes it.
   long episodes = 0, safe_states = 0, near_dangerous_count = 0;
   int slowed_copies = 0;
   double rho_min = 0, rho_max = 0;
   bool stop_at_goal = false;
   std::uint64_t seed = 1000;
   bool json = false;
-  CLI::Option *episodes_flag = nullptr, *safe_flag = nullptr, *slowed_flag = nullptr,
-              *nd_flag = nullptr, *rho_min_flag = nullptr, *rho_max_flag = nullptr,
-              *stop_flag = nullptr;
+  struct DataFlag {
+    CLI::Option* option;
+    std::string section, key;           // the option `section.key`, or `key` (no section)
+    std::function<YAML::Node()> value;  // range-checked
+  };
+  std::vector<DataFlag> data_flags;
+
+  // `--<flag>` for the domain option `path` ("section.key" or "key"). `preset`: every domain has
+  // the key (the help says the default is the domain's), else a domain without it rejects the
+  // flag. An integer is checked to lie in [lo, hi] when the flag is given.
+  template <typename T>
+  void AddDataFlag(CLI::App* cmd, const std::string& flag, T* value, const std::string& path,
+                   const std::string& help, bool preset, long lo = 0, long hi = -1) {
+    const std::string full_help =
+        help + " (key " + path + "; " +
+        (preset ? "default: the domain's" : "a domain without it rejects the flag") + ")";
+    CLI::Option* option = nullptr;
+    if constexpr (std::is_same_v<T, bool>) {
+      option = cmd->add_flag(flag, *value, full_help);
+    } else {
+      option = cmd->add_option(flag, *value, full_help);
+    }
+    const std::size_t dot = path.find('.');
+    data_flags.push_back({option, dot == std::string::npos ? "" : path.substr(0, dot),
+                          path.substr(dot + 1), [flag, value, lo, hi] {
+                            if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+                              if (lo <= hi) CheckRange(flag, *value, lo, hi);
+                            }
+                            return YAML::Node(*value);
+                          }});
+  }
 
   void Register(CLI::App& parent) {
     CLI::App* cmd = parent.add_subcommand(
         "generate",
         "Expert task demonstrations (collisions discarded) and safety demonstrations of any "
         "domain: demos.csv, safe.csv, near_dangerous.csv in --out");
-    cmd->add_option("--domain", domain,
-                    "the domain: " + experiments::DomainRegistry::Global().NameList())
-        ->required();
+    AddDomainOption(cmd, &domain)->required();
     cmd->add_option("--out", out, "output directory")->required()->transform(DirectoryPath());
-    episodes_flag =
-        cmd->add_option("--episodes", episodes,
-                        "expert episodes to keep, at most " + std::to_string(kMaxEpisodes) +
-                            " (key demonstrations.episodes; default: the domain's)");
-    safe_flag = cmd->add_option("--safe-states", safe_states,
-                                "demonstration states kept as safe states, at random (key "
-                                "safe_states; default: the domain's)");
-    slowed_flag = cmd->add_option(
-        "--slowed-copies", slowed_copies,
-        "safe-state augmentation, copies of each safe state with its velocity scaled by U[0, 1) "
-        "(key slowed_copies; a domain without it rejects the flag)");
-    nd_flag = cmd->add_option("--near-dangerous", near_dangerous_count,
-                              "near-dangerous states (key near_dangerous.count; default: the "
-                              "domain's)");
-    rho_min_flag = cmd->add_option("--rho-min", rho_min,
-                                   "near-dangerous band from this distance to the obstacle's edge, "
-                                   "negative: inside (key near_dangerous.rho_min; a domain "
-                                   "without it rejects the flag)");
-    rho_max_flag = cmd->add_option("--rho-max", rho_max,
-                                   "near-dangerous band to this distance (key "
-                                   "near_dangerous.rho_max; a domain without it rejects the flag)");
-    stop_flag = cmd->add_flag("--stop-at-goal", stop_at_goal,
-                              "end each demonstration at the goal, not after the full horizon "
-                              "(key demonstrations.stop_at_goal; a domain without it rejects the "
-                              "flag)");
+    AddDataFlag(cmd, "--episodes", &episodes, "demonstrations.episodes",
+                "expert episodes to keep, at most " + std::to_string(kMaxEpisodes), true, 1,
+                kMaxEpisodes);
+    AddDataFlag(cmd, "--safe-states", &safe_states, "safe_states",
+                "demonstration states kept as safe states, at random", true, 1, kMaxStates);
+    AddDataFlag(cmd, "--slowed-copies", &slowed_copies, "slowed_copies",
+                "safe-state augmentation, copies of each safe state with its velocity scaled by "
+                "U[0, 1)",
+                false, 0, kMaxSlowedCopies);
+    AddDataFlag(cmd, "--near-dangerous", &near_dangerous_count, "near_dangerous.count",
+                "near-dangerous states", true, 1, kMaxStates);
+    AddDataFlag(cmd, "--rho-min", &rho_min, "near_dangerous.rho_min",
+                "near-dangerous band from this distance to the obstacle's edge, negative: inside",
+                false);
+    AddDataFlag(cmd, "--rho-max", &rho_max, "near_dangerous.rho_max",
+                "near-dangerous band to this distance", false);
+    AddDataFlag(cmd, "--stop-at-goal", &stop_at_goal, "demonstrations.stop_at_goal",
+                "end each demonstration at the goal, not after the full horizon", false);
     AddSeedOption(cmd, "--seed", &seed, "seed of all the data");
     cmd->add_flag("--json", json, "print counts as JSON");
     cmd->callback([this] { Run(); });
@@ -96,25 +118,14 @@ struct DemosGenerateCommand {
     const std::unique_ptr<experiments::Domain> d =
         experiments::DomainRegistry::Global().Make(domain);
     YAML::Node options;
-    if (episodes_flag->count() > 0) {
-      CheckRange("--episodes", episodes, 1, kMaxEpisodes);
-      options["demonstrations"]["episodes"] = episodes;
+    for (const DataFlag& f : data_flags) {
+      if (f.option->count() == 0) continue;
+      if (f.section.empty()) {
+        options[f.key] = f.value();
+      } else {
+        options[f.section][f.key] = f.value();
+      }
     }
-    if (stop_flag->count() > 0) options["demonstrations"]["stop_at_goal"] = stop_at_goal;
-    if (safe_flag->count() > 0) {
-      CheckRange("--safe-states", safe_states, 1, kMaxStates);
-      options["safe_states"] = safe_states;
-    }
-    if (slowed_flag->count() > 0) {
-      CheckRange("--slowed-copies", slowed_copies, 0, kMaxSlowedCopies);
-      options["slowed_copies"] = slowed_copies;
-    }
-    if (nd_flag->count() > 0) {
-      CheckRange("--near-dangerous", near_dangerous_count, 1, kMaxStates);
-      options["near_dangerous"]["count"] = near_dangerous_count;
-    }
-    if (rho_min_flag->count() > 0) options["near_dangerous"]["rho_min"] = rho_min;
-    if (rho_max_flag->count() > 0) options["near_dangerous"]["rho_max"] = rho_max;
     if (options.size() > 0) d->ApplyYaml(options, "demos generate flags");
     d->Validate();
     // Before the work: an unusable --out (a file, a read-only place) fails at once.
@@ -181,9 +192,7 @@ struct PolicyTrainCommand {
                     "in robomimic's layout (.h5, .hdf5)")
         ->required();
     cmd->add_option("--out", out, "output policy model file")->required();
-    cmd->add_option("--domain", domain,
-                    "domain the demonstrations come from (AIRL rolls out in it): " +
-                        experiments::DomainRegistry::Global().NameList())
+    AddDomainOption(cmd, &domain, "domain the demonstrations come from (AIRL rolls out in it)")
         ->capture_default_str();
     bc_only.push_back(
         cmd->add_option("--state-features", state_features,
@@ -333,9 +342,7 @@ struct EvalCommand {
         "sampler), cbf-grad (gradient refinement of the mean); success and dangerous rates over seeds, Mann-Whitney U and TOST "
         "of SECURE vs AIRL, Kruskal-Wallis + Dunn across the ablations. The shield flags marked "
         "=preset default to the domain's preset (`secure domains NAME` lists it)");
-    cmd->add_option("--domain", domain,
-                    "the domain: " + experiments::DomainRegistry::Global().NameList())
-        ->required();
+    AddDomainOption(cmd, &domain)->required();
     AddConfigFlag(cmd, cfg);  // the domain's options: section <domain's>, key `domain`
     cmd->add_option("--run", run_dir,
                     "a `secure demo --out` or `secure experiment --out` directory: "

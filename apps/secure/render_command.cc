@@ -52,9 +52,7 @@ struct RenderCommand {
         "seed and index) with the domain's offscreen renderer: an MP4 video (ffmpeg) and/or PPM "
         "frames. The shield flags marked =preset default to the domain's preset (`secure domains "
         "NAME` lists it)");
-    cmd->add_option("--domain", domain,
-                    "the domain: " + experiments::DomainRegistry::Global().NameList())
-        ->required();
+    AddDomainOption(cmd, &domain)->required();
     AddConfigFlag(cmd, *config);  // the domain's options: section <domain's>, key `domain`
     cmd->add_option("--method", method,
                     "one method: bc, airl, secure, secure-random-safe, secure-no-resampling, "

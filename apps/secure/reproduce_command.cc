@@ -41,9 +41,8 @@ struct ReproduceCommand {
                     "profiles, for tests and smoke runs)")
         ->capture_default_str()
         ->check(CLI::IsMember({"full", "quick"}));
-    cmd->add_option("--domain", options.domains,
-                    "only this domain (repeatable; default every registered one): " +
-                        experiments::DomainRegistry::Global().NameList());
+    AddDomainOption(cmd, &options.domains,
+                    "only this domain (repeatable; default every registered one)");
     cmd->add_option("--study", options.studies,
                     "only this study (repeatable): ground-truth, method-comparison, ablation, "
                     "sensitivity, joint, user-study");

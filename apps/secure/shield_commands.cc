@@ -19,12 +19,6 @@ namespace {
 
 constexpr const char* kGroundTruthBarrier = "ground-truth";
 
-// The registered domains with a shield run, for the help and the errors.
-std::string ShieldRunDomains() {
-  return experiments::DomainRegistry::Global().ListOffering(
-      [](const experiments::Domain& d) { return d.HasShieldRun(); });
-}
-
 // Warns on stderr when a model's recorded ground truth (the provenance of `cbf train --domain`,
 // under the domain's GroundTruthSection) differs from the run's.
 void WarnOnGroundTruthMismatch(const cbf::BarrierNet& net, const experiments::Domain& domain,
@@ -60,8 +54,7 @@ struct ShieldRunCommand {
         "collisions, successes, interventions, latency. Defaults marked =preset and the task "
         "flags' are the domain's (`secure domains NAME`)");
     AddConfigFlag(cmd, cfg);  // the domain's ground-truth section (double_integrator:)
-    cmd->add_option("--domain", domain, "a domain with a shield run: " + ShieldRunDomains())
-        ->required();
+    AddDomainOption(cmd, &domain, kShieldRun)->required();
     cmd->add_option("--barrier", barrier,
                     "the shield's barrier: 'ground-truth' (a domain with one) or a barrier model "
                     "file")
@@ -91,8 +84,7 @@ struct ShieldRunCommand {
   void Run() {
     experiments::DomainRegistry& registry = experiments::DomainRegistry::Global();
     const std::unique_ptr<experiments::Domain> d = registry.Make(domain);
-    SECURE_CHECK(d->HasShieldRun(), "the " << domain << " domain has no shield run (domains with "
-                                           << "one: " << ShieldRunDomains() << ")");
+    RequireCapability(*d, domain, kShieldRun);
     if (episodes_flag->count() > 0) CheckRange("--episodes", request.episodes, 1, kMaxEpisodes);
     task_flags.ApplyTo(d.get(), *config);
     // The run: the domain's values, then the flags given.

@@ -85,6 +85,22 @@ data::StateSet StateSetOf(py::handle states, int dim, const std::vector<std::str
   return set;
 }
 
+// A trainer's two labelled sets: `safe` and `near_dangerous`, (N, d) arrays of one width d, their
+// columns named by `features` (default: `domain_features` when it has d names, else x0, x1, ...).
+struct LabelledSets {
+  data::StateSet safe, near_dangerous;
+};
+LabelledSets LabelledSetsOf(py::handle safe, py::handle near_dangerous, py::handle features,
+                            const std::vector<std::string>& domain_features = {}) {
+  const int dim = static_cast<int>(States(safe, -1, "safe", false).map.rows());
+  const std::vector<std::string> names =
+      features.is_none() && static_cast<int>(domain_features.size()) == dim
+          ? domain_features
+          : FeatureNames(features, dim, "x", "features");
+  return {StateSetOf(safe, dim, &names, "safe"),
+          StateSetOf(near_dangerous, dim, &names, "near_dangerous")};
+}
+
 }  // namespace
 
 void RegisterBarrier(py::module_& m) {
@@ -147,16 +163,12 @@ complex, object or string array. Releases the GIL.)doc")
         cbf::BarrierTrainerOptions o;
         CheckOptionTypes(options, o.ToJson(), "train_barrier options");
         o.ApplyYaml(ToYaml(options, "train_barrier"), "train_barrier options");
-        const StatesArg probe = States(safe, -1, "safe", false);
-        const int dim = static_cast<int>(probe.map.rows());
-        const std::vector<std::string> names = FeatureNames(features, dim, "x", "features");
-        const data::StateSet s = StateSetOf(safe, dim, &names, "safe");
-        const data::StateSet nd = StateSetOf(near_dangerous, dim, &names, "near_dangerous");
+        const LabelledSets sets = LabelledSetsOf(safe, near_dangerous, features);
         cbf::BarrierTrainingSummary summary;
         cbf::BarrierNet net;
         {
           py::gil_scoped_release release;
-          net = cbf::TrainBarrier(o, s, nd, &summary);
+          net = cbf::TrainBarrier(o, sets.safe, sets.near_dangerous, &summary);
         }
         return py::make_tuple(FromNet(std::move(net)), ToPython(summary.ToJson()));
       },
@@ -184,19 +196,12 @@ dict). Releases the GIL while training.)doc");
         }
         CheckOptionTypes(options, o.ToJson(), "train_car_barrier options");
         o.ApplyYaml(ToYaml(options, "train_car_barrier"), "train_car_barrier options");
-        const StatesArg probe = States(safe, -1, "safe", false);
-        const int dim = static_cast<int>(probe.map.rows());
-        const std::vector<std::string> names =
-            features.is_none() && static_cast<int>(domain_features.size()) == dim
-                ? domain_features
-                : FeatureNames(features, dim, "x", "features");
-        const data::StateSet s = StateSetOf(safe, dim, &names, "safe");
-        const data::StateSet nd = StateSetOf(near_dangerous, dim, &names, "near_dangerous");
+        const LabelledSets sets = LabelledSetsOf(safe, near_dangerous, features, domain_features);
         cbf::CarBarrierTrainingSummary summary;
         cbf::CarBarrierNet net;
         {
           py::gil_scoped_release release;
-          net = cbf::TrainCarBarrier(o, s, nd, &summary);
+          net = cbf::TrainCarBarrier(o, sets.safe, sets.near_dangerous, &summary);
         }
         return py::make_tuple(FromCar(std::move(net)), ToPython(summary.ToJson()));
       },

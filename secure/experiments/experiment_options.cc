@@ -5,13 +5,19 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/rng.h"
+#include "secure/common/strings.h"
 #include "secure/common/yaml_fields.h"
 #include "secure/common/yaml_value.h"
 #include "secure/experiments/internal/numbers.h"
@@ -191,56 +197,71 @@ void ExperimentOptions::Validate() const {
                      "check_held_out", check_held_out, "in [1, " << kMaxStates << "]");
 }
 
+namespace {
+
+using SectionReader = std::function<void(const YAML::Node&, const std::string&)>;
+
+// A section read whole by its options struct's ApplyYaml.
+template <typename Options>
+SectionReader ReadInto(Options* options) {
+  return [options](const YAML::Node& node, const std::string& where) {
+    options->ApplyYaml(node, where);
+  };
+}
+
+// The `check:` section: the experiment's own keys (enabled, held_out, augment), the rest the
+// check's options.
+void ApplyCheckSection(const YAML::Node& node, const std::string& source, const std::string& where,
+                       ExperimentOptions* o) {
+  SECURE_CHECK(node.IsMap(), where << ": expected a mapping of check options");
+  YAML::Node rest(YAML::NodeType::Map);
+  for (const auto& item : node) {
+    const std::string name = YamlKey(item.first, source);
+    if (name == "enabled") {
+      o->check_enabled = YamlValue<bool>(item.second, name, where);
+    } else if (name == "held_out") {
+      o->check_held_out = YamlValue<long>(item.second, name, where);
+    } else if (name == "augment") {
+      o->augment_flagged = YamlValue<bool>(item.second, name, where);
+    } else {
+      rest[name] = item.second;
+    }
+  }
+  o->check.ApplyYaml(rest, where);
+}
+
+}  // namespace
+
 void ExperimentOptions::ApplyYaml(const YAML::Node& node, const std::string& source,
                                   Domain* domain) {
   SECURE_CHECK(node.IsMap(), source << ": the experiment configuration must be a mapping");
+  // The sections, in the order the error lists them; `barrier` is the kind's barrier.
+  std::vector<std::pair<std::string, SectionReader>> sections = {
+      {"barrier", barrier_kind == BarrierKind::kPerObstacle ? ReadInto(&per_obstacle_barrier)
+                                                            : ReadInto(&flat_barrier)},
+      {"flat_barrier", ReadInto(&flat_barrier)},
+      {"per_obstacle_barrier", ReadInto(&per_obstacle_barrier)},
+      {"bc", ReadInto(&bc)},
+      {"airl", ReadInto(&airl)},
+      {"joint", ReadInto(&joint)},
+      {"shield", ReadInto(&shield)},
+      {"check",
+       [this, &source](const YAML::Node& n, const std::string& where) {
+         ApplyCheckSection(n, source, where, this);
+       }},
+      {"closed_loop", ReadInto(&closed_loop)},
+  };
+  if (domain != nullptr) sections.emplace_back("domain", ReadInto(domain));
   for (const auto& entry : node) {
     const std::string key = YamlKey(entry.first, source);
-    const std::string where = source + " [" + key + "]";
-    if (key == "barrier") {
-      if (barrier_kind == BarrierKind::kPerObstacle) {
-        per_obstacle_barrier.ApplyYaml(entry.second, where);
-      } else {
-        flat_barrier.ApplyYaml(entry.second, where);
-      }
-    } else if (key == "flat_barrier") {
-      flat_barrier.ApplyYaml(entry.second, where);
-    } else if (key == "per_obstacle_barrier") {
-      per_obstacle_barrier.ApplyYaml(entry.second, where);
-    } else if (key == "bc") {
-      bc.ApplyYaml(entry.second, where);
-    } else if (key == "airl") {
-      airl.ApplyYaml(entry.second, where);
-    } else if (key == "joint") {
-      joint.ApplyYaml(entry.second, where);
-    } else if (key == "shield") {
-      shield.ApplyYaml(entry.second, where);
-    } else if (key == "check") {
-      SECURE_CHECK(entry.second.IsMap(), where << ": expected a mapping of check options");
-      YAML::Node rest(YAML::NodeType::Map);
-      for (const auto& item : entry.second) {
-        const std::string name = YamlKey(item.first, source);
-        if (name == "enabled") {
-          check_enabled = YamlValue<bool>(item.second, name, where);
-        } else if (name == "held_out") {
-          check_held_out = YamlValue<long>(item.second, name, where);
-        } else if (name == "augment") {
-          augment_flagged = YamlValue<bool>(item.second, name, where);
-        } else {
-          rest[name] = item.second;
-        }
-      }
-      check.ApplyYaml(rest, where);
-    } else if (key == "closed_loop") {
-      closed_loop.ApplyYaml(entry.second, where);
-    } else if (key == "domain" && domain != nullptr) {
-      domain->ApplyYaml(entry.second, where);
-    } else {
-      SECURE_THROW(source << ": unknown section '" << key
-                          << "' (valid: barrier, flat_barrier, per_obstacle_barrier, bc, airl, "
-                             "joint, shield, check, closed_loop"
-                          << (domain != nullptr ? ", domain" : "") << ")");
+    const auto section = std::find_if(sections.begin(), sections.end(),
+                                      [&key](const auto& s) { return s.first == key; });
+    if (section == sections.end()) {
+      std::vector<std::string> valid;
+      for (const auto& s : sections) valid.push_back(s.first);
+      SECURE_THROW(source << ": unknown section '" << key << "' (valid: " << Join(valid) << ")");
     }
+    section->second(entry.second, source + " [" + key + "]");
   }
 }
 

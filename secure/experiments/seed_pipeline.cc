@@ -7,6 +7,8 @@
 #include <cctype>
 #include <cstdio>
 #include <ostream>
+#include <string>
+#include <utility>
 
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
@@ -14,6 +16,22 @@
 
 namespace secure::experiments::internal {
 namespace {
+
+// A trainer's options for one seed's run: `options` with `seed`, quiet.
+template <typename Options>
+Options SeedRun(Options options, std::uint64_t seed) {
+  options.seed = seed;
+  options.verbose = false;
+  return options;
+}
+// ... and (with a directory) the policy trainer's learning curve in `dir`/`curve`.
+template <typename Options>
+Options SeedRun(Options options, std::uint64_t seed, const std::string& dir,
+                const std::string& curve) {
+  options = SeedRun(std::move(options), seed);
+  if (!dir.empty()) options.curve_path = dir + "/" + curve;
+  return options;
+}
 
 // "prefix.ext" for the baseline variant, "prefix_<name>.ext" (name made file-safe) otherwise.
 std::string VariantFile(const std::string& prefix, const BarrierDataVariant& variant,
@@ -116,10 +134,7 @@ void SeedPipeline::TrainPolicies(std::uint64_t training_seed, const std::string&
 void SeedPipeline::TrainBcPolicy(std::uint64_t training_seed, const std::string& files,
                                  nlohmann::json& record) {
   const Stopwatch clock;
-  policy::BcOptions options = o_.bc;
-  options.seed = training_seed;
-  options.verbose = false;
-  if (!files.empty()) options.curve_path = files + "/bc_curve.csv";
+  const policy::BcOptions options = SeedRun(o_.bc, training_seed, files, "bc_curve.csv");
   policy::BcSummary summary;
   bc_ = policy::TrainBc(options, shared_.data.demonstrations, &summary);
   record["bc"] = summary.ToJson();
@@ -132,10 +147,7 @@ void SeedPipeline::TrainBcPolicy(std::uint64_t training_seed, const std::string&
 void SeedPipeline::TrainAirlPolicy(std::uint64_t training_seed, const std::string& files,
                                    nlohmann::json& record) {
   const Stopwatch clock;
-  policy::AirlOptions options = o_.airl;
-  options.seed = training_seed;
-  options.verbose = false;
-  if (!files.empty()) options.curve_path = files + "/airl_curve.csv";
+  const policy::AirlOptions options = SeedRun(o_.airl, training_seed, files, "airl_curve.csv");
   policy::AirlSummary summary;
   const int report_every = std::max(1, options.iterations / 4);
   long counted = 0;
@@ -249,10 +261,7 @@ void SeedPipeline::CheckVariantBarrier(const BarrierDataVariant& variant, bool f
 // The joint policy (AIRL with the CBF loss of `barrier`), warm-started from BC when AIRL is.
 policy::GaussianPolicy SeedPipeline::TrainJoint(const SeedBarrier& barrier) {
   const Stopwatch clock;
-  policy::AirlOptions options = o_.airl;
-  options.seed = seed_;
-  options.verbose = false;
-  if (!dir_.empty()) options.curve_path = dir_ + "/joint_curve.csv";
+  const policy::AirlOptions options = SeedRun(o_.airl, seed_, dir_, "joint_curve.csv");
   policy::AirlSummary summary;
   const policy::GaussianPolicy* start = o_.airl_warm_start ? &*bc_ : nullptr;
   long counted = 0;
@@ -327,19 +336,14 @@ SeedBarrier TrainSeedBarrier(const ExperimentOptions& o, std::uint64_t seed,
                              std::string* brief) {
   SeedBarrier b;
   if (o.barrier_kind == BarrierKind::kPerObstacle) {
-    cbf::CarBarrierTrainerOptions options = o.per_obstacle_barrier;
-    options.seed = seed;
-    options.verbose = false;
     cbf::CarBarrierTrainingSummary summary;
-    b.per_obstacle = cbf::TrainCarBarrier(options, safe, near_dangerous, &summary);
+    b.per_obstacle = cbf::TrainCarBarrier(SeedRun(o.per_obstacle_barrier, seed), safe,
+                                          near_dangerous, &summary);
     b.summary = summary.ToJson();
     *brief = summary.BriefReport();
   } else {
-    cbf::BarrierTrainerOptions options = o.flat_barrier;
-    options.seed = seed;
-    options.verbose = false;
     cbf::BarrierTrainingSummary summary;
-    b.flat = cbf::TrainBarrier(options, safe, near_dangerous, &summary);
+    b.flat = cbf::TrainBarrier(SeedRun(o.flat_barrier, seed), safe, near_dangerous, &summary);
     b.summary = summary.ToJson();
     *brief = summary.BriefReport();
   }

@@ -1,6 +1,10 @@
 // End-to-end tests of the `secure` command-line tool (the cli_test program, cli_test.cc):
 // hardening (one-line errors, bounded sizes, strict configs, "n/a" figures) and `policy train
 // --config` with flags over the file.
+#include <string>
+#include <utility>
+#include <vector>
+
 #include "tests/apps/cli_test_util.h"
 
 namespace {
@@ -29,25 +33,31 @@ TEST(CliHardeningTest, ImpossibleSizesAreRejectedBeforeAnyWork) {
                     (TempDir() / "never.model").string() + " --config " + cfg);
   ExpectOneErrorLine(r, "hidden[0] = 2000000000, must be in [1, 10000]");
   EXPECT_FALSE(fs::exists(TempDir() / "never.model"));
-  r = RunCli("cbf train --domain double-integrator --out x.model --hidden 64,20000");
-  ExpectOneErrorLine(r, "hidden[1] = 20000, must be in [1, 10000]");
-  r = RunCli("shield run --domain double-integrator --barrier ground-truth --episodes 2147483648");
-  ExpectOneErrorLine(r, "--episodes = 2147483648, must be in [1, 1000000]");
-  r = RunCli("eval --domain double-integrator --bc /nonexistent.model --episodes 2147483648");
-  ExpectOneErrorLine(r, "--episodes = 2147483648, must be in [1, 1000000]");
   r = RunCli("demo --quick --episodes 2147483648");
   ExpectOneErrorLine(r, "--episodes = 2147483648, must be in [1, 1000000]");
   EXPECT_EQ(r.err.find("[seed"), std::string::npos) << r.err;
-  r = RunCli("demos generate --domain double-integrator --episodes 2147483648 --out " +
-             (TempDir() / "never_dir").string());
-  ExpectOneErrorLine(r, "--episodes = 2147483648, must be in [1, 1000000]");
+  // (command, the error it names)
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"cbf train --domain double-integrator --out x.model --hidden 64,20000",
+       "hidden[1] = 20000, must be in [1, 10000]"},
+      {"shield run --domain double-integrator --barrier ground-truth --episodes 2147483648",
+       "--episodes = 2147483648, must be in [1, 1000000]"},
+      {"eval --domain double-integrator --bc /nonexistent.model --episodes 2147483648",
+       "--episodes = 2147483648, must be in [1, 1000000]"},
+      {"demos generate --domain double-integrator --episodes 2147483648 --out " +
+           (TempDir() / "never_dir").string(),
+       "--episodes = 2147483648, must be in [1, 1000000]"},
+      {"shield run --domain double-integrator --barrier ground-truth --samples 2000000000",
+       "num_samples = 2000000000, must be in [1, 1000000]"},
+      {"cbf table1 --seeds 0", "--seeds = 0, must be in [1, 10000]"},
+      {"cbf train --domain double-integrator --out x.model --safe 100000000000",
+       "--safe = 100000000000, must be in [1, 100000000]"},
+  };
+  for (const auto& [args, needle] : cases) {
+    SCOPED_TRACE(args);
+    ExpectOneErrorLine(RunCli(args), needle);
+  }
   EXPECT_FALSE(fs::exists(TempDir() / "never_dir"));
-  r = RunCli("shield run --domain double-integrator --barrier ground-truth --samples 2000000000");
-  ExpectOneErrorLine(r, "num_samples = 2000000000, must be in [1, 1000000]");
-  r = RunCli("cbf table1 --seeds 0");
-  ExpectOneErrorLine(r, "--seeds = 0, must be in [1, 10000]");
-  r = RunCli("cbf train --domain double-integrator --out x.model --safe 100000000000");
-  ExpectOneErrorLine(r, "--safe = 100000000000, must be in [1, 100000000]");
 }
 
 TEST(CliHardeningTest, ConfigFilesAreCheckedStrictly) {
@@ -206,11 +216,8 @@ TEST(CliHardeningTest, UndefinedFiguresReadNotApplicable) {
 }
 
 TEST(CliHardeningTest, ANonFinitePredictionNamesTheInputLine) {
-  WriteToyData();
   const std::string model = (TempDir() / "predict.model").string();
-  Result r = RunCli("cbf train --safe-states " + (TempDir() / "safe.csv").string() +
-                    " --near-dangerous-states " + (TempDir() / "nd.csv").string() +
-                    " --features x,y --out " + model + kFastTrain + " --activation relu");
+  Result r = RunCli(TrainToyArgs(model) + " --activation relu");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   // Values at the edge of the float range overflow inside the (unbounded, relu) network.
   const std::string states =

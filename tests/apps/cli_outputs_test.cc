@@ -28,9 +28,7 @@ TEST(CliTest, PolicyTrainRejectsFlagsOfTheOtherAlgorithm) {
     EXPECT_EQ(r.exit_code, 1) << flag;
     EXPECT_HAS(r.err, flag.substr(0, flag.find(' ')) + " applies to --algo bc only");
   }
-  const Result r = RunCli(base + "--algo airl --resume");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "--resume needs --checkpoint");
+  ExpectRejected(base + "--algo airl --resume", "--resume needs --checkpoint");
 }
 
 TEST(CliTest, PolicyTrainAirlResumeChecksTheCheckpoint) {
@@ -49,9 +47,8 @@ TEST(CliTest, PolicyTrainAirlResumeChecksTheCheckpoint) {
   ASSERT_TRUE(fs::exists(ckpt));
 
   // Fewer --iterations than the checkpoint has completed: an error, not the longer run's policy.
-  r = RunCli(train + "--iterations 1 --resume");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, ckpt + ": checkpoint has 2 completed iterations, more than iterations = 1");
+  ExpectRejected(train + "--iterations 1 --resume",
+                 ckpt + ": checkpoint has 2 completed iterations, more than iterations = 1");
   r = RunCli(train + "--iterations 2 --resume");  // as many: the checkpoint's policy
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(nlohmann::json::parse(r.out)["summary"]["resumed"].get<bool>());
@@ -65,26 +62,15 @@ TEST(CliTest, PolicyTrainAirlResumeChecksTheCheckpoint) {
   ASSERT_GT(bytes.size(), 1000u);
   bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x10);
   std::ofstream(ckpt, std::ios::binary) << bytes;
-  r = RunCli(train + "--iterations 3 --resume");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, ckpt + ": checksum mismatch");
+  ExpectRejected(train + "--iterations 3 --resume", ckpt + ": checksum mismatch");
   // Truncated.
   std::ofstream(ckpt, std::ios::binary) << bytes.substr(0, bytes.size() - 3);
-  r = RunCli(train + "--iterations 3 --resume");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, ckpt);
+  r = ExpectRejected(train + "--iterations 3 --resume", ckpt);
   EXPECT_HAS(r.err, "truncated");
 }
 
 // ------------------------------------------------------------------------------------------
 // Output paths that are not plain files, and byte-identical model files for a seed.
-
-std::string TrainToyArgs(const std::string& out) {
-  WriteToyData();
-  return "cbf train --safe-states " + (TempDir() / "safe.csv").string() +
-         " --near-dangerous-states " + (TempDir() / "nd.csv").string() + " --features x,y" +
-         kFastTrain + " --out " + out;
-}
 
 bool IsCharDevice(const fs::path& p) { return fs::is_character_file(fs::symlink_status(p)); }
 
@@ -123,9 +109,8 @@ TEST(CliTest, TrainOutThroughASymlinkWritesTheTargetAndKeepsTheLink) {
 TEST(CliTest, TrainOutToADirectoryOrAReaderlessFifoFailsNamingIt) {
   const fs::path dir = TempDir() / "bad_out";
   fs::create_directories(dir / "a_directory");
-  Result r = RunCli(TrainToyArgs((dir / "a_directory").string()));
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, (dir / "a_directory").string());
+  Result r =
+      ExpectRejected(TrainToyArgs((dir / "a_directory").string()), (dir / "a_directory").string());
   EXPECT_HAS(r.err, "directory");
   EXPECT_TRUE(fs::is_empty(dir / "a_directory"));
   const fs::path fifo = dir / "fifo";

@@ -148,9 +148,8 @@ TEST(CliTest, CbfTrainFromFilesStopsEarlyByDefault) {
             Slurp((TempDir() / "zero.model").string()));
   EXPECT_EQ(train("five.model", " --patience 5")["options"]["patience"], 5);
 
-  Result r = RunCli(files + "x.model --no-early-stopping --patience 5");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "--no-early-stopping and --patience 5");
+  Result r = ExpectRejected(files + "x.model --no-early-stopping --patience 5",
+                            "--no-early-stopping and --patience 5");
   r = RunCli("cbf train --help");
   EXPECT_HAS(r.out, "--no-early-stopping");
   EXPECT_HAS(r.out, "early stopping is on");
@@ -195,34 +194,23 @@ TEST(CliTest, Hdf5InputErrorsAreOneLineNamingTheFile) {
 }
 
 TEST(CliTest, PipelineStagesRejectBadInput) {
-  Result r = RunCli("policy train --algo gail --demos x.csv --out y.model");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "--algo = 'gail'");
-  r = RunCli("policy train --algo bc --demos /nonexistent/demos.csv --out y.model");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "/nonexistent/demos.csv");
+  Result r =
+      ExpectRejected("policy train --algo gail --demos x.csv --out y.model", "--algo = 'gail'");
+  ExpectRejected("policy train --algo bc --demos /nonexistent/demos.csv --out y.model",
+                 "/nonexistent/demos.csv");
   const std::string bad = Write("bad_demos.csv", "episode,step,x,y,vx,vy,ax,ay\n0,0,1,2,3,nan,0,0\n");
-  r = RunCli("policy train --algo bc --demos " + bad + " --out y.model");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "vy");
-  r = RunCli("eval --domain double-integrator");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "--run DIR");
-  r = RunCli("eval --domain double-integrator --bc /nonexistent.model --methods bc");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "/nonexistent.model");
-  r = RunCli("demo --quick --methods bc,foo");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "'foo'");
+  ExpectRejected("policy train --algo bc --demos " + bad + " --out y.model", "vy");
+  ExpectRejected("eval --domain double-integrator", "--run DIR");
+  ExpectRejected("eval --domain double-integrator --bc /nonexistent.model --methods bc",
+                 "/nonexistent.model");
+  ExpectRejected("demo --quick --methods bc,foo", "'foo'");
   r = RunCli("demos generate --domain panda --out x");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_HAS(r.err,
              "unknown domain 'panda' (registered: coffee-placing | derby | double-integrator | "
              "kitchen-cutting | panda-push | toy-cart)");
   // A flag the domain does not have is rejected by name (Derby has no slowed copies).
-  r = RunCli("demos generate --domain derby --slowed-copies 2 --out x");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "slowed_copies");
+  ExpectRejected("demos generate --domain derby --slowed-copies 2 --out x", "slowed_copies");
 }
 
 // Every command that takes --domain lists the registered domains in its help and its error.
@@ -240,9 +228,8 @@ TEST(CliTest, DomainCommandsListTheRegisteredDomains) {
   EXPECT_HAS(r.err,
              "unknown domain 'unicycle' (registered: coffee-placing | derby | double-integrator | "
              "kitchen-cutting | panda-push | toy-cart)");
-  const Result v = RunCli("cbf validate --domain derby --model " + std::string(SECURE_CLI));
-  EXPECT_EQ(v.exit_code, 1);
-  EXPECT_HAS(v.err, "the derby domain has no ground truth");
+  ExpectRejected("cbf validate --domain derby --model " + std::string(SECURE_CLI),
+                 "the derby domain has no ground truth");
 }
 
 TEST(CliTest, CheckLabelsSimulatesFromTheLabelledStates) {
@@ -258,12 +245,9 @@ TEST(CliTest, CheckLabelsSimulatesFromTheLabelledStates) {
     EXPECT_EQ(row["states"], 4);
     EXPECT_LE(row["dangerous"].get<long>() + row["skipped"].get<long>(), 4);
   }
-  const Result di = RunCli("demos check-labels --domain double-integrator");
-  EXPECT_EQ(di.exit_code, 1);
-  EXPECT_HAS(di.err, "the double-integrator domain has no label check");
-  const Result bad = RunCli("demos check-labels --domain panda-push --max-states 0");
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_HAS(bad.err, "--max-states");
+  ExpectRejected("demos check-labels --domain double-integrator",
+                 "the double-integrator domain has no label check");
+  ExpectRejected("demos check-labels --domain panda-push --max-states 0", "--max-states");
 }
 
 TEST(CliTest, EvalRenderAndCheckLabelsReadTheDomainsOptionsFromTheConfig) {
@@ -358,18 +342,13 @@ TEST(CliTest, UserStudyQuickPrintsTheConditionsBesideThePapersRatings) {
   EXPECT_HAS(text.out, "| Task (paper, Likert rating) | 73.3 | 77.1 | 81.6 | 73.6 |");
   EXPECT_HAS(text.out, "Likert ratings, not rates");
   // Bad options: one line naming the option and the value, exit 1.
-  Result bad = RunCli("experiment user-study --quick --spread 0,x");
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_HAS(bad.err, "--spread '0,x': 'x' is not a number in [0, 1]");
-  bad = RunCli("experiment user-study --quick --spread 1.5");
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_HAS(bad.err, "'1.5' is not a number in [0, 1]");
-  bad = RunCli("experiment user-study --quick --participants 1");
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_HAS(bad.err, "--participants = 1, must be in [2, 1000]");
-  bad = RunCli("experiment user-study --quick --domain derby");
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_HAS(bad.err, "--domain derby: the domain has no participants");
+  ExpectRejected("experiment user-study --quick --spread 0,x",
+                 "--spread '0,x': 'x' is not a number in [0, 1]");
+  ExpectRejected("experiment user-study --quick --spread 1.5", "'1.5' is not a number in [0, 1]");
+  ExpectRejected("experiment user-study --quick --participants 1",
+                 "--participants = 1, must be in [2, 1000]");
+  ExpectRejected("experiment user-study --quick --domain derby",
+                 "--domain derby: the domain has no participants");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -392,12 +371,9 @@ TEST(CliTest, DerbyExperimentQuickPrintsTheResultDocument) {
 }
 
 TEST(CliTest, DerbyExperimentRejectsBadOptions) {
-  Result r = RunCli("experiment derby-table3 --quick --barrier convolutional");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "'convolutional'");
-  r = RunCli("experiment derby-ablation --quick --episodes -3");
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_HAS(r.err, "episodes = -3");
+  Result r =
+      ExpectRejected("experiment derby-table3 --quick --barrier convolutional", "'convolutional'");
+  ExpectRejected("experiment derby-ablation --quick --episodes -3", "episodes = -3");
   r = RunCli("experiment derby-everything");
   EXPECT_NE(r.exit_code, 0);
 }
