@@ -283,6 +283,9 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
                  "projection)"),
       ShieldFlag(cmd, "--qp-margin", &so->qp_margin, &O::qp_margin,
                  "proposal: the projection asks the linearised g >= this margin"),
+      ShieldFlag(cmd, "--qp-max-step", &so->qp_max_step, &O::qp_max_step,
+                 "proposal qp: a projection farther than this from the mean falls back to "
+                 "sampling (0: no limit)"),
       ShieldFlag(cmd, "--refine-steps", &so->refine_steps, &O::refine_steps,
                  "proposal refine: gradient steps per decision at most"),
       ShieldFlag(cmd, "--max-iterations", &so->max_iterations, &O::max_iterations,

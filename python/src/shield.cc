@@ -328,6 +328,7 @@ sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or '
 'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore'),
 proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
 alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_margin=0,
+qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
 refine_steps=5); aggregation may also be 'first-safe' (the first-safe sampler).
 The actuator box: action_low / action_high (arrays of action_dim; -inf / inf where unbounded),
 else the box of the environment a builtin model (Dynamics.builtin, env.dynamics) came from, else
