@@ -253,8 +253,8 @@ struct ShieldOptions {
   // (Euclidean, in action units) is not taken: the QP with the constraint |a - mu| <= qp_max_step
   // is infeasible, and Algorithms 1-2 decide. 0: no limit. Ignored by the other proposals
   // (qp-only and refine have no sampling to fall back to). On Panda the projection's step was
-  // 2.6-3.3x the sampling shield's correction and took the arm where the shield model is wrong
-  // (docs/RESULTS.md, issue 37).
+  // 2.6-3.3x the sampling shield's correction; capping it removed at most 1.4 points of the
+  // extra danger there (docs/RESULTS.md, issue 37), so it is off by default.
   double qp_max_step = 0.0;
   // proposal = refine: gradient steps per decision at most (each a linearisation, a step and an
   // exact check).
