@@ -11,6 +11,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -156,8 +157,13 @@ std::uint64_t AddressSpaceBytes() {
     ::dup2(null_fd, STDOUT_FILENO);
     ::dup2(null_fd, STDERR_FILENO);
   }
+  // No core dump at all: RLIMIT_CORE = 0 stops a core file, but where core_pattern pipes to a
+  // helper (systemd-coredump, apport) the kernel ignores it, and the dump of a process with
+  // libtorch mapped holds the child's death, and so the reply, for as long as the helper takes.
+  // A process that is not dumpable is never dumped.
   struct rlimit no_core {0, 0};
   ::setrlimit(RLIMIT_CORE, &no_core);
+  ::prctl(PR_SET_DUMPABLE, 0, 0, 0, 0);
   // Few descriptors: a process the child starts (a sanitizer's symbolizer) closes every
   // descriptor up to this limit first, which takes minutes where the limit is 2^30.
   struct rlimit files {};
@@ -258,9 +264,17 @@ ChildEnd ReadReplyAndWait(int fd, pid_t pid, std::chrono::steady_clock::time_poi
     if (!child_exited) child_exited = exited();
   }
   ::kill(-pid, SIGKILL);
-  do {
-    end.waited = ::waitpid(pid, &end.status, 0);
-  } while (end.waited < 0 && errno == EINTR);
+  // Reaps the child, but waits for it at most kReapSeconds after SIGKILL: a process the kernel
+  // is still tearing down (a dump that a signal does not interrupt on some kernels) must not
+  // hold up the caller. One that is not reaped stays a zombie until this process ends.
+  constexpr int kReapSeconds = 10;
+  const auto reap_deadline = std::chrono::steady_clock::now() + std::chrono::seconds(kReapSeconds);
+  for (;;) {
+    end.waited = ::waitpid(pid, &end.status, WNOHANG);
+    if (end.waited < 0 && errno == EINTR) continue;
+    if (end.waited != 0 || std::chrono::steady_clock::now() >= reap_deadline) break;
+    ::usleep(2000);
+  }
   return end;
 }
 

@@ -3,6 +3,7 @@
 // findings, now regression inputs in tests/fuzz/corpus/hdf5_fuzz/) are one secure::Error naming
 // the file, and the data read through the guard are those read in this process.
 #include <signal.h>
+#include <sys/prctl.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -217,6 +218,16 @@ TEST_F(Hdf5GuardTest, AProcessTheChildStartedDoesNotHoldUpTheReply) {
   ExpectOneLineNaming(crash, path);
   for (int i = 0; i < 100 && !gone(reply); ++i) ::usleep(10'000);
   EXPECT_TRUE(gone(reply)) << "grandchild " << reply << " still runs";
+}
+
+// The reader's child is never dumped: a core_pattern that pipes to a helper (systemd-coredump,
+// apport) ignores RLIMIT_CORE, and the dump of a crashed child would hold up the reply.
+TEST_F(Hdf5GuardTest, TheChildIsNotDumpable) {
+  const std::string path = Write("any.h5", "not read");
+  EXPECT_EQ(internal::RunInHdf5ReaderProcess(path, [](std::string* out) {
+              *out += std::to_string(::prctl(PR_GET_DUMPABLE, 0, 0, 0, 0));
+            }),
+            "0");
 }
 
 }  // namespace
