@@ -6,7 +6,7 @@
 // evaluation after an epoch, saving and restoring the best weights) as std::functions.
 //
 //   nn::TrainingLoopOptions loop{options.max_epochs, n_train, options.batch_size,
-//                                options.patience, options.learning_rate,
+//                                options.even_batches, options.patience, options.learning_rate,
 //                                options.final_learning_rate, "cbf::TrainBarrier"};
 //   nn::TrainingSteps<Score> steps;
 //   steps.set_learning_rate = [&](double lr) { ... };
