@@ -238,6 +238,52 @@ struct Job {
     return b;
   }
 
+  // Table 1's over- and under-conservative rates of `barrier` on the estimate states (against
+  // the ground truth, or the person's answers; states the person cannot say are skipped).
+  void Errors(cbf::Barrier& barrier, LabelEfficiencyPoint* p) const {
+    Eigen::VectorXf h(eval.size());
+    barrier.Evaluate(eval.states, h);
+    long ts = 0, tu = 0, over = 0, under = 0;
+    for (long i = 0; i < eval.size(); ++i) {
+      if (std::isnan(eval_truth(i))) continue;  // the person cannot say
+      const bool truly_safe = eval_truth(i) >= 0, predicted_safe = h(i) >= 0;
+      if (truly_safe) {
+        ++ts;
+        over += !predicted_safe;
+      } else {
+        ++tu;
+        under += predicted_safe;
+      }
+    }
+    p->over = ts > 0 ? 100.0 * double(over) / double(ts) : 0.0;
+    p->under = tu > 0 ? 100.0 * double(under) / double(tu) : 0.0;
+  }
+
+  // The round's closed loop: SECURE on the run's policy (`loop`), else the domain's shield run;
+  // at the last round with `loop`, AIRL and SECURE over the run's barrier beside it.
+  void ClosedLoop(const internal::SeedBarrier& net, cbf::Barrier& barrier,
+                  const internal::RunPolicyLoop* loop, long episodes, bool last,
+                  LabelEfficiencyPoint* p, LabelEfficiencyCurve* curve) const {
+    p->episodes = episodes;
+    if (loop != nullptr) {
+      const eval::SeedResult r = loop->Secure(net, episodes);
+      p->dangerous = 100.0 * r.dangerous_rate();
+      p->success = 100.0 * r.success_rate();
+      if (last)
+        curve->closed_loop = {{"secure", r.ToJson()},
+                              {"airl", loop->Airl(episodes).ToJson()},
+                              {"secure_full_labels", loop->SecureFullLabels(episodes).ToJson()}};
+      return;
+    }
+    ShieldRunRequest request = domain.ShieldRunPreset();
+    request.episodes = episodes;
+    request.seed = Stream(seed, 0xe7a1ULL);  // the same episodes for every strategy and round
+    const ShieldRunReport report = domain.RunShield(request, barrier);
+    const double e = double(report.json.value("episodes", episodes));
+    p->dangerous = 100.0 * report.json.value("dangerous_episodes", 0L) / e;
+    p->success = 100.0 * report.json.value("success_episodes", 0L) / e;
+  }
+
   LabelEfficiencyCurve Run() const {
     const Stopwatch clock;
     LabelEfficiencyCurve curve;
@@ -292,44 +338,10 @@ struct Job {
       p.labels = labels;
       p.safe_labels = safe.size();
       p.near_dangerous_labels = near.size();
-      if (eval.size() > 0) {
-        Eigen::VectorXf h(eval.size());
-        barrier->Evaluate(eval.states, h);
-        long ts = 0, tu = 0, over = 0, under = 0;
-        for (long i = 0; i < eval.size(); ++i) {
-          if (std::isnan(eval_truth(i))) continue;  // the person cannot say
-          const bool truly_safe = eval_truth(i) >= 0, predicted_safe = h(i) >= 0;
-          if (truly_safe) {
-            ++ts;
-            over += !predicted_safe;
-          } else {
-            ++tu;
-            under += predicted_safe;
-          }
-        }
-        p.over = ts > 0 ? 100.0 * double(over) / double(ts) : 0.0;
-        p.under = tu > 0 ? 100.0 * double(under) / double(tu) : 0.0;
-      }
+      if (eval.size() > 0) Errors(*barrier, &p);
       const long episodes = last ? options.final_episodes : options.episodes;
-      if (loop && episodes > 0) {
-        const eval::SeedResult r = loop->Secure(net, episodes);
-        p.dangerous = 100.0 * r.dangerous_rate();
-        p.success = 100.0 * r.success_rate();
-        p.episodes = episodes;
-        if (last)
-          curve.closed_loop = {{"secure", r.ToJson()},
-                               {"airl", loop->Airl(episodes).ToJson()},
-                               {"secure_full_labels", loop->SecureFullLabels(episodes).ToJson()}};
-      } else if (shield_run && episodes > 0) {
-        ShieldRunRequest request = domain.ShieldRunPreset();
-        request.episodes = episodes;
-        request.seed = Stream(seed, 0xe7a1ULL);  // the same episodes for every strategy and round
-        const ShieldRunReport report = domain.RunShield(request, *barrier);
-        const double e = double(report.json.value("episodes", episodes));
-        p.dangerous = 100.0 * report.json.value("dangerous_episodes", 0L) / e;
-        p.success = 100.0 * report.json.value("success_episodes", 0L) / e;
-        p.episodes = episodes;
-      }
+      if (episodes > 0 && (loop || shield_run))
+        ClosedLoop(net, *barrier, loop.get(), episodes, last, &p, &curve);
       if (last && options.final_grid && truth) {
         const std::optional<cbf::StateSource> grid = domain.ValidationGrid();
         if (grid) {
