@@ -28,6 +28,7 @@ set(SECURE_SLOW_TESTS
   apps       CliTest.UserStudyQuickPrintsTheConditionsBesideThePapersRatings
   apps       CliTest.DemoQuickPrintsTheResultDocument
   apps       CliQueryTest.LabelEfficiencyQuickIsDeterministicResumesAndMergesShards
+  apps       CliQueryTest.LabelEfficiencyDerbyClosedLoopOnARunsPolicies
 )
 if(NOT SECURE_SLOW_TESTS_LIST_ONLY)
   list(LENGTH SECURE_SLOW_TESTS _n)

@@ -20,7 +20,7 @@ namespace secure::cli {
 namespace {
 
 struct LabelEfficiencyCommand {
-  std::string domain, strategies, out, shard;
+  std::string domain, strategies, out, shard, barrier = "flat", policies_from;
   bool quick = false, json = false, errors_from_labeller = false;
   int seeds = 0, rounds = -1, threads = 2;
   long k = 0, initial_labels = 0, pool = 0, episodes = -1, final_episodes = -1, eval_states = -1;
@@ -38,7 +38,7 @@ struct LabelEfficiencyCommand {
         "(with a ground truth) and closed-loop dangerous / success rates (with a shield run) "
         "against labels used. Domains with a labeller: " +
             DomainsWith(kLabeller));
-    AddConfigFlag(cmd, cfg);  // its `trainer:` section: the barrier trainer's options
+    AddConfigFlag(cmd, cfg);  // its `trainer:` section: the --barrier kind's trainer options
     cmd->add_option("--domain", domain, "the domain")->required();
     cmd->add_flag("--quick", quick, "the small profile (2 seeds, 2 rounds of 10, small pool)");
     cmd->add_option("--strategies", strategies,
@@ -59,6 +59,17 @@ struct LabelEfficiencyCommand {
     cmd->add_flag("--errors-from-labeller", errors_from_labeller,
                   "without a ground truth: the errors against the labeller's answers on the "
                   "estimate states (asks the labeller --eval-states times per seed)");
+    cmd->add_option("--barrier", barrier,
+                    "the barrier the labels train: flat (the trainer preset's MLP) | per-obstacle "
+                    "(the domain's per-obstacle barrier, Derby's SECURE barrier)")
+        ->capture_default_str();
+    cmd->add_option("--policies-from", policies_from,
+                    "a `secure experiment method-comparison --out` directory with "
+                    "seed-<k>/airl.model and barrier.model for every seed: the closed loop is "
+                    "SECURE (that AIRL policy shielded by the round's barrier) on the run's "
+                    "evaluation episodes, beside AIRL and SECURE over the run's barrier at the "
+                    "last round (closed-loop-*.json, for `secure compare`)")
+        ->check(CLI::ExistingDirectory);
     cmd->add_option("--threads", threads, "parallel jobs (seed x strategy)")->capture_default_str();
     cmd->add_option("--shard", shard, "k/N: run the seeds with index = k mod N (no result.json); "
                                       "an unsharded rerun into the same --out merges");
@@ -76,8 +87,13 @@ struct LabelEfficiencyCommand {
     experiments::LabelEfficiencyOptions o = experiments::LabelEfficiencyOptions::For(
         *d, quick ? experiments::Profile::kQuick : experiments::Profile::kFull);
     config->Check();
+    o.barrier_kind = FromString(experiments::kBarrierKindNames, barrier, "--barrier");
     const YAML::Node trainer = config->Section("trainer");
-    if (trainer.IsMap()) o.trainer.ApplyYaml(trainer, config->path + " [trainer]");
+    if (trainer.IsMap() && o.barrier_kind == experiments::BarrierKind::kPerObstacle)
+      o.per_obstacle_trainer.ApplyYaml(trainer, config->path + " [trainer]");
+    else if (trainer.IsMap())
+      o.trainer.ApplyYaml(trainer, config->path + " [trainer]");
+    o.policies_from = policies_from;
     if (!strategies.empty()) {
       o.strategies.clear();
       std::stringstream in(strategies);

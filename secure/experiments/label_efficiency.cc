@@ -19,6 +19,7 @@
 #include "secure/common/timer.h"
 #include "secure/experiments/experiment.h"
 #include "secure/experiments/ground_truth_study.h"
+#include "secure/experiments/internal/label_efficiency_closed_loop.h"
 #include "secure/experiments/internal/seed_runner.h"
 
 namespace secure::experiments {
@@ -27,6 +28,7 @@ LabelEfficiencyOptions LabelEfficiencyOptions::For(const Domain& domain, Profile
   LabelEfficiencyOptions o;
   o.trainer = domain.HasGroundTruth() ? domain.GroundTruthTrainerPreset()
                                       : domain.Preset().flat_barrier;
+  o.per_obstacle_trainer = domain.Preset().per_obstacle_barrier;
   if (profile == Profile::kQuick) {
     o.seeds = 2;
     o.pool = 2000;
@@ -43,6 +45,7 @@ LabelEfficiencyOptions LabelEfficiencyOptions::For(const Domain& domain, Profile
     o.reference_states = 200;
     o.max_epochs = 300;
     o.trainer.max_epochs = std::min(o.trainer.max_epochs, 30);
+    o.per_obstacle_trainer.max_epochs = std::min(o.per_obstacle_trainer.max_epochs, 10);
   }
   return o;
 }
@@ -80,6 +83,11 @@ void LabelEfficiencyOptions::Validate() const {
   SECURE_CHECK_FIELD(shard_count >= 1 && shard_index >= 0 && shard_index < shard_count, T,
                      "shard_index", shard_index, "in [0, shard_count)");
   trainer.Validate();
+  if (barrier_kind == BarrierKind::kPerObstacle) {
+    per_obstacle_trainer.Validate();
+    SECURE_CHECK_FIELD(per_obstacle_trainer.input.layout.IsSet(), T, "barrier_kind",
+                       "per-obstacle", "a domain with an obstacle layout (its per-obstacle barrier)");
+  }
 }
 
 nlohmann::json LabelEfficiencyOptions::ToJson() const {
@@ -103,7 +111,13 @@ nlohmann::json LabelEfficiencyOptions::ToJson() const {
           {"trainer", trainer.ToJson()},
           {"reference_states", reference_states},
           {"max_epochs", max_epochs}};
-  if (errors_from_labeller) j["errors_from_labeller"] = true;  // absent: job files stay valid
+  // Absent at their defaults: the job files of older runs stay valid.
+  if (errors_from_labeller) j["errors_from_labeller"] = true;
+  if (barrier_kind == BarrierKind::kPerObstacle) {
+    j["barrier_kind"] = ToString(kBarrierKindNames, barrier_kind);
+    j["per_obstacle_trainer"] = per_obstacle_trainer.ToJson();
+  }
+  if (!policies_from.empty()) j["policies_from"] = policies_from;
   return j;
 }
 
@@ -125,6 +139,7 @@ nlohmann::json LabelEfficiencyCurve::ToJson() const {
   nlohmann::json j{{"strategy", strategy}, {"seed", seed}, {"points", points_json},
                    {"seconds", seconds}};
   if (final_grid) j["final_grid"] = final_grid->ToJson();
+  if (!closed_loop.is_null()) j["closed_loop"] = closed_loop;
   return j;
 }
 
@@ -155,6 +170,7 @@ LabelEfficiencyCurve LabelEfficiencyCurve::FromJson(const nlohmann::json& j) {
     conf.unsafe_as_unsafe = g.at("unsafe_as_unsafe").get<long>();
     c.final_grid = conf;
   }
+  if (j.contains("closed_loop")) c.closed_loop = j["closed_loop"];
   return c;
 }
 
@@ -191,21 +207,81 @@ struct Job {
                                         // near-dangerous, NaN cannot say)
   std::vector<std::string> features;    // the domain's observation features
 
-  cbf::BarrierNet Train(const data::StateSet& safe, const data::StateSet& near,
-                        std::uint64_t training_seed) const {
-    cbf::BarrierTrainerOptions t = options.trainer;
+  // The preset's gradient steps on reference_states states, whatever the labels' count.
+  template <typename Trainer>
+  Trainer Scaled(Trainer t, long labels, std::uint64_t training_seed) const {
     t.seed = training_seed;
     t.verbose = false;
     t.threads = 1;
-    // The preset's gradient steps on reference_states states, whatever the labels' count.
     const double steps_per_epoch_ref = std::ceil(double(options.reference_states) / t.batch_size);
     const double steps_per_epoch =
-        std::ceil(double(safe.size() + near.size()) * (1 - t.validation_fraction) / t.batch_size);
+        std::ceil(double(labels) * (1 - t.validation_fraction) / t.batch_size);
     const double epochs = std::ceil(t.max_epochs * steps_per_epoch_ref / std::max(1.0, steps_per_epoch));
     t.max_epochs = static_cast<int>(std::clamp(epochs, double(t.max_epochs), double(options.max_epochs)));
     t.max_epochs = std::max(t.max_epochs, 1);
-    cbf::BarrierTrainingSummary summary;
-    return cbf::TrainBarrier(t, safe, near, &summary);
+    return t;
+  }
+
+  internal::SeedBarrier Train(const data::StateSet& safe, const data::StateSet& near,
+                              std::uint64_t training_seed) const {
+    const long labels = safe.size() + near.size();
+    internal::SeedBarrier b;
+    if (options.barrier_kind == BarrierKind::kPerObstacle) {
+      cbf::CarBarrierTrainingSummary summary;
+      b.per_obstacle = cbf::TrainCarBarrier(
+          Scaled(options.per_obstacle_trainer, labels, training_seed), safe, near, &summary);
+    } else {
+      cbf::BarrierTrainingSummary summary;
+      b.flat = cbf::TrainBarrier(Scaled(options.trainer, labels, training_seed), safe, near,
+                                 &summary);
+    }
+    return b;
+  }
+
+  // Table 1's over- and under-conservative rates of `barrier` on the estimate states (against
+  // the ground truth, or the person's answers; states the person cannot say are skipped).
+  void Errors(cbf::Barrier& barrier, LabelEfficiencyPoint* p) const {
+    Eigen::VectorXf h(eval.size());
+    barrier.Evaluate(eval.states, h);
+    long ts = 0, tu = 0, over = 0, under = 0;
+    for (long i = 0; i < eval.size(); ++i) {
+      if (std::isnan(eval_truth(i))) continue;  // the person cannot say
+      const bool truly_safe = eval_truth(i) >= 0, predicted_safe = h(i) >= 0;
+      if (truly_safe) {
+        ++ts;
+        over += !predicted_safe;
+      } else {
+        ++tu;
+        under += predicted_safe;
+      }
+    }
+    p->over = ts > 0 ? 100.0 * double(over) / double(ts) : 0.0;
+    p->under = tu > 0 ? 100.0 * double(under) / double(tu) : 0.0;
+  }
+
+  // The round's closed loop: SECURE on the run's policy (`loop`), else the domain's shield run;
+  // at the last round with `loop`, AIRL and SECURE over the run's barrier beside it.
+  void ClosedLoop(const internal::SeedBarrier& net, cbf::Barrier& barrier,
+                  const internal::RunPolicyLoop* loop, long episodes, bool last,
+                  LabelEfficiencyPoint* p, LabelEfficiencyCurve* curve) const {
+    p->episodes = episodes;
+    if (loop != nullptr) {
+      const eval::SeedResult r = loop->Secure(net, episodes);
+      p->dangerous = 100.0 * r.dangerous_rate();
+      p->success = 100.0 * r.success_rate();
+      if (last)
+        curve->closed_loop = {{"secure", r.ToJson()},
+                              {"airl", loop->Airl(episodes).ToJson()},
+                              {"secure_full_labels", loop->SecureFullLabels(episodes).ToJson()}};
+      return;
+    }
+    ShieldRunRequest request = domain.ShieldRunPreset();
+    request.episodes = episodes;
+    request.seed = Stream(seed, 0xe7a1ULL);  // the same episodes for every strategy and round
+    const ShieldRunReport report = domain.RunShield(request, barrier);
+    const double e = double(report.json.value("episodes", episodes));
+    p->dangerous = 100.0 * report.json.value("dangerous_episodes", 0L) / e;
+    p->success = 100.0 * report.json.value("success_episodes", 0L) / e;
   }
 
   LabelEfficiencyCurve Run() const {
@@ -248,53 +324,31 @@ struct Job {
     }
     std::unique_ptr<cbf::Barrier> truth = domain.MakeGroundTruth();
     const bool shield_run = domain.HasShieldRun();
+    std::unique_ptr<internal::RunPolicyLoop> loop;
+    if (!options.policies_from.empty())
+      loop = std::make_unique<internal::RunPolicyLoop>(domain, options.policies_from, seed);
     for (int round = 0; round <= options.rounds; ++round) {
       const bool last = round == options.rounds;
       const std::uint64_t training_seed = Stream(seed, 0x7a11ULL) + static_cast<std::uint64_t>(round);
-      const cbf::BarrierNet net = Train(safe, near, training_seed);
+      const internal::SeedBarrier net = Train(safe, near, training_seed);
       std::unique_ptr<cbf::Barrier> barrier =
-          net.MakeEvaluatorFor(features, "the " + domain.name() + " domain");
+          internal::BarrierOn(net, features, "the " + domain.name() + " domain");
       LabelEfficiencyPoint p;
       p.round = round;
       p.labels = labels;
       p.safe_labels = safe.size();
       p.near_dangerous_labels = near.size();
-      if (eval.size() > 0) {
-        Eigen::VectorXf h(eval.size());
-        barrier->Evaluate(eval.states, h);
-        long ts = 0, tu = 0, over = 0, under = 0;
-        for (long i = 0; i < eval.size(); ++i) {
-          if (std::isnan(eval_truth(i))) continue;  // the person cannot say
-          const bool truly_safe = eval_truth(i) >= 0, predicted_safe = h(i) >= 0;
-          if (truly_safe) {
-            ++ts;
-            over += !predicted_safe;
-          } else {
-            ++tu;
-            under += predicted_safe;
-          }
-        }
-        p.over = ts > 0 ? 100.0 * double(over) / double(ts) : 0.0;
-        p.under = tu > 0 ? 100.0 * double(under) / double(tu) : 0.0;
-      }
+      if (eval.size() > 0) Errors(*barrier, &p);
       const long episodes = last ? options.final_episodes : options.episodes;
-      if (shield_run && episodes > 0) {
-        ShieldRunRequest request = domain.ShieldRunPreset();
-        request.episodes = episodes;
-        request.seed = Stream(seed, 0xe7a1ULL);  // the same episodes for every strategy and round
-        const ShieldRunReport report = domain.RunShield(request, *barrier);
-        const double e = double(report.json.value("episodes", episodes));
-        p.dangerous = 100.0 * report.json.value("dangerous_episodes", 0L) / e;
-        p.success = 100.0 * report.json.value("success_episodes", 0L) / e;
-        p.episodes = episodes;
-      }
+      if (episodes > 0 && (loop || shield_run))
+        ClosedLoop(net, *barrier, loop.get(), episodes, last, &p, &curve);
       if (last && options.final_grid && truth) {
         const std::optional<cbf::StateSource> grid = domain.ValidationGrid();
         if (grid) {
           cbf::GridValidationOptions v;
           v.threads = 1;
           curve.final_grid = cbf::ValidateOnGrid(
-              [&] { return net.MakeEvaluatorFor(features, "the " + domain.name() + " domain"); },
+              [&] { return internal::BarrierOn(net, features, "the " + domain.name() + " domain"); },
               [&] { return domain.MakeGroundTruth(); }, *grid, v);
         }
       }
@@ -315,7 +369,7 @@ struct Job {
         const data::StateSet visited = domain.RunShield(request, *barrier).visited;
         if (visited.size() >= q.k) {
           std::unique_ptr<cbf::Barrier> on_visited =
-              net.MakeEvaluatorFor(visited.features, visited.source);
+              internal::BarrierOn(net, visited.features, visited.source);
           const cbf::QueryResult r = cbf::SelectQueries({on_visited.get()}, visited.states, q);
           add(Columns(visited, r.indices).states);
           continue;
@@ -326,19 +380,23 @@ struct Job {
       for (long i = 0; i < n; ++i)
         if (!asked[static_cast<std::size_t>(i)]) open.push_back(i);
       const data::StateSet candidates = Columns(pool, open);
-      std::vector<cbf::BarrierNet> members;
+      std::vector<internal::SeedBarrier> others;  // the disagreement ensemble's other members
+      std::vector<const internal::SeedBarrier*> members;
       std::vector<std::unique_ptr<cbf::Barrier>> evaluators;
       std::vector<cbf::Barrier*> barriers;
       if (strategy == cbf::QueryStrategy::kDisagreement) {
-        members.push_back(net);
-        for (int m = 1; m < options.ensemble; ++m)
-          members.push_back(Train(safe, near, training_seed + 1000003ULL * static_cast<std::uint64_t>(m)));
+        others.reserve(static_cast<std::size_t>(options.ensemble));
+        members.push_back(&net);
+        for (int m = 1; m < options.ensemble; ++m) {
+          others.push_back(Train(safe, near, training_seed + 1000003ULL * static_cast<std::uint64_t>(m)));
+          members.push_back(&others.back());
+        }
       } else if (strategy != cbf::QueryStrategy::kDiversity &&
                  strategy != cbf::QueryStrategy::kRandom) {
-        members.push_back(net);
+        members.push_back(&net);
       }
-      for (const cbf::BarrierNet& m : members) {
-        evaluators.push_back(m.MakeEvaluatorFor(candidates.features, candidates.source));
+      for (const internal::SeedBarrier* m : members) {
+        evaluators.push_back(internal::BarrierOn(*m, candidates.features, candidates.source));
         barriers.push_back(evaluators.back().get());
       }
       if (strategy == cbf::QueryStrategy::kShieldRelevant) q.strategy = cbf::QueryStrategy::kMargin;
@@ -398,6 +456,11 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
     }
     todo.push_back(job);
   }
+  // A run without a seed's models fails here, before any training.
+  if (!options.policies_from.empty())
+    for (int job : todo)
+      internal::RunPolicyLoop(domain, options.policies_from,
+                              options.first_seed + static_cast<std::uint64_t>(job / S));
   // Per seed: the pool and the ground-truth evaluation states (computed by the seed's jobs on
   // demand, once).
   struct SeedData {
@@ -465,6 +528,12 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
     if (done[i]) result.curves.push_back(curves[i]);
   result.seconds = clock.Seconds();
   const bool complete = std::all_of(done.begin(), done.end(), [](char d) { return d != 0; });
+  if (complete && options.shard_count == 1 && !options.policies_from.empty() && options.seeds >= 2 &&
+      options.final_episodes > 0)
+    result.closed_loop = internal::ClosedLoopEvaluations(result.curves, domain, options);
+  if (!options.output_dir.empty())
+    for (const auto& [name, doc] : result.closed_loop)
+      WriteFileAtomically(options.output_dir + "/closed-loop-" + name + ".json", doc.dump(1) + "\n");
   if (!options.output_dir.empty() && complete && options.shard_count == 1) {
     WriteFileAtomically(options.output_dir + "/result.json", result.ToJson().dump(1) + "\n");
     std::ostringstream csv;
@@ -486,6 +555,10 @@ nlohmann::json LabelEfficiencyResult::ToJson() const {
   nlohmann::json j{{"experiment", "label-efficiency"}, {"domain", domain},
                    {"options", options},               {"labeller", labeller},
                    {"curves", c},                      {"seconds", seconds}};
+  if (!closed_loop.empty()) {
+    j["closed_loop"] = nlohmann::json::object();
+    for (const auto& [name, doc] : closed_loop) j["closed_loop"][name] = doc;
+  }
   if (paper)
     j["paper"] = {{"over_conservative", paper->over_conservative},
                   {"under_conservative", paper->under_conservative}};
@@ -554,6 +627,7 @@ std::string LabelEfficiencyResult::Table() const {
               ? "; without a ground truth, against the labeller's answers (the person, not physics)"
               : "")
       << "\n";
+  if (!closed_loop.empty()) out << "\n" << internal::ClosedLoopTable(closed_loop);
   if (paper) {
     out << "\nLabels (mean over seeds) at which the mean errors first reach the paper's Table 1 ("
         << paper->over_conservative << " % over, " << paper->under_conservative << " % under):\n\n"

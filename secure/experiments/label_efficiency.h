@@ -25,6 +25,17 @@
 //   round), the same episodes for every strategy and round (common random numbers). A domain
 //   without a ground truth but with a labeller can have the same two rates measured against the
 //   labeller's answers (errors_from_labeller): the error against the person, not against physics.
+//   With policies_from (a `secure experiment method-comparison --out` directory holding
+//   seed-<seed>/airl.model and barrier.model for every seed), the closed loop is SECURE itself
+//   instead of the domain's shield run: the run's AIRL policy of the seed under the domain
+//   preset's shield over the round's barrier, on the first `episodes` (`final_episodes`) of the
+//   run's own evaluation episodes (eval::EvaluationSeed(seed)); at the last round also AIRL
+//   unshielded and SECURE over the run's barrier (the default's labels) on the same episodes,
+//   written as `secure eval --json` documents closed-loop-<strategy>.json and
+//   closed-loop-full-labels.json (`secure compare` pairs them by seed).
+//   barrier_kind: the barrier trained on the labels, the trainer preset's flat MLP (`trainer`) or
+//   the domain's per-obstacle barrier (`per_obstacle_trainer`, the domain preset's; Derby's
+//   SECURE barrier).
 //
 // Each (seed, strategy) is a job on `threads` workers; results do not depend on their number.
 // With output_dir every job writes seed-K/<strategy>.json atomically; a rerun into the same
@@ -38,12 +49,15 @@
 #include <optional>
 #include <ostream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "secure/cbf/barrier_trainer.h"
 #include "secure/cbf/query.h"
 #include "secure/cbf/validation.h"
+#include "secure/cbf/car_barrier_trainer.h"
 #include "secure/experiments/domain.h"
+#include "secure/experiments/experiment.h"
 
 namespace secure::experiments {
 
@@ -70,6 +84,9 @@ struct LabelEfficiencyOptions {
   long shield_pool_states = 20000;  // shield-relevant: visited states kept per round
   long shield_pool_episodes = 20;   // shield-relevant: episodes gathering them
   cbf::BarrierTrainerOptions trainer;
+  BarrierKind barrier_kind = BarrierKind::kFlat;     // which barrier the labels train
+  cbf::CarBarrierTrainerOptions per_obstacle_trainer;  // barrier_kind per-obstacle
+  std::string policies_from;  // a method-comparison run directory: SECURE's closed loop (above)
   long reference_states = 1600;  // scale epochs to the preset's gradient steps on this many
   int max_epochs = 4000;         // cap of the scaled epochs
   int threads = 2;
@@ -100,6 +117,9 @@ struct LabelEfficiencyCurve {
   std::uint64_t seed = 0;
   std::vector<LabelEfficiencyPoint> points;
   std::optional<cbf::Confusion> final_grid;  // Table 1 at the last round
+  // With policies_from, the last round's closed loop as eval::SeedResult documents: "secure"
+  // (the last barrier), "airl" and "secure_full_labels" (the run's barrier); null without.
+  nlohmann::json closed_loop;
   double seconds = 0;
   nlohmann::json ToJson() const;
   static LabelEfficiencyCurve FromJson(const nlohmann::json& j);
@@ -111,6 +131,9 @@ struct LabelEfficiencyResult {
   std::string labeller;
   std::vector<LabelEfficiencyCurve> curves;  // seed-major, strategies in options order
   std::optional<PaperGroundTruthStudy> paper;
+  // With policies_from and at least 2 seeds, once every job is done: per strategy, then "full
+  // labels", the last round's closed loop as a `secure eval --json` document.
+  std::vector<std::pair<std::string, nlohmann::json>> closed_loop;
   double seconds = 0;
   /// Per strategy and round: labels, over, under (mean (std) over seeds), dangerous, success;
   /// the final grid's Table 1; labels each strategy needs to reach the paper's Table 1 errors.

@@ -93,6 +93,8 @@ void CheckEpisodeSums(const eval::SeedResult& r, const std::string& where) {
                        << ", the seed's count is " << want[c]);
 }
 
+}  // namespace
+
 eval::SeedResult SeedResultFromJson(const nlohmann::json& j) {
   eval::SeedResult r;
   r.episodes = j.at("episodes").get<long>();
@@ -121,6 +123,8 @@ eval::SeedResult SeedResultFromJson(const nlohmann::json& j) {
   EpisodeOutcomesFromJson(j, &r);
   return r;
 }
+
+namespace {
 
 // A JSON value for a message: its dump, cut at 80 characters.
 std::string Quote(const nlohmann::json& j) {

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "secure/common/atomic_file.h"
 #include "secure/common/rng.h"
 #include "tests/apps/cli_run.h"
 #include "tests/test_util.h"
@@ -250,6 +251,72 @@ TEST(CliQueryTest, LabelEfficiencyErrorsFromTheLabellerWithoutAGroundTruth) {
     }
   // The same labels and barriers: only the measure differs.
   EXPECT_EQ(doc["curves"][0]["points"][1]["near_dangerous_labels"], p0["near_dangerous_labels"]);
+}
+
+// Derby in closed loop (slow label): the label-efficiency barriers shield a quick method
+// comparison's AIRL policies on that run's own evaluation episodes. SECURE over the run's barrier
+// and AIRL reproduce the run's per-seed rates exactly (the same models and episodes); every
+// document is a `secure eval --json` result that `secure compare` pairs by seed.
+TEST(CliQueryTest, LabelEfficiencyDerbyClosedLoopOnARunsPolicies) {
+  const CliResult mc = RunCli("experiment method-comparison --domain derby --quick --methods "
+                              "airl,secure --threads 1 --out " + P("le_mc"));
+  ASSERT_EQ(mc.exit_code, 0) << mc.err;
+  const std::string base =
+      "experiment label-efficiency --domain derby --quick --barrier per-obstacle --strategies "
+      "random,margin --threads 1 --policies-from " + P("le_mc");
+  const CliResult r = RunCli(base + " --json --out " + P("le_cl"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json doc = nlohmann::json::parse(r.out);
+  EXPECT_EQ(doc["options"]["barrier_kind"], "per-obstacle");
+  for (const auto& c : doc["curves"]) {
+    for (const auto& p : c["points"]) {
+      EXPECT_GE(p["dangerous"].get<double>(), 0.0);
+      EXPECT_GE(p["success"].get<double>(), 0.0);
+    }
+    EXPECT_EQ(c["closed_loop"]["secure"]["episodes"], 10);
+  }
+  const nlohmann::json run = nlohmann::json::parse(ReadFile(P("le_mc/result.json")));
+  for (const char* name : {"random", "margin", "full-labels"}) {
+    const std::string path = P("le_cl/closed-loop-") + name + ".json";
+    ASSERT_TRUE(std::filesystem::exists(path)) << path;
+    const nlohmann::json e = nlohmann::json::parse(ReadFile(path));
+    EXPECT_EQ(e["command"], "eval");
+    EXPECT_EQ(e["seeds_evaluated"], 2);
+    EXPECT_EQ(e["episodes"], 10);
+    EXPECT_EQ(e["methods"]["airl"]["success_rate"]["per_seed"],
+              run["methods"]["airl"]["success_rate"]["per_seed"]) << name;
+    EXPECT_EQ(doc["closed_loop"][name]["methods"]["secure"]["success_rate"],
+              e["methods"]["secure"]["success_rate"]);
+  }
+  const nlohmann::json full = nlohmann::json::parse(ReadFile(P("le_cl/closed-loop-full-labels.json")));
+  for (const char* rate : {"success_rate", "dangerous_rate"})
+    EXPECT_EQ(full["methods"]["secure"][rate]["per_seed"], run["methods"]["secure"][rate]["per_seed"]);
+  const CliResult cmp = RunCli("compare " + P("le_cl/closed-loop-margin.json") + " " +
+                               P("le_cl/closed-loop-full-labels.json"));
+  EXPECT_EQ(cmp.exit_code, 0) << cmp.err;
+  EXPECT_HAS(cmp.out, "secure");
+  // A rerun reuses the job files and writes the same documents.
+  const std::string margin = ReadFile(P("le_cl/closed-loop-margin.json"));
+  ASSERT_EQ(RunCli(base + " --out " + P("le_cl")).exit_code, 0);
+  EXPECT_EQ(ReadFile(P("le_cl/closed-loop-margin.json")), margin);
+}
+
+// The closed loop's bad input: a run without the seed's policy, a per-obstacle barrier on a
+// domain without obstacles.
+TEST(CliQueryTest, LabelEfficiencyClosedLoopErrorsNameTheFileOrField) {
+  std::filesystem::create_directories(P("le_empty_run"));
+  // (after the run's banner line on stderr)
+  const CliResult empty = RunCli(
+      "experiment label-efficiency --domain derby --quick --seeds 1 --rounds 0 --strategies "
+      "random --threads 1 --policies-from " + P("le_empty_run"));
+  EXPECT_EQ(empty.exit_code, 1);
+  EXPECT_HAS(empty.err, "secure: error: label-efficiency --policies-from " + P("le_empty_run") +
+                            ": no " + P("le_empty_run") + "/seed-0/airl.model");
+  ExpectOneErrorLine(RunCli("experiment label-efficiency --domain double-integrator --quick "
+                            "--barrier per-obstacle"),
+                     "barrier_kind = per-obstacle");
+  ExpectOneErrorLine(RunCli("experiment label-efficiency --domain derby --quick --barrier round"),
+                     "--barrier");
 }
 
 }  // namespace

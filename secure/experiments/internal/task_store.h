@@ -20,6 +20,10 @@ namespace secure::experiments::internal {
 constexpr const char* kTaskFile = "task.json";
 constexpr int kTaskFormat = 1;
 
+/// A seed's method result as its JSON (eval::SeedResult::ToJson) holds it; an error naming the
+/// missing field.
+eval::SeedResult SeedResultFromJson(const nlohmann::json& j);
+
 /// <run_dir>/seed-<seed>.
 std::string SeedDir(const std::string& run_dir, std::uint64_t seed);
 
