@@ -115,4 +115,54 @@ QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
   return result;
 }
 
+void GaussianMetricScratch::Resize(Eigen::Index n) {
+  origin = Eigen::VectorXd::Zero(n);
+  normal.resize(n);
+  low.resize(n);
+  high.resize(n);
+  z.resize(n);
+  breakpoints.reserve(static_cast<std::size_t>(2 * n));
+}
+
+QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
+                                 const Eigen::Ref<const Eigen::VectorXd>& sigma,
+                                 const Eigen::Ref<const Eigen::VectorXd>& c, double d,
+                                 const Eigen::Ref<const Eigen::VectorXd>& low,
+                                 const Eigen::Ref<const Eigen::VectorXd>& high,
+                                 Eigen::Ref<Eigen::VectorXd> a, GaussianMetricScratch& scratch) {
+  const Eigen::Index n = mu.size();
+  SECURE_CHECK(sigma.size() == n && c.size() == n && low.size() == n && high.size() == n &&
+                   a.size() == n && scratch.z.size() == n,
+               "ProjectInGaussianMetric: sizes "
+                   << n << ", " << sigma.size() << ", " << c.size() << ", " << low.size() << ", "
+                   << high.size() << ", " << a.size() << ", scratch " << scratch.z.size()
+                   << " differ");
+  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
+               "ProjectInGaussianMetric: mu, c and d must be finite");
+  for (Eigen::Index i = 0; i < n; ++i)
+    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
+                 "ProjectInGaussianMetric: box [" << low[i] << ", " << high[i] << "] of "
+                                                  << "coordinate " << i
+                                                  << ": need low <= high, no NaN");
+  for (Eigen::Index i = 0; i < n; ++i)
+    SECURE_CHECK(std::isfinite(sigma[i]) && sigma[i] > 0, "ProjectInGaussianMetric: sigma["
+                                                              << i << "] = " << sigma[i]
+                                                              << ", must be finite and > 0");
+  // The problem in z = (a - mu) / sigma. An infinite bound stays infinite; a finite one over a
+  // tiny sigma may overflow to +-inf, which is the same box in z.
+  double offset = d;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    scratch.normal[i] = sigma[i] * c[i];
+    scratch.low[i] = (low[i] - mu[i]) / sigma[i];
+    scratch.high[i] = (high[i] - mu[i]) / sigma[i];
+    offset -= c[i] * mu[i];
+  }
+  const QpResult result =
+      ProjectOntoHalfSpaceAndBox(scratch.origin, scratch.normal, offset, scratch.low, scratch.high,
+                                 scratch.z, scratch.breakpoints);
+  for (Eigen::Index i = 0; i < n; ++i)
+    a[i] = std::clamp(mu[i] + sigma[i] * scratch.z[i], low[i], high[i]);
+  return result;
+}
+
 }  // namespace secure::shield

@@ -87,6 +87,9 @@ nlohmann::json ShieldOptions::ToJson() const {
     json["qp_margin"] = qp_margin;
     // (absent: no limit, as before; it acts only with proposal = qp)
     if (qp_max_step > 0 && proposal == Proposal::kQp) json["qp_max_step"] = qp_max_step;
+    // (absent: euclidean, as before; it acts only with proposal = qp or qp-only)
+    if (qp_metric != QpMetric::kEuclidean && proposal != Proposal::kRefine)
+      json["qp_metric"] = ToString(kQpMetricNames, qp_metric);
   }
   return json;
 }
@@ -114,6 +117,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("qp_iterations", &qp_iterations)
       .Field("qp_margin", &qp_margin)
       .Field("qp_max_step", &qp_max_step)
+      .Enum("qp_metric", &qp_metric, kQpMetricNames)
       .Field("refine_steps", &refine_steps)
       .Apply(node, source);
 }

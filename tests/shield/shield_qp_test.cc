@@ -112,6 +112,7 @@ ShieldOptions RandomOptions() {
   o.qp_iterations = *rc::gen::inRange(1, 4);
   o.qp_margin = *rc::gen::element(0.0, 0.1);
   o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
+  o.qp_metric = *rc::gen::element(QpMetric::kEuclidean, QpMetric::kPolicy);  // sigma > 0 here
   return o;
 }
 
