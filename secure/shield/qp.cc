@@ -39,6 +39,19 @@ double Slope(const Eigen::Ref<const Eigen::VectorXd>& mu, const Eigen::Ref<const
   return slope;
 }
 
+// The checks both solvers share: mu, c, d finite; low <= high without NaN. `who` names the caller.
+void CheckProblem(const char* who, const Eigen::Ref<const Eigen::VectorXd>& mu,
+                  const Eigen::Ref<const Eigen::VectorXd>& c, double d,
+                  const Eigen::Ref<const Eigen::VectorXd>& low,
+                  const Eigen::Ref<const Eigen::VectorXd>& high) {
+  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
+               who << ": mu, c and d must be finite");
+  for (Eigen::Index i = 0; i < mu.size(); ++i)
+    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
+                 who << ": box [" << low[i] << ", " << high[i] << "] of coordinate " << i
+                     << ": need low <= high, no NaN");
+}
+
 }  // namespace
 
 QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
@@ -51,13 +64,7 @@ QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
                "ProjectOntoHalfSpaceAndBox: sizes " << n << ", " << c.size() << ", " << low.size()
                                                     << ", " << high.size() << ", " << a.size()
                                                     << " differ");
-  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
-               "ProjectOntoHalfSpaceAndBox: mu, c and d must be finite");
-  for (Eigen::Index i = 0; i < n; ++i)
-    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
-                 "ProjectOntoHalfSpaceAndBox: box [" << low[i] << ", " << high[i] << "] of "
-                                                     << "coordinate " << i
-                                                     << ": need low <= high, no NaN");
+  CheckProblem("ProjectOntoHalfSpaceAndBox", mu, c, d, low, high);
   QpResult result;
   // lambda = 0: the box projection of mu, if it satisfies the half-space.
   if (Phi(mu, c, low, high, 0.0) >= d) {
@@ -137,13 +144,7 @@ QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
                    << n << ", " << sigma.size() << ", " << c.size() << ", " << low.size() << ", "
                    << high.size() << ", " << a.size() << ", scratch " << scratch.z.size()
                    << " differ");
-  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
-               "ProjectInGaussianMetric: mu, c and d must be finite");
-  for (Eigen::Index i = 0; i < n; ++i)
-    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
-                 "ProjectInGaussianMetric: box [" << low[i] << ", " << high[i] << "] of "
-                                                  << "coordinate " << i
-                                                  << ": need low <= high, no NaN");
+  CheckProblem("ProjectInGaussianMetric", mu, c, d, low, high);
   for (Eigen::Index i = 0; i < n; ++i)
     SECURE_CHECK(std::isfinite(sigma[i]) && sigma[i] > 0, "ProjectInGaussianMetric: sigma["
                                                               << i << "] = " << sigma[i]
