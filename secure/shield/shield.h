@@ -273,7 +273,8 @@ struct ShieldOptions {
   // extra danger there (docs/RESULTS.md, issue 37), so it is off by default.
   double qp_max_step = 0.0;
   // proposal = qp or qp-only: the metric of the projection (QpMetric). Accepted with any
-  // proposal, as qp_max_step is (a config sets it for every method); refine ignores it.
+  // proposal, as qp_max_step is (a config sets it for every method); refine and none ignore it.
+  // ToJson writes it only when it is policy.
   QpMetric qp_metric = QpMetric::kEuclidean;
   // proposal = refine: gradient steps per decision at most (each a linearisation, a step and an
   // exact check).

@@ -87,10 +87,11 @@ nlohmann::json ShieldOptions::ToJson() const {
     json["qp_margin"] = qp_margin;
     // (absent: no limit, as before; it acts only with proposal = qp)
     if (qp_max_step > 0 && proposal == Proposal::kQp) json["qp_max_step"] = qp_max_step;
-    // (absent: euclidean, as before; it acts only with proposal = qp or qp-only)
-    if (qp_metric != QpMetric::kEuclidean && proposal != Proposal::kRefine)
-      json["qp_metric"] = ToString(kQpMetricNames, qp_metric);
   }
+  // Absent when euclidean (every shield before it keeps its bytes); written whenever set, also
+  // with proposal none: a config sets it for every method and secure-qp / cbf-qp take it from
+  // these options (and a result's options then say which metric its projections used).
+  if (qp_metric != QpMetric::kEuclidean) json["qp_metric"] = ToString(kQpMetricNames, qp_metric);
   return json;
 }
 

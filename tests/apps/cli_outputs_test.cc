@@ -324,8 +324,8 @@ TEST(CliTest, EvalEpisodesOutHasARowPerEpisodeAndTheListsNameThem) {
 }
 
 // --qp-metric and the config's `shield: {qp_metric: ...}` (eval: the domain's preset, then the
-// file, then the flags): written into the shield's options where it acts (a proposal that
-// projects), the default writing nothing; a bad value is one line naming the flag or the file.
+// file, then the flags): written into the shield's options when set, the default writing
+// nothing; a bad value is one line naming the flag or the file.
 TEST(CliTest, EvalAndShieldRunTakeTheQpMetric) {
   const std::string dir = (TempDir() / "qp_metric").string();
   ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));

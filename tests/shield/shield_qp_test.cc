@@ -542,22 +542,25 @@ TEST(QpMetricShieldTest, ASigmaWithAZeroEntryIsAClearError) {
   }
 }
 
-TEST(QpMetricShieldTest, TheOptionIsReadWrittenOnlyWhereItActsAndChecked) {
+TEST(QpMetricShieldTest, TheOptionIsReadWrittenOnlyWhenSetAndChecked) {
   ShieldOptions o;
   EXPECT_EQ(o.qp_metric, QpMetric::kEuclidean);
   o.qp_metric = QpMetric::kPolicy;
-  EXPECT_FALSE(o.ToJson().contains("qp_metric"));  // proposal none: no projection
-  for (const Proposal proposal : {Proposal::kQp, Proposal::kQpOnly}) {
+  // Written whenever set, whatever the proposal (a config's options reach secure-qp and cbf-qp
+  // through them, and a result says which metric its projections used).
+  for (const Proposal proposal :
+       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
     o.proposal = proposal;
     EXPECT_EQ(o.ToJson()["qp_metric"], "policy");
   }
-  o.proposal = Proposal::kRefine;
-  EXPECT_FALSE(o.ToJson().contains("qp_metric"));
   // The default writes nothing: the options (and run directories) of every existing shield keep
   // their bytes.
-  ShieldOptions plain;
-  plain.proposal = Proposal::kQp;
-  EXPECT_FALSE(plain.ToJson().contains("qp_metric"));
+  for (const Proposal proposal :
+       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
+    ShieldOptions plain;
+    plain.proposal = proposal;
+    EXPECT_FALSE(plain.ToJson().contains("qp_metric"));
+  }
   // YAML, both values, and back through ToJson.
   ShieldOptions y;
   y.ApplyYaml(YAML::Load("{proposal: qp, qp_metric: policy}"), "s.yaml");
