@@ -253,6 +253,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
   sampler = ToString(shield::kSamplerNames, so->sampler);
   action_bounds = ToString(shield::kActionBoundsNames, so->action_bounds);
   proposal = ToString(shield::kProposalNames, so->proposal);
+  qp_metric = ToString(shield::kQpMetricNames, so->qp_metric);
   using O = shield::ShieldOptions;
   // The flags in help order; each binds its field (or the enum's string) and copies its field.
   const std::vector<std::pair<CLI::Option*, std::function<void(const O&, O*)>>> flags = {
@@ -286,6 +287,9 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
       ShieldFlag(cmd, "--qp-max-step", &so->qp_max_step, &O::qp_max_step,
                  "proposal qp: a projection farther than this from the mean falls back to "
                  "sampling (0: no limit)"),
+      ShieldFlag(cmd, "--qp-metric", &qp_metric, &O::qp_metric,
+                 "proposal qp, qp-only: the projection's metric: euclidean | policy (the "
+                 "policy's Gaussian, (a - mu)^T diag(sigma)^-2 (a - mu))"),
       ShieldFlag(cmd, "--refine-steps", &so->refine_steps, &O::refine_steps,
                  "proposal refine: gradient steps per decision at most"),
       ShieldFlag(cmd, "--max-iterations", &so->max_iterations, &O::max_iterations,
@@ -312,6 +316,7 @@ void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
   so->sampler = FromString(shield::kSamplerNames, sampler, "--sampler");
   so->action_bounds = FromString(shield::kActionBoundsNames, action_bounds, "--action-bounds");
   so->proposal = FromString(shield::kProposalNames, proposal, "--proposal");
+  so->qp_metric = FromString(shield::kQpMetricNames, qp_metric, "--qp-metric");
 }
 
 void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,

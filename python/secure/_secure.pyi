@@ -329,6 +329,8 @@ class Shield:
     proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
     alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_margin=0,
     qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
+    qp_metric='euclidean' (or 'policy': proposal 'qp' / 'qp-only' project in the policy's metric
+    (a - mu)^T diag(sigma)^-2 (a - mu); needs sigma > 0),
     refine_steps=5); aggregation may also be 'first-safe' (the first-safe sampler).
     The actuator box: action_low / action_high (arrays of action_dim; -inf / inf where unbounded),
     else the box of the environment a builtin model (Dynamics.builtin, env.dynamics) came from, else

@@ -24,7 +24,7 @@ def test_shield_directions_records_both_shields_at_every_decision(di_data, tiny_
          "--seeds", "0", "--episodes", "2", "--out", str(out)],
         capture_output=True, text=True, env=env, timeout=240)
     assert result.returncode == 0, result.stderr
-    lines = result.stdout.strip().splitlines()
+    lines = [line for line in result.stdout.strip().splitlines() if not line.startswith("  ")]
     assert lines[0].startswith("seed 0 (following qp): 2 episodes")
     assert lines[-1].startswith("all seeds (following qp): 2 episodes")
     rows = json.load(open(out))
@@ -32,6 +32,9 @@ def test_shield_directions_records_both_shields_at_every_decision(di_data, tiny_
     for r in rows:
         assert r["qp"] in ("not_tried", "accepted", "rejected", "infeasible"), r["qp"]
         assert r["correction_qp"] >= 0 and r["correction_secure"] >= 0
+        for axes, norm in ((r["axes_qp"], r["correction_qp"]),
+                           (r["axes_secure"], r["correction_secure"])):
+            assert len(axes) == 2 and abs(sum(x * x for x in axes) ** 0.5 - norm) <= 1e-5 * (1 + norm)
         assert r["g_qp"] == r["g_qp"] and r["g_secure"] == r["g_secure"]  # finite, not NaN
         assert -1.0 - 1e-6 <= r["cos"] <= 1.0 + 1e-6 or r["cos"] != r["cos"]  # NaN: no correction
 

@@ -330,3 +330,34 @@ def test_shield_keeps_decisions_inside_the_actuator_box(tiny_barrier):
         secure.Shield(barrier, linear, action_low=[1, 1], action_high=[-1, -1])
     with pytest.raises(ValueError, match="action_bounds"):
         secure.Shield(barrier, builtin, action_bounds="wrap")
+
+
+def test_shield_qp_metric_option():
+    """qp_metric='policy': the CBF-QP projects in the policy's metric (a - mu)^T diag(sigma)^-2
+    (a - mu), so the policy's sure axis (small sigma) moves less than in the Euclidean one."""
+    env = secure.make_env("double-integrator")
+    barrier = secure.Barrier.ground_truth("double-integrator")
+    euclidean = secure.Shield(barrier, env.dynamics, proposal="qp-only")
+    policy = secure.Shield(barrier, env.dynamics, proposal="qp-only", qp_metric="policy")
+    assert "qp_metric" not in euclidean.options and policy.options["qp_metric"] == "policy"
+    sigma = np.array([0.5, 0.05], dtype=np.float32)
+    grid = np.linspace(-3, 3, 7, dtype=np.float32)
+    means = np.array([[ax, ay] for ax in grid for ay in grid], dtype=np.float32)
+    compared = differ = 0
+    for x in np.linspace(2, 8, 7, dtype=np.float32):
+        s = np.array([x, 2.6, 0.0, 1.5], dtype=np.float32)  # below the disc, moving up
+        for mu in means[euclidean.evaluate_g(s, means) < -1e-2][:3]:
+            p, e = policy.decide(s, mu, sigma).to_dict(), euclidean.decide(s, mu, sigma).to_dict()
+            if p["qp"] != "accepted" or e["qp"] != "accepted":
+                continue
+            dp, de = np.array(p["action"]) - mu, np.array(e["action"]) - mu
+            assert abs(dp[1]) <= abs(de[1]) + 1e-4
+            assert np.sum((dp / sigma) ** 2) <= np.sum((de / sigma) ** 2) * (1 + 1e-3) + 1e-4
+            compared += 1
+            differ += abs(dp[1]) < 0.5 * abs(de[1])
+    assert compared >= 3 and differ >= 1, (compared, differ)
+    with pytest.raises(ValueError, match="qp_metric"):
+        secure.Shield(barrier, env.dynamics, qp_metric="mahalanobis")
+    with pytest.raises(Exception, match=r"sigma\[1\] = 0"):
+        policy.decide(np.array([5, 2.6, 0, 1.5], dtype=np.float32), np.array([0, 3], np.float32),
+                      np.array([0.5, 0.0], dtype=np.float32))

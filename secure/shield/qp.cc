@@ -39,6 +39,19 @@ double Slope(const Eigen::Ref<const Eigen::VectorXd>& mu, const Eigen::Ref<const
   return slope;
 }
 
+// The checks both solvers share: mu, c, d finite; low <= high without NaN. `who` names the caller.
+void CheckProblem(const char* who, const Eigen::Ref<const Eigen::VectorXd>& mu,
+                  const Eigen::Ref<const Eigen::VectorXd>& c, double d,
+                  const Eigen::Ref<const Eigen::VectorXd>& low,
+                  const Eigen::Ref<const Eigen::VectorXd>& high) {
+  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
+               who << ": mu, c and d must be finite");
+  for (Eigen::Index i = 0; i < mu.size(); ++i)
+    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
+                 who << ": box [" << low[i] << ", " << high[i] << "] of coordinate " << i
+                     << ": need low <= high, no NaN");
+}
+
 }  // namespace
 
 QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
@@ -51,13 +64,7 @@ QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
                "ProjectOntoHalfSpaceAndBox: sizes " << n << ", " << c.size() << ", " << low.size()
                                                     << ", " << high.size() << ", " << a.size()
                                                     << " differ");
-  SECURE_CHECK(mu.allFinite() && c.allFinite() && std::isfinite(d),
-               "ProjectOntoHalfSpaceAndBox: mu, c and d must be finite");
-  for (Eigen::Index i = 0; i < n; ++i)
-    SECURE_CHECK(!std::isnan(low[i]) && !std::isnan(high[i]) && low[i] <= high[i],
-                 "ProjectOntoHalfSpaceAndBox: box [" << low[i] << ", " << high[i] << "] of "
-                                                     << "coordinate " << i
-                                                     << ": need low <= high, no NaN");
+  CheckProblem("ProjectOntoHalfSpaceAndBox", mu, c, d, low, high);
   QpResult result;
   // lambda = 0: the box projection of mu, if it satisfies the half-space.
   if (Phi(mu, c, low, high, 0.0) >= d) {
@@ -112,6 +119,50 @@ QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
   }
   for (Eigen::Index i = 0; i < n; ++i) a[i] = std::clamp(mu[i] + lambda * c[i], low[i], high[i]);
   result.multiplier = lambda;
+  return result;
+}
+
+void GaussianMetricScratch::Resize(Eigen::Index n) {
+  origin = Eigen::VectorXd::Zero(n);
+  normal.resize(n);
+  low.resize(n);
+  high.resize(n);
+  z.resize(n);
+  breakpoints.reserve(static_cast<std::size_t>(2 * n));
+}
+
+QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
+                                 const Eigen::Ref<const Eigen::VectorXd>& sigma,
+                                 const Eigen::Ref<const Eigen::VectorXd>& c, double d,
+                                 const Eigen::Ref<const Eigen::VectorXd>& low,
+                                 const Eigen::Ref<const Eigen::VectorXd>& high,
+                                 Eigen::Ref<Eigen::VectorXd> a, GaussianMetricScratch& scratch) {
+  const Eigen::Index n = mu.size();
+  SECURE_CHECK(sigma.size() == n && c.size() == n && low.size() == n && high.size() == n &&
+                   a.size() == n && scratch.z.size() == n,
+               "ProjectInGaussianMetric: sizes "
+                   << n << ", " << sigma.size() << ", " << c.size() << ", " << low.size() << ", "
+                   << high.size() << ", " << a.size() << ", scratch " << scratch.z.size()
+                   << " differ");
+  CheckProblem("ProjectInGaussianMetric", mu, c, d, low, high);
+  for (Eigen::Index i = 0; i < n; ++i)
+    SECURE_CHECK(std::isfinite(sigma[i]) && sigma[i] > 0, "ProjectInGaussianMetric: sigma["
+                                                              << i << "] = " << sigma[i]
+                                                              << ", must be finite and > 0");
+  // The problem in z = (a - mu) / sigma. An infinite bound stays infinite; a finite one over a
+  // tiny sigma may overflow to +-inf, which is the same box in z.
+  double offset = d;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    scratch.normal[i] = sigma[i] * c[i];
+    scratch.low[i] = (low[i] - mu[i]) / sigma[i];
+    scratch.high[i] = (high[i] - mu[i]) / sigma[i];
+    offset -= c[i] * mu[i];
+  }
+  const QpResult result =
+      ProjectOntoHalfSpaceAndBox(scratch.origin, scratch.normal, offset, scratch.low, scratch.high,
+                                 scratch.z, scratch.breakpoints);
+  for (Eigen::Index i = 0; i < n; ++i)
+    a[i] = std::clamp(mu[i] + sigma[i] * scratch.z[i], low[i], high[i]);
   return result;
 }
 

@@ -14,6 +14,17 @@
 //
 // Infeasible (max over the box of c . a < d): the result is that maximiser (the box point of
 // largest c . a: high where c > 0, low where c < 0, clip(mu) where c = 0), with kInfeasible.
+//
+// ProjectInGaussianMetric solves the same problem in the metric of a diagonal Gaussian
+// N(mu, diag(sigma^2)) (the shield's qp_metric = policy):
+//
+//   min sum_i ((a_i - mu_i) / sigma_i)^2   subject to   c . a >= d,   low <= a <= high,
+//
+// by the change of variables a = mu + sigma o z (o: element-wise): min ||z||^2 subject to
+// (sigma o c) . z >= d - c . mu and (low - mu) / sigma <= z <= (high - mu) / sigma, which is the
+// problem above projecting z = 0; then a = mu + sigma o z (clipped onto the box against rounding).
+// Its solution is a = clip(mu + lambda sigma^2 o c): a coordinate moves in proportion to its
+// variance, so the policy's sure directions (small sigma) move least.
 
 #include <Eigen/Core>
 #include <vector>
@@ -45,5 +56,24 @@ QpResult ProjectOntoHalfSpaceAndBox(const Eigen::Ref<const Eigen::VectorXd>& mu,
                                     const Eigen::Ref<const Eigen::VectorXd>& low,
                                     const Eigen::Ref<const Eigen::VectorXd>& high,
                                     Eigen::Ref<Eigen::VectorXd> a, std::vector<double>& scratch);
+
+/// The scratch of ProjectInGaussianMetric: the transformed problem. Resize(n) once, and no call
+/// allocates.
+struct GaussianMetricScratch {
+  Eigen::VectorXd origin, normal, low, high, z;  // (n) the problem in z = (a - mu) / sigma
+  std::vector<double> breakpoints;               // capacity 2n
+  void Resize(Eigen::Index n);
+};
+
+/// The projection in the metric of N(mu, diag(sigma^2)) (above) into `a`; the status and the
+/// multiplier are those of the problem in z (the same lambda as in a = clip(mu + lambda sigma^2 o
+/// c)). @throws secure::Error as ProjectOntoHalfSpaceAndBox, and on a sigma of the wrong size or
+/// with an entry that is not finite and > 0 (the metric needs every sigma_i > 0).
+QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
+                                 const Eigen::Ref<const Eigen::VectorXd>& sigma,
+                                 const Eigen::Ref<const Eigen::VectorXd>& c, double d,
+                                 const Eigen::Ref<const Eigen::VectorXd>& low,
+                                 const Eigen::Ref<const Eigen::VectorXd>& high,
+                                 Eigen::Ref<Eigen::VectorXd> a, GaussianMetricScratch& scratch);
 
 }  // namespace secure::shield

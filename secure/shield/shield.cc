@@ -90,6 +90,10 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
     qp_high_.resize(action_dim_);
     qp_solution_.resize(action_dim_);
     qp_scratch_.reserve(static_cast<std::size_t>(2 * action_dim_));
+    if (options_.qp_metric == QpMetric::kPolicy) {
+      qp_sigma_.resize(action_dim_);
+      qp_metric_scratch_.Resize(action_dim_);
+    }
   }
   low_ = Eigen::VectorXf::Constant(action_dim_, -std::numeric_limits<float>::infinity());
   high_ = Eigen::VectorXf::Constant(action_dim_, std::numeric_limits<float>::infinity());
@@ -443,7 +447,7 @@ const Decision& Shield::Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
     // The CBF-QP projection of mu (or its gradient refinement) first: the decision if its exact
     // g >= 0.
     const bool refine = options_.proposal == Proposal::kRefine;
-    if (refine ? RefineMean(state, mu, h_state) : ProposeQp(state, mu, h_state)) {
+    if (refine ? RefineMean(state, mu, h_state) : ProposeQp(state, mu, sigma, h_state)) {
       decision_.status = Status::kSafe;
       decision_.safe_ratio = 1.0;
       decision_.distance_to_mean = (decision_.action - mu).norm();

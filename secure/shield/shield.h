@@ -43,6 +43,7 @@
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/domains/environment.h"
+#include "secure/shield/qp.h"
 
 namespace YAML {
 class Node;
@@ -154,7 +155,8 @@ inline constexpr EnumTable<ActionBounds, 3> kActionBoundsNames{{
 /// gradient at the predicted state s+ = T(s, mu) and the model's action Jacobian J at mu (central
 /// differences of T, exact up to rounding for a model affine in the action):
 ///   g(a) ~ g(mu) + (grad h(s+) . J (a - mu)) / dt >= 0,
-/// solves min ||a - mu||^2 over that half-space and the actuator box (qp.h), and checks the
+/// solves min ||a - mu||^2 (or, qp_metric = policy, min (a - mu)^T diag(sigma)^-2 (a - mu)) over
+/// that half-space and the actuator box (qp.h), and checks the
 /// result with the exact g (the shield model and the barrier, as every sample is checked).
 enum class Proposal {
   kNone,    // Algorithms 1-2 only (the paper)
@@ -206,6 +208,20 @@ double QmcUniform(std::uint64_t word);
 double QmcNormal(std::uint64_t word);
 }  // namespace detail
 
+/// The metric in which the CBF-QP projects the policy's mean (proposal qp and qp-only; qp.h).
+enum class QpMetric {
+  kEuclidean,  // min ||a - mu||^2: every action axis alike (the textbook CBF-QP)
+  // min (a - mu)^T diag(sigma)^-2 (a - mu), sigma the policy's (Decide's sigma): the change of
+  // the action least unlikely under the policy's Gaussian; it moves along the policy's sure axes
+  // (small sigma) least, as SECURE's draws from N(mu, sigma) do. Needs every sigma_i > 0: a zero
+  // entry makes Decide throw (a deterministic policy has no such metric; use euclidean).
+  kPolicy,
+};
+inline constexpr EnumTable<QpMetric, 2> kQpMetricNames{{
+    {QpMetric::kEuclidean, "euclidean"},
+    {QpMetric::kPolicy, "policy"},
+}};
+
 /// The largest ShieldOptions::lookahead_steps.
 inline constexpr int kMaxLookaheadSteps = 100;
 /// The largest ShieldOptions::qp_iterations.
@@ -256,6 +272,10 @@ struct ShieldOptions {
   // 2.6-3.3x the sampling shield's correction; capping it removed at most 1.4 points of the
   // extra danger there (docs/RESULTS.md, issue 37), so it is off by default.
   double qp_max_step = 0.0;
+  // proposal = qp or qp-only: the metric of the projection (QpMetric). Accepted with any
+  // proposal, as qp_max_step is (a config sets it for every method); refine and none ignore it.
+  // ToJson writes it only when it is policy.
+  QpMetric qp_metric = QpMetric::kEuclidean;
   // proposal = refine: gradient steps per decision at most (each a linearisation, a step and an
   // exact check).
   int refine_steps = 5;
@@ -381,7 +401,8 @@ class Shield {
   void Seed(std::uint64_t seed) { rng_.Seed(seed); }
 
   /// One shielded decision. `mu` and `sigma` (action_dim) are the policy's Gaussian at `state`.
-  /// @throws secure::Error only on wrong dimensions (misuse); bad numbers give kInvalidInput.
+  /// @throws secure::Error only on misuse: wrong dimensions, or (qp_metric = policy with proposal
+  /// qp or qp-only) a sigma with a zero entry; other bad numbers give kInvalidInput.
   const Decision& Decide(const Eigen::Ref<const Eigen::VectorXf>& state,
                          const Eigen::Ref<const Eigen::VectorXf>& mu,
                          const Eigen::Ref<const Eigen::VectorXf>& sigma);
@@ -423,8 +444,13 @@ class Shield {
   Eigen::Ref<const Eigen::MatrixXf> Applied(const Eigen::Ref<const Eigen::MatrixXf>& actions);
   // The CBF-QP projection of mu (proposal != none) into decision_ (action, g, qp); returns whether
   // its exact g >= 0. h_state = h(s), finite.
+  // `sigma` (finite, >= 0) is the policy's, for qp_metric = policy.
   bool ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
-                 const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state);
+                 const Eigen::Ref<const Eigen::VectorXf>& mu,
+                 const Eigen::Ref<const Eigen::VectorXf>& sigma, double h_state);
+  // The projection of qp_mu_ onto the half-space c . a >= offset (c = qp_normal_) and the box,
+  // in the metric qp_metric, into qp_solution_.
+  QpResult Project(const Eigen::Ref<const Eigen::VectorXf>& sigma, double offset);
   // The linearisation of g at a0 = qp_actions_.col(0) (in the box): T at a0 and its 2n
   // neighbours (qp_next_), h and grad h at T(s, a0), the Jacobian, and the normal c = J^T grad h
   // / dt (qp_normal_). Returns g(a0) from that h.
@@ -482,7 +508,9 @@ class Shield {
   Eigen::MatrixXf qp_gradient_;   // (state_dim x 1)
   Eigen::MatrixXd qp_jacobian_;   // (state_dim x action_dim)
   Eigen::VectorXd qp_normal_, qp_mu_, qp_low_, qp_high_, qp_solution_;  // (action_dim)
-  std::vector<double> qp_scratch_;  // (4 action_dim + 2) the QP's breakpoints
+  std::vector<double> qp_scratch_;           // (4 action_dim + 2) the QP's breakpoints
+  Eigen::VectorXd qp_sigma_;                 // (action_dim) qp_metric = policy: the policy's sigma
+  GaussianMetricScratch qp_metric_scratch_;  // qp_metric = policy: the problem in z
 };
 
 }  // namespace secure::shield

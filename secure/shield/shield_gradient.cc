@@ -1,11 +1,13 @@
 // The shield's gradient-based proposals (shield.h, Proposal): the linearisation of g at an action
 // (the barrier's gradient at the predicted state and the model's action Jacobian), the CBF-QP
 // projection of the policy's mean (proposal qp, qp-only) and the gradient refinement of the mean
-// (proposal refine). Each checks what it returns with the exact g, as every sample is checked.
+// (proposal refine). The projection is Euclidean or in the policy's metric (qp_metric). Each
+// checks what it returns with the exact g, as every sample is checked.
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
+#include "secure/common/error.h"
 #include "secure/shield/qp.h"
 #include "secure/shield/shield.h"
 
@@ -71,9 +73,28 @@ double Shield::Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double 
   return (static_cast<double>(qp_h_[0]) - h_state) * inv_dt + ClassKValue(options_, h_state);
 }
 
+QpResult Shield::Project(const Eigen::Ref<const Eigen::VectorXf>& sigma, double offset) {
+  if (options_.qp_metric == QpMetric::kPolicy) {
+    for (int r = 0; r < action_dim_; ++r) qp_sigma_[r] = sigma[r];
+    return ProjectInGaussianMetric(qp_mu_, qp_sigma_, qp_normal_, offset, qp_low_, qp_high_,
+                                   qp_solution_, qp_metric_scratch_);
+  }
+  return ProjectOntoHalfSpaceAndBox(qp_mu_, qp_normal_, offset, qp_low_, qp_high_, qp_solution_,
+                                    qp_scratch_);
+}
+
 bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
-                       const Eigen::Ref<const Eigen::VectorXf>& mu, double h_state) {
+                       const Eigen::Ref<const Eigen::VectorXf>& mu,
+                       const Eigen::Ref<const Eigen::VectorXf>& sigma, double h_state) {
   const int n = action_dim_;
+  if (options_.qp_metric == QpMetric::kPolicy) {
+    // Decide has rejected a negative or non-finite sigma (kInvalidInput); a zero has no metric.
+    for (int r = 0; r < n; ++r)
+      SECURE_CHECK(sigma[r] > 0, "Shield: qp_metric = policy needs the policy's sigma > 0 in "
+                                 "every action, sigma["
+                                     << r << "] = " << sigma[r]
+                                     << " (a deterministic policy: use qp_metric = euclidean)");
+  }
   const double inf = std::numeric_limits<double>::infinity();
   for (int r = 0; r < n; ++r) {
     qp_mu_[r] = mu[r];
@@ -98,8 +119,7 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
     for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
     QpResult result;
     if (qp_normal_.allFinite() && std::isfinite(offset)) {
-      result = ProjectOntoHalfSpaceAndBox(qp_mu_, qp_normal_, offset, qp_low_, qp_high_,
-                                          qp_solution_, qp_scratch_);
+      result = Project(sigma, offset);
     } else {
       // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
       result.status = QpStatus::kInfeasible;

@@ -88,6 +88,10 @@ nlohmann::json ShieldOptions::ToJson() const {
     // (absent: no limit, as before; it acts only with proposal = qp)
     if (qp_max_step > 0 && proposal == Proposal::kQp) json["qp_max_step"] = qp_max_step;
   }
+  // Absent when euclidean (every shield before it keeps its bytes); written whenever set, also
+  // with proposal none: a config sets it for every method and secure-qp / cbf-qp take it from
+  // these options (and a result's options then say which metric its projections used).
+  if (qp_metric != QpMetric::kEuclidean) json["qp_metric"] = ToString(kQpMetricNames, qp_metric);
   return json;
 }
 
@@ -114,6 +118,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("qp_iterations", &qp_iterations)
       .Field("qp_margin", &qp_margin)
       .Field("qp_max_step", &qp_max_step)
+      .Enum("qp_metric", &qp_metric, kQpMetricNames)
       .Field("refine_steps", &refine_steps)
       .Apply(node, source);
 }

@@ -323,4 +323,38 @@ TEST(CliTest, EvalEpisodesOutHasARowPerEpisodeAndTheListsNameThem) {
   }
 }
 
+// --qp-metric and the config's `shield: {qp_metric: ...}` (eval: the domain's preset, then the
+// file, then the flags): written into the shield's options when set, the default writing
+// nothing; a bad value is one line naming the flag or the file.
+TEST(CliTest, EvalAndShieldRunTakeTheQpMetric) {
+  const std::string dir = (TempDir() / "qp_metric").string();
+  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
+  const std::string cfg = Write("qp_metric.yaml", "pipeline:\n  shield: {qp_metric: policy}\n");
+  const std::string base = "eval --domain double-integrator --bc " + dir +
+                           "/bc.model --barrier ground-truth --methods bc+shield --seeds 1 "
+                           "--episodes 2 --proposal qp-only --json";
+  const auto shield_of = [](const Result& r) {
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out)["shield"] : nlohmann::json::object();
+  };
+  EXPECT_FALSE(shield_of(RunCli(base)).contains("qp_metric"));
+  EXPECT_EQ(shield_of(RunCli(base + " --config " + cfg))["qp_metric"], "policy");
+  EXPECT_EQ(shield_of(RunCli(base + " --qp-metric policy"))["qp_metric"], "policy");
+  // The flag wins over the file.
+  EXPECT_FALSE(shield_of(RunCli(base + " --config " + cfg + " --qp-metric euclidean"))
+                   .contains("qp_metric"));
+  // shield run takes the flag too (its double integrator's noisy policy: sigma > 0).
+  const Result run = RunCli(
+      "shield run --domain double-integrator --barrier ground-truth --episodes 3 --seed 3 --json "
+      "--proposal qp-only --qp-metric policy");
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_EQ(nlohmann::json::parse(run.out)["options"]["shield"]["qp_metric"], "policy");
+  ExpectOneErrorLine(RunCli(base + " --qp-metric mahalanobis"),
+                     "--qp-metric = 'mahalanobis', must be one of euclidean, policy");
+  const std::string bad =
+      Write("qp_metric_bad.yaml", "pipeline:\n  shield: {qp_metric: mahalanobis}\n");
+  ExpectOneErrorLine(RunCli(base + " --config " + bad),
+                     "qp_metric_bad.yaml [pipeline] [shield] [qp_metric] = 'mahalanobis'");
+}
+
 }  // namespace

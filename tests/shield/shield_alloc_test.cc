@@ -428,6 +428,12 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
     boxed.high = Vec({1.0f, 1.0f});
     boxed.options.qp_margin = 0.5;
     scenarios.push_back(boxed);
+    if (proposal == Proposal::kRefine) continue;
+    for (Scenario metric : {unsafe, boxed}) {  // the projection in the policy's metric
+      metric.name += ", qp_metric policy";
+      metric.options.qp_metric = QpMetric::kPolicy;
+      scenarios.push_back(metric);
+    }
   }
 
   // Every path again with the other samplers (odd M for the antithetic one: an unpaired column).
@@ -624,6 +630,10 @@ TEST(ShieldAllocTest, DerbyPerCarBarrierDecisionsDoNotAllocate) {
     Scenario qp = s;
     qp.name += ", proposal " + std::string(ToString(kProposalNames, proposal));
     qp.options.proposal = proposal;
+    ExpectNoAllocations(qp, barrier, model, 300);
+    if (proposal == Proposal::kRefine) continue;
+    qp.name += ", qp_metric policy";
+    qp.options.qp_metric = QpMetric::kPolicy;
     ExpectNoAllocations(qp, barrier, model, 300);
   }
   s.name += ", sampler = qmc";

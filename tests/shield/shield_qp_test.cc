@@ -1,5 +1,6 @@
 // The CBF-QP projection in the shield (ShieldOptions::proposal): the gradient-first mode (qp),
-// the CBF-QP filter alone (qp-only) and the gradient refinement of the mean (refine). Properties with RapidCheck over the double integrator (its
+// the CBF-QP filter alone (qp-only) and the gradient refinement of the mean (refine), the
+// projection in the policy's metric (qp_metric). Properties with RapidCheck over the double integrator (its
 // ground truth, whose gradient is by finite differences, and a random barrier network) and Derby
 // (a random per-car barrier and its shield model); exact cases on an integrator.
 
@@ -112,6 +113,7 @@ ShieldOptions RandomOptions() {
   o.qp_iterations = *rc::gen::inRange(1, 4);
   o.qp_margin = *rc::gen::element(0.0, 0.1);
   o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
+  o.qp_metric = *rc::gen::element(QpMetric::kEuclidean, QpMetric::kPolicy);  // sigma > 0 here
   return o;
 }
 
@@ -467,6 +469,115 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
   EXPECT_EQ(y.refine_steps, 7);
   Decision d;
   EXPECT_FALSE(d.ToJson().contains("qp"));
+}
+
+// The shield, on h(s) = w . s + 0.5 (w = (1, -2)) with the integrator s' = s + 0.1 a and
+// alpha(h) = 2 h: g(a) = w . a + 0.2, exactly affine. The CBF-QP filter in the policy's metric
+// returns mu + lambda S w, S = diag(sigma^2), lambda = (-0.2 - w . mu) / (w^T S w); the
+// Euclidean one mu + (-0.2 - w . mu) / |w|^2 w.
+TEST(QpMetricShieldTest, TheFilterReturnsTheProjectionInThePolicysMetric) {
+  HalfSpace h1, h2;
+  const Eigen::Vector2d w = h1.w.cast<double>();
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f});    // h = 0.1
+  const Eigen::VectorXf mu = Vec({-1.0f, 1.0f});      // g = -2.8
+  const Eigen::VectorXf sigma = Vec({0.14f, 0.04f});  // Panda's x and y
+  ShieldOptions o;
+  o.proposal = Proposal::kQpOnly;
+  o.class_k_gain = 2.0;
+  o.qp_metric = QpMetric::kPolicy;
+  Shield policy(o, h1.barrier, h1.dynamics);
+  o.qp_metric = QpMetric::kEuclidean;
+  Shield euclidean(o, h2.barrier, h2.dynamics);
+  const Decision d = policy.Decide(state, mu, sigma);
+  const Decision e = euclidean.Decide(state, mu, sigma);
+  ASSERT_EQ(d.status, Status::kSafe) << d.ToJson().dump();
+  ASSERT_EQ(e.status, Status::kSafe) << e.ToJson().dump();
+  const Eigen::Vector2d m = mu.cast<double>(), s2 = sigma.cast<double>().cwiseAbs2();
+  const Eigen::Vector2d sw = s2.cwiseProduct(w);
+  const Eigen::Vector2d expected = m + (-0.2 - w.dot(m)) / w.dot(sw) * sw;
+  EXPECT_NEAR(d.action[0], expected[0], 2e-3);
+  EXPECT_NEAR(d.action[1], expected[1], 2e-3);
+  EXPECT_GE(d.g, 0.0);
+  EXPECT_NEAR(d.g, 0.0, 1e-2);  // on the boundary, plus the rounding allowance
+  // The policy's metric moves the sure axis (y, sigma 0.04) far less than the Euclidean one, and
+  // x more: it is farther in action units and nearer in the policy's metric.
+  EXPECT_LT(std::abs(d.action[1] - mu[1]), 0.5 * std::abs(e.action[1] - mu[1]));  // 0.34, 1.12
+  EXPECT_GT(std::abs(d.action[0] - mu[0]), std::abs(e.action[0] - mu[0]));
+  EXPECT_GT(d.distance_to_mean, e.distance_to_mean);
+  const auto metric = [&](const Eigen::VectorXf& a) {
+    return (a - mu).cwiseQuotient(sigma).squaredNorm();
+  };
+  EXPECT_LT(metric(d.action), metric(e.action));
+  // Equal sigma: the two metrics agree.
+  const Decision de = policy.Decide(state, mu, Vec({0.3f, 0.3f}));
+  const Decision ee = euclidean.Decide(state, mu, Vec({0.3f, 0.3f}));
+  EXPECT_NEAR((de.action - ee.action).norm(), 0.0, 1e-5);
+}
+
+// A sigma with a zero entry has no policy metric: a one-line error where the projection uses it
+// (proposal qp, qp-only); the Euclidean metric and the other proposals take it. A negative sigma
+// stays invalid input whatever the options.
+TEST(QpMetricShieldTest, ASigmaWithAZeroEntryIsAClearError) {
+  HalfSpace h;
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f}), mu = Vec({-1.0f, 1.0f});
+  for (const Proposal proposal :
+       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
+    for (const QpMetric metric : {QpMetric::kEuclidean, QpMetric::kPolicy}) {
+      ShieldOptions o;
+      o.proposal = proposal;
+      o.qp_metric = metric;
+      Shield shield(o, h.barrier, h.dynamics);
+      if (metric == QpMetric::kPolicy &&
+          (proposal == Proposal::kQp || proposal == Proposal::kQpOnly)) {
+        const std::string error = ErrorOf([&] { shield.Decide(state, mu, Vec({0.1f, 0.0f})); });
+        EXPECT_HAS(error, "qp_metric = policy needs the policy's sigma > 0");
+        EXPECT_HAS(error, "sigma[1] = 0");
+        EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+      } else {
+        EXPECT_NE(shield.Decide(state, mu, Vec({0.1f, 0.0f})).status, Status::kInvalidInput)
+            << ToString(kProposalNames, proposal);
+      }
+      EXPECT_EQ(shield.Decide(state, mu, Vec({0.1f, -1.0f})).status, Status::kInvalidInput);
+    }
+  }
+}
+
+TEST(QpMetricShieldTest, TheOptionIsReadWrittenOnlyWhenSetAndChecked) {
+  ShieldOptions o;
+  EXPECT_EQ(o.qp_metric, QpMetric::kEuclidean);
+  o.qp_metric = QpMetric::kPolicy;
+  // Written whenever set, whatever the proposal (a config's options reach secure-qp and cbf-qp
+  // through them, and a result says which metric its projections used).
+  for (const Proposal proposal :
+       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
+    o.proposal = proposal;
+    EXPECT_EQ(o.ToJson()["qp_metric"], "policy");
+  }
+  // The default writes nothing: the options (and run directories) of every existing shield keep
+  // their bytes.
+  for (const Proposal proposal :
+       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
+    ShieldOptions plain;
+    plain.proposal = proposal;
+    EXPECT_FALSE(plain.ToJson().contains("qp_metric"));
+  }
+  // YAML, both values, and back through ToJson.
+  ShieldOptions y;
+  y.ApplyYaml(YAML::Load("{proposal: qp, qp_metric: policy}"), "s.yaml");
+  EXPECT_EQ(y.qp_metric, QpMetric::kPolicy);
+  y.Validate();
+  ShieldOptions z;
+  z.ApplyYaml(YAML::Load(y.ToJson().dump()), "round-trip");
+  EXPECT_EQ(z.qp_metric, QpMetric::kPolicy);
+  EXPECT_EQ(z.ToJson(), y.ToJson());
+  y.ApplyYaml(YAML::Load("{qp_metric: euclidean}"), "s.yaml");
+  EXPECT_EQ(y.qp_metric, QpMetric::kEuclidean);
+  const std::string error =
+      ErrorOf([&] { y.ApplyYaml(YAML::Load("{qp_metric: mahalanobis}"), "s.yaml"); });
+  EXPECT_HAS(error, "s.yaml");
+  EXPECT_HAS(error, "qp_metric");
+  EXPECT_HAS(error, "mahalanobis");
+  EXPECT_EQ(error.find('\n'), std::string::npos) << error;
 }
 
 }  // namespace

@@ -6,15 +6,16 @@ proposal 'qp'; --follow secure: the sampling shield), and at every decision asks
 an action at the same state. Where the policy's mean fails the check (g(mu) < 0) it records:
   - the angle between the two corrections (a_qp - mu) and (a_secure - mu): does the barrier's
     gradient point where the sampling shield goes?
-  - their sizes, g at each action, and the QP's status (accepted / rejected by the exact g /
-    infeasible);
+  - their sizes (also per action axis), g at each action, and the QP's status (accepted /
+    rejected by the exact g / infeasible);
   - for the action taken, h at the true next state against h at the shield model's prediction:
     is the shield model wrong in the states that this shield visits?
 
     PYTHONPATH=build/python python3 tools/diagnostics/shield_directions.py \\
         --domain panda-push --run RUN --seeds 5,6,7,8,9 --episodes 40 --follow qp
     (then --follow secure) prints one line per seed and a summary; --out F.json keeps every
-    decision. The shield options are the domain's preset (or --config FILE's section), as
+    decision. The shield options are the domain's preset (or --config FILE's section, e.g.
+    `panda_push: {shield: {qp_metric: policy}}` for the projection in the policy's metric), as
     `secure experiment` uses them; RUN is a `secure experiment method-comparison` directory
     (seed-K/barrier.model, seed-K/airl.model). docs/RESULTS.md (issue 37) quotes a Panda run.
 """
@@ -67,6 +68,7 @@ def run_seed(args, shield_options, seed):
                 seed=seed, episode=episode, step=step, g_mu=g_mu, qp=by_qp.qp,
                 correction_qp=n_qp, correction_secure=n_s, g_qp=float(by_qp.g),
                 g_secure=float(by_sampling.g),
+                axes_qp=[float(x) for x in np.abs(c_qp)], axes_secure=[float(x) for x in np.abs(c_s)],
                 cos=float(c_qp @ c_s / (n_qp * n_s)) if min(n_qp, n_s) > 1e-9 else float("nan"),
                 h_true=h(obs), h_predicted=h_predicted, collided=bool(info.get("collided", False))))
             if terminated or truncated:
@@ -90,6 +92,12 @@ def summarise(rows, label):
           f"g at the action QP {med('g_qp'):+.2f}, SECURE {med('g_secure'):+.2f}; "
           f"h(true next) - h(predicted) median {quantile(error, .5):+.4f}, p10 {quantile(error, .1):+.4f}; "
           f"predicted h >= 0 but true h < 0: {miss} ({miss / max(1, len(intervened)):.1%}); QP {qp}")
+    if intervened:
+        # Per action axis: where each shield moves the action (the QP's metric decides this).
+        axes = lambda key: " ".join(
+            f"{statistics.median(r[key][i] for r in intervened):.3f}"
+            for i in range(len(intervened[0][key])))
+        print(f"  |a - mu| per axis (medians): QP {axes('axes_qp')}; SECURE {axes('axes_secure')}")
 
 
 def main():
