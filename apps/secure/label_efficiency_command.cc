@@ -125,10 +125,7 @@ struct LabelEfficiencyCommand {
     }
     o.Validate();
     CreateDirectories(out);
-    std::cerr << "secure experiment label-efficiency on " << d->name() << ": " << o.seeds
-              << " seeds x " << o.strategies.size() << " strategies, " << o.initial_labels
-              << " initial labels + " << o.rounds << " rounds x " << o.k << ", on " << o.threads
-              << " threads" << (out.empty() ? "" : ", writing to " + out) << "\n";
+    // The banner is RunLabelEfficiency's, after its input checks: an error is then one line.
     const experiments::LabelEfficiencyResult r =
         experiments::RunLabelEfficiency(*d, o, &std::cerr);
     if (json) {

@@ -461,6 +461,12 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
     for (int job : todo)
       internal::RunPolicyLoop(domain, options.policies_from,
                               options.first_seed + static_cast<std::uint64_t>(job / S));
+  if (progress != nullptr)
+    *progress << "secure experiment label-efficiency on " << domain.name() << ": "
+              << options.seeds << " seeds x " << S << " strategies, " << options.initial_labels
+              << " initial labels + " << options.rounds << " rounds x " << options.k << ", on "
+              << options.threads << " threads"
+              << (options.output_dir.empty() ? "" : ", writing to " + options.output_dir) << "\n";
   // Per seed: the pool and the ground-truth evaluation states (computed by the seed's jobs on
   // demand, once).
   struct SeedData {

@@ -141,7 +141,8 @@ struct LabelEfficiencyResult {
   nlohmann::json ToJson() const;
 };
 
-/// Runs the experiment (see above). `progress`: one line per job (null: none).
+/// Runs the experiment (see above). `progress` (null: none): a line naming the experiment once
+/// its inputs are checked (the job files to resume, --policies-from's models), then one per job.
 /// @throws secure::Error if the domain has no labeller, on invalid options, or a job file of
 ///   another experiment in output_dir (naming it).
 LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
