@@ -271,6 +271,13 @@ void PessimisticBarrier::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf
   AggregateMembers(m, h);
 }
 
+void PessimisticBarrier::DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                            Eigen::Ref<Eigen::VectorXf> h,
+                                            Eigen::Ref<Eigen::MatrixXf> gradients) {
+  inner_->EvaluateGradient(states, h, gradients);
+  if (model_.IsLastStep(states)) DoEvaluateStates(states, h, /*dense=*/false);
+}
+
 void PessimisticBarrier::LinearMembers(const Eigen::Ref<const Eigen::MatrixXf>& states,
                                        Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   const Eigen::VectorXf& s = model_.last_state();

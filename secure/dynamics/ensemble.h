@@ -158,10 +158,20 @@ class PessimisticBarrier final : public cbf::SkippingBarrier {
   int state_dim() const override { return inner_->state_dim(); }
   std::string Describe() const override;
   cbf::Barrier& inner() { return *inner_; }
+  /// The inner barrier's (EvaluateGradient below).
+  bool analytic_gradient() const override { return inner_->analytic_gradient(); }
 
  protected:
   void DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
                         Eigen::Ref<Eigen::VectorXf> h, bool dense) override;
+  /// The inner barrier's gradient (analytic where the inner one is). Off the last Step's states
+  /// h is the inner h, so value and gradient are exact; on them h is the pessimistic value and
+  /// the gradient that of the inner h at the members' mean (the shield's linearisation of g
+  /// takes the slope so). Before, central differences of the inner h: the same slope, 2d + 1
+  /// states.
+  void DoEvaluateGradient(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                          Eigen::Ref<Eigen::VectorXf> h,
+                          Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
   // h_members_ for the linear path: h(s̄⁺_i) + ∇h(s)·(s⁺_ik − s̄⁺_i).

@@ -282,6 +282,42 @@ TEST_F(DynamicsTest, PessimisticBarrierIsTheMinimumOverMembers) {
   }
 }
 
+TEST_F(DynamicsTest, PessimisticGradientIsTheInnerOnesAndItsValueThePessimisticOne) {
+  auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(4, 2, 5, {32, 32}, 9));
+  const EnsembleModel model(shared, 64);
+  long inner_columns = 0;
+  PessimisticBarrier pessimistic(
+      std::make_unique<CountingBarrier>(std::make_unique<QuadraticBarrier>(4), &inner_columns),
+      model);
+  QuadraticBarrier curved(4);
+  EXPECT_FALSE(pessimistic.analytic_gradient());  // the inner one's (central differences here)
+  Rng rng(3);
+  Eigen::VectorXf s(4);
+  for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(0.3 * rng.Normal());
+  Eigen::MatrixXf actions(2, 3);
+  for (Eigen::Index j = 0; j < actions.size(); ++j) actions(j) = static_cast<float>(rng.Normal());
+  Eigen::MatrixXf next(4, 3);
+  model.Step(s, actions, next);
+  // On the last step's states: the pessimistic value, the inner h's slope at the members' mean
+  // (h = 1 - |s|^2: gradient -2 s).
+  Eigen::VectorXf h(3), h_pessimistic(3), h_mean(3);
+  Eigen::MatrixXf gradients(4, 3);
+  pessimistic.Evaluate(next, h_pessimistic);
+  curved.Evaluate(next, h_mean);
+  inner_columns = 0;
+  pessimistic.EvaluateGradient(next, h, gradients);
+  EXPECT_EQ(h, h_pessimistic);
+  for (int i = 0; i < 3; ++i) EXPECT_LT(h[i], h_mean[i]);  // the minimum of a concave h's members
+  EXPECT_TRUE(gradients.isApprox(-2.0f * next, 1e-2f)) << gradients << "\n" << -2.0f * next;
+  // The inner barrier's central differences (2d + 1 states per column) and the K M members.
+  EXPECT_EQ(inner_columns, 3 * (2 * 4 + 1) + 5 * 3);
+  // Elsewhere: the inner h and its gradient.
+  const Eigen::MatrixXf copy = next;
+  pessimistic.EvaluateGradient(copy, h, gradients);
+  EXPECT_EQ(h, h_mean);
+  EXPECT_TRUE(gradients.isApprox(-2.0f * copy, 1e-2f));
+}
+
 TEST_F(DynamicsTest, PessimismMeanStdAndLinearOptions) {
   auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(4, 2, 5, {32, 32}, 9));
   const EnsembleModel model(shared, 64);
