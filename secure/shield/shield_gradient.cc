@@ -104,15 +104,21 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
   // The first linearisation point: mu as the actuator applies it.
   qp_actions_.col(0) = mu;
   if (ClipToBox(qp_actions_.leftCols(1))) decision_.bounded = true;
+  // mu first, with the exact g (one model step, one barrier evaluation): at mu the linearisation
+  // is g(mu) itself, so when g(mu) >= qp_margin the QP's answer is mu, and the Jacobian and the
+  // gradient (2n + 1 model steps and a backward pass) are needed only when mu fails.
+  one_action_.col(0) = qp_actions_.col(0);
+  EvaluateG(state, h_state, one_action_, one_g_);
+  const double g_mu = one_g_[0];
+  if (g_mu >= options_.qp_margin && Record(decision_, one_action_, g_mu)) return true;
+  decision_.intervened = true;  // the policy's mean failed the condition
   for (int round = 0; round < options_.qp_iterations; ++round) {
-    const double g0 = Linearise(state, h_state);
-    if (round == 0 && g0 >= options_.qp_margin) {
-      // mu satisfies the condition: the QP's answer is mu itself (clipped), checked exactly.
-      one_action_.col(0) = qp_actions_.col(0);
-      EvaluateG(state, h_state, one_action_, one_g_);
-      if (Record(decision_, one_action_, one_g_[0])) return true;
-    }
-    decision_.intervened = true;  // the policy's mean failed the condition
+    double g0 = Linearise(state, h_state);
+    // In round 0 the linearisation's value is the exact g(mu) just computed. The two differ by
+    // float rounding, and, under a learned model, by its pessimism (the exact g takes h over the
+    // ensemble's members; the linearisation takes the members' mean), which the projection then
+    // accounts for.
+    if (round == 0 && std::isfinite(g_mu)) g0 = g_mu;
     // The half-space c . a >= c . a0 - g0 + margin, where the margin adds to qp_margin what float
     // rounding of h costs g.
     double offset = options_.qp_margin + RoundingMargin(h_state, options_.dt) - g0;
