@@ -72,18 +72,18 @@ void BM_BarrierEval(benchmark::State& state, Net net, nn::MatmulBackend backend)
 constexpr nn::MatmulBackend kDefault = nn::MatmulBackend::kAuto;
 constexpr nn::MatmulBackend kEigen = nn::MatmulBackend::kEigen;
 BENCHMARK_CAPTURE(BM_BarrierEval, DI, Net::kDoubleIntegrator, kDefault)
-    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+    ->ArgName("batch")->Arg(1)->Arg(2)->Arg(6)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
 BENCHMARK_CAPTURE(BM_BarrierEval, DI_eigen, Net::kDoubleIntegrator, kEigen)
-    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+    ->ArgName("batch")->Arg(1)->Arg(2)->Arg(6)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
 // Derby: M agent states x 12 obstacles; M = 1 is one shield step, M = 64, 128 the batched cases
 // (768 and 1536 network inputs).
-BENCHMARK_CAPTURE(BM_BarrierEval, Derby, Net::kDerby, kDefault)->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
+BENCHMARK_CAPTURE(BM_BarrierEval, Derby, Net::kDerby, kDefault)->ArgName("M")->Arg(1)->Arg(2)->Arg(6)->Arg(64)->Arg(128);
 BENCHMARK_CAPTURE(BM_BarrierEval, Derby_eigen, Net::kDerby, kEigen)
-    ->ArgName("M")->Arg(1)->Arg(64)->Arg(128);
+    ->ArgName("M")->Arg(1)->Arg(2)->Arg(6)->Arg(64)->Arg(128);
 BENCHMARK_CAPTURE(BM_BarrierEval, Panda, Net::kPanda, kDefault)
-    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+    ->ArgName("batch")->Arg(1)->Arg(2)->Arg(6)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
 BENCHMARK_CAPTURE(BM_BarrierEval, Panda_eigen, Net::kPanda, kEigen)
-    ->ArgName("batch")->Arg(1)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
+    ->ArgName("batch")->Arg(1)->Arg(2)->Arg(6)->Arg(64)->Arg(128)->Arg(1024)->Arg(4096);
 
 }  // namespace
 }  // namespace secure::bench

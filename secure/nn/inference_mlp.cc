@@ -150,8 +150,9 @@ void InferenceMlp::Forward(const Eigen::Ref<const Eigen::MatrixXf>& inputs, Work
     SECURE_CHECK(workspace.x_.rows() == spec_.input_dim,
                  "InferenceMlp::Forward: the workspace was made by a model with another backend");
   }
-  // Below kMinLibxsmmBatch columns Eigen's matrix-vector products are faster (DI net, one state:
-  // 0.75 vs 1.25 us), so a policy's single-state forward stays on Eigen.
+  // One column: Eigen's matrix-vector products are as fast (Panda net, one state: 10.5 vs 11.8
+  // us; DI net 0.36 vs 0.35 us), so a policy's single-state forward stays on Eigen. From two
+  // columns on LIBXSMM (docs/PERFORMANCE.md, "Small batches").
   if (backend_ == MatmulBackend::kLibxsmm && n >= kMinLibxsmmBatch) {
     ForwardLibxsmm(inputs, workspace, outputs);
   } else {

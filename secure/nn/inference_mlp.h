@@ -12,8 +12,10 @@
 // (64-column blocks, then 32/16/8/4/2/1-column tails), so Forward() only calls them. On the
 // project machine they run the shield's layer shapes 1.3-2x faster than Eigen's GEMM
 // (docs/PERFORMANCE.md). Bias and activation are applied per 64-column block while it is in
-// cache. The output layer (one or a few rows) and batches of fewer than 8 columns (a policy's
-// single-state forward) stay Eigen products, which are faster there. MatmulBackend::kEigen
+// cache. The output layer (one or a few rows) and single columns (a policy's single-state
+// forward) stay Eigen products (a matrix-vector product, as fast there). Batches of 2-7 columns
+// (a learned model's K members, a linearisation's 2n + 1 points) take LIBXSMM's tails: Eigen's
+// GEMM repacks the weights on every call, 2.3-3.6x slower there on the Panda barrier. MatmulBackend::kEigen
 // selects Eigen's GEMM for every layer (the reference, and the A/B baseline of the benchmarks);
 // kAuto uses LIBXSMM when it can generate code for this CPU and Eigen otherwise, and backend()
 // says which one a model uses. Both compute the same function; results differ by float rounding
@@ -126,7 +128,7 @@ class InferenceMlp {
   static constexpr int kColumnBlock = 64;  // columns per kernel call; tails use 32, 16, ..., 1
   static constexpr int kTails = 7;         // column counts 64, 32, 16, 8, 4, 2, 1
   static constexpr int kRowBlock = 64;     // output rows per kernel call
-  static constexpr int kMinLibxsmmBatch = 8;  // smaller batches take the Eigen path
+  static constexpr int kMinLibxsmmBatch = 2;  // one column takes the Eigen path
   struct LayerKernels {
     // kernels[t][0]: kRowBlock (or all) rows, kernels[t][1]: the remaining rows (or null), for
     // kColumnBlock >> t columns.
