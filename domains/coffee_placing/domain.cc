@@ -141,13 +141,7 @@ std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() co
 }
 
 // ---------------------------------------------------------------------------------------------
-CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
-
-std::string CoffeePlacingDomain::Describe() const {
-  return CoffeePlacingEnv(options_.task, options_.shield_model,
-                          MeanParticipant(options_.population).thresholds)
-      .Describe();
-}
+CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile) : ArmDomain(profile) {}
 
 std::unique_ptr<Environment> CoffeePlacingDomain::MakeEnvironment() const {
   return std::make_unique<CoffeePlacingEnv>(options_.task, options_.shield_model,

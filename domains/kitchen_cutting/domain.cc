@@ -60,11 +60,7 @@ YamlFields KitchenCuttingDomainOptions::Fields() {
 SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
-
-std::string KitchenCuttingDomain::Describe() const {
-  return KitchenCuttingEnv(options_.task, options_.shield_model).Describe();
-}
+KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : ArmDomain(profile) {}
 
 std::unique_ptr<Environment> KitchenCuttingDomain::MakeEnvironment() const {
   return std::make_unique<KitchenCuttingEnv>(options_.task, options_.shield_model);
@@ -114,27 +110,13 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
   std::vector<experiments::LabelCheckRow> rows;
   auto add = [&](const std::string& name, const std::string& label, const data::StateSet& set) {
     const KitchenLabelCheckResult r = CheckKitchenLabels(options_.task, set, check);
-    experiments::LabelCheckRow row;
-    row.set = name;
-    row.label = label;
-    row.states = r.states;
-    row.dangerous = r.dangerous;
-    row.skipped = r.unreachable;
-    rows.push_back(row);
+    rows.push_back(franka::LabelRow(name, label, r.states, r.dangerous, r.unreachable));
   };
   add("safe states", "safe", safe);
-  for (NearDangerousScenario k : {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
-                                  NearDangerousScenario::kBlade, NearDangerousScenario::kReach}) {
-    std::vector<long> cols;
-    for (long i = 0; i < static_cast<long>(kinds.size()); ++i)
-      if (kinds[i] == k) cols.push_back(i);
-    if (cols.empty()) continue;
-    data::StateSet s;
-    s.features = near.features;
-    s.source = near.source;
-    s.states = data::SelectColumns(near.states, cols);
-    add(std::string("near-dangerous (") + ScenarioName(k) + ")", "near-dangerous", s);
-  }
+  franka::AddScenarioRows(near, kinds,
+                          {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
+                           NearDangerousScenario::kBlade, NearDangerousScenario::kReach},
+                          add);
   return rows;
 }
 
