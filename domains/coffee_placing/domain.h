@@ -90,14 +90,13 @@ class CoffeePlacingDomain final : public franka::ArmDomain<CoffeePlacingDomainOp
   ///    and class-K from the shield's options.
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
-  cbf::BarrierCheckProblem MakeCheckProblem(
-      const shield::ShieldOptions& shield, const data::StateSet& safe,
-      const data::StateSet& near_dangerous,
-      std::unique_ptr<DynamicsModel>* dynamics) const override;
 
   bool HasPopulation() const override { return true; }
   std::unique_ptr<experiments::Population> MakePopulation(
       const experiments::PopulationOptions& options) const override;
+
+ protected:
+  franka::ArmCheckSpec CheckSpec() const override;
 };
 
 /// The barrier's input: the end-effector position and velocity, the cup's tilt, the person's

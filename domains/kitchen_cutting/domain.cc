@@ -139,12 +139,8 @@ void KitchenCuttingDomain::CheckHeldOut(std::uint64_t data_seed, long count, dat
   franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
-cbf::BarrierCheckProblem KitchenCuttingDomain::MakeCheckProblem(
-    const shield::ShieldOptions& shield, const data::StateSet& safe,
-    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
-  options_.Validate();
+franka::ArmCheckSpec KitchenCuttingDomain::CheckSpec() const {
   franka::ArmCheckSpec spec;
-  spec.domain = name();
   spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
     for (int k = 0; k < 3; ++k) {
       const float hand = static_cast<float>(0.005 * rng.Normal());
@@ -181,7 +177,7 @@ cbf::BarrierCheckProblem KitchenCuttingDomain::MakeCheckProblem(
   spec.region_description =
       "held-out safe and near-dangerous observations, perturbed (hand and blade sd 0.005 m, ee "
       "velocity sd 0.05 m/s, the person's arm sd 0.01 m, its velocities sd 0.05 m/s)";
-  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+  return spec;
 }
 
 double ObservedEdgeClearance(const KitchenCuttingOptions& task,

@@ -66,14 +66,13 @@ class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomain
   ///    and class-K from the shield's options.
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
-  cbf::BarrierCheckProblem MakeCheckProblem(
-      const shield::ShieldOptions& shield, const data::StateSet& safe,
-      const data::StateSet& near_dangerous,
-      std::unique_ptr<DynamicsModel>* dynamics) const override;
 
   /// Table 3's kitchen row: the real robot, 10 episodes (BC 70 / AIRL 80 / SECURE 90 % success,
   /// 100 / 100 / 0 % dangerous; no standard deviations).
   std::optional<experiments::PaperTable3> PaperReference() const override;
+
+ protected:
+  franka::ArmCheckSpec CheckSpec() const override;
 };
 
 /// The barrier's input: the blade's edge, the end-effector velocity, the person's wrist, elbow

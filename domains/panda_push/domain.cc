@@ -187,12 +187,8 @@ void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::St
   franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
-cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
-    const shield::ShieldOptions& shield, const data::StateSet& safe,
-    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
-  options_.Validate();
+franka::ArmCheckSpec PandaPushDomain::CheckSpec() const {
   franka::ArmCheckSpec spec;
-  spec.domain = name();
   spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
     franka::AddNoise(rng, 0.005, kEePos, 3, s);
     franka::AddNoise(rng, 0.05, kEeVel, 3, s);
@@ -218,7 +214,7 @@ cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
       "held-out safe and near-dangerous observations, perturbed (ee position sd 0.005 m, ee "
       "velocity sd 0.05 m/s, block position sd 0.005 m, Euler angles sd 0.02 rad, velocity sd "
       "0.02 m/s, angular velocity sd 0.05 rad/s)";
-  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+  return spec;
 }
 
 experiments::ExperimentOptions PandaPushDomain::Preset() const {

@@ -93,15 +93,14 @@ class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
   ///    [-1, 1]^3, dt and class-K from the shield's options.
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
-  cbf::BarrierCheckProblem MakeCheckProblem(
-      const shield::ShieldOptions& shield, const data::StateSet& safe,
-      const data::StateSet& near_dangerous,
-      std::unique_ptr<DynamicsModel>* dynamics) const override;
 
   /// The report's pictures (report_hints.cc): the barrier over the end effector's height and
   /// pushing speed; Table 3's Panda Arm Push row.
   std::optional<experiments::ReportHints> MakeReportHints() const override;
   std::optional<experiments::PaperTable3> PaperReference() const override;
+
+ protected:
+  franka::ArmCheckSpec CheckSpec() const override;
 
  private:
   // The label check's continuation with this domain's shield-model velocity gain (also the
