@@ -141,13 +141,7 @@ std::optional<experiments::PaperUserStudy> CoffeePopulation::PaperReference() co
 }
 
 // ---------------------------------------------------------------------------------------------
-CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
-
-std::string CoffeePlacingDomain::Describe() const {
-  return CoffeePlacingEnv(options_.task, options_.shield_model,
-                          MeanParticipant(options_.population).thresholds)
-      .Describe();
-}
+CoffeePlacingDomain::CoffeePlacingDomain(experiments::Profile profile) : ArmDomain(profile) {}
 
 std::unique_ptr<Environment> CoffeePlacingDomain::MakeEnvironment() const {
   return std::make_unique<CoffeePlacingEnv>(options_.task, options_.shield_model,
@@ -170,12 +164,8 @@ void CoffeePlacingDomain::CheckHeldOut(std::uint64_t data_seed, long count, data
   franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
-cbf::BarrierCheckProblem CoffeePlacingDomain::MakeCheckProblem(
-    const shield::ShieldOptions& shield, const data::StateSet& safe,
-    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
-  options_.Validate();
+franka::ArmCheckSpec CoffeePlacingDomain::CheckSpec() const {
   franka::ArmCheckSpec spec;
-  spec.domain = name();
   spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
     franka::AddNoise(rng, 0.01, kEePos, 3, s);
     franka::AddNoise(rng, 0.05, kEeVel, 3, s);
@@ -209,7 +199,7 @@ cbf::BarrierCheckProblem CoffeePlacingDomain::MakeCheckProblem(
       "held-out safe and unsafe observations, perturbed (ee position sd 0.01 m, ee velocity sd "
       "0.05 m/s, tilt sd 0.03 rad, the person's arm sd 0.02 m, its velocities sd 0.05 m/s; the "
       "clearance recomputed)";
-  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+  return spec;
 }
 
 std::unique_ptr<experiments::Population> CoffeePlacingDomain::MakePopulation(

@@ -7,9 +7,9 @@
 
 #include "domains/coffee_placing/coffee_placing.h"
 #include "domains/coffee_placing/participants.h"
+#include "domains/franka/arm_domain.h"
 #include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
-#include "secure/experiments/options_domain.h"
 
 namespace secure::domains::coffee_placing {
 
@@ -58,12 +58,11 @@ class CoffeePopulation final : public experiments::Population {
   std::vector<coffee_placing::Participant> participants_;
 };
 
-class CoffeePlacingDomain final : public experiments::OptionsDomain<CoffeePlacingDomainOptions> {
+class CoffeePlacingDomain final : public franka::ArmDomain<CoffeePlacingDomainOptions> {
  public:
   explicit CoffeePlacingDomain(experiments::Profile profile = experiments::Profile::kFull);
 
   std::string name() const override { return "coffee-placing"; }
-  std::string Describe() const override;
   std::string Title() const override { return "Coffee Placing"; }
   std::string ConfigSection() const override { return "coffee_placing"; }
 
@@ -89,17 +88,15 @@ class CoffeePlacingDomain final : public experiments::OptionsDomain<CoffeePlacin
   ///    on ObservedClearance and the tilt: the environment's dangerous test);
   ///  - dynamics: the environment's shield model (CoffeeShieldModel), action box [-1, 1]^4, dt
   ///    and class-K from the shield's options.
-  bool HasCheck() const override { return true; }
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
-  cbf::BarrierCheckProblem MakeCheckProblem(
-      const shield::ShieldOptions& shield, const data::StateSet& safe,
-      const data::StateSet& near_dangerous,
-      std::unique_ptr<DynamicsModel>* dynamics) const override;
 
   bool HasPopulation() const override { return true; }
   std::unique_ptr<experiments::Population> MakePopulation(
       const experiments::PopulationOptions& options) const override;
+
+ protected:
+  franka::ArmCheckSpec CheckSpec() const override;
 };
 
 /// The barrier's input: the end-effector position and velocity, the cup's tilt, the person's

@@ -245,14 +245,8 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
       placed = r.reached_goal;
       o = next;
     }
-    if (violated) {
-      ++out.discarded_violating;
+    if (!KeepOrCountDiscarded(violated, placed, &out.discarded_violating, &out.discarded_failed))
       continue;
-    }
-    if (!placed) {
-      ++out.discarded_failed;
-      continue;
-    }
     collector.KeepEpisode();
   }
   SECURE_CHECK(collector.kept_steps() >= options.states,

@@ -18,6 +18,35 @@ namespace {
 // Rejection sampling gives up after this many draws per car (the defaults almost never reject).
 constexpr int kMaxPlacementDraws = 10000;
 
+// (x, y) farther than sqrt(r2) from (cx, cy).
+bool FarFrom(double x, double y, double cx, double cy, double r2) {
+  return (x - cx) * (x - cx) + (y - cy) * (y - cy) > r2;
+}
+
+// Places cars 0..n-1 one by one by rejection (points[2j], points[2j + 1]): up to
+// kMaxPlacementDraws proposals propose(j) -> {x, y}, the first that passes clear(x, y) and lies
+// farther than sqrt(sep2) from every car placed before it. Returns the first car that found no
+// place (the cars after it are not tried), or -1.
+template <typename Propose, typename Clear>
+int PlaceCars(int n, double sep2, Propose&& propose, Clear&& clear, double* points) {
+  for (int j = 0; j < n; ++j) {
+    bool placed = false;
+    for (int draw = 0; draw < kMaxPlacementDraws && !placed; ++draw) {
+      const std::array<double, 2> p = propose(j);
+      const double x = p[0], y = p[1];
+      placed = clear(x, y);
+      for (int k = 0; k < j && placed; ++k)
+        placed = FarFrom(x, y, points[2 * k], points[2 * k + 1], sep2);
+      if (placed) {
+        points[2 * j] = x;
+        points[2 * j + 1] = y;
+      }
+    }
+    if (!placed) return j;
+  }
+  return -1;
+}
+
 bool Finite(double x) { return std::isfinite(x); }
 
 // The cars' acceleration noise: an approximately standard normal draw (Irwin-Hall: the sum of
@@ -311,46 +340,34 @@ void DerbyEnv::Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) {
   std::array<double, 2 * kMaxCars> start, target;
   const double sep2 = o.min_separation * o.min_separation;
   const double clear2 = o.ego_clearance * o.ego_clearance;
-  auto far_from = [](double x, double y, double cx, double cy, double r2) {
-    return (x - cx) * (x - cx) + (y - cy) * (y - cy) > r2;
-  };
-  for (int j = 0; j < n; ++j) {
-    bool placed = false;
-    for (int draw = 0; draw < kMaxPlacementDraws && !placed; ++draw) {
-      const double x = rng.Uniform(0.0, side), y = rng.Uniform(0.0, side);
-      placed = far_from(x, y, start_x, start_y, clear2) && far_from(x, y, goal_x, goal_y, clear2);
-      for (int k = 0; k < j && placed; ++k)
-        placed = far_from(x, y, start[2 * k], start[2 * k + 1], sep2);
-      if (placed) {
-        start[2 * j] = x;
-        start[2 * j + 1] = y;
-      }
-    }
-    SECURE_CHECK(placed, "DerbyEnv::Reset: no start for car "
-                             << j << " in [0, " << side << "]^2 at least " << o.min_separation
-                             << " from the other cars and " << o.ego_clearance
-                             << " from the ego start and goal (" << kMaxPlacementDraws
-                             << " draws)");
-  }
-  for (int j = 0; j < n; ++j) {
-    bool placed = false;
-    for (int draw = 0; draw < kMaxPlacementDraws && !placed; ++draw) {
-      const double x = start[2 * j] + rng.Uniform(-o.car_goal_offset, o.car_goal_offset);
-      const double y = start[2 * j + 1] + rng.Uniform(-o.car_goal_offset, o.car_goal_offset);
-      placed = far_from(x, y, goal_x, goal_y, clear2);
-      for (int k = 0; k < j && placed; ++k)
-        placed = far_from(x, y, target[2 * k], target[2 * k + 1], sep2);
-      if (placed) {
-        target[2 * j] = x;
-        target[2 * j + 1] = y;
-      }
-    }
-    SECURE_CHECK(placed, "DerbyEnv::Reset: no goal for car "
-                             << j << " within +-" << o.car_goal_offset << " of its start, "
-                             << o.min_separation << " from the other goals and "
-                             << o.ego_clearance << " from the ego goal (" << kMaxPlacementDraws
-                             << " draws)");
-  }
+  const int no_start = PlaceCars(
+      n, sep2,
+      [&](int) {
+        const double x = rng.Uniform(0.0, side), y = rng.Uniform(0.0, side);
+        return std::array<double, 2>{x, y};
+      },
+      [&](double x, double y) {
+        return FarFrom(x, y, start_x, start_y, clear2) && FarFrom(x, y, goal_x, goal_y, clear2);
+      },
+      start.data());
+  SECURE_CHECK(no_start < 0, "DerbyEnv::Reset: no start for car "
+                                 << no_start << " in [0, " << side << "]^2 at least "
+                                 << o.min_separation << " from the other cars and "
+                                 << o.ego_clearance << " from the ego start and goal ("
+                                 << kMaxPlacementDraws << " draws)");
+  const int no_goal = PlaceCars(
+      n, sep2,
+      [&](int j) {
+        const double x = start[2 * j] + rng.Uniform(-o.car_goal_offset, o.car_goal_offset);
+        const double y = start[2 * j + 1] + rng.Uniform(-o.car_goal_offset, o.car_goal_offset);
+        return std::array<double, 2>{x, y};
+      },
+      [&](double x, double y) { return FarFrom(x, y, goal_x, goal_y, clear2); }, target.data());
+  SECURE_CHECK(no_goal < 0, "DerbyEnv::Reset: no goal for car "
+                                << no_goal << " within +-" << o.car_goal_offset
+                                << " of its start, " << o.min_separation
+                                << " from the other goals and " << o.ego_clearance
+                                << " from the ego goal (" << kMaxPlacementDraws << " draws)");
   // The trajectories: explicit Euler in double, stored as float. Car by car (the noise stream
   // order is part of the episode's definition: car 0's frames, then car 1's, ...).
   const double dt = o.dt;

@@ -354,29 +354,19 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
         [&](const StepOutcome&) {
           episode_min = std::min<double>(episode_min, env.NearestCarDistance());
         });
-    const int reached_at = episode.reached_at;
-    if (episode.collided) {
-      ++out.discarded_collisions;
+    if (!KeepOrCountDiscarded(episode, &out.discarded_collisions, &out.discarded_no_goal))
       continue;
-    }
-    if (reached_at == 0) {
-      ++out.discarded_no_goal;
-      continue;
-    }
     ++kept;
     min_distance = std::min(min_distance, episode_min);
-    out.steps_to_goal.push_back(reached_at);
+    out.steps_to_goal.push_back(episode.reached_at);
     out.attempts.push_back(attempt);
     collector.KeepEpisode();
   }
   out.expert = expert.stats();
   out.min_car_distance = kept > 0 ? min_distance : 0.0;
-  SECURE_CHECK(!demo.require_all || kept == demo.episodes,
-               "GenerateDerbyDemonstrations: kept "
-                   << kept << " of DerbyDemonstrationOptions::episodes = " << demo.episodes
-                   << " demonstrations after " << out.attempted << " attempts ("
-                   << out.discarded_collisions << " collided, " << out.discarded_no_goal
-                   << " never reached the goal)");
+  if (demo.require_all)
+    CheckAllKept("GenerateDerbyDemonstrations", "DerbyDemonstrationOptions::episodes", kept,
+                 demo.episodes, out.attempted, out.discarded_collisions, out.discarded_no_goal);
   out.trajectories = collector.Finish();
   out.seconds = clock.Seconds();
   return out;

@@ -319,27 +319,18 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
                          .cwiseMin(static_cast<float>(task.accel_bound));
         },
         [](const StepOutcome&) {});
-    // The first step whose state is in the goal; 0 = never. A collision stopped the episode.
-    const int reached_at = episode.reached_at;
-    if (episode.collided) {
-      ++out.discarded_collisions;
+    // Kept: reached the goal (its first step there: reached_at) without a collision (which
+    // stopped the episode).
+    if (!KeepOrCountDiscarded(episode, &out.discarded_collisions, &out.discarded_no_goal))
       continue;
-    }
-    if (reached_at == 0) {
-      ++out.discarded_no_goal;
-      continue;
-    }
     ++kept;
-    out.steps_to_goal.push_back(reached_at);
+    out.steps_to_goal.push_back(episode.reached_at);
     collector.KeepEpisode();
   }
   out.expert = expert.stats();
-  SECURE_CHECK(!demo.require_all || kept == demo.episodes,
-               "GenerateDemonstrations: kept "
-                   << kept << " of DemonstrationOptions::episodes = " << demo.episodes
-                   << " demonstrations after " << out.attempted << " attempts ("
-                   << out.discarded_collisions << " collided, " << out.discarded_no_goal
-                   << " never reached the goal)");
+  if (demo.require_all)
+    CheckAllKept("GenerateDemonstrations", "DemonstrationOptions::episodes", kept, demo.episodes,
+                 out.attempted, out.discarded_collisions, out.discarded_no_goal);
   out.trajectories = collector.Finish();
   out.seconds = clock.Seconds();
   return out;

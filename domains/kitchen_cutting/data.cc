@@ -208,14 +208,7 @@ KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions&
                 1.0f);
         },
         [](const StepOutcome&) {});
-    if (episode.collided) {
-      ++out.discarded_dangerous;
-      continue;
-    }
-    if (episode.reached_at == 0) {
-      ++out.discarded_failed;
-      continue;
-    }
+    if (!KeepOrCountDiscarded(episode, &out.discarded_dangerous, &out.discarded_failed)) continue;
     if (env.sim().path().into) ++out.into_episodes;
     collector.KeepEpisode();
   }

@@ -60,11 +60,7 @@ YamlFields KitchenCuttingDomainOptions::Fields() {
 SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : OptionsDomain(profile) {}
-
-std::string KitchenCuttingDomain::Describe() const {
-  return KitchenCuttingEnv(options_.task, options_.shield_model).Describe();
-}
+KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : ArmDomain(profile) {}
 
 std::unique_ptr<Environment> KitchenCuttingDomain::MakeEnvironment() const {
   return std::make_unique<KitchenCuttingEnv>(options_.task, options_.shield_model);
@@ -114,27 +110,13 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
   std::vector<experiments::LabelCheckRow> rows;
   auto add = [&](const std::string& name, const std::string& label, const data::StateSet& set) {
     const KitchenLabelCheckResult r = CheckKitchenLabels(options_.task, set, check);
-    experiments::LabelCheckRow row;
-    row.set = name;
-    row.label = label;
-    row.states = r.states;
-    row.dangerous = r.dangerous;
-    row.skipped = r.unreachable;
-    rows.push_back(row);
+    rows.push_back(franka::LabelRow(name, label, r.states, r.dangerous, r.unreachable));
   };
   add("safe states", "safe", safe);
-  for (NearDangerousScenario k : {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
-                                  NearDangerousScenario::kBlade, NearDangerousScenario::kReach}) {
-    std::vector<long> cols;
-    for (long i = 0; i < static_cast<long>(kinds.size()); ++i)
-      if (kinds[i] == k) cols.push_back(i);
-    if (cols.empty()) continue;
-    data::StateSet s;
-    s.features = near.features;
-    s.source = near.source;
-    s.states = data::SelectColumns(near.states, cols);
-    add(std::string("near-dangerous (") + ScenarioName(k) + ")", "near-dangerous", s);
-  }
+  franka::AddScenarioRows(near, kinds,
+                          {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
+                           NearDangerousScenario::kBlade, NearDangerousScenario::kReach},
+                          add);
   return rows;
 }
 
@@ -157,12 +139,8 @@ void KitchenCuttingDomain::CheckHeldOut(std::uint64_t data_seed, long count, dat
   franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
-cbf::BarrierCheckProblem KitchenCuttingDomain::MakeCheckProblem(
-    const shield::ShieldOptions& shield, const data::StateSet& safe,
-    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
-  options_.Validate();
+franka::ArmCheckSpec KitchenCuttingDomain::CheckSpec() const {
   franka::ArmCheckSpec spec;
-  spec.domain = name();
   spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
     for (int k = 0; k < 3; ++k) {
       const float hand = static_cast<float>(0.005 * rng.Normal());
@@ -199,7 +177,7 @@ cbf::BarrierCheckProblem KitchenCuttingDomain::MakeCheckProblem(
   spec.region_description =
       "held-out safe and near-dangerous observations, perturbed (hand and blade sd 0.005 m, ee "
       "velocity sd 0.05 m/s, the person's arm sd 0.01 m, its velocities sd 0.05 m/s)";
-  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+  return spec;
 }
 
 double ObservedEdgeClearance(const KitchenCuttingOptions& task,

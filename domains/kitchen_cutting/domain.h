@@ -5,10 +5,10 @@
 #include <string>
 
 #include "domains/kitchen_cutting/data.h"
+#include "domains/franka/arm_domain.h"
 #include "domains/kitchen_cutting/kitchen_cutting.h"
 #include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
-#include "secure/experiments/options_domain.h"
 
 namespace secure::domains::kitchen_cutting {
 
@@ -30,12 +30,11 @@ struct KitchenCuttingDomainOptions {
   nlohmann::json ToJson() const;
 };
 
-class KitchenCuttingDomain final : public experiments::OptionsDomain<KitchenCuttingDomainOptions> {
+class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomainOptions> {
  public:
   explicit KitchenCuttingDomain(experiments::Profile profile = experiments::Profile::kFull);
 
   std::string name() const override { return "kitchen-cutting"; }
-  std::string Describe() const override;
   std::string Title() const override { return "Kitchen Cutting"; }
   std::string ConfigSection() const override { return "kitchen_cutting"; }
 
@@ -65,17 +64,15 @@ class KitchenCuttingDomain final : public experiments::OptionsDomain<KitchenCutt
   ///    shoulder);
   ///  - dynamics: the environment's shield model (KitchenShieldModel), action box [-1, 1]^3, dt
   ///    and class-K from the shield's options.
-  bool HasCheck() const override { return true; }
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
-  cbf::BarrierCheckProblem MakeCheckProblem(
-      const shield::ShieldOptions& shield, const data::StateSet& safe,
-      const data::StateSet& near_dangerous,
-      std::unique_ptr<DynamicsModel>* dynamics) const override;
 
   /// Table 3's kitchen row: the real robot, 10 episodes (BC 70 / AIRL 80 / SECURE 90 % success,
   /// 100 / 100 / 0 % dangerous; no standard deviations).
   std::optional<experiments::PaperTable3> PaperReference() const override;
+
+ protected:
+  franka::ArmCheckSpec CheckSpec() const override;
 };
 
 /// The barrier's input: the blade's edge, the end-effector velocity, the person's wrist, elbow

@@ -317,14 +317,9 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
         break;
       }
     }
-    if (toppled) {
-      ++out.discarded_toppled;
+    if (!KeepOrCountDiscarded(toppled, success && push_begin >= 0, &out.discarded_toppled,
+                              &out.discarded_failed))
       continue;
-    }
-    if (!success || push_begin < 0) {
-      ++out.discarded_failed;
-      continue;
-    }
     out.push_begin.push_back(collector.KeepEpisode() + push_begin);
     ++kept;
   }

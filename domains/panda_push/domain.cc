@@ -75,11 +75,7 @@ YamlFields PandaPushDomainOptions::Fields() {
 SECURE_YAML_JSON_FROM_FIELDS(PandaPushDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-PandaPushDomain::PandaPushDomain(experiments::Profile profile) : OptionsDomain(profile) {}
-
-std::string PandaPushDomain::Describe() const {
-  return PandaPushEnv(options_.task, options_.shield_model).Describe();
-}
+PandaPushDomain::PandaPushDomain(experiments::Profile profile) : ArmDomain(profile) {}
 
 std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {
   return std::make_unique<PandaPushEnv>(options_.task, options_.shield_model);
@@ -147,20 +143,7 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   std::vector<experiments::LabelCheckRow> rows;
   auto add = [&](const std::string& name, const std::string& label, const data::StateSet& set) {
     const LabelCheckResult r = panda_push::CheckLabels(options_.task, set, check);
-    experiments::LabelCheckRow row;
-    row.set = name;
-    row.label = label;
-    row.states = r.states;
-    row.dangerous = r.toppled;
-    row.skipped = r.unreachable;
-    rows.push_back(row);
-  };
-  auto columns = [](const data::StateSet& from, const std::vector<long>& cols) {
-    data::StateSet s;
-    s.features = from.features;
-    s.source = from.source;
-    s.states = data::SelectColumns(from.states, cols);
-    return s;
+    rows.push_back(franka::LabelRow(name, label, r.states, r.toppled, r.unreachable));
   };
   add("safe states", "safe", safe);
   std::vector<long> pushing;
@@ -170,16 +153,11 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   data::StateSet demo_states;
   demo_states.features = ObservationFeatures();
   demo_states.states = demos.trajectories.states;
-  add("demonstration states while pushing", "safe", columns(demo_states, pushing));
-  for (NearDangerousScenario k : {NearDangerousScenario::kUpper, NearDangerousScenario::kFastX,
-                                  NearDangerousScenario::kFastZ, NearDangerousScenario::kBoth}) {
-    std::vector<long> cols;
-    for (long i = 0; i < static_cast<long>(kinds.size()); ++i)
-      if (kinds[i] == k) cols.push_back(i);
-    if (!cols.empty())
-      add(std::string("near-dangerous (") + ScenarioName(k) + ")", "near-dangerous",
-          columns(near, cols));
-  }
+  add("demonstration states while pushing", "safe", franka::SelectStates(demo_states, pushing));
+  franka::AddScenarioRows(near, kinds,
+                          {NearDangerousScenario::kUpper, NearDangerousScenario::kFastX,
+                           NearDangerousScenario::kFastZ, NearDangerousScenario::kBoth},
+                          add);
   if (!options_.released_data_dir.empty()) {
     const ReleasedPandaFiles released = ReadReleasedPandaFiles(options_.released_data_dir);
     data::StateSet released_demos;
@@ -209,12 +187,8 @@ void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::St
   franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
-cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
-    const shield::ShieldOptions& shield, const data::StateSet& safe,
-    const data::StateSet& near_dangerous, std::unique_ptr<DynamicsModel>* dynamics) const {
-  options_.Validate();
+franka::ArmCheckSpec PandaPushDomain::CheckSpec() const {
   franka::ArmCheckSpec spec;
-  spec.domain = name();
   spec.perturb = [](Rng& rng, Eigen::Ref<Eigen::VectorXf> s) {
     franka::AddNoise(rng, 0.005, kEePos, 3, s);
     franka::AddNoise(rng, 0.05, kEeVel, 3, s);
@@ -240,7 +214,7 @@ cbf::BarrierCheckProblem PandaPushDomain::MakeCheckProblem(
       "held-out safe and near-dangerous observations, perturbed (ee position sd 0.005 m, ee "
       "velocity sd 0.05 m/s, block position sd 0.005 m, Euler angles sd 0.02 rad, velocity sd "
       "0.02 m/s, angular velocity sd 0.05 rad/s)";
-  return franka::ArmCheckProblem(spec, MakeEnvironment(), shield, safe, near_dangerous, dynamics);
+  return spec;
 }
 
 experiments::ExperimentOptions PandaPushDomain::Preset() const {

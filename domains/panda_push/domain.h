@@ -4,11 +4,11 @@
 #include <memory>
 #include <string>
 
+#include "domains/franka/arm_domain.h"
 #include "domains/panda_push/data.h"
 #include "domains/panda_push/panda_push.h"
 #include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
-#include "secure/experiments/options_domain.h"
 
 namespace secure::domains::panda_push {
 
@@ -40,12 +40,11 @@ struct PandaPushDomainOptions {
   nlohmann::json ToJson() const;
 };
 
-class PandaPushDomain final : public experiments::OptionsDomain<PandaPushDomainOptions> {
+class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
  public:
   explicit PandaPushDomain(experiments::Profile profile = experiments::Profile::kFull);
 
   std::string name() const override { return "panda-push"; }
-  std::string Describe() const override;
   std::string Title() const override { return "Panda Arm Push"; }
   std::string ConfigSection() const override { return "panda_push"; }
 
@@ -92,18 +91,16 @@ class PandaPushDomain final : public experiments::OptionsDomain<PandaPushDomainO
   ///  - dynamics: the environment's shield model (shield_model: approximate, or the privileged
   ///    rollout, which costs one simulated control period per action the check tries), action box
   ///    [-1, 1]^3, dt and class-K from the shield's options.
-  bool HasCheck() const override { return true; }
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
-  cbf::BarrierCheckProblem MakeCheckProblem(
-      const shield::ShieldOptions& shield, const data::StateSet& safe,
-      const data::StateSet& near_dangerous,
-      std::unique_ptr<DynamicsModel>* dynamics) const override;
 
   /// The report's pictures (report_hints.cc): the barrier over the end effector's height and
   /// pushing speed; Table 3's Panda Arm Push row.
   std::optional<experiments::ReportHints> MakeReportHints() const override;
   std::optional<experiments::PaperTable3> PaperReference() const override;
+
+ protected:
+  franka::ArmCheckSpec CheckSpec() const override;
 
  private:
   // The label check's continuation with this domain's shield-model velocity gain (also the

@@ -342,38 +342,46 @@ CarBarrierEvaluator::CarBarrierEvaluator(const CarBarrierNet& net, int max_state
   active_gradients_.resize(net.input.feature_dim(), gradient_chunk);
 }
 
+Eigen::Index CarBarrierEvaluator::GatherCars(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                                             Eigen::Index first, Eigen::Index m, bool dense,
+                                             bool record_cars) {
+  const int k = layout_.num_obstacles;
+  Eigen::Index c = 0;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const float* s = states.col(first + i).data();
+    int count = 0;
+    for (int j = 0; j < k; ++j) {
+      const float* p = s + layout_.PositionIndex(j);
+      const float dx = p[0], dy = p[1];
+      const float d = std::sqrt(dx * dx + dy * dy + eps_);
+      const bool in_range = !(d > big_r_);  // NaN stays in: it must not read as "no car"
+      if (!in_range && !dense) continue;
+      float* f = features_.col(c).data();
+      f[0] = dx;
+      f[1] = dy;
+      f[2] = d - r_;
+      if (use_velocity_) {
+        const float* v = s + layout_.VelocityIndex(j);
+        f[3] = v[0];
+        f[4] = v[1];
+      }
+      if (dense) in_range_[static_cast<std::size_t>(c)] = in_range ? 1 : 0;
+      if (record_cars) entry_car_[static_cast<std::size_t>(c)] = j;
+      ++c;
+      ++count;
+    }
+    count_[static_cast<std::size_t>(i)] = count;
+  }
+  return c;
+}
+
 void CarBarrierEvaluator::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf>& states,
                                            Eigen::Ref<Eigen::VectorXf> h, bool dense) {
   const Eigen::Index n = states.cols();
-  const int k = layout_.num_obstacles;
   for (Eigen::Index first = 0; first < n; first += max_states_) {
     const Eigen::Index m = std::min<Eigen::Index>(max_states_, n - first);
     // Gather the in-range cars of every state of the chunk (dense: every car).
-    Eigen::Index c = 0;
-    for (Eigen::Index i = 0; i < m; ++i) {
-      const float* s = states.col(first + i).data();
-      int count = 0;
-      for (int j = 0; j < k; ++j) {
-        const float* p = s + layout_.PositionIndex(j);
-        const float dx = p[0], dy = p[1];
-        const float d = std::sqrt(dx * dx + dy * dy + eps_);
-        const bool in_range = !(d > big_r_);  // NaN stays in: it must not read as "no car"
-        if (!in_range && !dense) continue;
-        float* f = features_.col(c).data();
-        f[0] = dx;
-        f[1] = dy;
-        f[2] = d - r_;
-        if (use_velocity_) {
-          const float* v = s + layout_.VelocityIndex(j);
-          f[3] = v[0];
-          f[4] = v[1];
-        }
-        if (dense) in_range_[static_cast<std::size_t>(c)] = in_range ? 1 : 0;
-        ++c;
-        ++count;
-      }
-      count_[static_cast<std::size_t>(i)] = count;
-    }
+    const Eigen::Index c = GatherCars(states, first, m, dense, /*record_cars=*/false);
     last_entries_ = static_cast<long>(c);
     // One forward over all of them.
     if (c > 0) {
@@ -402,35 +410,11 @@ void CarBarrierEvaluator::DoEvaluateGradient(const Eigen::Ref<const Eigen::Matri
   // least h_j below the cap), 0 at the cap. Per chunk: the forward over every in-range car
   // (EvaluateChunks' work) picks the active car of each state; one backward pass over those.
   const Eigen::Index n = states.cols();
-  const int k = layout_.num_obstacles;
   const Eigen::Index chunk = static_cast<Eigen::Index>(active_.size());
   gradients.setZero();
   for (Eigen::Index first = 0; first < n; first += chunk) {
     const Eigen::Index m = std::min(chunk, n - first);
-    Eigen::Index c = 0;
-    for (Eigen::Index i = 0; i < m; ++i) {
-      const float* s = states.col(first + i).data();
-      int count = 0;
-      for (int j = 0; j < k; ++j) {
-        const float* p = s + layout_.PositionIndex(j);
-        const float dx = p[0], dy = p[1];
-        const float d = std::sqrt(dx * dx + dy * dy + eps_);
-        if (d > big_r_) continue;
-        float* f = features_.col(c).data();
-        f[0] = dx;
-        f[1] = dy;
-        f[2] = d - r_;
-        if (use_velocity_) {
-          const float* v = s + layout_.VelocityIndex(j);
-          f[3] = v[0];
-          f[4] = v[1];
-        }
-        entry_car_[static_cast<std::size_t>(c)] = j;
-        ++c;
-        ++count;
-      }
-      count_[static_cast<std::size_t>(i)] = count;
-    }
+    const Eigen::Index c = GatherCars(states, first, m, /*dense=*/false, /*record_cars=*/true);
     if (c > 0) {
       Eigen::Map<Eigen::RowVectorXf> out(entry_h_.data(), c);
       mlp_.Forward(features_.leftCols(c), workspace_, out);

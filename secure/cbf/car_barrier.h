@@ -187,6 +187,12 @@ class CarBarrierEvaluator final : public SkippingBarrier {
                           Eigen::Ref<Eigen::MatrixXf> gradients) override;
 
  private:
+  // Gathers the cars of states first..first+m-1 into features_ (in-range cars; dense: every
+  // car, with in_range_ per entry), their counts per state into count_, and with record_cars
+  // each entry's car into entry_car_. Returns the entries gathered.
+  Eigen::Index GatherCars(const Eigen::Ref<const Eigen::MatrixXf>& states, Eigen::Index first,
+                          Eigen::Index m, bool dense, bool record_cars);
+
   ObstacleLayout layout_;
   bool use_velocity_;
   float r_, big_r_, eps_, cap_;

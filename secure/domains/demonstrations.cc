@@ -60,4 +60,25 @@ data::TrajectorySet DemonstrationCollector::Finish() const {
   return out;
 }
 
+bool KeepOrCountDiscarded(bool dangerous, bool reached_goal, long* discarded_dangerous,
+                          long* discarded_failed) {
+  if (dangerous) {
+    ++*discarded_dangerous;
+    return false;
+  }
+  if (!reached_goal) {
+    ++*discarded_failed;
+    return false;
+  }
+  return true;
+}
+
+void CheckAllKept(const std::string& generator, const std::string& option, long kept, long wanted,
+                  long attempted, long discarded_collisions, long discarded_no_goal) {
+  SECURE_CHECK(kept == wanted, generator << ": kept " << kept << " of " << option << " = "
+                                         << wanted << " demonstrations after " << attempted
+                                         << " attempts (" << discarded_collisions << " collided, "
+                                         << discarded_no_goal << " never reached the goal)");
+}
+
 }  // namespace secure::domains

@@ -60,6 +60,25 @@ struct RecordedEpisode {
   int reached_at = 0;     // the first step (1, 2, ...) whose outcome reached the goal; 0 = never
 };
 
+/// What the generators that keep only the episodes that reached the goal without a dangerous
+/// event do with an attempt: true to keep it; otherwise it is counted in *discarded_dangerous
+/// (it had a dangerous event: a collision, a topple, a violation) or else in *discarded_failed
+/// (it never reached the goal).
+bool KeepOrCountDiscarded(bool dangerous, bool reached_goal, long* discarded_dangerous,
+                          long* discarded_failed);
+/// The same for a recorded episode (collided; reached_at > 0).
+inline bool KeepOrCountDiscarded(const RecordedEpisode& episode, long* discarded_dangerous,
+                                 long* discarded_failed) {
+  return KeepOrCountDiscarded(episode.collided, episode.reached_at > 0, discarded_dangerous,
+                              discarded_failed);
+}
+
+/// The expert generators' require_all check: @throws secure::Error "<generator>: kept K of
+/// <option> = N demonstrations after A attempts (C collided, G never reached the goal)" if
+/// `kept` < `wanted`.
+void CheckAllKept(const std::string& generator, const std::string& option, long kept, long wanted,
+                  long attempted, long discarded_collisions, long discarded_no_goal);
+
 /// Records one episode of a demonstrator in `collector` (BeginEpisode first), from `observation`
 /// (the environment's state after its Reset; updated in place): for step = 1, ..., horizon,
 /// `act(observation, action, recorded)` sets the action to step with and the one to record (the
