@@ -15,11 +15,11 @@
 // cache. The output layer (one or a few rows) and single columns (a policy's single-state
 // forward) stay Eigen products (a matrix-vector product, as fast there). Batches of 2-7 columns
 // (a learned model's K members, a linearisation's 2n + 1 points) take LIBXSMM's tails: Eigen's
-// GEMM repacks the weights on every call, 2.3-3.6x slower there on the Panda barrier. MatmulBackend::kEigen
-// selects Eigen's GEMM for every layer (the reference, and the A/B baseline of the benchmarks);
-// kAuto uses LIBXSMM when it can generate code for this CPU and Eigen otherwise, and backend()
-// says which one a model uses. Both compute the same function; results differ by float rounding
-// (~1e-6 relative).
+// GEMM repacks the weights on every call, 2.0-3.4x slower there on the Panda barrier.
+// MatmulBackend::kEigen selects Eigen's GEMM for every layer (the reference, and the A/B
+// baseline of the benchmarks); kAuto uses LIBXSMM when it can generate code for this CPU and
+// Eigen otherwise, and backend() says which one a model uses. Both compute the same function;
+// results differ by float rounding (~1e-6 relative).
 //
 // Forcing a path (tests, A/B runs): the environment variable SECURE_MATMUL_BACKEND=eigen|libxsmm
 // replaces kAuto in every constructor of the process (an explicit kEigen or kLibxsmm is kept), and
