@@ -153,7 +153,7 @@ inline constexpr EnumTable<ActionBounds, 3> kActionBoundsNames{{
 /// Whether a decision first tries the CBF-QP's projection of the policy's mean (docs/SHIELD.md,
 /// "CBF-QP and the gradient-first shield"). mu itself is checked first with the exact g: if g(mu)
 /// >= qp_margin it is the QP's answer, with one model step and one barrier evaluation. Otherwise
-/// the projection linearises g at mu (its value the exact g(mu)), with the barrier's
+/// the projection linearises g at mu, with the barrier's
 /// gradient at the predicted state s+ = T(s, mu) and the model's action Jacobian J at mu (central
 /// differences of T, exact up to rounding for a model affine in the action):
 ///   g(a) ~ g(mu) + (grad h(s+) . J (a - mu)) / dt >= 0,
