@@ -282,6 +282,9 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
       ShieldFlag(cmd, "--qp-iterations", &so->qp_iterations, &O::qp_iterations,
                  "proposal: linearisations per decision (re-linearised at a rejected "
                  "projection)"),
+      ShieldFlag(cmd, "--qp-line-search", &so->qp_line_search, &O::qp_line_search,
+                 "proposal qp, qp-only: secant steps on the exact g along a rejected "
+                 "projection's line (0: none)"),
       ShieldFlag(cmd, "--qp-margin", &so->qp_margin, &O::qp_margin,
                  "proposal: the projection asks the linearised g >= this margin"),
       ShieldFlag(cmd, "--qp-max-step", &so->qp_max_step, &O::qp_max_step,

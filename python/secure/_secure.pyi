@@ -327,8 +327,9 @@ class Shield:
     sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or 'antithetic',
     'qmc'), top_q_fraction=0.3, lookahead_steps=1, action_bounds='clip' (or 'reject', 'ignore'),
     proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
-    alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_margin=0,
-    qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
+    alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_line_search=0
+    (proposal 'qp' / 'qp-only': secant steps on the exact g along a rejected projection's line),
+    qp_margin=0, qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
     qp_metric='euclidean' (or 'policy': proposal 'qp' / 'qp-only' project in the policy's metric
     (a - mu)^T diag(sigma)^-2 (a - mu); needs sigma > 0),
     refine_steps=5); aggregation may also be 'first-safe' (the first-safe sampler).

@@ -332,6 +332,44 @@ def test_shield_keeps_decisions_inside_the_actuator_box(tiny_barrier):
         secure.Shield(barrier, builtin, action_bounds="wrap")
 
 
+def test_shield_qp_line_search_option():
+    """qp_line_search: secant steps on the exact g along a rejected projection's line. On a model
+    curved in the action the textbook projection is often rejected; the search recovers many of
+    those, and what it accepts has g >= 0 (the exact check), as the shield recomputes it."""
+    barrier = secure.Barrier.ground_truth("double-integrator")
+
+    def step(s, a):  # the double integrator with a velocity change quadratic in the action
+        n = np.repeat(s[None, :], a.shape[0], axis=0).astype(np.float32)
+        n[:, 0] += 0.1 * s[2]
+        n[:, 1] += 0.1 * s[3]
+        n[:, 2] += 0.1 * a[:, 0] + 0.1 * a[:, 1] ** 2
+        n[:, 3] += 0.1 * a[:, 1] - 0.05 * a[:, 0] ** 2
+        return n
+
+    curved = secure.Dynamics.from_callable(step, 4, 2)
+    plain = secure.Shield(barrier, curved, proposal="qp-only")
+    search = secure.Shield(barrier, curved, proposal="qp-only", qp_line_search=2)
+    assert "qp_line_search" not in plain.options and search.options["qp_line_search"] == 2
+    rng = np.random.default_rng(0)
+    sigma = np.ones(2, dtype=np.float32)
+    rejected = recovered = 0
+    for _ in range(400):
+        s = np.array([rng.uniform(0, 10), rng.uniform(0, 10), rng.uniform(-2, 2),
+                      rng.uniform(-2, 2)], dtype=np.float32)
+        mu = rng.uniform(-3, 3, 2).astype(np.float32)
+        if plain.decide(s, mu, sigma).to_dict()["qp"] != "rejected":
+            continue
+        rejected += 1
+        d = search.decide(s, mu, sigma).to_dict()
+        if d["qp"] == "accepted":
+            recovered += 1
+            a = np.array([d["action"]], dtype=np.float32)
+            assert d["g"] >= 0 and abs(search.evaluate_g(s, a)[0] - d["g"]) <= 1e-5
+    assert rejected >= 20 and recovered >= rejected // 3, (rejected, recovered)
+    with pytest.raises(ValueError, match="qp_line_search"):
+        secure.Shield(barrier, curved, proposal="qp", qp_line_search=-1)
+
+
 def test_shield_qp_metric_option():
     """qp_metric='policy': the CBF-QP projects in the policy's metric (a - mu)^T diag(sigma)^-2
     (a - mu), so the policy's sure axis (small sigma) moves less than in the Euclidean one."""

@@ -89,6 +89,7 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
     qp_low_.resize(action_dim_);
     qp_high_.resize(action_dim_);
     qp_solution_.resize(action_dim_);
+    qp_point_.resize(action_dim_);
     qp_scratch_.reserve(static_cast<std::size_t>(2 * action_dim_));
     if (options_.qp_metric == QpMetric::kPolicy) {
       qp_sigma_.resize(action_dim_);

@@ -228,6 +228,8 @@ inline constexpr EnumTable<QpMetric, 2> kQpMetricNames{{
 inline constexpr int kMaxLookaheadSteps = 100;
 /// The largest ShieldOptions::qp_iterations.
 inline constexpr int kMaxQpIterations = 10;
+/// The largest ShieldOptions::qp_line_search.
+inline constexpr int kMaxQpLineSearch = 10;
 /// The largest ShieldOptions::refine_steps.
 inline constexpr int kMaxRefineSteps = 50;
 
@@ -262,6 +264,15 @@ struct ShieldOptions {
   // Linearisations per decision: when the projection's exact g < 0, re-linearise at it and
   // project mu again, up to this many times in all (1: the textbook CBF-QP).
   int qp_iterations = 1;
+  // Exact checks along a rejected projection's line (proposal qp and qp-only; 0: none). The
+  // projection lands on the linearised boundary, and where g curves away from its tangent the
+  // exact g there is a little below 0. Each step is a secant step on the exact g along the line
+  // from the linearisation point a0 through the projection a*, a(t) = a0 + t (a* - a0), clipped
+  // to the box: from the last two points it aims past the boundary by the deficit it just saw
+  // (g = target + (target - g_last)), and the first a(t) with g >= 0 is the decision; a secant
+  // that does not rise, or a point beyond qp_max_step (proposal qp), ends it. One model step and
+  // one barrier evaluation per step (docs/SHIELD.md).
+  int qp_line_search = 0;
   // The linearised condition the projection asks for is g >= qp_margin (>= 0, in g's units): a
   // buffer against the linearisation's error on a curved barrier or model. (A fixed 1e-4 (1 +
   // |h(s)|) / dt is always added, against float rounding.) The exact check is g >= 0 whatever
@@ -457,6 +468,11 @@ class Shield {
   // neighbours (qp_next_), h and grad h at T(s, a0), the Jacobian, and the normal c = J^T grad h
   // / dt (qp_normal_). Returns g(a0) from that h.
   double Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
+  // qp_line_search's secant steps on the exact g along a0 + t (a* - a0) (a0 = qp_point_ with
+  // exact g g_point, a* = qp_solution_ with exact g g_solution); returns whether a point's g >= 0
+  // (then it is recorded in decision_).
+  bool LineSearch(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, double g_point,
+                  double g_solution);
   // proposal = refine: the gradient refinement of mu into decision_ (action, g, qp); returns
   // whether an iterate's exact g >= 0 (shield_refine.cc).
   bool RefineMean(const Eigen::Ref<const Eigen::VectorXf>& state,
@@ -510,6 +526,7 @@ class Shield {
   Eigen::MatrixXf qp_gradient_;   // (state_dim x 1)
   Eigen::MatrixXd qp_jacobian_;   // (state_dim x action_dim)
   Eigen::VectorXd qp_normal_, qp_mu_, qp_low_, qp_high_, qp_solution_;  // (action_dim)
+  Eigen::VectorXd qp_point_;  // (action_dim) the linearisation point a0 (qp_line_search's line)
   std::vector<double> qp_scratch_;           // (4 action_dim + 2) the QP's breakpoints
   Eigen::VectorXd qp_sigma_;                 // (action_dim) qp_metric = policy: the policy's sigma
   GaussianMetricScratch qp_metric_scratch_;  // qp_metric = policy: the problem in z

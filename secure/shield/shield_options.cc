@@ -35,6 +35,8 @@ void ShieldOptions::Validate() const {
                      "lookahead_steps", lookahead_steps, "in [1, " << kMaxLookaheadSteps << "]");
   SECURE_CHECK_FIELD(qp_iterations >= 1 && qp_iterations <= kMaxQpIterations, "ShieldOptions",
                      "qp_iterations", qp_iterations, "in [1, " << kMaxQpIterations << "]");
+  SECURE_CHECK_FIELD(qp_line_search >= 0 && qp_line_search <= kMaxQpLineSearch, "ShieldOptions",
+                     "qp_line_search", qp_line_search, "in [0, " << kMaxQpLineSearch << "]");
   SECURE_CHECK_FIELD(std::isfinite(qp_margin) && qp_margin >= 0, "ShieldOptions", "qp_margin",
                      qp_margin, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(qp_max_step) && qp_max_step >= 0, "ShieldOptions",
@@ -83,6 +85,8 @@ nlohmann::json ShieldOptions::ToJson() const {
       json["refine_steps"] = refine_steps;
     } else {
       json["qp_iterations"] = qp_iterations;
+      // (absent: none, as before it existed)
+      if (qp_line_search > 0) json["qp_line_search"] = qp_line_search;
     }
     json["qp_margin"] = qp_margin;
     // (absent: no limit, as before; it acts only with proposal = qp)
@@ -116,6 +120,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Enum("action_bounds", &action_bounds, kActionBoundsNames)
       .Enum("proposal", &proposal, kProposalNames)
       .Field("qp_iterations", &qp_iterations)
+      .Field("qp_line_search", &qp_line_search)
       .Field("qp_margin", &qp_margin)
       .Field("qp_max_step", &qp_max_step)
       .Enum("qp_metric", &qp_metric, kQpMetricNames)

@@ -357,4 +357,23 @@ TEST(CliTest, EvalAndShieldRunTakeTheQpMetric) {
                      "qp_metric_bad.yaml [pipeline] [shield] [qp_metric] = 'mahalanobis'");
 }
 
+// --qp-line-search reaches the shield of eval (flag and file, the flag winning) and is checked.
+TEST(CliTest, EvalTakesTheQpLineSearch) {
+  const std::string dir = (TempDir() / "qp_line_search").string();
+  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
+  const std::string cfg = Write("qp_line_search.yaml", "pipeline:\n  shield: {qp_line_search: 2}\n");
+  const std::string base = "eval --domain double-integrator --bc " + dir +
+                           "/bc.model --barrier ground-truth --methods bc+shield --seeds 1 "
+                           "--episodes 2 --proposal qp --json";
+  const auto shield_of = [](const Result& r) {
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out)["shield"] : nlohmann::json::object();
+  };
+  EXPECT_FALSE(shield_of(RunCli(base)).contains("qp_line_search"));
+  EXPECT_EQ(shield_of(RunCli(base + " --config " + cfg))["qp_line_search"], 2);
+  EXPECT_EQ(shield_of(RunCli(base + " --config " + cfg + " --qp-line-search 1"))["qp_line_search"],
+            1);
+  ExpectOneErrorLine(RunCli(base + " --qp-line-search 11"), "qp_line_search = 11");
+}
+
 }  // namespace

@@ -429,6 +429,11 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
     boxed.options.qp_margin = 0.5;
     scenarios.push_back(boxed);
     if (proposal == Proposal::kRefine) continue;
+    for (Scenario searched : {unsafe, boxed}) {  // secant steps along a rejected projection
+      searched.name += ", qp_line_search 3";
+      searched.options.qp_line_search = 3;
+      scenarios.push_back(searched);
+    }
     for (Scenario metric : {unsafe, boxed}) {  // the projection in the policy's metric
       metric.name += ", qp_metric policy";
       metric.options.qp_metric = QpMetric::kPolicy;

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <string>
 
 #include "domains/derby/derby.h"
 #include "domains/derby/domain.h"
@@ -111,6 +112,7 @@ ShieldOptions RandomOptions() {
   o.max_iterations = *rc::gen::inRange(1, 6);
   o.seed = *rc::gen::arbitrary<std::uint64_t>();
   o.qp_iterations = *rc::gen::inRange(1, 4);
+  o.qp_line_search = *rc::gen::inRange(0, 4);
   o.qp_margin = *rc::gen::element(0.0, 0.1);
   o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
   o.qp_metric = *rc::gen::element(QpMetric::kEuclidean, QpMetric::kPolicy);  // sigma > 0 here
@@ -356,6 +358,55 @@ TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
 // A constructed half-space (h(s) = w . s + b, an integrator: g affine in a): one Polyak step
 // moves a violating mean onto g >= 0; with a box the clipped steps stay in it and still reach the
 // half-space; a box the half-space misses is reported.
+// The same disc: the textbook projection a* lands just outside; one secant step of the line
+// search along mu + t (a* - mu), aimed past the boundary by the deficit g(a*), is accepted. The
+// decision lies on that line beyond a*, at the t the secant gives, and the gradient-first shield
+// then decides without sampling.
+TEST(QpShieldTest, ALineSearchOnTheExactGRecoversARejectedProjection) {
+  FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+    return 1.0 - static_cast<double>(s.squaredNorm());
+  });
+  const IntegratorDynamics dynamics(2, 0.1);
+  ShieldOptions o;
+  o.proposal = Proposal::kQpOnly;
+  const Eigen::VectorXf state = Vec({0.0f, 0.9f});
+  const Eigen::VectorXf mu = Vec({3.0f, 3.0f});
+  Shield plain(o, barrier, dynamics);
+  const Decision& rejected = plain.Decide(state, mu, Vec({0.1f, 0.1f}));
+  ASSERT_EQ(rejected.qp, QpOutcome::kRejected);
+  const Eigen::Vector2d a_star = rejected.action.cast<double>();
+  const double g_star = rejected.g;
+  ASSERT_LT(g_star, 0.0);
+  // g(mu) exactly: h(s + 0.1 mu) - h(s) over dt, plus alpha(h(s)) = h(s).
+  const Eigen::Vector2d s0 = state.cast<double>(), m = mu.cast<double>();
+  const auto h = [](const Eigen::Vector2d& s) { return 1.0 - s.squaredNorm(); };
+  const double g_mu = (h(s0 + 0.1 * m) - h(s0)) / 0.1 + h(s0);
+  ASSERT_LT(g_mu, g_star);  // g rises along the line
+
+  o.qp_line_search = 1;
+  Shield searching(o, barrier, dynamics);
+  const Decision& d = searching.Decide(state, mu, Vec({0.1f, 0.1f}));
+  EXPECT_EQ(d.qp, QpOutcome::kAccepted) << d.ToJson().dump();
+  EXPECT_EQ(d.fallback, Fallback::kNone);
+  EXPECT_GE(d.g, 0.0);
+  EXPECT_NEAR(d.g, (h(s0 + 0.1 * d.action.cast<double>()) - h(s0)) / 0.1 + h(s0), 1e-4);
+  // On the line, beyond a*, at t = 1 + 2 (target - g*) / (g* - g(mu)) (target ~ 0 here: the
+  // rounding margin 1e-4 (1 + |h(s)|) / dt).
+  const double target = 1e-4 * (1.0 + std::abs(h(s0))) / 0.1;
+  const double t = 1.0 + 2.0 * (target - g_star) / (g_star - g_mu);
+  const Eigen::Vector2d expected = m + t * (a_star - m);
+  EXPECT_NEAR(d.action[0], expected[0], 1e-4);
+  EXPECT_NEAR(d.action[1], expected[1], 1e-4);
+
+  // The gradient-first shield: the search decides, no sampling round runs.
+  o.proposal = Proposal::kQp;
+  Shield first(o, barrier, dynamics);
+  const Decision& f = first.Decide(state, mu, Vec({0.5f, 0.5f}));
+  EXPECT_EQ(f.qp, QpOutcome::kAccepted) << f.ToJson().dump();
+  EXPECT_EQ(f.iterations, 0);
+  EXPECT_TRUE(f.safe());
+}
+
 TEST(QpShieldTest, RefinementMovesAViolatingMeanIntoTheHalfSpaceWithinTheBox) {
   HalfSpace h;
   const Eigen::Vector2f& w = h.w;
@@ -437,11 +488,22 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
   o.qp_iterations = 0;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_iterations = 0");
   o.qp_iterations = 1;
+  EXPECT_FALSE(o.ToJson().contains("qp_line_search"));  // absent unless set (runs keep identity)
+  o.qp_line_search = 2;
+  EXPECT_EQ(o.ToJson()["qp_line_search"], 2);
+  for (int bad : {-1, kMaxQpLineSearch + 1}) {
+    o.qp_line_search = bad;
+    EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_line_search = " + std::to_string(bad));
+  }
+  o.qp_line_search = 0;
   o.qp_margin = -1;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_margin = -1");
   ShieldOptions y;
-  y.ApplyYaml(YAML::Load("{proposal: qp-only, qp_iterations: 3, qp_margin: 0.25}"), "s.yaml");
+  y.ApplyYaml(YAML::Load("{proposal: qp-only, qp_iterations: 3, qp_margin: 0.25, "
+                         "qp_line_search: 4}"),
+              "s.yaml");
   EXPECT_EQ(y.proposal, Proposal::kQpOnly);
+  EXPECT_EQ(y.qp_line_search, 4);
   EXPECT_EQ(y.qp_iterations, 3);
   EXPECT_EQ(y.qp_margin, 0.25);
   EXPECT_HAS(ErrorOf([&] { y.ApplyYaml(YAML::Load("{proposal: newton}"), "s.yaml"); }),
