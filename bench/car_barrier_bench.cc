@@ -24,27 +24,21 @@
 #include "secure/cbf/car_barrier.h"
 #include "secure/common/rng.h"
 #include "secure/nn/mlp.h"
+#include "tests/cbf/synthetic_derby_observations.h"
 
 namespace secure::bench {
 namespace {
 
-constexpr int kCars = 12;
-
 Eigen::MatrixXf Observations(int n, double half_width, std::uint64_t seed) {
   Rng rng(seed);
-  Eigen::MatrixXf obs(52, n);
+  Eigen::MatrixXf obs(test::kObs, n);
   for (int i = 0; i < n; ++i) {
-    for (int f = 0; f < 4; ++f) obs(f, i) = static_cast<float>(rng.Uniform(-1, 1));
-    std::vector<std::array<float, 4>> cars(kCars);
-    for (auto& c : cars)
-      c = {static_cast<float>(rng.Uniform(-half_width, half_width)),
-           static_cast<float>(rng.Uniform(-half_width, half_width)),
-           static_cast<float>(rng.Uniform(-0.5, 0.5)), static_cast<float>(rng.Uniform(-0.5, 0.5))};
-    std::sort(cars.begin(), cars.end(), [](const auto& a, const auto& b) {
-      return a[0] * a[0] + a[1] * a[1] < b[0] * b[0] + b[1] * b[1];
-    });
-    for (int j = 0; j < kCars; ++j)
-      for (int q = 0; q < 4; ++q) obs(4 + 4 * j + q, i) = cars[j][q];
+    const auto draw_car = [&](int) -> test::SyntheticCar {
+      return {static_cast<float>(rng.Uniform(-half_width, half_width)),
+              static_cast<float>(rng.Uniform(-half_width, half_width)),
+              static_cast<float>(rng.Uniform(-0.5, 0.5)), static_cast<float>(rng.Uniform(-0.5, 0.5))};
+    };
+    test::WriteSyntheticObservation(rng, draw_car, obs.col(i));
   }
   return obs;
 }

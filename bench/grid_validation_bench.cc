@@ -17,6 +17,7 @@
 #include <benchmark/benchmark.h>
 
 #include <memory>
+#include <string>
 
 #include "bench/bench_nets.h"
 #include "domains/double_integrator/ground_truth_barrier.h"
@@ -55,20 +56,31 @@ void ReportGrid(benchmark::State& state, const di::Grid& grid, const cbf::Confus
   state.counters["safe_as_unsafe"] = static_cast<double>(c.safe_as_unsafe);
 }
 
-// state.range(0): worker threads.
-void BM_GridValidation_Net(benchmark::State& state) {
-  const cbf::BarrierNet net = MakeDoubleIntegratorNet();
+// One full-grid pass per iteration with state.range(0) worker threads (the other options the
+// defaults) and the barrier from `make_barrier(truth)` (one per worker); the counters, and
+// `label`.
+template <typename MakeBarrier>
+void RunGridValidation(benchmark::State& state, MakeBarrier&& make_barrier,
+                       const std::string& label) {
   const di::GroundTruth truth;
   const di::Grid grid;
   cbf::GridValidationOptions options;
   options.threads = static_cast<int>(state.range(0));
   cbf::Confusion c;
   for (auto _ : state) {
-    c = domains::double_integrator::ValidateAgainstGroundTruth([&] { return net.MakeEvaluator(); }, truth, grid, options);
+    c = di::ValidateAgainstGroundTruth([&] { return make_barrier(truth); }, truth, grid, options);
     benchmark::DoNotOptimize(c);
   }
   ReportGrid(state, grid, c);
-  state.SetLabel(Describe(net.mlp.spec) + ", chunk " + std::to_string(options.chunk));
+  state.SetLabel(label);
+}
+
+// state.range(0): worker threads.
+void BM_GridValidation_Net(benchmark::State& state) {
+  const cbf::BarrierNet net = MakeDoubleIntegratorNet();
+  RunGridValidation(state, [&](const di::GroundTruth&) { return net.MakeEvaluator(); },
+                    Describe(net.mlp.spec) + ", chunk " +
+                        std::to_string(cbf::GridValidationOptions{}.chunk));
 }
 BENCHMARK(BM_GridValidation_Net)
     ->ArgName("threads")
@@ -79,19 +91,10 @@ BENCHMARK(BM_GridValidation_Net)
     ->Unit(benchmark::kSecond);
 
 void BM_GridValidation_GroundTruth(benchmark::State& state) {
-  const di::GroundTruth truth;
-  const di::Grid grid;
-  cbf::GridValidationOptions options;
-  options.threads = static_cast<int>(state.range(0));
-  cbf::Confusion c;
-  for (auto _ : state) {
-    c = domains::double_integrator::ValidateAgainstGroundTruth(
-        [&] { return std::make_unique<domains::double_integrator::GroundTruthBarrier>(truth); }, truth, grid,
-        options);
-    benchmark::DoNotOptimize(c);
-  }
-  ReportGrid(state, grid, c);
-  state.SetLabel("analytic ground truth (no network)");
+  RunGridValidation(
+      state,
+      [](const di::GroundTruth& truth) { return std::make_unique<di::GroundTruthBarrier>(truth); },
+      "analytic ground truth (no network)");
 }
 BENCHMARK(BM_GridValidation_GroundTruth)
     ->ArgName("threads")

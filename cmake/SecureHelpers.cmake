@@ -41,11 +41,12 @@ const char ${symbol}[] = R\"mjcf(@_text@)mjcf\";
   set(${out_var} ${_out} PARENT_SCOPE)
 endfunction()
 
-# secure_add_test(<name> <module-label> SOURCES ... DEPS ...)
+# secure_add_test(<name> <module-label> [CLI] SOURCES ... DEPS ...)
 # One GoogleTest executable per unit, registered with CTest and labelled by module
-# (ctest -L cbf runs the cbf tests).
+# (ctest -L cbf runs the cbf tests). CLI: the test runs the `secure` executable, whose path is
+# SECURE_CLI there (and which is built first).
 function(secure_add_test name label)
-  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  cmake_parse_arguments(ARG "CLI" "" "SOURCES;DEPS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR})  # "tests/test_util.h"
   target_compile_options(${name} PRIVATE ${SECURE_WARNINGS} ${SECURE_TEST_OPTIMIZATION})
@@ -57,6 +58,10 @@ function(secure_add_test name label)
   # again. `ctest -L property-random` runs the properties with fresh seeds (tests/CMakeLists.txt).
   gtest_discover_tests(${name} PROPERTIES LABELS ${label} DISCOVERY_TIMEOUT 60
     ENVIRONMENT "RC_PARAMS=seed=${SECURE_RAPIDCHECK_SEED}")
+  if(ARG_CLI)
+    target_compile_definitions(${name} PRIVATE SECURE_CLI="$<TARGET_FILE:secure>")
+    add_dependencies(${name} secure)
+  endif()
 endfunction()
 
 # secure_add_domain(<name> SOURCES ... DEPS ... [PRIVATE_DEPS ...] [TESTS ...] [TEST_DEPS ...])
@@ -93,9 +98,7 @@ function(secure_add_domain_tests)
       continue()
     endif()
     get_property(_deps GLOBAL PROPERTY SECURE_DOMAIN_TEST_DEPS_${_d})
-    secure_add_test(${_d}_test domains SOURCES ${_tests} DEPS secure::domain_${_d} ${_deps})
-    target_compile_definitions(${_d}_test PRIVATE SECURE_CLI="$<TARGET_FILE:secure>")
-    add_dependencies(${_d}_test secure)
+    secure_add_test(${_d}_test domains CLI SOURCES ${_tests} DEPS secure::domain_${_d} ${_deps})
   endforeach()
 endfunction()
 

@@ -89,17 +89,10 @@ nlohmann::json ReachAvoidOptions::ToJson() const {
 }
 
 void ReachAvoidOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of reach-avoid task options");
   static const std::set<std::string> known = {
       "obstacle",    "radius", "gamma",       "goal",       "goal_radius", "start_region",
       "start_speed", "dt",     "accel_bound", "brake_gain", "max_steps",   "start_clearance"};
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key
-                        << "' in the reach-avoid task options (valid: "
-                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
-    const YAML::Node& v = item.second;
+  const auto apply = [&](const std::string& key, const YAML::Node& v) {
     if (key == "obstacle") {
       YamlPair(v, key, source, &truth.obstacle_x, &truth.obstacle_y);
     } else if (key == "radius") {
@@ -125,7 +118,8 @@ void ReachAvoidOptions::ApplyYaml(const YAML::Node& node, const std::string& sou
     } else if (key == "max_steps") {
       max_steps = YamlValue<int>(v, key, source);
     }
-  }
+  };
+  ForEachYamlField(node, known, "reach-avoid task options", source, apply);
 }
 
 Eigen::Vector4f DrawStartState(const ReachAvoidOptions& o, Rng& rng) {

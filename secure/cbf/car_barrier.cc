@@ -267,10 +267,7 @@ void CarBarrierNet::Save(const std::string& path) const {
 }
 
 CarBarrierNet CarBarrierNet::Load(const std::string& path) {
-  const nn::ModelFile file = nn::ReadModelFile(path);
-  SECURE_CHECK(file.kind == kCarBarrierModelKind, path << ": holds a '" << file.kind
-                                                       << "' model, expected '"
-                                                       << kCarBarrierModelKind << "'");
+  const nn::ModelFile file = nn::ReadModelFileOfKind(path, kCarBarrierModelKind);
   CarBarrierNet net;
   net.input = CarFeatureSpec::FromJson(Field(file.metadata, "input", "", path), path);
   net.cap = NumberField(file.metadata, "cap", path);

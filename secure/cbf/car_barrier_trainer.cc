@@ -197,7 +197,6 @@ void CarBarrierTrainerOptions::Validate() const {
 }
 
 void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of car barrier trainer options");
   static const std::set<std::string> known = [] {
     std::set<std::string> k = {"layout",           "collision_radius", "sensing_radius",
                                "distance_epsilon", "use_velocity",     "hidden",
@@ -207,13 +206,7 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
     k.insert(Keys().begin(), Keys().end());
     return k;
   }();
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key
-                        << "' in the car barrier trainer options (valid: "
-                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
-    const YAML::Node& v = item.second;
+  const auto apply = [&](const std::string& key, const YAML::Node& v) {
     if (key == "layout") {
       SECURE_CHECK(v.IsMap(), source << ": field 'layout' must be a mapping");
       for (const auto& l : v) {
@@ -258,7 +251,8 @@ void CarBarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::stri
     } else {
       ApplyYamlKey(key, v, source);
     }
-  }
+  };
+  ForEachYamlField(node, known, "car barrier trainer options", source, apply);
 }
 
 nlohmann::json CarBarrierTrainerOptions::ToJson() const {

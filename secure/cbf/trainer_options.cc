@@ -33,7 +33,6 @@ void BarrierTrainerOptions::Validate() const {
 }
 
 void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of barrier trainer options");
   static const std::set<std::string> known = [] {
     std::set<std::string> k = {"hidden",          "activation",  "safe_margin",   "unsafe_margin",
                                "balance_classes", "safe_weight", "unsafe_weight", "input_features",
@@ -41,12 +40,7 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
     k.insert(Keys().begin(), Keys().end());
     return k;
   }();
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key << "' in the barrier trainer options (valid: "
-                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
-    const YAML::Node& v = item.second;
+  const auto apply = [&](const std::string& key, const YAML::Node& v) {
     if (key == "input_features") {
       input_features = YamlList<std::string>(v, key, source, "feature names");
     } else if (key == "hidden") {
@@ -69,7 +63,8 @@ void BarrierTrainerOptions::ApplyYaml(const YAML::Node& node, const std::string&
     } else {
       ApplyYamlKey(key, v, source);
     }
-  }
+  };
+  ForEachYamlField(node, known, "barrier trainer options", source, apply);
 }
 
 nlohmann::json BarrierTrainerOptions::ToJson() const {

@@ -4,11 +4,13 @@
 // Header-only; a target that includes it links yaml-cpp (secure::common itself does not).
 #include <yaml-cpp/yaml.h>
 
+#include <set>
 #include <string>
 #include <type_traits>
 #include <vector>
 
 #include "secure/common/error.h"
+#include "secure/common/strings.h"
 
 namespace secure {
 
@@ -52,6 +54,23 @@ std::vector<T> YamlList(const YAML::Node& node, const std::string& key, const st
 inline std::vector<int> YamlWidths(const YAML::Node& node, const std::string& key,
                                    const std::string& source) {
   return YamlList<int>(node, key, source, "layer widths");
+}
+
+/// Reads the mapping `node` of `what` (e.g. "reach-avoid task options") field by field:
+/// apply(key, value) for each entry, in file order. Errors name `source`: "expected a mapping of
+/// <what>" if `node` is not a mapping, and "unknown field 'k' in the <what> (valid: a, b, ...)"
+/// (`known` in sorted order) for a key not in `known`.
+template <typename Apply>
+void ForEachYamlField(const YAML::Node& node, const std::set<std::string>& known,
+                      const std::string& what, const std::string& source, Apply&& apply) {
+  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of " << what);
+  for (const auto& item : node) {
+    const std::string key = YamlKey(item.first, source);
+    SECURE_CHECK(known.count(key),
+                 source << ": unknown field '" << key << "' in the " << what << " (valid: "
+                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
+    apply(key, item.second);
+  }
 }
 
 }  // namespace secure

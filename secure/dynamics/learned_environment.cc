@@ -25,7 +25,7 @@ LearnedModelEnvironment::LearnedModelEnvironment(std::unique_ptr<domains::Enviro
                                                  std::shared_ptr<const EnsembleDynamics> model,
                                                  const std::string& source, int max_batch,
                                                  PessimismOptions pessimism)
-    : inner_(std::move(inner)),
+    : ForwardingEnvironment(std::move(inner)),
       source_(source),
       model_(std::move(model), max_batch, nn::MatmulBackend::kAuto, pessimism) {
   SECURE_CHECK(inner_ != nullptr, "LearnedModelEnvironment: no environment");

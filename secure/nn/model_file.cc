@@ -427,6 +427,13 @@ void WriteModelFile(const std::string& path, const ModelFile& file) {
 
 ModelFile ReadModelFile(const std::string& path) { return ParseModelFile(ReadFile(path), path); }
 
+ModelFile ReadModelFileOfKind(const std::string& path, const std::string& kind) {
+  ModelFile file = ReadModelFile(path);
+  SECURE_CHECK(file.kind == kind,
+               path << ": holds a '" << file.kind << "' model, expected '" << kind << "'");
+  return file;
+}
+
 namespace {
 bool IsTimingKey(const std::string& key) {
   auto ends_with = [&](const std::string& suffix) {

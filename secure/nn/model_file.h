@@ -52,6 +52,9 @@ ModelFile ParseModelFile(const std::string& bytes, const std::string& source);
 /// Atomic write / checked read of a model file.
 void WriteModelFile(const std::string& path, const ModelFile& file);
 ModelFile ReadModelFile(const std::string& path);
+/// ReadModelFile of a file that must hold a `kind` model: @throws secure::Error "<path>: holds a
+/// '<its kind>' model, expected '<kind>'" otherwise.
+ModelFile ReadModelFileOfKind(const std::string& path, const std::string& kind);
 
 /// `summary` without wall-clock timing: every member, at any depth, named "seconds" or ending in
 /// "_seconds" or "_per_second" is removed. Trainers store a training summary in the model file

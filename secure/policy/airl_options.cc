@@ -72,7 +72,6 @@ void AirlOptions::Validate() const {
 
 void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   using internal::YamlValue;
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of AIRL options");
   static const std::set<std::string> known = {"policy_hidden",
                                               "value_hidden",
                                               "reward_hidden",
@@ -105,12 +104,7 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
                                               "checkpoint_every",
                                               "resume",
                                               "stop_after_iterations"};
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key << "' in the AIRL options (valid: "
-                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
-    const YAML::Node& v = item.second;
+  const auto apply = [&](const std::string& key, const YAML::Node& v) {
     auto dbl = [&] { return YamlValue<double>(v, key, source); };
     auto integer = [&] { return YamlValue<int>(v, key, source); };
     if (key == "policy_hidden")
@@ -178,7 +172,8 @@ void AirlOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
       resume = YamlValue<bool>(v, key, source);
     else if (key == "stop_after_iterations")
       stop_after_iterations = integer();
-  }
+  };
+  ForEachYamlField(node, known, "AIRL options", source, apply);
 }
 
 nlohmann::json AirlOptions::ToJson() const {

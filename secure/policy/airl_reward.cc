@@ -57,12 +57,9 @@ void AirlRewardModel::Validate(const std::string& what) const {
 
 void AirlRewardModel::Save(const std::string& path) const {
   Validate(path);
-  nn::ModelFile file;
-  file.kind = kAirlRewardKind;
-  file.metadata["observation_features"] = observation_features;
-  if (!input_features.empty()) file.metadata["input_features"] = input_features;
+  nn::ModelFile file =
+      internal::FeatureModelFile(kAirlRewardKind, observation_features, input_features, provenance);
   file.metadata["discount"] = discount;
-  file.metadata["provenance"] = provenance;
   nn::AddMlp("reward", reward, &file);
   nn::AddMlp("shaping", shaping, &file);
   nn::AddNormalizer("input", input, &file);
@@ -70,10 +67,7 @@ void AirlRewardModel::Save(const std::string& path) const {
 }
 
 AirlRewardModel AirlRewardModel::Load(const std::string& path) {
-  const nn::ModelFile file = nn::ReadModelFile(path);
-  SECURE_CHECK(file.kind == kAirlRewardKind, path << ": holds a '" << file.kind
-                                                  << "' model, expected '" << kAirlRewardKind
-                                                  << "'");
+  const nn::ModelFile file = nn::ReadModelFileOfKind(path, kAirlRewardKind);
   AirlRewardModel model;
   model.observation_features = StringList(file.metadata, "observation_features", path);
   if (file.metadata.contains("input_features"))

@@ -39,18 +39,11 @@ void BcOptions::Validate() const {
 
 void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
   using internal::YamlValue;
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of behaviour cloning options");
   static const std::set<std::string> known = {
       "hidden",      "activation", "input_features", "learning_rate", "final_learning_rate",
       "epochs",      "batch_size", "weight_decay",   "validation_fraction",
       "min_log_std", "seed",       "verbose",        "curve_path"};
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    SECURE_CHECK(known.count(key),
-                 source << ": unknown field '" << key
-                        << "' in the behaviour cloning options (valid: "
-                        << Join(std::vector<std::string>(known.begin(), known.end())) << ")");
-    const YAML::Node& v = item.second;
+  const auto apply = [&](const std::string& key, const YAML::Node& v) {
     if (key == "hidden") {
       hidden = internal::YamlWidths(v, key, source);
     } else if (key == "activation") {
@@ -79,7 +72,8 @@ void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
     } else if (key == "curve_path") {
       curve_path = YamlValue<std::string>(v, key, source);
     }
-  }
+  };
+  ForEachYamlField(node, known, "behaviour cloning options", source, apply);
 }
 
 nlohmann::json BcOptions::ToJson() const {

@@ -81,13 +81,9 @@ void GaussianPolicy::CheckFeatures(const std::vector<std::string>& observation_n
 
 void GaussianPolicy::Save(const std::string& path) const {
   Validate(path);
-  nn::ModelFile file;
-  file.kind = kGaussianPolicyKind;
-  file.metadata["observation_features"] = observation_features;
-  // Only when it differs from the observation, so that other policies' files keep their bytes.
-  if (!input_features.empty()) file.metadata["input_features"] = input_features;
+  nn::ModelFile file = internal::FeatureModelFile(kGaussianPolicyKind, observation_features,
+                                                  input_features, provenance);
   file.metadata["action_features"] = action_features;
-  file.metadata["provenance"] = provenance;
   nn::AddMlp("mean", mean, &file);
   nn::AddNormalizer("input", input, &file);
   file.tensors.push_back({"log_std",
@@ -97,10 +93,7 @@ void GaussianPolicy::Save(const std::string& path) const {
 }
 
 GaussianPolicy GaussianPolicy::Load(const std::string& path) {
-  const nn::ModelFile file = nn::ReadModelFile(path);
-  SECURE_CHECK(file.kind == kGaussianPolicyKind, path << ": holds a '" << file.kind
-                                                      << "' model, expected '"
-                                                      << kGaussianPolicyKind << "'");
+  const nn::ModelFile file = nn::ReadModelFileOfKind(path, kGaussianPolicyKind);
   GaussianPolicy policy;
   policy.observation_features = StringList(file.metadata, "observation_features", path);
   policy.action_features = StringList(file.metadata, "action_features", path);

@@ -1,4 +1,5 @@
 #include "secure/cbf/car_barrier.h"
+#include "tests/cbf/synthetic_derby_observations.h"
 #include "tests/nn/nn_test_util.h"
 #include "tests/test_util.h"
 
@@ -24,8 +25,8 @@ namespace {
 
 using secure::test::ErrorOf;
 
-constexpr int kObs = 52;
-constexpr int kCars = 12;
+using test::kCars;
+using test::kObs;
 
 // The Demolition Derby observation layout (the derby plug-in's): 52 values, 12 blocks of 4 from 4.
 ObstacleLayout DerbyLayout() { return domains::derby::ObstacleLayoutOfObservation(); }
@@ -36,18 +37,12 @@ Eigen::MatrixXf RandomObservations(int n, double min_dist, double max_dist, std:
   Rng rng(seed);
   Eigen::MatrixXf obs(kObs, n);
   for (int i = 0; i < n; ++i) {
-    for (int f = 0; f < 4; ++f) obs(f, i) = static_cast<float>(rng.Uniform(-1, 1));
-    std::vector<std::array<float, 4>> cars(kCars);
-    for (auto& c : cars) {
+    const auto draw_car = [&](int) -> test::SyntheticCar {
       const double d = rng.Uniform(min_dist, max_dist), a = rng.Uniform(0, 2 * M_PI);
-      c = {static_cast<float>(d * std::cos(a)), static_cast<float>(d * std::sin(a)),
-           static_cast<float>(rng.Uniform(-0.5, 0.5)), static_cast<float>(rng.Uniform(-0.5, 0.5))};
-    }
-    std::sort(cars.begin(), cars.end(), [](const auto& a, const auto& b) {
-      return a[0] * a[0] + a[1] * a[1] < b[0] * b[0] + b[1] * b[1];
-    });
-    for (int j = 0; j < kCars; ++j)
-      for (int q = 0; q < 4; ++q) obs(4 + 4 * j + q, i) = cars[j][q];
+      return {static_cast<float>(d * std::cos(a)), static_cast<float>(d * std::sin(a)),
+              static_cast<float>(rng.Uniform(-0.5, 0.5)), static_cast<float>(rng.Uniform(-0.5, 0.5))};
+    };
+    test::WriteSyntheticObservation(rng, draw_car, obs.col(i));
   }
   return obs;
 }

@@ -1,7 +1,8 @@
 #pragma once
-// Synthetic Demolition Derby observations for the per-car barrier's trainer tests and benchmark
-// (tests/cbf/car_barrier_trainer_test.cc, bench/car_barrier_train_bench.cc): 52 values, goal
-// offset and velocity, then 12 cars (relative position and velocity) sorted nearest first.
+// Synthetic Demolition Derby observations for the per-car barrier's tests and benchmarks
+// (tests/cbf/car_barrier_trainer_test.cc, tests/cbf/car_barrier_test.cc,
+// bench/car_barrier_train_bench.cc, bench/car_barrier_bench.cc): 52 values, goal offset and
+// velocity, then 12 cars (relative position and velocity) sorted nearest first.
 #include <Eigen/Core>
 #include <algorithm>
 #include <array>
@@ -25,6 +26,24 @@ inline std::vector<std::string> ObsNames() {
   return names;
 }
 
+using SyntheticCar = std::array<float, 4>;  // dx, dy, dvx, dvy relative to the ego
+
+// One observation into `observation` (kObs values): the goal offset and ego velocity uniform in
+// [-1, 1) from `rng`, then the cars draw_car(0), ..., draw_car(kCars - 1) (drawn in that order)
+// sorted nearest first.
+template <typename DrawCar>
+void WriteSyntheticObservation(Rng& rng, DrawCar&& draw_car,
+                               Eigen::Ref<Eigen::VectorXf> observation) {
+  for (int f = 0; f < 4; ++f) observation[f] = static_cast<float>(rng.Uniform(-1, 1));
+  std::vector<SyntheticCar> cars(kCars);
+  for (int j = 0; j < kCars; ++j) cars[j] = draw_car(j);
+  std::sort(cars.begin(), cars.end(), [](const SyntheticCar& a, const SyntheticCar& b) {
+    return a[0] * a[0] + a[1] * a[1] < b[0] * b[0] + b[1] * b[1];
+  });
+  for (int j = 0; j < kCars; ++j)
+    for (int q = 0; q < 4; ++q) observation[4 + 4 * j + q] = cars[j][q];
+}
+
 // Synthetic Derby observations. Safe: every car farther than 0.2 (uniform in [-1.5, 1.5]^2, so
 // some are out of the sensing radius). Near-dangerous: the nearest car within 0.14, the others
 // farther than 0.2. Cars sorted nearest first.
@@ -33,9 +52,7 @@ inline data::StateSet Synthetic(bool near_dangerous, int n, std::uint64_t seed, 
   data::StateSet set{near_dangerous ? "synthetic near-dangerous" : "synthetic safe", ObsNames(),
                      Eigen::MatrixXf(kObs, n)};
   for (int i = 0; i < n; ++i) {
-    for (int f = 0; f < 4; ++f) set.states(f, i) = static_cast<float>(rng.Uniform(-1, 1));
-    std::vector<std::array<float, 4>> cars(kCars);
-    for (int j = 0; j < kCars; ++j) {
+    const auto draw_car = [&](int j) -> SyntheticCar {
       double x, y;
       if (near_dangerous && j == 0) {
         const double rho = rng.Uniform(0, 0.14), a = rng.Uniform(0, 2 * M_PI);
@@ -47,15 +64,11 @@ inline data::StateSet Synthetic(bool near_dangerous, int n, std::uint64_t seed, 
           y = rng.Uniform(-1.5, 1.5);
         } while (std::hypot(x, y) <= safe_min);
       }
-      cars[j] = {static_cast<float>(x), static_cast<float>(y),
-                 static_cast<float>(rng.Uniform(-0.5, 0.5)),
-                 static_cast<float>(rng.Uniform(-0.5, 0.5))};
-    }
-    std::sort(cars.begin(), cars.end(), [](const auto& a, const auto& b) {
-      return a[0] * a[0] + a[1] * a[1] < b[0] * b[0] + b[1] * b[1];
-    });
-    for (int j = 0; j < kCars; ++j)
-      for (int q = 0; q < 4; ++q) set.states(4 + 4 * j + q, i) = cars[j][q];
+      return {static_cast<float>(x), static_cast<float>(y),
+              static_cast<float>(rng.Uniform(-0.5, 0.5)),
+              static_cast<float>(rng.Uniform(-0.5, 0.5))};
+    };
+    WriteSyntheticObservation(rng, draw_car, set.states.col(i));
   }
   return set;
 }

@@ -1,57 +1,19 @@
 // Every registered domain's Environment::Step() and shield model allocate nothing
-// (domains/environment.h, domains/dynamics.h): a counting C allocator (operator new and Eigen
-// both allocate through malloc), so this is its own executable. Skipped under AddressSanitizer,
-// which owns malloc (tests/sanitizers.h; CMake does not build it in a sanitizer build).
+// (domains/environment.h, domains/dynamics.h): a counting C allocator (tests/malloc_counter.h;
+// operator new and Eigen both allocate through malloc), so this is its own executable. Skipped
+// under AddressSanitizer, which owns malloc (tests/sanitizers.h; CMake does not build it in a
+// sanitizer build).
 
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstddef>
-#include <cstdlib>
 #include <memory>
 #include <string>
 
 #include "secure/common/rng.h"
 #include "secure/experiments/domain.h"
 #include "tests/domains/domain_contract_util.h"
+#include "tests/malloc_counter.h"
 #include "tests/sanitizers.h"
-
-namespace {
-std::atomic<bool> counting{false};
-std::atomic<long> malloc_calls{0};
-void Count() {
-  if (counting.load(std::memory_order_relaxed)) malloc_calls.fetch_add(1);
-}
-}  // namespace
-
-#if !SECURE_TEST_ASAN
-extern "C" {
-void* __libc_malloc(std::size_t size);
-void* __libc_calloc(std::size_t count, std::size_t size);
-void* __libc_realloc(void* pointer, std::size_t size);
-void* __libc_memalign(std::size_t alignment, std::size_t size);
-void* malloc(std::size_t size) noexcept {
-  Count();
-  return __libc_malloc(size);
-}
-void* calloc(std::size_t count, std::size_t size) noexcept {
-  Count();
-  return __libc_calloc(count, size);
-}
-void* realloc(void* pointer, std::size_t size) noexcept {
-  Count();
-  return __libc_realloc(pointer, size);
-}
-void* memalign(std::size_t alignment, std::size_t size) noexcept {
-  Count();
-  return __libc_memalign(alignment, size);
-}
-void* aligned_alloc(std::size_t alignment, std::size_t size) noexcept {
-  Count();
-  return __libc_memalign(alignment, size);
-}
-}
-#endif
 
 namespace secure::test {
 namespace {
@@ -70,16 +32,15 @@ TEST_P(DomainAlloc, StepShieldModelAndBackupDoNotAllocate) {
   Rng rng(1), action_rng(2);
   for (Eigen::Index j = 0; j < actions.cols(); ++j) DrawAction(action_rng, actions.col(j));
   env->Reset(rng, o);
-  malloc_calls = 0;
-  counting = true;
+  BeginCountingMalloc();
   for (int t = 0; t < steps; ++t) {
     DrawAction(action_rng, a);
     env->ShieldModel().Step(o, actions, next);
     env->BackupAction(o, backup);
     env->Step(a, o);
   }
-  counting = false;
-  EXPECT_EQ(malloc_calls.load(), 0) << GetParam();
+  const long calls = EndCountingMalloc();
+  EXPECT_EQ(calls, 0) << GetParam();
 }
 
 INSTANTIATE_TEST_SUITE_P(AllRegistered, DomainAlloc, ::testing::ValuesIn(ContractDomainNames()),

@@ -40,6 +40,15 @@ struct Episode {
   std::vector<Eigen::VectorXf> observations;
   std::vector<bool> goal, collided;
   std::vector<int> collisions;
+
+  // One step of `env` with `action` (the observation `o` updated in place), recorded.
+  void Step(domains::Environment& env, const Eigen::VectorXf& action, Eigen::VectorXf& o) {
+    const domains::StepOutcome out = env.Step(action, o);
+    observations.push_back(o);
+    goal.push_back(out.reached_goal);
+    collided.push_back(out.collided);
+    collisions.push_back(out.collisions);
+  }
 };
 
 // An episode of `env` from Rng(seed) with actions drawn from Rng(action_seed), `steps` steps.
@@ -52,11 +61,7 @@ Episode RunEpisode(domains::Environment& env, std::uint64_t seed, std::uint64_t 
   e.observations.push_back(o);
   for (int t = 0; t < steps; ++t) {
     DrawAction(action_rng, a);
-    const domains::StepOutcome out = env.Step(a, o);
-    e.observations.push_back(o);
-    e.goal.push_back(out.reached_goal);
-    e.collided.push_back(out.collided);
-    e.collisions.push_back(out.collisions);
+    e.Step(env, a, o);
   }
   return e;
 }
@@ -174,11 +179,7 @@ TEST_P(DomainContract, CloneIsIndependent) {
     DrawAction(clone_actions, ca);
     clone->Step(ca, co);
     DrawAction(action_rng, a);
-    const domains::StepOutcome out = env_->Step(a, o);
-    interleaved.observations.push_back(o);
-    interleaved.goal.push_back(out.reached_goal);
-    interleaved.collided.push_back(out.collided);
-    interleaved.collisions.push_back(out.collisions);
+    interleaved.Step(*env_, a, o);
   }
   ExpectSameEpisode(reference, interleaved);
   // The clone, run alone, is an environment of its own with the same options.
@@ -369,11 +370,7 @@ TEST_P(DomainContract, RenderingWhereClaimed) {
     ASSERT_EQ(frame.rgb.size(), 3u * width * height) << "step " << t;
     if (t == steps) break;
     DrawAction(action_rng, a);
-    const domains::StepOutcome out = env_->Step(a, o);
-    rendered.observations.push_back(o);
-    rendered.goal.push_back(out.reached_goal);
-    rendered.collided.push_back(out.collided);
-    rendered.collisions.push_back(out.collisions);
+    rendered.Step(*env_, a, o);
   }
   ExpectSameEpisode(plain, rendered);
 }

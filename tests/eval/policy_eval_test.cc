@@ -24,13 +24,16 @@ using test::ErrorOf;
 using test::PdOnReachAvoid;
 using test::PdPolicy;
 
+// SeedModels::make_barrier for the scenario's task: its ground-truth barrier.
+std::function<std::unique_ptr<cbf::Barrier>()> GroundTruthOf(const PdOnReachAvoid& s) {
+  return [&s] { return std::make_unique<di::GroundTruthBarrier>(s.task.truth); };
+}
+
 TEST(PolicyEvalTest, ShieldWithGroundTruthPreventsTheCollisionsOfTheUnshieldedPolicy) {
   PdOnReachAvoid s(0.3);
   SeedModels models;
   models.airl = &s.pd;
-  models.make_barrier = [&] {
-    return std::make_unique<domains::double_integrator::GroundTruthBarrier>(s.task.truth);
-  };
+  models.make_barrier = GroundTruthOf(s);
   const auto results = EvaluateMethods(s.env, {Method::kAirl, Method::kSecure}, models,
                                        shield::ShieldOptions{}, 40, 7);
   const SeedResult& plain = results.at(Method::kAirl);
@@ -103,9 +106,7 @@ TEST(PolicyEvalTest, SameSeedGivesTheSameEpisodes) {
   PdOnReachAvoid s(0.5);
   SeedModels models;
   models.bc = &s.pd;
-  models.make_barrier = [&] {
-    return std::make_unique<domains::double_integrator::GroundTruthBarrier>(s.task.truth);
-  };
+  models.make_barrier = GroundTruthOf(s);
   const std::vector<Method> methods = {Method::kBc, Method::kBcShield};
   const auto a = EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 10, 3);
   const auto b = EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 10, 3);
@@ -308,7 +309,7 @@ TEST(PolicyEvalTest, EvaluateMethodsResultsArePinned) {
   SeedModels models;
   models.bc = &s.pd;
   models.airl = &s.pd;
-  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(s.task.truth); };
+  models.make_barrier = GroundTruthOf(s);
   for (const shield::ShieldOptions& options : {IgnoreTheBox(), shield::ShieldOptions{}}) {
     SCOPED_TRACE(options.ToJson().dump());
     const auto r = EvaluateMethods(
@@ -525,7 +526,7 @@ std::map<Method, SeedResult> EvaluateWithTheGroundTruth(const std::vector<Method
   PdOnReachAvoid s(0.3);
   SeedModels models;
   models.airl = &s.pd;
-  models.make_barrier = [&] { return std::make_unique<di::GroundTruthBarrier>(s.task.truth); };
+  models.make_barrier = GroundTruthOf(s);
   return EvaluateMethods(s.env, methods, models, shield::ShieldOptions{}, 20, 7);
 }
 

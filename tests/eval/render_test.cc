@@ -10,6 +10,7 @@
 
 #include "domains/double_integrator/ground_truth_barrier.h"
 #include "domains/double_integrator/reach_avoid.h"
+#include "secure/domains/forwarding_environment.h"
 #include "tests/eval/pd_policy.h"
 #include "tests/test_util.h"
 
@@ -21,17 +22,10 @@ using test::ErrorOf;
 
 // The reach-avoid task with a "renderer": the frame's first bytes are the current observation's
 // floats, the rest a constant; so a frame says which state it shows.
-class RenderableEnv final : public domains::Environment {
+class RenderableEnv final : public domains::ForwardingEnvironment {
  public:
   explicit RenderableEnv(std::unique_ptr<domains::Environment> inner)
-      : inner_(std::move(inner)), observation_(inner_->observation_dim()) {}
-  int observation_dim() const override { return inner_->observation_dim(); }
-  int action_dim() const override { return inner_->action_dim(); }
-  std::vector<std::string> ObservationFeatures() const override {
-    return inner_->ObservationFeatures();
-  }
-  std::vector<std::string> ActionFeatures() const override { return inner_->ActionFeatures(); }
-  int max_steps() const override { return inner_->max_steps(); }
+      : ForwardingEnvironment(std::move(inner)), observation_(inner_->observation_dim()) {}
   std::string Describe() const override { return "renderable " + inner_->Describe(); }
   void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override {
     inner_->Reset(rng, observation);
@@ -42,14 +36,6 @@ class RenderableEnv final : public domains::Environment {
     const domains::StepOutcome outcome = inner_->Step(action, observation);
     observation_ = observation;
     return outcome;
-  }
-  const domains::DynamicsModel& ShieldModel() const override { return inner_->ShieldModel(); }
-  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    inner_->ActionBounds(low, high);
-  }
-  bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& observation,
-                    Eigen::Ref<Eigen::VectorXf> action) const override {
-    return inner_->BackupAction(observation, action);
   }
   std::unique_ptr<Environment> Clone() const override {
     return std::make_unique<RenderableEnv>(inner_->Clone());
@@ -63,7 +49,6 @@ class RenderableEnv final : public domains::Environment {
   }
 
  private:
-  std::unique_ptr<domains::Environment> inner_;
   Eigen::VectorXf observation_;
 };
 

@@ -12,6 +12,7 @@
 
 #include "domains/coffee_placing/domain.h"
 #include "secure/common/error.h"
+#include "secure/domains/forwarding_environment.h"
 #include "secure/experiments/domain.h"
 #include "secure/experiments/user_study.h"
 
@@ -72,41 +73,20 @@ struct StartLog {
   std::map<int, std::vector<std::shared_ptr<std::vector<Eigen::VectorXf>>>> starts;
 };
 
-class RecordingEnv final : public domains::Environment {
+class RecordingEnv final : public domains::ForwardingEnvironment {
  public:
   RecordingEnv(std::unique_ptr<domains::Environment> inner,
                std::shared_ptr<std::vector<Eigen::VectorXf>> log)
-      : inner_(std::move(inner)), log_(std::move(log)) {}
-  int observation_dim() const override { return inner_->observation_dim(); }
-  int action_dim() const override { return inner_->action_dim(); }
-  std::vector<std::string> ObservationFeatures() const override {
-    return inner_->ObservationFeatures();
-  }
-  std::vector<std::string> ActionFeatures() const override { return inner_->ActionFeatures(); }
-  int max_steps() const override { return inner_->max_steps(); }
-  std::string Describe() const override { return inner_->Describe(); }
+      : ForwardingEnvironment(std::move(inner)), log_(std::move(log)) {}
   void Reset(Rng& rng, Eigen::Ref<Eigen::VectorXf> observation) override {
     inner_->Reset(rng, observation);
     log_->push_back(observation);
-  }
-  domains::StepOutcome Step(const Eigen::Ref<const Eigen::VectorXf>& action,
-                            Eigen::Ref<Eigen::VectorXf> observation) override {
-    return inner_->Step(action, observation);
-  }
-  const domains::DynamicsModel& ShieldModel() const override { return inner_->ShieldModel(); }
-  void ActionBounds(Eigen::Ref<Eigen::VectorXf> low, Eigen::Ref<Eigen::VectorXf> high) const override {
-    inner_->ActionBounds(low, high);
-  }
-  bool BackupAction(const Eigen::Ref<const Eigen::VectorXf>& o,
-                    Eigen::Ref<Eigen::VectorXf> a) const override {
-    return inner_->BackupAction(o, a);
   }
   std::unique_ptr<domains::Environment> Clone() const override {
     return std::make_unique<RecordingEnv>(inner_->Clone(), log_);
   }
 
  private:
-  std::unique_ptr<domains::Environment> inner_;
   std::shared_ptr<std::vector<Eigen::VectorXf>> log_;
 };
 

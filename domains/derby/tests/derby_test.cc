@@ -6,7 +6,6 @@
 
 #include <gtest/gtest.h>
 
-#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdlib>
@@ -16,40 +15,9 @@
 
 #include "secure/common/error.h"
 #include "secure/common/rng.h"
+#include "tests/malloc_counter.h"
 #include "tests/sanitizers.h"
 #include "tests/test_util.h"
-
-// ------------------------------------------------------------------------------------------------
-// Counting C allocator (operator new and Eigen both allocate through malloc); counting is off
-// except inside the allocation test. glibc-specific, as the project. Not in an AddressSanitizer
-// build, which owns malloc (the allocation test is skipped there).
-namespace {
-std::atomic<bool> counting{false};
-std::atomic<long> malloc_calls{0};
-[[maybe_unused]] void Count() {  // unused where the test is skipped (ASan)
-  if (counting.load(std::memory_order_relaxed)) malloc_calls.fetch_add(1);
-}
-}  // namespace
-
-#if !SECURE_TEST_ASAN
-extern "C" {
-void* __libc_malloc(std::size_t size);
-void* __libc_calloc(std::size_t count, std::size_t size);
-void* __libc_realloc(void* pointer, std::size_t size);
-void* malloc(std::size_t size) noexcept {
-  Count();
-  return __libc_malloc(size);
-}
-void* calloc(std::size_t count, std::size_t size) noexcept {
-  Count();
-  return __libc_calloc(count, size);
-}
-void* realloc(void* pointer, std::size_t size) noexcept {
-  Count();
-  return __libc_realloc(pointer, size);
-}
-}
-#endif
 
 namespace secure::domains::derby {
 namespace {
@@ -489,13 +457,12 @@ TEST(DerbyEnvTest, ResetStepAndModelDoNotAllocate) {
   Eigen::MatrixXf actions = Eigen::MatrixXf::Random(2, 64), next(kObservationDim, 64);
   Rng rng(1);
   env.Reset(rng, o);
-  malloc_calls = 0;
-  counting = true;
+  test::BeginCountingMalloc();
   env.Reset(rng, o);
   for (int t = 0; t < 50; ++t) env.Step(a, o);
   env.ShieldModel().Step(o, actions, next);
-  counting = false;
-  EXPECT_EQ(malloc_calls.load(), 0);
+  const long calls = test::EndCountingMalloc();
+  EXPECT_EQ(calls, 0);
 }
 
 }  // namespace

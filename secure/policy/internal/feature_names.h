@@ -1,6 +1,7 @@
 #pragma once
 // Feature-name helpers shared by the policy module's model files (gaussian_policy.cc,
-// airl_reward.cc). INTERNAL: include it only from secure/policy/*.cc. No LibTorch.
+// airl_reward.cc), and the metadata they share. INTERNAL: include it only from secure/policy/*.cc.
+// No LibTorch.
 
 #include <algorithm>
 #include <nlohmann/json.hpp>
@@ -8,6 +9,7 @@
 #include <vector>
 
 #include "secure/common/error.h"
+#include "secure/nn/model_file.h"
 
 namespace secure::policy::internal {
 
@@ -23,6 +25,21 @@ inline std::vector<std::string> StringList(const nlohmann::json& metadata, const
     out.push_back(item.get<std::string>());
   }
   return out;
+}
+
+/// A model file of `kind` with the metadata both model files open with: observation_features,
+/// input_features (only when not empty: the network reads the whole observation otherwise, and
+/// such files keep their bytes) and provenance.
+inline nn::ModelFile FeatureModelFile(const std::string& kind,
+                                      const std::vector<std::string>& observation_features,
+                                      const std::vector<std::string>& input_features,
+                                      const nlohmann::json& provenance) {
+  nn::ModelFile file;
+  file.kind = kind;
+  file.metadata["observation_features"] = observation_features;
+  if (!input_features.empty()) file.metadata["input_features"] = input_features;
+  file.metadata["provenance"] = provenance;
+  return file;
 }
 
 /// The row of `name` in `features`, or -1.
