@@ -326,7 +326,7 @@ TEST(CliTest, EvalEpisodesOutHasARowPerEpisodeAndTheListsNameThem) {
 // --qp-metric and the config's `shield: {qp_metric: ...}` (eval: the domain's preset, then the
 // file, then the flags): written into the shield's options when set, the default writing
 // nothing; a bad value is one line naming the flag or the file.
-TEST(CliTest, EvalAndShieldRunTakeTheQpMetric) {
+TEST(CliTest, EvalAndShieldRunTakeTheQpMetricAndLineSearch) {
   const std::string dir = (TempDir() / "qp_metric").string();
   ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
   const std::string cfg = Write("qp_metric.yaml", "pipeline:\n  shield: {qp_metric: policy}\n");
@@ -355,24 +355,13 @@ TEST(CliTest, EvalAndShieldRunTakeTheQpMetric) {
       Write("qp_metric_bad.yaml", "pipeline:\n  shield: {qp_metric: mahalanobis}\n");
   ExpectOneErrorLine(RunCli(base + " --config " + bad),
                      "qp_metric_bad.yaml [pipeline] [shield] [qp_metric] = 'mahalanobis'");
-}
-
-// --qp-line-search reaches the shield of eval (flag and file, the flag winning) and is checked.
-TEST(CliTest, EvalTakesTheQpLineSearch) {
-  const std::string dir = (TempDir() / "qp_line_search").string();
-  ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
-  const std::string cfg = Write("qp_line_search.yaml", "pipeline:\n  shield: {qp_line_search: 2}\n");
-  const std::string base = "eval --domain double-integrator --bc " + dir +
-                           "/bc.model --barrier ground-truth --methods bc+shield --seeds 1 "
-                           "--episodes 2 --proposal qp --json";
-  const auto shield_of = [](const Result& r) {
-    EXPECT_EQ(r.exit_code, 0) << r.err;
-    return r.exit_code == 0 ? nlohmann::json::parse(r.out)["shield"] : nlohmann::json::object();
-  };
+  // --qp-line-search the same way (flag and file, the flag winning), and checked.
+  const std::string search =
+      Write("qp_line_search.yaml", "pipeline:\n  shield: {qp_line_search: 2}\n");
   EXPECT_FALSE(shield_of(RunCli(base)).contains("qp_line_search"));
-  EXPECT_EQ(shield_of(RunCli(base + " --config " + cfg))["qp_line_search"], 2);
-  EXPECT_EQ(shield_of(RunCli(base + " --config " + cfg + " --qp-line-search 1"))["qp_line_search"],
-            1);
+  EXPECT_EQ(shield_of(RunCli(base + " --config " + search))["qp_line_search"], 2);
+  EXPECT_EQ(
+      shield_of(RunCli(base + " --config " + search + " --qp-line-search 1"))["qp_line_search"], 1);
   ExpectOneErrorLine(RunCli(base + " --qp-line-search 11"), "qp_line_search = 11");
 }
 

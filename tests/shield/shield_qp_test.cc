@@ -304,19 +304,32 @@ TEST(QpShieldTest, AProjectionBeyondTheTrustRegionFallsBackToSampling) {
   EXPECT_FALSE(f.intervened);
 }
 
+// h(s) = 1 - |s|^2 (a disc: h concave) with the integrator s' = s + 0.1 a, at s = (0, 0.9), the
+// policy's mean (3, 3) pointing outward and sideways.
+struct Disc {
+  FunctionBarrier barrier{2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            return 1.0 - static_cast<double>(s.squaredNorm());
+                          }};
+  const IntegratorDynamics dynamics{2, 0.1};
+  const Eigen::VectorXf state = Vec({0.0f, 0.9f});
+  const Eigen::VectorXf mu = Vec({3.0f, 3.0f});
+  static ShieldOptions QpOnly() {
+    ShieldOptions o;
+    o.proposal = Proposal::kQpOnly;
+    return o;
+  }
+};
+
 // A curved barrier (a disc, h concave): the tangent plane overestimates h, so the textbook
 // projection lands just outside the safe set and the exact check rejects it; re-linearising at
 // the projection (qp_iterations), a margin, or more refinement steps recover a safe action.
 TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
-  FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
-    return 1.0 - static_cast<double>(s.squaredNorm());
-  });
-  const IntegratorDynamics dynamics(2, 0.1);
-  ShieldOptions o;
-  o.proposal = Proposal::kQpOnly;
+  Disc disc;
+  FunctionBarrier& barrier = disc.barrier;
+  const IntegratorDynamics& dynamics = disc.dynamics;
+  const Eigen::VectorXf &state = disc.state, &mu = disc.mu;
+  ShieldOptions o = disc.QpOnly();
   o.class_k_gain = 1.0;
-  const Eigen::VectorXf state = Vec({0.0f, 0.9f});
-  const Eigen::VectorXf mu = Vec({3.0f, 3.0f});  // outward and sideways
   {
     Shield shield(o, barrier, dynamics);
     const Decision& d = shield.Decide(state, mu, Vec({0.1f, 0.1f}));
@@ -363,29 +376,23 @@ TEST(QpShieldTest, ACurvedBarrierMisleadsOneLinearisationAndTheStatusSaysSo) {
 // decision lies on that line beyond a*, at the t the secant gives, and the gradient-first shield
 // then decides without sampling.
 TEST(QpShieldTest, ALineSearchOnTheExactGRecoversARejectedProjection) {
-  FunctionBarrier barrier(2, "disc", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
-    return 1.0 - static_cast<double>(s.squaredNorm());
-  });
-  const IntegratorDynamics dynamics(2, 0.1);
-  ShieldOptions o;
-  o.proposal = Proposal::kQpOnly;
-  const Eigen::VectorXf state = Vec({0.0f, 0.9f});
-  const Eigen::VectorXf mu = Vec({3.0f, 3.0f});
-  Shield plain(o, barrier, dynamics);
-  const Decision& rejected = plain.Decide(state, mu, Vec({0.1f, 0.1f}));
+  Disc disc;
+  ShieldOptions o = Disc::QpOnly();
+  Shield plain(o, disc.barrier, disc.dynamics);
+  const Decision& rejected = plain.Decide(disc.state, disc.mu, Vec({0.1f, 0.1f}));
   ASSERT_EQ(rejected.qp, QpOutcome::kRejected);
   const Eigen::Vector2d a_star = rejected.action.cast<double>();
   const double g_star = rejected.g;
   ASSERT_LT(g_star, 0.0);
   // g(mu) exactly: h(s + 0.1 mu) - h(s) over dt, plus alpha(h(s)) = h(s).
-  const Eigen::Vector2d s0 = state.cast<double>(), m = mu.cast<double>();
+  const Eigen::Vector2d s0 = disc.state.cast<double>(), m = disc.mu.cast<double>();
   const auto h = [](const Eigen::Vector2d& s) { return 1.0 - s.squaredNorm(); };
   const double g_mu = (h(s0 + 0.1 * m) - h(s0)) / 0.1 + h(s0);
   ASSERT_LT(g_mu, g_star);  // g rises along the line
 
   o.qp_line_search = 1;
-  Shield searching(o, barrier, dynamics);
-  const Decision& d = searching.Decide(state, mu, Vec({0.1f, 0.1f}));
+  Shield searching(o, disc.barrier, disc.dynamics);
+  const Decision& d = searching.Decide(disc.state, disc.mu, Vec({0.1f, 0.1f}));
   EXPECT_EQ(d.qp, QpOutcome::kAccepted) << d.ToJson().dump();
   EXPECT_EQ(d.fallback, Fallback::kNone);
   EXPECT_GE(d.g, 0.0);
@@ -400,8 +407,8 @@ TEST(QpShieldTest, ALineSearchOnTheExactGRecoversARejectedProjection) {
 
   // The gradient-first shield: the search decides, no sampling round runs.
   o.proposal = Proposal::kQp;
-  Shield first(o, barrier, dynamics);
-  const Decision& f = first.Decide(state, mu, Vec({0.5f, 0.5f}));
+  Shield first(o, disc.barrier, disc.dynamics);
+  const Decision& f = first.Decide(disc.state, disc.mu, Vec({0.5f, 0.5f}));
   EXPECT_EQ(f.qp, QpOutcome::kAccepted) << f.ToJson().dump();
   EXPECT_EQ(f.iterations, 0);
   EXPECT_TRUE(f.safe());
