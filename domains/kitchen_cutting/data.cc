@@ -152,9 +152,10 @@ const char* ScenarioName(NearDangerousScenario s) {
 // ---------------------------------------------------------------------------------------------
 // The person's rule (data.h)
 
-bool StrokeReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, double ee_vz,
-                   const ArmPose& arm) {
-  return ee_vz < 0 && PathClearance(task, edge, arm) < task.contact_distance;
+bool StrokeReaches(const KitchenCuttingOptions& task, const KitchenNearDangerousOptions& rule,
+                   const Eigen::Vector3d& edge, double ee_vz, const ArmPose& arm) {
+  return ee_vz < 0 && -ee_vz >= rule.stroke_vz[0] &&
+         PathClearance(task, edge, arm) < task.contact_distance;
 }
 
 bool ArmReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, const ArmPose& arm,
@@ -178,7 +179,8 @@ bool BladeReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge
   return false;
 }
 
-KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task, double look_ahead,
+KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task,
+                                   const KitchenNearDangerousOptions& rule,
                                    const Eigen::Ref<const Eigen::VectorXf>& o) {
   SECURE_CHECK(o.size() == kObservationDim, "JudgeKitchenState: an observation of "
                                                 << kObservationDim << " values, got " << o.size());
@@ -187,9 +189,9 @@ KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task, double loo
   if (EdgeToArmDistance(task.human, edge, arm) < task.contact_distance)
     return KitchenJudgement::kDangerous;
   const bool near =
-      StrokeReaches(task, edge, ee_velocity.z(), arm) ||
-      ArmReaches(task, edge, arm, At(o, kWristVel), At(o, kElbowVel), look_ahead) ||
-      BladeReaches(task, edge, ee_velocity, arm, look_ahead);
+      StrokeReaches(task, rule, edge, ee_velocity.z(), arm) ||
+      ArmReaches(task, edge, arm, At(o, kWristVel), At(o, kElbowVel), rule.look_ahead) ||
+      BladeReaches(task, edge, ee_velocity, arm, rule.look_ahead);
   return near ? KitchenJudgement::kNearDangerous : KitchenJudgement::kSafe;
 }
 
@@ -343,8 +345,9 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         const ArmPose p = ArmPoseForWrist(h, wrist);
         const double d = EdgeToArmDistance(h, edge, p);
         if (d < task.contact_distance || d > options.near_distance) continue;
-        // The rule's clause (a) for any downward speed (the draw of it follows).
-        if (!StrokeReaches(task, edge, -1.0, p)) continue;
+        // The rule's clause (a) at the fastest stroke speed (the draw of it follows: any drawn
+        // speed satisfies the clause as well).
+        if (!StrokeReaches(task, options, edge, -options.stroke_vz[1], p)) continue;
         franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
         o[kEeVel] = o[kEeVel + 1] = 0.0f;
         o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));

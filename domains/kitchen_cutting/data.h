@@ -40,8 +40,10 @@
 // wrist, elbow and hand tip and their velocities),
 //   - dangerous: the edge within contact_distance of the arm now (ObservedEdgeClearance);
 //   - near-dangerous, if any clause holds:
-//     (a) StrokeReaches: the end-effector moving down (ee_vz < 0) and the stroke's path (the edge
-//         lowered to the board; checked halfway and at the board) within contact_distance;
+//     (a) StrokeReaches: the end-effector moving down at a stroke's speed (-ee_vz >= the least
+//         of stroke_vz, 0.3 m/s: not the hovering knife's drift of a few cm/s) and the stroke's
+//         path (the edge lowered to the board; checked halfway and at the board) within
+//         contact_distance;
 //     (b) ArmReaches: the arm, moved on at its observed velocities (the hand tip with the
 //         wrist) for look_ahead, within contact_distance of the edge where it is;
 //     (c) BladeReaches: the edge, moved on at the end-effector velocity (10 points over
@@ -151,9 +153,10 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
 /// The person's judgement of a state (the rule above).
 enum class KitchenJudgement { kSafe, kNearDangerous, kDangerous };
 /// The clauses of the rule, on the edge (its centre) and the arm in world coordinates.
-/// (a) the end-effector moving down at `ee_vz` (< 0) and the stroke's path within contact.
-bool StrokeReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, double ee_vz,
-                   const ArmPose& arm);
+/// (a) the end-effector moving down at `ee_vz` (< 0, -ee_vz >= stroke_vz[0]) and the stroke's
+/// path within contact.
+bool StrokeReaches(const KitchenCuttingOptions& task, const KitchenNearDangerousOptions& rule,
+                   const Eigen::Vector3d& edge, double ee_vz, const ArmPose& arm);
 /// (b) the arm moved on for `look_ahead` s (wrist and hand tip at `wrist_velocity`, elbow at
 /// `elbow_velocity`) within contact of the edge.
 bool ArmReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, const ArmPose& arm,
@@ -163,9 +166,9 @@ bool ArmReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, 
 /// within contact of the arm.
 bool BladeReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge,
                   const Eigen::Vector3d& ee_velocity, const ArmPose& arm, double look_ahead);
-/// The rule on an observation (kObservationDim values; `look_ahead` is
-/// KitchenNearDangerousOptions::look_ahead).
-KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task, double look_ahead,
+/// The rule on an observation (kObservationDim values), with `rule`'s look_ahead and stroke_vz.
+KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task,
+                                   const KitchenNearDangerousOptions& rule,
                                    const Eigen::Ref<const Eigen::VectorXf>& observation);
 
 /// The labels against physics: the simulation is put in each state

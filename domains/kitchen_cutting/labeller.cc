@@ -21,7 +21,7 @@ std::vector<int> KitchenCuttingDomain::Label(const Eigen::Ref<const Eigen::Matri
   std::vector<int> labels(static_cast<std::size_t>(states.cols()));
   for (long i = 0; i < states.cols(); ++i) {
     const bool safe =
-        JudgeKitchenState(options_.task, rule.look_ahead, states.col(i)) == KitchenJudgement::kSafe;
+        JudgeKitchenState(options_.task, rule, states.col(i)) == KitchenJudgement::kSafe;
     const bool flip = noise.Uniform() < rule.label_noise;  // one draw per state, always
     labels[static_cast<std::size_t>(i)] = safe != flip ? 1 : 0;
   }
@@ -34,8 +34,8 @@ std::string KitchenCuttingDomain::LabellerDescription() const {
   s << "the person who made the near-dangerous states: near-dangerous if the blade's edge is "
        "within "
     << options_.task.contact_distance
-    << " m of the arm, or comes within it when the stroke continues down to the board, the arm "
-       "moves on at its velocity for "
+    << " m of the arm, or comes within it when a stroke (down at >= " << rule.stroke_vz[0]
+    << " m/s) continues to the board, the arm moves on at its velocity for "
     << rule.look_ahead << " s, or the knife moves on at its velocity for " << rule.look_ahead
     << " s; else safe; answers flipped with probability " << rule.label_noise;
   return s.str();
