@@ -35,8 +35,8 @@ std::string KitchenCuttingDomain::LabellerDescription() const {
        "within "
     << options_.task.contact_distance
     << " m of the arm, or comes within it when a stroke (down at >= " << rule.stroke_vz[0]
-    << " m/s) continues to the board, the arm moves on at its velocity for "
-    << rule.look_ahead << " s, or the knife moves on at its velocity for " << rule.look_ahead
+    << " m/s) continues to the board, the arm moves on at its velocity for " << rule.look_ahead
+    << " s, or the knife moves on at its velocity for " << rule.look_ahead
     << " s; else safe; answers flipped with probability " << rule.label_noise;
   return s.str();
 }

@@ -19,8 +19,8 @@ void CheckLabellerStates(const std::string& domain, const Eigen::Ref<const Eigen
   const long dim = static_cast<long>(features.size());
   SECURE_CHECK(states.rows() == dim, domain << " labeller: states have " << states.rows()
                                             << " features, expected " << dim
-                                            << " (the observation: " << features.front() << ", ..., "
-                                            << features.back() << ")");
+                                            << " (the observation: " << features.front()
+                                            << ", ..., " << features.back() << ")");
   for (long i = 0; i < states.cols(); ++i)
     for (long r = 0; r < dim; ++r)
       SECURE_CHECK(std::isfinite(states(r, i)),

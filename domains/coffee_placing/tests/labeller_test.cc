@@ -11,6 +11,7 @@
 #include "domains/coffee_placing/domain.h"
 #include "domains/coffee_placing/participants.h"
 #include "secure/common/error.h"
+#include "tests/test_util.h"
 
 namespace secure::domains::coffee_placing {
 namespace {
@@ -98,22 +99,14 @@ TEST(CoffeeLabeller, JudgesThePositionsAndTheTilt) {
 
 TEST(CoffeeLabeller, RejectsRowsItCannotJudge) {
   const CoffeePlacingDomain domain(experiments::Profile::kQuick);
-  try {
-    domain.Label(Eigen::MatrixXf::Zero(17, 2), 0);
-    ADD_FAILURE() << "no error";
-  } catch (const Error& e) {
-    EXPECT_STREQ(e.what(), "coffee-placing labeller: states have 17 features, expected 23 (the "
-                           "observation: ee_x, ..., clearance)");
-  }
+  EXPECT_EQ(test::ErrorOf([&] { domain.Label(Eigen::MatrixXf::Zero(17, 2), 0); }),
+            "coffee-placing labeller: states have 17 features, expected 23 (the "
+            "observation: ee_x, ..., clearance)");
   Eigen::MatrixXf states = domain.GenerateData(5).safe.states.leftCols(2);
   states(kTilt, 1) = std::numeric_limits<float>::infinity();
-  try {
-    domain.Label(states, 0);
-    ADD_FAILURE() << "no error";
-  } catch (const Error& e) {
-    EXPECT_STREQ(e.what(), "coffee-placing labeller: state 1, feature tilt = inf: not finite (the "
-                           "person cannot judge it)");
-  }
+  EXPECT_EQ(test::ErrorOf([&] { domain.Label(states, 0); }),
+            "coffee-placing labeller: state 1, feature tilt = inf: not finite (the "
+            "person cannot judge it)");
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include "domains/kitchen_cutting/data.h"
 #include "domains/kitchen_cutting/domain.h"
 #include "secure/common/error.h"
+#include "tests/test_util.h"
 
 namespace secure::domains::kitchen_cutting {
 namespace {
@@ -57,7 +58,8 @@ TEST(KitchenLabeller, ReachPrecursorStatesAreOnlyPartlyCaughtByTheRule) {
   Rng rng(4001);
   KitchenSafeStates(demos, o.safe, rng);  // the draws of GenerateData
   std::vector<NearDangerousScenario> kinds;
-  const data::StateSet near = KitchenNearDangerousStates(o.task, demos, o.near_dangerous, rng, &kinds);
+  const data::StateSet near =
+      KitchenNearDangerousStates(o.task, demos, o.near_dangerous, rng, &kinds);
   const std::vector<int> labels = domain.Label(near.states, 1);
   long reach = 0, reach_caught = 0, others_missed = 0;
   for (std::size_t i = 0; i < kinds.size(); ++i) {
@@ -123,7 +125,8 @@ TEST(KitchenLabeller, JudgesEachClauseOfTheRule) {
     touching[kWrist + k] += shift;
     touching[kHandTip + k] += shift;
   }
-  EXPECT_EQ(JudgeKitchenState(task, KitchenNearDangerousOptions{}, touching), KitchenJudgement::kDangerous);
+  EXPECT_EQ(JudgeKitchenState(task, KitchenNearDangerousOptions{}, touching),
+            KitchenJudgement::kDangerous);
   EXPECT_EQ(domain.Label(touching, 0), std::vector<int>{0});
   // Clause (b): the arm moving so that its wrist is at the edge after look_ahead (0.3 s).
   Eigen::VectorXf moving = o;
@@ -143,22 +146,14 @@ TEST(KitchenLabeller, JudgesEachClauseOfTheRule) {
 TEST(KitchenLabeller, RejectsRowsItCannotJudge) {
   const KitchenCuttingDomain domain(experiments::Profile::kQuick);
   const Eigen::MatrixXf narrow = Eigen::MatrixXf::Zero(21, 2);
-  try {
-    domain.Label(narrow, 0);
-    ADD_FAILURE() << "no error";
-  } catch (const Error& e) {
-    EXPECT_STREQ(e.what(), "kitchen-cutting labeller: states have 21 features, expected 26 (the "
-                           "observation: ee_x, ..., lifted)");
-  }
+  EXPECT_EQ(test::ErrorOf([&] { domain.Label(narrow, 0); }),
+            "kitchen-cutting labeller: states have 21 features, expected 26 (the "
+            "observation: ee_x, ..., lifted)");
   Eigen::MatrixXf states = domain.GenerateData(5).safe.states.leftCols(3);
   states(kWrist, 2) = std::numeric_limits<float>::quiet_NaN();
-  try {
-    domain.Label(states, 0);
-    ADD_FAILURE() << "no error";
-  } catch (const Error& e) {
-    EXPECT_STREQ(e.what(), "kitchen-cutting labeller: state 2, feature wrist_x = nan: not finite "
-                           "(the person cannot judge it)");
-  }
+  EXPECT_EQ(test::ErrorOf([&] { domain.Label(states, 0); }),
+            "kitchen-cutting labeller: state 2, feature wrist_x = nan: not finite "
+            "(the person cannot judge it)");
 }
 
 }  // namespace
