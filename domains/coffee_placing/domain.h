@@ -91,6 +91,16 @@ class CoffeePlacingDomain final : public franka::ArmDomain<CoffeePlacingDomainOp
   void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
                     data::StateSet* near_dangerous) const override;
 
+  /// The labeller (labeller.cc): the mean participant, the person of GenerateData
+  /// (ParticipantAnswersUnsafe in participants.h): unsafe (a violation of their comfort
+  /// distance or maximum tilt, the clearance recomputed from the positions) -> 0, else 1, each
+  /// answer flipped with their label noise (population.label_noise's middle, 0.03) from `seed`.
+  /// Query pool: the default (the generated safe and unsafe states).
+  bool HasLabeller() const override { return true; }
+  std::vector<int> Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         std::uint64_t seed) const override;
+  std::string LabellerDescription() const override;
+
   bool HasPopulation() const override { return true; }
   std::unique_ptr<experiments::Population> MakePopulation(
       const experiments::PopulationOptions& options) const override;

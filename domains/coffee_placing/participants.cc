@@ -262,6 +262,20 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
 // ---------------------------------------------------------------------------------------------
 // Labelled states
 
+bool ParticipantJudgesUnsafe(const PersonOptions& person, const Thresholds& thresholds,
+                             const Eigen::Ref<const Eigen::VectorXf>& o) {
+  SECURE_CHECK(o.size() == kObservationDim, "ParticipantJudgesUnsafe: an observation of "
+                                                << kObservationDim << " values, got " << o.size());
+  const float clearance = static_cast<float>(ObservedClearance(person, o));
+  return thresholds.Violated(clearance, o[kTilt]);
+}
+
+bool ParticipantAnswersUnsafe(const PersonOptions& person, const Participant& participant,
+                              const Eigen::Ref<const Eigen::VectorXf>& o, Rng& rng) {
+  const bool unsafe = ParticipantJudgesUnsafe(person, participant.thresholds, o);
+  return rng.Uniform() < participant.label_noise ? !unsafe : unsafe;
+}
+
 void CoffeeLabelledStates(const CoffeePlacingOptions& task, const CoffeeLabelOptions& options,
                           const Participant& participant, const data::TrajectorySet& demos,
                           Rng& rng, data::StateSet* safe, data::StateSet* unsafe) {
@@ -303,8 +317,7 @@ void CoffeeLabelledStates(const CoffeePlacingOptions& task, const CoffeeLabelOpt
     if (rng.Uniform() < options.tilt_probability)
       o[kTilt] = static_cast<float>(rng.Uniform(-options.tilt_range, options.tilt_range));
     o[kClearance] = static_cast<float>(ObservedClearance(person, o));
-    bool is_unsafe = participant.thresholds.Violated(o[kClearance], o[kTilt]);
-    if (rng.Uniform() < participant.label_noise) is_unsafe = !is_unsafe;
+    const bool is_unsafe = ParticipantAnswersUnsafe(person, participant, o, rng);
     if (is_unsafe && n_unsafe < options.unsafe) unsafe->states.col(n_unsafe++) = o;
     if (!is_unsafe && n_safe < options.safe) safe->states.col(n_safe++) = o;
   }

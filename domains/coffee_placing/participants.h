@@ -34,7 +34,9 @@
 // random direction, the arm moving at up to arm_speed in a random direction) and / or the cup's
 // tilt redrawn (p = tilt_probability: U(-tilt_range, tilt_range)); the clearance recomputed;
 // labelled by the participant's thresholds (a violation: unsafe), then flipped with the
-// participant's label noise; drawn until both classes are full.
+// participant's label noise; drawn until both classes are full. The judgement and the flip are
+// ParticipantAnswersUnsafe, which is also the domain's labeller (Domain::Label, the mean
+// participant): one rule, one copy of the thresholds.
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -131,6 +133,17 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
                                                   const CoffeeDemonstrationOptions& options,
                                                   const Participant& participant,
                                                   std::uint64_t seed);
+
+/// The participant's judgement of an observation (kObservationDim values): a violation of their
+/// thresholds (Thresholds::Violated) by the clearance recomputed from the observation's
+/// positions (ObservedClearance, rounded to float as the observation's clearance feature is;
+/// the row's own clearance feature is not read) and the tilt. True: unsafe.
+bool ParticipantJudgesUnsafe(const PersonOptions& person, const Thresholds& thresholds,
+                             const Eigen::Ref<const Eigen::VectorXf>& observation);
+/// The participant's answer: the judgement flipped with probability participant.label_noise
+/// (one uniform from `rng`, drawn whatever the judgement). True: unsafe.
+bool ParticipantAnswersUnsafe(const PersonOptions& person, const Participant& participant,
+                              const Eigen::Ref<const Eigen::VectorXf>& observation, Rng& rng);
 
 /// The participant's labelled states (safe, unsafe) from the demonstration states.
 /// @throws secure::Error if the classes cannot be filled.

@@ -102,6 +102,8 @@ void KitchenNearDangerousOptions::Validate() const {
                      "in [0, 1 - p_stroke - p_blade] (p_stroke = " << p_stroke << ", p_blade = "
                                                                    << p_blade << ")");
   CheckIntervalField(reach_gap, o, "reach_gap", 0.0, 1.0);
+  SECURE_CHECK_FIELD(Finite(label_noise) && label_noise >= 0 && label_noise <= 0.5, o,
+                     "label_noise", label_noise, "in [0, 0.5]");
 }
 
 nlohmann::json KitchenNearDangerousOptions::ToJson() const {
@@ -110,6 +112,7 @@ nlohmann::json KitchenNearDangerousOptions::ToJson() const {
     j.erase("p_reach");
     j.erase("reach_gap");
   }
+  if (label_noise <= 0) j.erase("label_noise");
   return j;
 }
 
@@ -124,7 +127,8 @@ YamlFields KitchenNearDangerousOptions::Fields() {
       .Field("p_blade", &p_blade)
       .Field("blade_speed", &blade_speed)
       .Field("p_reach", &p_reach)
-      .Field("reach_gap", &reach_gap);
+      .Field("reach_gap", &reach_gap)
+      .Field("label_noise", &label_noise);
 }
 
 void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
@@ -143,6 +147,52 @@ const char* ScenarioName(NearDangerousScenario s) {
       return "the person's reach, before contact";
   }
   return "?";
+}
+
+// ---------------------------------------------------------------------------------------------
+// The person's rule (data.h)
+
+bool StrokeReaches(const KitchenCuttingOptions& task, const KitchenNearDangerousOptions& rule,
+                   const Eigen::Vector3d& edge, double ee_vz, const ArmPose& arm) {
+  return ee_vz < 0 && -ee_vz >= rule.stroke_vz[0] &&
+         PathClearance(task, edge, arm) < task.contact_distance;
+}
+
+bool ArmReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, const ArmPose& arm,
+                const Eigen::Vector3d& wrist_velocity, const Eigen::Vector3d& elbow_velocity,
+                double look_ahead) {
+  ArmPose later = arm;
+  later.wrist += look_ahead * wrist_velocity;
+  later.tip += look_ahead * wrist_velocity;
+  later.elbow += look_ahead * elbow_velocity;
+  return EdgeToArmDistance(task.human, edge, later) < task.contact_distance;
+}
+
+bool BladeReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge,
+                  const Eigen::Vector3d& ee_velocity, const ArmPose& arm, double look_ahead) {
+  constexpr int kPathPoints = 10;
+  for (int i = 1; i <= kPathPoints; ++i) {
+    const Eigen::Vector3d at = edge + (look_ahead * i / kPathPoints) * ee_velocity;
+    if (at.z() >= task.board_top && EdgeToArmDistance(task.human, at, arm) < task.contact_distance)
+      return true;
+  }
+  return false;
+}
+
+KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task,
+                                   const KitchenNearDangerousOptions& rule,
+                                   const Eigen::Ref<const Eigen::VectorXf>& o) {
+  SECURE_CHECK(o.size() == kObservationDim, "JudgeKitchenState: an observation of "
+                                                << kObservationDim << " values, got " << o.size());
+  const Eigen::Vector3d edge = At(o, kBlade), ee_velocity = At(o, kEeVel);
+  const ArmPose arm = ObservedArm(task.human, o, 0.0);
+  if (EdgeToArmDistance(task.human, edge, arm) < task.contact_distance)
+    return KitchenJudgement::kDangerous;
+  const bool near =
+      StrokeReaches(task, rule, edge, ee_velocity.z(), arm) ||
+      ArmReaches(task, edge, arm, At(o, kWristVel), At(o, kElbowVel), rule.look_ahead) ||
+      BladeReaches(task, edge, ee_velocity, arm, rule.look_ahead);
+  return near ? KitchenJudgement::kNearDangerous : KitchenJudgement::kSafe;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -295,7 +345,9 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         const ArmPose p = ArmPoseForWrist(h, wrist);
         const double d = EdgeToArmDistance(h, edge, p);
         if (d < task.contact_distance || d > options.near_distance) continue;
-        if (PathClearance(task, edge, p) >= task.contact_distance) continue;
+        // The rule's clause (a) at the fastest stroke speed (the draw of it follows: any drawn
+        // speed satisfies the clause as well).
+        if (!StrokeReaches(task, options, edge, -options.stroke_vz[1], p)) continue;
         franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
         o[kEeVel] = o[kEeVel + 1] = 0.0f;
         o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));
@@ -313,13 +365,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
                                   0.3 * Eigen::Vector3d(rng.Normal(), rng.Normal(), rng.Normal());
         if (towards.norm() < 1e-6) continue;
         const Eigen::Vector3d v = Draw(rng, options.blade_speed) * towards.normalized();
-        bool reaches = false;
-        constexpr int kPathPoints = 10;
-        for (int i = 1; i <= kPathPoints && !reaches; ++i) {
-          const Eigen::Vector3d at = edge + (options.look_ahead * i / kPathPoints) * v;
-          reaches = at.z() >= task.board_top && EdgeToArmDistance(h, at, p) < task.contact_distance;
-        }
-        if (!reaches) continue;
+        if (!BladeReaches(task, edge, v, p, options.look_ahead)) continue;  // the rule's (c)
         franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
         for (int k = 0; k < 3; ++k) o[kEeVel + k] = static_cast<float>(v[k]);
         accepted = true;
@@ -330,11 +376,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         const Eigen::Vector3d towards = (edge - p.wrist).normalized();
         const double speed = Draw(rng, options.arm_speed);
         const Eigen::Vector3d wv = speed * towards, ev = 0.5 * speed * towards;
-        ArmPose later = p;
-        later.wrist += options.look_ahead * wv;
-        later.tip += options.look_ahead * wv;
-        later.elbow += options.look_ahead * ev;
-        if (EdgeToArmDistance(h, edge, later) >= task.contact_distance) continue;
+        if (!ArmReaches(task, edge, p, wv, ev, options.look_ahead)) continue;  // the rule's (b)
         franka::WriteHumanArm(p, wv, ev, kWrist, o);
         accepted = true;
       }

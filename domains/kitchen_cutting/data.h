@@ -31,7 +31,28 @@
 //   (d) reach (p_reach, off by default): the person's real reach, the state reach_gap before it
 //       touches the blade (precursor.h).
 // Each draw is rejection-sampled (at most 200 tries per state; a state without an accepted draw
-// is skipped); the states are drawn in a random order of demonstration states.
+// is skipped); the states are drawn in a random order of demonstration states. Scenarios (a)-(c)
+// accept a draw by one clause each of the person's rule (JudgeKitchenState below), which is also
+// the domain's labeller (Domain::Label): one rule, one copy of its thresholds.
+//
+// The person's rule (ASSUMPTION: how the person who made the near-dangerous states judges any
+// state): from the observation alone (the blade's edge, the end-effector velocity, the arm's
+// wrist, elbow and hand tip and their velocities),
+//   - dangerous: the edge within contact_distance of the arm now (ObservedEdgeClearance);
+//   - near-dangerous, if any clause holds:
+//     (a) StrokeReaches: the end-effector moving down at a stroke's speed (-ee_vz >= the least
+//         of stroke_vz, 0.3 m/s: not the hovering knife's drift of a few cm/s) and the stroke's
+//         path (the edge lowered to the board; checked halfway and at the board) within
+//         contact_distance;
+//     (b) ArmReaches: the arm, moved on at its observed velocities (the hand tip with the
+//         wrist) for look_ahead, within contact_distance of the edge where it is;
+//     (c) BladeReaches: the edge, moved on at the end-effector velocity (10 points over
+//         look_ahead, not below the board), within contact_distance of the arm where it is;
+//   - else safe.
+// Label noise: the labeller flips each answer with probability label_noise (default 0: the
+// generator's person labels its states without mistakes, and its states are not flipped).
+// Scenario (d) is labelled by the reach's real future, which the rule does not see: its states
+// are near-dangerous by the rule only where (b) catches them (measured in the tests).
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -107,9 +128,12 @@ struct KitchenNearDangerousOptions {
   // states (drawn from (b)'s share; 0: the data of earlier releases).
   double p_reach = 0.0;
   Interval reach_gap = {0.0, 0.2};  // s before the first contact
+  // The labeller's share of wrong answers (JudgeKitchenState's answer flipped; not applied to
+  // the generated states). 0: the generator's person.
+  double label_noise = 0.0;
   void Validate() const;
   /// The field table (the YAML keys and JSON fields): ApplyYaml and ToJson (which writes p_reach
-  /// and reach_gap only with p_reach > 0).
+  /// and reach_gap only with p_reach > 0, label_noise only when > 0).
   YamlFields Fields();
   nlohmann::json ToJson() const;
   void ApplyYaml(const YAML::Node& node, const std::string& source);
@@ -125,6 +149,27 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
                                           const KitchenDemonstrations& demos,
                                           const KitchenNearDangerousOptions& options, Rng& rng,
                                           std::vector<NearDangerousScenario>* scenarios = nullptr);
+
+/// The person's judgement of a state (the rule above).
+enum class KitchenJudgement { kSafe, kNearDangerous, kDangerous };
+/// The clauses of the rule, on the edge (its centre) and the arm in world coordinates.
+/// (a) the end-effector moving down at `ee_vz` (< 0, -ee_vz >= stroke_vz[0]) and the stroke's
+/// path within contact.
+bool StrokeReaches(const KitchenCuttingOptions& task, const KitchenNearDangerousOptions& rule,
+                   const Eigen::Vector3d& edge, double ee_vz, const ArmPose& arm);
+/// (b) the arm moved on for `look_ahead` s (wrist and hand tip at `wrist_velocity`, elbow at
+/// `elbow_velocity`) within contact of the edge.
+bool ArmReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge, const ArmPose& arm,
+                const Eigen::Vector3d& wrist_velocity, const Eigen::Vector3d& elbow_velocity,
+                double look_ahead);
+/// (c) the edge moved on at `ee_velocity` (10 points over `look_ahead` s, at or above the board)
+/// within contact of the arm.
+bool BladeReaches(const KitchenCuttingOptions& task, const Eigen::Vector3d& edge,
+                  const Eigen::Vector3d& ee_velocity, const ArmPose& arm, double look_ahead);
+/// The rule on an observation (kObservationDim values), with `rule`'s look_ahead and stroke_vz.
+KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task,
+                                   const KitchenNearDangerousOptions& rule,
+                                   const Eigen::Ref<const Eigen::VectorXf>& observation);
 
 /// The labels against physics: the simulation is put in each state
 /// (KitchenCuttingSim::SetObservation: the arm by IK, the person's arm moving on at its observed

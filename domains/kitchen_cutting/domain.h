@@ -49,6 +49,15 @@ class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomain
                                                       long max_states) const override;
   std::string LabelCheckDescription() const override;
 
+  /// The labeller (labeller.cc): the person's rule that made the near-dangerous states
+  /// (JudgeKitchenState in data.h, with near_dangerous.look_ahead): near-dangerous or dangerous
+  /// -> 0, safe -> 1, each answer flipped with probability near_dangerous.label_noise (default 0)
+  /// from `seed`. Query pool: the default (the generated safe and near-dangerous states).
+  bool HasLabeller() const override { return true; }
+  std::vector<int> Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         std::uint64_t seed) const override;
+  std::string LabellerDescription() const override;
+
   /// The barrier check (cbf/barrier_check.h):
   ///  - held-out states: our generators (data.h) on new demonstrations, drawn from the stream
   ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1): `count` safe

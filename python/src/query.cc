@@ -107,7 +107,9 @@ Releases the GIL.)doc");
 A domain's simulated person labels states (an (N, observation_dim) array): 1 safe, 0
 near-dangerous, -1 cannot say, as an (N,) int32 array. Domains with a labeller: the double
 integrator (its ground truth), derby (nearest car within 0.14), panda-push (the label check's
-physics). Raises ValueError for a domain without one.)doc");
+physics), kitchen-cutting (the rule that made its near-dangerous states), coffee-placing (the
+mean participant's thresholds, with their label noise 0.03). Raises ValueError for a domain
+without one, or for rows it cannot judge.)doc");
 }
 
 }  // namespace secure::python

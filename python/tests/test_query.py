@@ -60,4 +60,4 @@ def test_errors(tiny_barrier):
     with pytest.raises(ValueError, match="at least 2"):
         secure.query(barrier, _pool(10), k=2, strategy="disagreement")
     with pytest.raises(ValueError, match="no labeller"):
-        secure.label("coffee-placing", np.zeros((1, 3), np.float32))
+        secure.label("toy-cart", np.zeros((1, 3), np.float32))

@@ -301,6 +301,12 @@ class Domain {
   virtual ShieldRunReport RunShield(const ShieldRunRequest& request, cbf::Barrier& barrier) const;
 };
 
+/// Checks the states a labeller (Domain::Label) is given: `features.size()` rows (the domain's
+/// observation features, named in the message) and finite values. @throws secure::Error, one
+/// line naming `domain`, and the width or the state (column), feature and value.
+void CheckLabellerStates(const std::string& domain, const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         const std::vector<std::string>& features);
+
 /// Checks experiment options against `domain` before a run: first what every domain shares (the
 /// shield looks ahead exactly one control period: shield.dt equals the control_period() of the
 /// domain's environment, when it has a clock), then the domain's own CheckExperiment.

@@ -1,5 +1,6 @@
 // The labeller capability's defaults (Domain::Label, Domain::SampleQueryPool; domain.h).
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 
 #include "secure/common/error.h"
@@ -11,6 +12,21 @@ namespace secure::experiments {
 std::vector<int> Domain::Label(const Eigen::Ref<const Eigen::MatrixXf>&, std::uint64_t) const {
   SECURE_THROW("the " << name() << " domain has no labeller (a simulated person who labels "
                          "states; domains with one: those whose Domain::HasLabeller() is true)");
+}
+
+void CheckLabellerStates(const std::string& domain, const Eigen::Ref<const Eigen::MatrixXf>& states,
+                         const std::vector<std::string>& features) {
+  const long dim = static_cast<long>(features.size());
+  SECURE_CHECK(states.rows() == dim, domain << " labeller: states have " << states.rows()
+                                            << " features, expected " << dim
+                                            << " (the observation: " << features.front()
+                                            << ", ..., " << features.back() << ")");
+  for (long i = 0; i < states.cols(); ++i)
+    for (long r = 0; r < dim; ++r)
+      SECURE_CHECK(std::isfinite(states(r, i)),
+                   domain << " labeller: state " << i << ", feature "
+                          << features[static_cast<std::size_t>(r)] << " = " << states(r, i)
+                          << ": not finite (the person cannot judge it)");
 }
 
 data::StateSet Domain::SampleQueryPool(long count, std::uint64_t seed) const {

@@ -175,9 +175,9 @@ TEST(CliQueryTest, ErrorsAreOneLine) {
   ExpectOneErrorLine(RunCli("cbf query --pool " + P("pool3.csv") +
                             " --k 50 --strategy random --out " + P("x.csv")),
                      "--k 50 exceeds the 20 states");
-  ExpectOneErrorLine(RunCli("cbf label --domain coffee-placing --states " + P("pool3.csv") +
+  ExpectOneErrorLine(RunCli("cbf label --domain toy-cart --states " + P("pool3.csv") +
                             " --out " + P("x.csv")),
-                     "the coffee-placing domain has no labeller");
+                     "the toy-cart domain has no labeller");
   // A label that is neither 1, 0 nor -1, named with its file and line.
   {
     std::ofstream out(P("bad_label.csv"));
