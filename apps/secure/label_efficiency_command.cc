@@ -2,6 +2,7 @@
 // for (experiments/label_efficiency.h).
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -43,7 +44,8 @@ struct LabelEfficiencyCommand {
     cmd->add_flag("--quick", quick, "the small profile (2 seeds, 2 rounds of 10, small pool)");
     cmd->add_option("--strategies", strategies,
                     "comma-separated: random, margin, disagreement, diversity, shield-relevant "
-                    "(default: all)");
+                    "(default: all the domain supports; shield-relevant needs a domain with a "
+                    "shield run)");
     cmd->add_option("--seeds", seeds, "seeds (default 5; quick 2)");
     AddSeedOption(cmd, "--first-seed", &first_seed, "seed i is first-seed + i");
     cmd->add_option("--rounds", rounds, "query rounds (default 8; quick 2)");
@@ -99,6 +101,10 @@ struct LabelEfficiencyCommand {
       std::stringstream in(strategies);
       for (std::string item; std::getline(in, item, ',');)
         o.strategies.push_back(FromString(cbf::kQueryStrategyNames, item, "--strategies"));
+    } else if (!d->HasShieldRun()) {  // the default: every strategy the domain supports
+      o.strategies.erase(std::remove(o.strategies.begin(), o.strategies.end(),
+                                     cbf::QueryStrategy::kShieldRelevant),
+                         o.strategies.end());
     }
     if (seeds > 0) o.seeds = seeds;
     o.first_seed = first_seed;

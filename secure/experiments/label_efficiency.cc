@@ -427,6 +427,16 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
   options.Validate();
   SECURE_CHECK(domain.HasLabeller(), "label-efficiency: the " << domain.name()
                                                               << " domain has no labeller");
+  // shield-relevant asks about the states the domain's shielded loop visits: without a shield run
+  // it would be margin under another name.
+  SECURE_CHECK(domain.HasShieldRun() ||
+                   std::find(options.strategies.begin(), options.strategies.end(),
+                             cbf::QueryStrategy::kShieldRelevant) == options.strategies.end(),
+               "label-efficiency: strategy shield-relevant queries the states the shielded loop "
+               "visits, and the "
+                   << domain.name()
+                   << " domain has no shield run (Domain::HasShieldRun): leave it out of the "
+                      "strategies");
   const Stopwatch clock;
   const nlohmann::json options_json = options.ToJson();
   const std::vector<std::string> features = domain.MakeEnvironment()->ObservationFeatures();

@@ -13,7 +13,9 @@
 //      epochs scaled so that every training takes the preset's number of gradient steps on
 //      `reference_states` states, so small label sets are not under-trained), measure it, then
 //      (before round R) ask k more: the strategy's k states of the still-unlabelled pool
-//      (shield-relevant: of the states a shielded run with the current barrier visits;
+//      (shield-relevant: of the states a shielded run with the current barrier visits, only on
+//      a domain with a shield run (an error elsewhere); margin over the pool in a round whose
+//      run visited fewer than k states;
 //      disagreement: over `ensemble` barriers trained with different seeds on the same labels);
 //      the person labels them (a -1, "cannot say", is asked but not used).
 //   Measures each round: where the domain has a ground truth, Table 1's over-conservative

@@ -302,7 +302,7 @@ TEST(CliQueryTest, LabelEfficiencyDerbyClosedLoopOnARunsPolicies) {
 }
 
 // The closed loop's bad input: a run without the seed's policy, a per-obstacle barrier on a
-// domain without obstacles.
+// domain without obstacles, a strategy the domain cannot serve.
 TEST(CliQueryTest, LabelEfficiencyClosedLoopErrorsNameTheFileOrField) {
   std::filesystem::create_directories(P("le_empty_run"));
   // (the check runs before the experiment's banner line: the error is the only line)
@@ -316,6 +316,10 @@ TEST(CliQueryTest, LabelEfficiencyClosedLoopErrorsNameTheFileOrField) {
                      "barrier_kind = per-obstacle");
   ExpectOneErrorLine(RunCli("experiment label-efficiency --domain derby --quick --barrier round"),
                      "--barrier");
+  // shield-relevant needs the domain's shielded loop; Derby's driver has none to run.
+  ExpectOneErrorLine(RunCli("experiment label-efficiency --domain derby --quick --strategies "
+                            "margin,shield-relevant"),
+                     "the derby domain has no shield run");
 }
 
 }  // namespace
