@@ -140,6 +140,8 @@ nlohmann::json LabelEfficiencyCurve::ToJson() const {
                    {"seconds", seconds}};
   if (final_grid) j["final_grid"] = final_grid->ToJson();
   if (!closed_loop.is_null()) j["closed_loop"] = closed_loop;
+  if (strategy == ToString(cbf::kQueryStrategyNames, cbf::QueryStrategy::kShieldRelevant))
+    j["margin_rounds"] = margin_rounds;
   return j;
 }
 
@@ -148,6 +150,7 @@ LabelEfficiencyCurve LabelEfficiencyCurve::FromJson(const nlohmann::json& j) {
   c.strategy = j.at("strategy").get<std::string>();
   c.seed = j.at("seed").get<std::uint64_t>();
   c.seconds = j.at("seconds").get<double>();
+  c.margin_rounds = j.value("margin_rounds", 0);
   for (const nlohmann::json& p : j.at("points")) {
     LabelEfficiencyPoint q;
     q.round = p.at("round").get<int>();
@@ -374,7 +377,8 @@ struct Job {
           add(Columns(visited, r.indices).states);
           continue;
         }
-        // Too few visited states: margin over the pool instead (below).
+        // Too few visited states: margin over the pool instead (below), counted.
+        ++curve.margin_rounds;
       }
       std::vector<long> open;
       for (long i = 0; i < n; ++i)
@@ -643,6 +647,16 @@ std::string LabelEfficiencyResult::Table() const {
               ? "; without a ground truth, against the labeller's answers (the person, not physics)"
               : "")
       << "\n";
+  int margin_rounds = 0, shield_rounds = 0;
+  for (const LabelEfficiencyCurve& c : curves)
+    if (c.strategy == ToString(cbf::kQueryStrategyNames, cbf::QueryStrategy::kShieldRelevant)) {
+      margin_rounds += c.margin_rounds;
+      shield_rounds += std::max(0, static_cast<int>(c.points.size()) - 1);
+    }
+  if (margin_rounds > 0)
+    out << "shield-relevant: " << margin_rounds << " of " << shield_rounds
+        << " query rounds asked by margin over the pool (the shielded run visited fewer than k "
+           "states)\n";
   if (!closed_loop.empty()) out << "\n" << internal::ClosedLoopTable(closed_loop);
   if (paper) {
     out << "\nLabels (mean over seeds) at which the mean errors first reach the paper's Table 1 ("

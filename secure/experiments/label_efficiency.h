@@ -122,6 +122,9 @@ struct LabelEfficiencyCurve {
   // With policies_from, the last round's closed loop as eval::SeedResult documents: "secure"
   // (the last barrier), "airl" and "secure_full_labels" (the run's barrier); null without.
   nlohmann::json closed_loop;
+  // shield-relevant: the rounds whose shielded run visited fewer than k states, so that margin
+  // over the pool asked instead (written for shield-relevant only; the table reports it).
+  int margin_rounds = 0;
   double seconds = 0;
   nlohmann::json ToJson() const;
   static LabelEfficiencyCurve FromJson(const nlohmann::json& j);
