@@ -8,6 +8,7 @@
 
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
+#include "secure/common/random_order.h"
 #include "secure/common/timer.h"
 #include "secure/domains/demonstrations.h"
 
@@ -295,18 +296,12 @@ void DerbyExpert::Act(const DerbyEnv& env, Rng& rng, Eigen::Ref<Eigen::VectorXf>
                    << o.ToJson().dump() << " vs " << task_.ToJson().dump() << ")");
   const Eigen::Vector2d p = env.ego_position().cast<double>();
   const Eigen::Vector2d v = env.ego_velocity().cast<double>();
-  Eigen::Vector2d a = Nominal(p, v, env.goal().cast<double>());
-  a.x() += options_.noise_sigma * rng.Normal();
-  a.y() += options_.noise_sigma * rng.Normal();
-  ++stats_.steps;
-  if (options_.use_filter) {
-    DerbyFilterInfo info;
-    a = FilterAction(env, a, &info);
-    stats_.modified += info.modified ? 1 : 0;
-    stats_.infeasible += info.feasible ? 0 : 1;
-  } else {
-    a = a.cwiseMax(-task_.accel_bound).cwiseMin(task_.accel_bound);
-  }
+  const Eigen::Vector2d a = NoisyFilteredAction<DerbyFilterInfo>(
+      Nominal(p, v, env.goal().cast<double>()), options_.noise_sigma, options_.use_filter,
+      task_.accel_bound, rng, stats_,
+      [&](const Eigen::Vector2d& noisy, DerbyFilterInfo* info) {
+        return FilterAction(env, noisy, info);
+      });
   action = a.cast<float>();
 }
 
@@ -390,12 +385,8 @@ data::StateSet SafeStatesFromDemonstrations(const data::TrajectorySet& trajector
     for (long i = 0; i < n; ++i) picked.push_back(i);
   const long rest = count - static_cast<long>(picked.size());
   if (rest > 0) {
-    std::vector<long> order(static_cast<std::size_t>(n));
-    std::iota(order.begin(), order.end(), 0L);
-    Shuffle(order.begin(), order.end(), rng);
-    order.resize(static_cast<std::size_t>(rest));
-    std::sort(order.begin(), order.end());
-    picked.insert(picked.end(), order.begin(), order.end());
+    const std::vector<long> subset = SortedRandomSubset(n, rest, rng);
+    picked.insert(picked.end(), subset.begin(), subset.end());
   }
   set.states = data::SelectColumns(trajectories.states, picked);
   return set;

@@ -57,6 +57,7 @@
 
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
+#include "secure/domains/filtering_expert.h"
 #include "domains/derby/derby.h"
 
 namespace secure::domains::derby {
@@ -99,11 +100,7 @@ struct DerbyFilterInfo {
   double min_h = 0.0;     // min over cars of h at the current frame
 };
 
-struct DerbyExpertStats {
-  long steps = 0;
-  long modified = 0;
-  long infeasible = 0;
-};
+using DerbyExpertStats = domains::ExpertFilterStats;
 
 class DerbyExpert {
  public:

@@ -9,6 +9,7 @@
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
+#include "secure/common/random_order.h"
 #include "secure/common/timer.h"
 #include "secure/domains/demonstrations.h"
 
@@ -259,17 +260,9 @@ void Expert::Act(const Eigen::Ref<const Eigen::VectorXf>& state, Rng& rng,
                "Expert::Act: state/action have " << state.size() << "/" << action.size()
                                                  << " entries, expected 4/2");
   const Eigen::Vector4d s = state.cast<double>();
-  Eigen::Vector2d a = Nominal(s);
-  for (int i = 0; i < kActionDim; ++i) a[i] += options_.noise_sigma * rng.Normal();
-  ++stats_.steps;
-  if (options_.use_filter) {
-    FilterInfo info;
-    a = FilterAction(s, a, &info);
-    if (info.modified) ++stats_.modified;
-    if (!info.feasible) ++stats_.infeasible;
-  } else {
-    a = a.cwiseMax(-task_.accel_bound).cwiseMin(task_.accel_bound);
-  }
+  const Eigen::Vector2d a = NoisyFilteredAction<FilterInfo>(
+      Nominal(s), options_.noise_sigma, options_.use_filter, task_.accel_bound, rng, stats_,
+      [&](const Eigen::Vector2d& noisy, FilterInfo* info) { return FilterAction(s, noisy, info); });
   action[0] = static_cast<float>(a[0]);
   action[1] = static_cast<float>(a[1]);
 }
@@ -376,12 +369,7 @@ data::StateSet SafeStatesFromDemonstrations(const data::TrajectorySet& trajector
     set.states = trajectories.states;
     return set;
   }
-  std::vector<long> order(static_cast<std::size_t>(n));
-  std::iota(order.begin(), order.end(), 0L);
-  Shuffle(order.begin(), order.end(), rng);
-  order.resize(static_cast<std::size_t>(max_states));
-  std::sort(order.begin(), order.end());
-  set.states = data::SelectColumns(trajectories.states, order);
+  set.states = data::SelectColumns(trajectories.states, SortedRandomSubset(n, max_states, rng));
   return set;
 }
 

@@ -70,6 +70,7 @@
 
 #include "secure/common/rng.h"
 #include "secure/data/data.h"
+#include "secure/domains/filtering_expert.h"
 #include "domains/double_integrator/double_integrator.h"
 #include "domains/double_integrator/reach_avoid.h"
 
@@ -130,12 +131,9 @@ struct FilterInfo {
   bool feasible = true;   // some action in the box satisfies the condition (with the margin)
 };
 
-/// Counts over the Act() calls since construction or the last ResetStats().
-struct ExpertStats {
-  long steps = 0;
-  long modified = 0;    // the filter changed the (clipped) nominal action
-  long infeasible = 0;  // no action met the condition; the h-maximising corner was used
-};
+/// Counts over the Act() calls since construction or the last ResetStats() (infeasible: the
+/// h-maximising corner was used).
+using ExpertStats = domains::ExpertFilterStats;
 
 class Expert {
  public:

@@ -1,6 +1,10 @@
 #include "secure/common/rng.h"
 
+#include <algorithm>
 #include <cmath>
+#include <numeric>
+
+#include "secure/common/random_order.h"
 
 namespace secure {
 
@@ -31,6 +35,20 @@ double Rng::Normal() {
   spare_normal_ = radius * std::sin(angle);
   has_spare_ = true;
   return radius * std::cos(angle);
+}
+
+std::vector<long> RandomPermutation(long n, Rng& rng) {
+  std::vector<long> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), 0L);
+  Shuffle(order.begin(), order.end(), rng);
+  return order;
+}
+
+std::vector<long> SortedRandomSubset(long n, long k, Rng& rng) {
+  std::vector<long> order = RandomPermutation(n, rng);
+  order.resize(static_cast<std::size_t>(k));
+  std::sort(order.begin(), order.end());
+  return order;
 }
 
 }  // namespace secure

@@ -16,6 +16,7 @@
 #include <Eigen/Core>
 
 #include "secure/common/error.h"
+#include "secure/common/random_order.h"
 #include "secure/common/rng.h"
 
 namespace secure::data {
@@ -211,9 +212,7 @@ IndexSplit SplitForValidation(long n, double fraction, Rng& rng) {
   long n_val = fraction > 0 ? std::lround(fraction * static_cast<double>(n)) : 0;
   if (fraction > 0 && n >= 2) n_val = std::clamp(n_val, 1L, n - 1);
   if (n < 2) n_val = 0;
-  std::vector<long> order(static_cast<std::size_t>(std::max(n, 0L)));
-  std::iota(order.begin(), order.end(), 0L);
-  Shuffle(order.begin(), order.end(), rng);
+  const std::vector<long> order = RandomPermutation(std::max(n, 0L), rng);
   split.validation.assign(order.begin(), order.begin() + n_val);
   split.train.assign(order.begin() + n_val, order.end());
   return split;

@@ -4,6 +4,7 @@
 #include <numeric>
 
 #include "secure/common/error.h"
+#include "secure/common/random_order.h"
 #include "secure/common/rng.h"
 #include "secure/experiments/domain.h"
 
@@ -33,10 +34,8 @@ data::StateSet Domain::SampleQueryPool(long count, std::uint64_t seed) const {
   SECURE_CHECK(count >= 1, "query pool: count = " << count << ", must be >= 1");
   const DomainData d = GenerateData(seed);
   const long n = d.safe.size() + d.near_dangerous.size();
-  std::vector<long> order(static_cast<std::size_t>(n));
-  std::iota(order.begin(), order.end(), 0L);
   Rng rng(seed ^ 0x9001'0000'0000'0000ULL);
-  Shuffle(order.begin(), order.end(), rng);
+  std::vector<long> order = RandomPermutation(n, rng);
   order.resize(static_cast<std::size_t>(std::min(n, count)));
   data::StateSet pool;
   pool.source = "the " + name() + " query pool (data seed " + std::to_string(seed) + ")";

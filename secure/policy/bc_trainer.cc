@@ -12,6 +12,7 @@
 #include "secure/common/error.h"
 #include "secure/common/filesystem.h"
 #include "secure/common/option_check.h"
+#include "secure/common/random_order.h"
 #include "secure/common/rng.h"
 #include "secure/common/strings.h"
 #include "secure/common/timer.h"
@@ -45,9 +46,7 @@ Split SplitEpisodes(const data::TrajectorySet& demos, double fraction, Rng& rng)
   long n_val = 0;
   if (fraction > 0 && episodes >= 2)
     n_val = std::clamp(std::lround(fraction * static_cast<double>(episodes)), 1L, episodes - 1);
-  std::vector<long> order(episodes);
-  std::iota(order.begin(), order.end(), 0L);
-  Shuffle(order.begin(), order.end(), rng);
+  const std::vector<long> order = RandomPermutation(episodes, rng);
   std::vector<bool> is_val(episodes, false);
   for (long i = 0; i < n_val; ++i) is_val[order[i]] = true;
   Split split;

@@ -8,6 +8,8 @@
 #include <numeric>
 #include <vector>
 
+#include "secure/common/random_order.h"
+
 namespace secure {
 namespace {
 
@@ -214,6 +216,34 @@ TEST(RngTest, ShuffleOfEmptyAndSingleRangesIsANoOp) {
   std::vector<int> one{42};
   Shuffle(one.begin(), one.end(), rng);
   EXPECT_EQ(one, std::vector<int>{42});
+}
+
+TEST(RngTest, RandomPermutationIsTheShuffledIdentity) {
+  Rng a(21), b(21);
+  std::vector<long> expected(50);
+  std::iota(expected.begin(), expected.end(), 0L);
+  Shuffle(expected.begin(), expected.end(), b);
+  const std::vector<long> p = RandomPermutation(50, a);
+  EXPECT_EQ(p, expected);
+  EXPECT_EQ(a.NextU64(), b.NextU64());  // the same draws consumed
+  EXPECT_TRUE(RandomPermutation(0, a).empty());
+}
+
+TEST(RngTest, SortedRandomSubsetIsTheSortedHeadOfThePermutation) {
+  Rng a(22), b(22);
+  std::vector<long> head = RandomPermutation(40, b);
+  head.resize(7);
+  std::sort(head.begin(), head.end());
+  const std::vector<long> s = SortedRandomSubset(40, 7, a);
+  EXPECT_EQ(s, head);
+  EXPECT_TRUE(std::is_sorted(s.begin(), s.end()));
+  EXPECT_EQ(std::adjacent_find(s.begin(), s.end()), s.end());  // distinct
+  EXPECT_GE(s.front(), 0);
+  EXPECT_LT(s.back(), 40);
+  std::vector<long> all(40);
+  std::iota(all.begin(), all.end(), 0L);
+  EXPECT_EQ(SortedRandomSubset(40, 40, a), all);
+  EXPECT_TRUE(SortedRandomSubset(40, 0, a).empty());
 }
 
 TEST(RngTest, SplitGivesADifferentDeterministicStream) {

@@ -28,16 +28,11 @@ import sys
 import h5py
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from script_checks import check, exit_status  # noqa: E402
+
 CLI = os.environ["SECURE_CLI"]
 WORK = os.environ["SECURE_WORK"]
-failures = []
-
-
-def check(cond, message):
-    if not cond:
-        failures.append(message)
-        print("FAIL: " + message, file=sys.stderr)
-    return cond
 
 
 def run(*args):
@@ -213,12 +208,10 @@ def main():
     os.makedirs(WORK)
     our_file_as_robomimic_reads_it()
     robomimic_file_with_images_converts()
-    if failures:
-        print("%d check(s) failed" % len(failures), file=sys.stderr)
-        return 1
-    shutil.rmtree(WORK, ignore_errors=True)
-    print("robomimic h5py checks passed")
-    return 0
+    status = exit_status("robomimic h5py checks passed")
+    if status == 0:
+        shutil.rmtree(WORK, ignore_errors=True)
+    return status
 
 
 if __name__ == "__main__":

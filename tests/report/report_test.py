@@ -26,18 +26,13 @@ matplotlib.use("Agg")
 import matplotlib.image as mpimg  # noqa: E402
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from script_checks import check, exit_status, failures  # noqa: E402,F401 (label_efficiency_report_test)
+
 CLI = os.environ["SECURE_CLI"]
 WORK = os.environ["SECURE_REPORT_WORK"]
 EXPECT_BARRIER = os.environ.get("SECURE_EXPECT_BARRIER") == "1"
 CHROMIUM = os.environ.get("CHROMIUM", "chromium")
-failures = []
-
-
-def check(cond, message):
-    if not cond:
-        failures.append(message)
-        print("FAIL: " + message, file=sys.stderr)
-    return cond
 
 
 def run(args, **kw):
@@ -331,7 +326,4 @@ def output_rules(run_dir):
 
 if __name__ == "__main__":
     main()
-    if failures:
-        print("%d check(s) failed" % len(failures), file=sys.stderr)
-        sys.exit(1)
-    print("report_html: all checks passed")
+    sys.exit(exit_status("report_html: all checks passed"))
