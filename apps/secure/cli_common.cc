@@ -254,6 +254,7 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
   action_bounds = ToString(shield::kActionBoundsNames, so->action_bounds);
   proposal = ToString(shield::kProposalNames, so->proposal);
   qp_metric = ToString(shield::kQpMetricNames, so->qp_metric);
+  qp_target = ToString(shield::kQpTargetNames, so->qp_target);
   using O = shield::ShieldOptions;
   // The flags in help order; each binds its field (or the enum's string) and copies its field.
   const std::vector<std::pair<CLI::Option*, std::function<void(const O&, O*)>>> flags = {
@@ -285,6 +286,9 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
       ShieldFlag(cmd, "--qp-line-search", &so->qp_line_search, &O::qp_line_search,
                  "proposal qp, qp-only: secant steps on the exact g along a rejected "
                  "projection's line (0: none)"),
+      ShieldFlag(cmd, "--qp-bisection", &so->qp_bisection, &O::qp_bisection,
+                 "proposal qp, qp-only: bisection steps on the exact g back along the line of "
+                 "an accepted projection that overshot the boundary (0: none)"),
       ShieldFlag(cmd, "--qp-margin", &so->qp_margin, &O::qp_margin,
                  "proposal: the projection asks the linearised g >= this margin"),
       ShieldFlag(cmd, "--qp-max-step", &so->qp_max_step, &O::qp_max_step,
@@ -293,6 +297,10 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
       ShieldFlag(cmd, "--qp-metric", &qp_metric, &O::qp_metric,
                  "proposal qp, qp-only: the projection's metric: euclidean | policy (the "
                  "policy's Gaussian, (a - mu)^T diag(sigma)^-2 (a - mu))"),
+      ShieldFlag(cmd, "--qp-target", &qp_target, &O::qp_target,
+                 "proposal qp, qp-only: where the projection lands: boundary (the least change) "
+                 "| safe-mean (the policy's Gaussian's mean over the linearised safe half-space; "
+                 "needs --qp-metric policy)"),
       ShieldFlag(cmd, "--refine-steps", &so->refine_steps, &O::refine_steps,
                  "proposal refine: gradient steps per decision at most"),
       ShieldFlag(cmd, "--max-iterations", &so->max_iterations, &O::max_iterations,
@@ -320,6 +328,7 @@ void ShieldFlags::ApplyTo(shield::ShieldOptions* so) const {
   so->action_bounds = FromString(shield::kActionBoundsNames, action_bounds, "--action-bounds");
   so->proposal = FromString(shield::kProposalNames, proposal, "--proposal");
   so->qp_metric = FromString(shield::kQpMetricNames, qp_metric, "--qp-metric");
+  so->qp_target = FromString(shield::kQpTargetNames, qp_target, "--qp-target");
 }
 
 void ShieldFlags::OverlayGiven(const shield::ShieldOptions& parsed,

@@ -177,7 +177,8 @@ class TaskFlags {
 /// Flags for the shield's options (--samples, --safe-ratio, --class-k, ...), bound to `options`;
 /// the enum-valued ones are parsed by ApplyTo() after CLI parsing.
 struct ShieldFlags {
-  std::string class_k, aggregation, resampling, sampler, action_bounds, proposal, qp_metric;
+  std::string class_k, aggregation, resampling, sampler, action_bounds, proposal, qp_metric,
+      qp_target;
   /// `domain_preset`: the command starts from a chosen domain's options (OverlayGiven onto its
   /// preset), so the help shows "=preset" (the values: `secure domains NAME`), not the general
   /// defaults in `options`.

@@ -248,11 +248,14 @@ class Dynamics:
         """next = A s + B a; A is (d, d), B is (d, n) (copied)."""
         ...
     @staticmethod
-    def learned(path: str, max_batch: int = 1024) -> Dynamics:
+    def learned(path: str, max_batch: int = 1024, *, pessimism: str = 'min', pessimism_kappa: float = 1.0, pessimism_linear: bool = False) -> Dynamics:
         """A learned dynamics ensemble from its model file (`secure dynamics train`): step() gives the
-        members' mean; a Shield on it scores an action by the minimum over the members of h(s+), so the
-        ensemble's disagreement makes the shield careful. max_batch bounds the actions per step (the
-        shield's max(num_samples, num_probes)). Inference only (no LibTorch).
+        members' mean; a Shield on it scores an action pessimistically over the members' h(s+), so the
+        ensemble's disagreement makes the shield careful: pessimism='min' (the minimum over the members)
+        or 'mean-std' (their mean minus pessimism_kappa standard deviations); pessimism_linear=True takes
+        the members' h(s+) to first order through the barrier's gradient (h on M states instead of K M),
+        as `secure eval --pessimism --pessimism-kappa --pessimism-linear`. max_batch bounds the actions
+        per step (the shield's max(num_samples, num_probes)). Inference only (no LibTorch).
         """
         ...
     @staticmethod
@@ -329,6 +332,9 @@ class Shield:
     proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
     alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_line_search=0
     (proposal 'qp' / 'qp-only': secant steps on the exact g along a rejected projection's line),
+    qp_bisection=0 (proposal 'qp' / 'qp-only': bisection steps on the exact g back along the line of
+    an accepted projection that overshot), qp_target='boundary' (or 'safe-mean': the mean of the
+    policy's Gaussian over the linearised safe half-space; needs qp_metric='policy'),
     qp_margin=0, qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
     qp_metric='euclidean' (or 'policy': proposal 'qp' / 'qp-only' project in the policy's metric
     (a - mu)^T diag(sigma)^-2 (a - mu); needs sigma > 0),

@@ -81,10 +81,19 @@ std::shared_ptr<Dynamics> Linear(ArrayLike a, ArrayLike b) {
   return d;
 }
 
-std::shared_ptr<Dynamics> Learned(const std::string& path, int max_batch) {
+std::shared_ptr<Dynamics> Learned(const std::string& path, int max_batch,
+                                  const std::string& pessimism, double pessimism_kappa,
+                                  bool pessimism_linear) {
+  // As `secure eval --dynamics M --pessimism ... --pessimism-kappa ... --pessimism-linear`.
+  dynamics::PessimismOptions how;
+  how.aggregate = dynamics::PessimismOptions::ParseAggregate(pessimism, "pessimism");
+  how.kappa = pessimism_kappa;
+  how.linear = pessimism_linear;
+  how.Validate();
   auto ensemble = std::make_shared<const dynamics::EnsembleDynamics>(
       dynamics::EnsembleDynamics::Load(path));
-  auto model = std::make_shared<const dynamics::EnsembleModel>(ensemble, max_batch);
+  auto model = std::make_shared<const dynamics::EnsembleModel>(
+      ensemble, max_batch, nn::MatmulBackend::kAuto, how);
   auto d = std::make_shared<Dynamics>();
   d->model = model.get();
   d->owner = model;
@@ -266,11 +275,16 @@ A dynamics model T(s, a) the shield looks one step ahead with. Made by
   env.dynamics                                 the shield model of an environment)doc")
       .def_static("linear", &Linear, py::arg("A"), py::arg("B"),
                   "next = A s + B a; A is (d, d), B is (d, n) (copied).")
-      .def_static("learned", &Learned, py::arg("path"), py::arg("max_batch") = 1024, R"doc(
+      .def_static("learned", &Learned, py::arg("path"), py::arg("max_batch") = 1024,
+                  py::kw_only(), py::arg("pessimism") = "min", py::arg("pessimism_kappa") = 1.0,
+                  py::arg("pessimism_linear") = false, R"doc(
 A learned dynamics ensemble from its model file (`secure dynamics train`): step() gives the
-members' mean; a Shield on it scores an action by the minimum over the members of h(s+), so the
-ensemble's disagreement makes the shield careful. max_batch bounds the actions per step (the
-shield's max(num_samples, num_probes)). Inference only (no LibTorch).)doc")
+members' mean; a Shield on it scores an action pessimistically over the members' h(s+), so the
+ensemble's disagreement makes the shield careful: pessimism='min' (the minimum over the members)
+or 'mean-std' (their mean minus pessimism_kappa standard deviations); pessimism_linear=True takes
+the members' h(s+) to first order through the barrier's gradient (h on M states instead of K M),
+as `secure eval --pessimism --pessimism-kappa --pessimism-linear`. max_batch bounds the actions
+per step (the shield's max(num_samples, num_probes)). Inference only (no LibTorch).)doc")
       .def_static("from_callable", &FromCallable, py::arg("fn"), py::arg("state_dim"),
                   py::arg("action_dim"), py::arg("name") = "python dynamics", R"doc(
 A model written in Python: fn(state, actions) gets a (state_dim,) float32 array and an
@@ -329,6 +343,9 @@ sigma_step=0.5, max_iterations=20, time_budget_us=0, seed=0, sampler='iid' (or '
 proposal='none' (or 'qp': the CBF-QP projection of the mean first, 'qp-only': the CBF-QP filter
 alone, 'refine': gradient refinement of the mean alone), qp_iterations=1, qp_line_search=0
 (proposal 'qp' / 'qp-only': secant steps on the exact g along a rejected projection's line),
+qp_bisection=0 (proposal 'qp' / 'qp-only': bisection steps on the exact g back along the line of
+an accepted projection that overshot), qp_target='boundary' (or 'safe-mean': the mean of the
+policy's Gaussian over the linearised safe half-space; needs qp_metric='policy'),
 qp_margin=0, qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
 qp_metric='euclidean' (or 'policy': proposal 'qp' / 'qp-only' project in the policy's metric
 (a - mu)^T diag(sigma)^-2 (a - mu); needs sigma > 0),

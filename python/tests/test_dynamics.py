@@ -71,3 +71,26 @@ def test_learned_dynamics_errors(tmp_path, learned_model):
         secure.Dynamics.learned(str(tmp_path / "missing.model"))
     with pytest.raises(ValueError, match="max_batch = 0"):
         secure.Dynamics.learned(learned_model, max_batch=0)
+    with pytest.raises(ValueError, match="pessimism = 'max', must be min | mean-std"):
+        secure.Dynamics.learned(learned_model, pessimism="max")
+    with pytest.raises(ValueError, match="kappa"):
+        secure.Dynamics.learned(learned_model, pessimism="mean-std", pessimism_kappa=-1)
+
+
+def test_learned_pessimism_options(learned_model):
+    """pessimism='mean-std' with kappa 0 scores by the members' mean h(s+), never below the
+    minimum over the members (the default); a larger kappa is more careful."""
+    barrier = secure.Barrier.ground_truth("double-integrator")
+    state = np.array([5.0, 7.4, 0.0, -1.0], dtype=np.float32)
+    actions = np.array([[0.0, -3.0], [0.0, 0.0], [0.0, 3.0]], dtype=np.float32)
+
+    def g(**kw):
+        model = secure.Dynamics.learned(learned_model, **kw)
+        return secure.Shield(barrier, model, num_samples=8, num_probes=8).evaluate_g(state, actions)
+
+    g_min, g_mean = g(), g(pessimism="mean-std", pessimism_kappa=0.0)
+    g_careful = g(pessimism="mean-std", pessimism_kappa=3.0)
+    assert np.all(g_mean >= g_min - 1e-4) and np.all(g_careful <= g_mean + 1e-4)
+    assert np.any(g_mean > g_min + 1e-6)  # the members disagree somewhere
+    g_linear = g(pessimism_linear=True)
+    assert np.all(np.abs(g_linear - g_min) < 0.1 * np.abs(g_min) + 0.5)

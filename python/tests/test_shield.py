@@ -370,6 +370,50 @@ def test_shield_qp_line_search_option():
         secure.Shield(barrier, curved, proposal="qp", qp_line_search=-1)
 
 
+def test_shield_qp_bisection_and_target_options():
+    """qp_bisection: on a model whose step switches on within a small move (a contact), the
+    projection overshoots deep into the safe set; bisection on the exact g brings it back along the
+    same line, nearer the mean, still with g >= 0. qp_target='safe-mean' needs the policy metric."""
+    barrier = secure.Barrier.ground_truth("double-integrator")
+
+    def step(s, a):  # the double integrator, braking hard only once ay exceeds 1 (a contact)
+        n = np.repeat(s[None, :], a.shape[0], axis=0).astype(np.float32)
+        n[:, 0] += 0.1 * s[2]
+        n[:, 1] += 0.1 * s[3]
+        n[:, 2] += 0.1 * a[:, 0]
+        n[:, 3] += 0.1 * a[:, 1] + 2.0 * np.tanh(20.0 * (a[:, 1] - 1.0))
+        return n
+
+    contact = secure.Dynamics.from_callable(step, 4, 2)  # g(ay) jumps by ~180 around ay = 1
+    box = dict(action_low=[-3, -3], action_high=[3, 3])
+    plain = secure.Shield(barrier, contact, proposal="qp-only", **box)
+    bisect = secure.Shield(barrier, contact, proposal="qp-only", qp_bisection=8, **box)
+    assert "qp_bisection" not in plain.options and bisect.options["qp_bisection"] == 8
+    sigma = np.ones(2, dtype=np.float32)
+    compared = nearer = 0
+    for x in np.linspace(2, 8, 13, dtype=np.float32):
+        s = np.array([x, 2.7, 0.0, 1.2], dtype=np.float32)  # below the disc, moving up into it
+        # Past the contact (ay > 1), where g is flat and far below 0: the linearisation puts the
+        # boundary beyond the box, and the projection lands on its face at ay = -3.
+        for mu in (np.array([0.0, 2.5], np.float32), np.array([0.5, 2.0], np.float32)):
+            p, b = plain.decide(s, mu, sigma).to_dict(), bisect.decide(s, mu, sigma).to_dict()
+            if p["qp"] != "accepted" or b["qp"] != "accepted":
+                continue
+            compared += 1
+            a = np.array([b["action"]], dtype=np.float32)
+            assert b["g"] >= 0 and abs(bisect.evaluate_g(s, a)[0] - b["g"]) <= 1e-5
+            assert b["distance_to_mean"] <= p["distance_to_mean"] + 1e-6
+            nearer += b["distance_to_mean"] < 0.5 * p["distance_to_mean"]
+    assert compared >= 5 and nearer == compared, (compared, nearer)
+    with pytest.raises(ValueError, match="qp_bisection"):
+        secure.Shield(barrier, contact, proposal="qp", qp_bisection=31)
+    target = secure.Shield(barrier, contact, proposal="qp", qp_metric="policy",
+                           qp_target="safe-mean")
+    assert target.options["qp_target"] == "safe-mean"
+    with pytest.raises(ValueError, match="needs qp_metric = policy"):
+        secure.Shield(barrier, contact, proposal="qp", qp_target="safe-mean")
+
+
 def test_shield_qp_metric_option():
     """qp_metric='policy': the CBF-QP projects in the policy's metric (a - mu)^T diag(sigma)^-2
     (a - mu), so the policy's sure axis (small sigma) moves less than in the Euclidean one."""

@@ -166,4 +166,37 @@ QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
   return result;
 }
 
+double InverseMillsRatio(double x) {
+  SECURE_CHECK(std::isfinite(x), "InverseMillsRatio: x = " << x << ", must be finite");
+  // 1 - Phi(x) = erfc(x / sqrt(2)) / 2 keeps full relative precision up to x ~ 37 (then
+  // underflows); from x = 25 the series x + 1/x - 2/x^3 + 10/x^5 - 74/x^7 is good to < 1e-11 (relative).
+  if (x > 25.0) {
+    const double r = 1.0 / (x * x);
+    return x + (1.0 / x) * (1.0 - r * (2.0 - r * (10.0 - 74.0 * r)));
+  }
+  constexpr double kInvSqrt2Pi = 0.39894228040143267794;
+  constexpr double kInvSqrt2 = 0.70710678118654752440;
+  const double tail = 0.5 * std::erfc(x * kInvSqrt2);
+  return kInvSqrt2Pi * std::exp(-0.5 * x * x) / tail;
+}
+
+double GaussianHalfSpaceMeanOffset(const Eigen::Ref<const Eigen::VectorXd>& mu,
+                                   const Eigen::Ref<const Eigen::VectorXd>& sigma,
+                                   const Eigen::Ref<const Eigen::VectorXd>& c, double d) {
+  const Eigen::Index n = mu.size();
+  SECURE_CHECK(sigma.size() == n && c.size() == n,
+               "GaussianHalfSpaceMeanOffset: sizes " << n << ", " << sigma.size() << ", "
+                                                     << c.size() << " differ");
+  SECURE_CHECK(mu.allFinite() && sigma.allFinite() && c.allFinite() && std::isfinite(d),
+               "GaussianHalfSpaceMeanOffset: a non-finite mu, sigma, c or d (d = " << d << ")");
+  double cmu = 0.0, s2 = 0.0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    cmu += c[i] * mu[i];
+    s2 += (sigma[i] * c[i]) * (sigma[i] * c[i]);
+  }
+  const double s = std::sqrt(s2);
+  if (!(s > 0)) return d;
+  return cmu + s * InverseMillsRatio((d - cmu) / s);
+}
+
 }  // namespace secure::shield

@@ -25,6 +25,14 @@
 // problem above projecting z = 0; then a = mu + sigma o z (clipped onto the box against rounding).
 // Its solution is a = clip(mu + lambda sigma^2 o c): a coordinate moves in proportion to its
 // variance, so the policy's sure directions (small sigma) move least.
+//
+// GaussianHalfSpaceMeanOffset gives the half-space whose projection in that metric is the mean of
+// the Gaussian restricted to c . a >= d (the shield's qp_target = safe-mean): with s = |sigma o c|
+// and beta = (d - c . mu) / s, E[a | c . a >= d] = mu + lambda(beta) sigma^2 o c / s, where
+// lambda(beta) = phi(beta) / (1 - Phi(beta)) is the inverse Mills ratio (> max(beta, 0)); that is
+// the projection onto c . a >= d' with d' = c . mu + s lambda(beta) >= d. Without a box the
+// projection is that mean exactly; with one it is the nearest box point of the tightened
+// half-space.
 
 #include <Eigen/Core>
 #include <vector>
@@ -75,5 +83,17 @@ QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
                                  const Eigen::Ref<const Eigen::VectorXd>& low,
                                  const Eigen::Ref<const Eigen::VectorXd>& high,
                                  Eigen::Ref<Eigen::VectorXd> a, GaussianMetricScratch& scratch);
+
+/// The inverse Mills ratio of the standard normal, phi(x) / (1 - Phi(x)), for any finite x:
+/// E[Z | Z >= x] for Z ~ N(0, 1). Exact through erfc where 1 - Phi(x) is representable, its
+/// asymptotic series beyond x = 25 (relative error < 1e-11 there).
+double InverseMillsRatio(double x);
+
+/// d' above: the offset whose ProjectInGaussianMetric (without a box) is E[a | c . a >= d] under
+/// N(mu, diag(sigma^2)). Returns d when sigma o c = 0 (no spread along c: nothing to average).
+/// @throws secure::Error on mismatched sizes or a non-finite input.
+double GaussianHalfSpaceMeanOffset(const Eigen::Ref<const Eigen::VectorXd>& mu,
+                                   const Eigen::Ref<const Eigen::VectorXd>& sigma,
+                                   const Eigen::Ref<const Eigen::VectorXd>& c, double d);
 
 }  // namespace secure::shield

@@ -224,12 +224,30 @@ inline constexpr EnumTable<QpMetric, 2> kQpMetricNames{{
     {QpMetric::kPolicy, "policy"},
 }};
 
+/// Where the CBF-QP's projection lands (proposal qp and qp-only; qp.h).
+enum class QpTarget {
+  kBoundary,  // on the linearised boundary g = qp_margin: the least change (the textbook CBF-QP)
+  // The mean of the policy's Gaussian N(mu, diag(sigma^2)) over the linearised safe half-space,
+  // in closed form (qp.h, GaussianHalfSpaceMeanOffset): what Algorithm 1's average of the safe
+  // draws estimates on the first round, without drawing. It lies inside the half-space by
+  // |sigma o c| (lambda(beta) - beta) in g's units, more the nearer mu is to the boundary, and
+  // moves along sigma^2 o c. Needs qp_metric = policy (the projection onto the tightened half-space
+  // is in that metric) and every sigma_i > 0.
+  kSafeMean,
+};
+inline constexpr EnumTable<QpTarget, 2> kQpTargetNames{{
+    {QpTarget::kBoundary, "boundary"},
+    {QpTarget::kSafeMean, "safe-mean"},
+}};
+
 /// The largest ShieldOptions::lookahead_steps.
 inline constexpr int kMaxLookaheadSteps = 100;
 /// The largest ShieldOptions::qp_iterations.
 inline constexpr int kMaxQpIterations = 10;
 /// The largest ShieldOptions::qp_line_search.
 inline constexpr int kMaxQpLineSearch = 10;
+/// The largest ShieldOptions::qp_bisection.
+inline constexpr int kMaxQpBisection = 30;
 /// The largest ShieldOptions::refine_steps.
 inline constexpr int kMaxRefineSteps = 50;
 
@@ -273,6 +291,17 @@ struct ShieldOptions {
   // that does not rise, or a point beyond qp_max_step (proposal qp), ends it. One model step and
   // one barrier evaluation per step (docs/SHIELD.md).
   int qp_line_search = 0;
+  // Bisection steps on the exact g along the same line after an accepted point that overshot
+  // (proposal qp and qp-only; 0: none). Where g is far from linear in the action (a contact that
+  // the shield model switches on within a small move), the linearised boundary can lie far beyond
+  // the exact one, and the projection lands deep in the safe set, at the box's corner even, where
+  // the nearest safe action was close to mu. When the accepted point's exact g exceeds the target
+  // (qp_margin plus the rounding allowance) by more than a tenth of the gap between the target and
+  // the g of the line's last rejected point (a0, or the line search's), each step checks the
+  // midpoint of the two and keeps it as the decision when its g >= the target: the least change
+  // along the line to within its length / 2^K. One model step and one barrier evaluation per
+  // step, only on such decisions (docs/SHIELD.md).
+  int qp_bisection = 0;
   // The linearised condition the projection asks for is g >= qp_margin (>= 0, in g's units): a
   // buffer against the linearisation's error on a curved barrier or model. (A fixed 1e-4 (1 +
   // |h(s)|) / dt is always added, against float rounding.) The exact check is g >= 0 whatever
@@ -289,6 +318,9 @@ struct ShieldOptions {
   // proposal, as qp_max_step is (a config sets it for every method); refine and none ignore it.
   // ToJson writes it only when it is policy.
   QpMetric qp_metric = QpMetric::kEuclidean;
+  // proposal = qp or qp-only: where the projection lands (QpTarget). ToJson writes it only when
+  // it is safe-mean.
+  QpTarget qp_target = QpTarget::kBoundary;
   // proposal = refine: gradient steps per decision at most (each a linearisation, a step and an
   // exact check).
   int refine_steps = 5;
@@ -473,6 +505,13 @@ class Shield {
   // (then it is recorded in decision_).
   bool LineSearch(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, double g_point,
                   double g_solution);
+  // qp_bisection's steps on the same line between a rejected t_unsafe (exact g g_unsafe) and the
+  // accepted t_safe (g_safe, recorded in decision_), when g_safe overshot the target: each
+  // midpoint whose exact g >= the target becomes the decision and the new safe end.
+  void Bisect(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state, double t_unsafe,
+              double g_unsafe, double t_safe, double g_safe);
+  // a0 + t (a* - a0) (qp_point_, qp_solution_) into one_action_, clipped onto the box.
+  void PointOnLine(double t);
   // proposal = refine: the gradient refinement of mu into decision_ (action, g, qp); returns
   // whether an iterate's exact g >= 0 (shield_refine.cc).
   bool RefineMean(const Eigen::Ref<const Eigen::VectorXf>& state,

@@ -1,8 +1,11 @@
 // The shield's gradient-based proposals (shield.h, Proposal): the linearisation of g at an action
 // (the barrier's gradient at the predicted state and the model's action Jacobian), the CBF-QP
 // projection of the policy's mean (proposal qp, qp-only) and the gradient refinement of the mean
-// (proposal refine). The projection is Euclidean or in the policy's metric (qp_metric). Each
-// checks what it returns with the exact g, as every sample is checked.
+// (proposal refine). The projection is Euclidean or in the policy's metric (qp_metric), onto the
+// linearised boundary or the Gaussian's mean over the linearised half-space (qp_target); a line
+// search (qp_line_search) and a bisection (qp_bisection) on the exact g along the projection's
+// line mend a linearisation that fell short or overshot. Each checks what it returns with the
+// exact g, as every sample is checked.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -126,6 +129,12 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
     for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
     QpResult result;
     if (qp_normal_.allFinite() && std::isfinite(offset)) {
+      if (options_.qp_target == QpTarget::kSafeMean) {
+        // The half-space tightened so that its projection in the policy's metric is the mean of
+        // N(mu, sigma^2) over c . a >= offset (qp.h).
+        for (int r = 0; r < n; ++r) qp_sigma_[r] = sigma[r];
+        offset = GaussianHalfSpaceMeanOffset(qp_mu_, qp_sigma_, qp_normal_, offset);
+      }
       result = Project(sigma, offset);
     } else {
       // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
@@ -143,7 +152,10 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
     one_action_.col(0) = qp_solution_.cast<float>();
     ClipToBox(one_action_);  // rounding to float stays in the box
     EvaluateG(state, h_state, one_action_, one_g_);
-    if (Record(decision_, one_action_, one_g_[0])) return true;
+    if (Record(decision_, one_action_, one_g_[0])) {
+      Bisect(state, h_state, 0.0, g_point, 1.0, one_g_[0]);
+      return true;
+    }
     decision_.qp =
         result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
     // The next linearisation point (qp_iterations > 1): the projection as checked.
@@ -172,21 +184,47 @@ bool Shield::LineSearch(const Eigen::Ref<const Eigen::VectorXf>& state, double h
     // Past the boundary by the deficit just seen: on a g that curves below its secant the step
     // to g = target alone falls short again by about as much.
     const double t = t_last + 2.0 * (target - g_last) / slope;
-    for (int r = 0; r < n; ++r)
-      one_action_(r, 0) = static_cast<float>(qp_point_[r] + t * (qp_solution_[r] - qp_point_[r]));
-    ClipToBox(one_action_);
+    PointOnLine(t);
     if (options_.qp_max_step > 0 && options_.proposal == Proposal::kQp &&
         (one_action_.col(0).cast<double>() - qp_mu_).norm() > options_.qp_max_step) {
       return false;  // beyond the trust region, as a projection there would be
     }
     EvaluateG(state, h_state, one_action_, one_g_);
-    if (Record(decision_, one_action_, one_g_[0])) return true;
+    if (Record(decision_, one_action_, one_g_[0])) {
+      Bisect(state, h_state, t_last, g_last, t, one_g_[0]);
+      return true;
+    }
     t_prev = t_last;
     g_prev = g_last;
     t_last = t;
     g_last = one_g_[0];
   }
   return false;
+}
+
+void Shield::PointOnLine(double t) {
+  for (int r = 0; r < action_dim_; ++r)
+    one_action_(r, 0) = static_cast<float>(qp_point_[r] + t * (qp_solution_[r] - qp_point_[r]));
+  ClipToBox(one_action_);
+}
+
+void Shield::Bisect(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,
+                    double t_unsafe, double g_unsafe, double t_safe, double g_safe) {
+  const double target = options_.qp_margin + RoundingMargin(h_state, options_.dt);
+  // Only past an overshoot: where g is close to linear along the line the accepted point sits
+  // near the target already, and the midpoints would all fail.
+  if (!(g_safe > target + 0.1 * (target - g_unsafe))) return;
+  for (int step = 0; step < options_.qp_bisection; ++step) {
+    const double t = 0.5 * (t_unsafe + t_safe);
+    PointOnLine(t);
+    EvaluateG(state, h_state, one_action_, one_g_);
+    if (one_g_[0] >= target) {
+      Record(decision_, one_action_, one_g_[0]);
+      t_safe = t;
+    } else {
+      t_unsafe = t;
+    }
+  }
 }
 
 bool Shield::RefineMean(const Eigen::Ref<const Eigen::VectorXf>& state,

@@ -37,12 +37,19 @@ void ShieldOptions::Validate() const {
                      "qp_iterations", qp_iterations, "in [1, " << kMaxQpIterations << "]");
   SECURE_CHECK_FIELD(qp_line_search >= 0 && qp_line_search <= kMaxQpLineSearch, "ShieldOptions",
                      "qp_line_search", qp_line_search, "in [0, " << kMaxQpLineSearch << "]");
+  SECURE_CHECK_FIELD(qp_bisection >= 0 && qp_bisection <= kMaxQpBisection, "ShieldOptions",
+                     "qp_bisection", qp_bisection, "in [0, " << kMaxQpBisection << "]");
   SECURE_CHECK_FIELD(std::isfinite(qp_margin) && qp_margin >= 0, "ShieldOptions", "qp_margin",
                      qp_margin, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(qp_max_step) && qp_max_step >= 0, "ShieldOptions",
                      "qp_max_step", qp_max_step, ">= 0 (0: no limit)");
   SECURE_CHECK_FIELD(refine_steps >= 1 && refine_steps <= kMaxRefineSteps, "ShieldOptions",
                      "refine_steps", refine_steps, "in [1, " << kMaxRefineSteps << "]");
+  SECURE_CHECK(qp_target == QpTarget::kBoundary || qp_metric == QpMetric::kPolicy,
+               "ShieldOptions::qp_target = safe-mean is the mean of the policy's Gaussian over the "
+               "linearised half-space, a projection in the policy's metric: it needs qp_metric = "
+               "policy, not "
+                   << ToString(kQpMetricNames, qp_metric));
   SECURE_CHECK(proposal == Proposal::kNone || lookahead_steps == 1,
                "ShieldOptions::proposal = " << ToString(kProposalNames, proposal)
                                             << " linearises the one-step condition: it needs "
@@ -87,6 +94,7 @@ nlohmann::json ShieldOptions::ToJson() const {
       json["qp_iterations"] = qp_iterations;
       // (absent: none, as before it existed)
       if (qp_line_search > 0) json["qp_line_search"] = qp_line_search;
+      if (qp_bisection > 0) json["qp_bisection"] = qp_bisection;
     }
     json["qp_margin"] = qp_margin;
     // (absent: no limit, as before; it acts only with proposal = qp)
@@ -96,6 +104,7 @@ nlohmann::json ShieldOptions::ToJson() const {
   // with proposal none: a config sets it for every method and secure-qp / cbf-qp take it from
   // these options (and a result's options then say which metric its projections used).
   if (qp_metric != QpMetric::kEuclidean) json["qp_metric"] = ToString(kQpMetricNames, qp_metric);
+  if (qp_target != QpTarget::kBoundary) json["qp_target"] = ToString(kQpTargetNames, qp_target);
   return json;
 }
 
@@ -121,9 +130,11 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Enum("proposal", &proposal, kProposalNames)
       .Field("qp_iterations", &qp_iterations)
       .Field("qp_line_search", &qp_line_search)
+      .Field("qp_bisection", &qp_bisection)
       .Field("qp_margin", &qp_margin)
       .Field("qp_max_step", &qp_max_step)
       .Enum("qp_metric", &qp_metric, kQpMetricNames)
+      .Enum("qp_target", &qp_target, kQpTargetNames)
       .Field("refine_steps", &refine_steps)
       .Apply(node, source);
 }

@@ -326,7 +326,7 @@ TEST(CliTest, EvalEpisodesOutHasARowPerEpisodeAndTheListsNameThem) {
 // --qp-metric and the config's `shield: {qp_metric: ...}` (eval: the domain's preset, then the
 // file, then the flags): written into the shield's options when set, the default writing
 // nothing; a bad value is one line naming the flag or the file.
-TEST(CliTest, EvalAndShieldRunTakeTheQpMetricAndLineSearch) {
+TEST(CliTest, EvalAndShieldRunTakeTheProjectionOptions) {
   const std::string dir = (TempDir() / "qp_metric").string();
   ASSERT_NO_FATAL_FAILURE(TrainDoubleIntegratorBc(dir, 2));
   const std::string cfg = Write("qp_metric.yaml", "pipeline:\n  shield: {qp_metric: policy}\n");
@@ -363,6 +363,18 @@ TEST(CliTest, EvalAndShieldRunTakeTheQpMetricAndLineSearch) {
   EXPECT_EQ(
       shield_of(RunCli(base + " --config " + search + " --qp-line-search 1"))["qp_line_search"], 1);
   ExpectOneErrorLine(RunCli(base + " --qp-line-search 11"), "qp_line_search = 11");
+  // --qp-bisection and --qp-target likewise.
+  const std::string bisect =
+      Write("qp_bisection.yaml", "pipeline:\n  shield: {qp_bisection: 6}\n");
+  EXPECT_FALSE(shield_of(RunCli(base)).contains("qp_bisection"));
+  EXPECT_EQ(shield_of(RunCli(base + " --config " + bisect))["qp_bisection"], 6);
+  EXPECT_EQ(shield_of(RunCli(base + " --config " + bisect + " --qp-bisection 2"))["qp_bisection"],
+            2);
+  ExpectOneErrorLine(RunCli(base + " --qp-bisection 31"), "qp_bisection = 31");
+  EXPECT_EQ(shield_of(RunCli(base + " --qp-metric policy --qp-target safe-mean"))["qp_target"],
+            "safe-mean");
+  ExpectOneErrorLine(RunCli(base + " --qp-target safe-mean"),
+                     "qp_target = safe-mean is the mean of the policy's Gaussian");
 }
 
 }  // namespace

@@ -433,6 +433,9 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
       searched.name += ", qp_line_search 3";
       searched.options.qp_line_search = 3;
       scenarios.push_back(searched);
+      searched.name += ", qp_bisection 4";  // and bisection back along an overshooting one
+      searched.options.qp_bisection = 4;
+      scenarios.push_back(searched);
     }
     for (Scenario metric : {unsafe, boxed}) {  // the projection in the policy's metric
       metric.name += ", qp_metric policy";

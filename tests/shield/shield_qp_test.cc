@@ -1,6 +1,6 @@
 // The CBF-QP projection in the shield (ShieldOptions::proposal): the gradient-first mode (qp),
-// the CBF-QP filter alone (qp-only) and the gradient refinement of the mean (refine), the
-// projection in the policy's metric (qp_metric). Properties with RapidCheck over the double integrator (its
+// the CBF-QP filter alone (qp-only) and the gradient refinement of the mean (refine)
+// (the projection's metric and target: shield_qp_metric_test.cc). Properties with RapidCheck over the double integrator (its
 // ground truth, whose gradient is by finite differences, and a random barrier network) and Derby
 // (a random per-car barrier and its shield model); exact cases on an integrator.
 
@@ -33,6 +33,7 @@ namespace {
 using secure::test::ErrorOf;
 using test::BitEqual;
 using test::FunctionBarrier;
+using test::HalfSpace;
 using test::IntegratorDynamics;
 using test::Vec;
 
@@ -113,6 +114,7 @@ ShieldOptions RandomOptions() {
   o.seed = *rc::gen::arbitrary<std::uint64_t>();
   o.qp_iterations = *rc::gen::inRange(1, 4);
   o.qp_line_search = *rc::gen::inRange(0, 4);
+  o.qp_bisection = *rc::gen::element(0, 0, 3, 8);
   o.qp_margin = *rc::gen::element(0.0, 0.1);
   o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
   o.qp_metric = *rc::gen::element(QpMetric::kEuclidean, QpMetric::kPolicy);  // sigma > 0 here
@@ -212,14 +214,6 @@ RC_GTEST_PROP(QpShieldProperty, RefineReportsTheExactCheckAndStaysInTheBox, ()) 
 // h(s) = w . s + b with an integrator: the linearisation is exact, so the filter returns the
 // closed-form projection of mu onto {g >= 0}, and mu itself where mu is safe.
 // h(s) = w . s + 0.5 with w = (1, -2), and the integrator s' = s + 0.1 a.
-struct HalfSpace {
-  const Eigen::Vector2f w{1.0f, -2.0f};
-  FunctionBarrier barrier{2, "linear", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
-                            return static_cast<double>(s[0] - 2.0f * s[1]) + 0.5;
-                          }};
-  const IntegratorDynamics dynamics{2, 0.1};
-};
-
 TEST(QpShieldTest, LinearBarrierAndAffineModelGiveTheClosedFormProjection) {
   HalfSpace h;
   const Eigen::Vector2f& w = h.w;
@@ -414,6 +408,77 @@ TEST(QpShieldTest, ALineSearchOnTheExactGRecoversARejectedProjection) {
   EXPECT_TRUE(f.safe());
 }
 
+// g far from linear in the action: on an integrator (x' = x + 0.1 a, from x = 0) the barrier h(y)
+// = 0.5 - tanh(20 (y - 0.1)) drops like a step where y = 0.1 a crosses 0.1, as a shield model's
+// contact switches on; with alpha(h) = 5 h, g(a) = 10 h(0.1 a) - 7.32 >= 0 exactly for a <= a_b =
+// 1 + atanh(-0.232) / 2 = 0.8818. From mu = 2.5, on the flat part of the step (g = -12.3, slope
+// -0.2), the linearisation puts the boundary at a = -59.8: the projection lands there, and the
+// exact g accepts it. Bisection on the exact g along the line brings it back to just inside a_b.
+struct Step {
+  FunctionBarrier barrier{1, "step", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            return 0.5 - std::tanh(20.0 * (static_cast<double>(s[0]) - 0.1));
+                          }};
+  const IntegratorDynamics dynamics{1, 0.1};
+  const Eigen::VectorXf state = Vec({0.0f});
+  const Eigen::VectorXf mu = Vec({2.5f});
+  static double G(double a) {
+    const double h0 = 0.5 - std::tanh(-2.0);
+    return (0.5 - std::tanh(20.0 * (0.1 * a - 0.1)) - h0) / 0.1 + 5.0 * h0;
+  }
+  static ShieldOptions Options(Proposal proposal, int bisection) {
+    ShieldOptions o;
+    o.proposal = proposal;
+    o.class_k_gain = 5.0;
+    o.qp_bisection = bisection;
+    return o;
+  }
+};
+
+TEST(QpShieldTest, BisectionBringsAnOvershootingProjectionBackToTheExactBoundary) {
+  Step step;
+  const double a_b = 1.0 + std::atanh(-0.232) / 2.0;
+  ASSERT_NEAR(Step::G(a_b), 0.0, 0.01);
+  ASSERT_LT(Step::G(2.5), -12.0);
+  Shield overshooting(Step::Options(Proposal::kQpOnly, 0), step.barrier, step.dynamics);
+  const Decision& far = overshooting.Decide(step.state, step.mu, Vec({0.3f}));
+  ASSERT_EQ(far.qp, QpOutcome::kAccepted) << far.ToJson().dump();
+  EXPECT_LT(far.action[0], -50.0f);  // the linearised boundary, 60 action units away
+  EXPECT_GT(far.g, 7.0);
+
+  // 12 steps: the line from 2.5 to -59.8 to within 62.3 / 2^12 = 0.015, on the safe side.
+  Shield bisecting(Step::Options(Proposal::kQpOnly, 12), step.barrier, step.dynamics);
+  const Decision& d = bisecting.Decide(step.state, step.mu, Vec({0.3f}));
+  ASSERT_EQ(d.qp, QpOutcome::kAccepted) << d.ToJson().dump();
+  EXPECT_TRUE(d.safe());
+  EXPECT_GE(d.g, 0.0);
+  EXPECT_NEAR(d.g, Step::G(d.action[0]), 1e-3);
+  EXPECT_LE(d.action[0], a_b + 1e-3);
+  EXPECT_GE(d.action[0], a_b - 0.02);
+  EXPECT_NEAR(d.distance_to_mean, 2.5 - d.action[0], 1e-5);
+
+  // The gradient-first shield takes the bisected projection too; no sampling round runs.
+  Shield first(Step::Options(Proposal::kQp, 12), step.barrier, step.dynamics);
+  const Decision& f = first.Decide(step.state, step.mu, Vec({0.3f}));
+  EXPECT_EQ(f.qp, QpOutcome::kAccepted);
+  EXPECT_EQ(f.iterations, 0);
+  EXPECT_TRUE(BitEqual(f.action, d.action));
+
+  // Where g is linear along the line (an affine model under a linear barrier) the projection
+  // lands on the boundary, nothing overshoots, and bisection leaves the decision as it was.
+  HalfSpace h1, h2;
+  ShieldOptions o = Step::Options(Proposal::kQpOnly, 0);
+  o.class_k_gain = 2.0;
+  Shield plain(o, h1.barrier, h1.dynamics);
+  o.qp_bisection = 12;
+  Shield unchanged(o, h2.barrier, h2.dynamics);
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f}), mu = Vec({-1.0f, 1.0f});
+  const Decision& p = plain.Decide(state, mu, Vec({0.1f, 0.1f}));
+  const Decision& u = unchanged.Decide(state, mu, Vec({0.1f, 0.1f}));
+  ASSERT_EQ(p.qp, QpOutcome::kAccepted);
+  EXPECT_TRUE(BitEqual(p.action, u.action));
+  EXPECT_EQ(p.g, u.g);
+}
+
 TEST(QpShieldTest, RefinementMovesAViolatingMeanIntoTheHalfSpaceWithinTheBox) {
   HalfSpace h;
   const Eigen::Vector2f& w = h.w;
@@ -503,12 +568,21 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
     EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_line_search = " + std::to_string(bad));
   }
   o.qp_line_search = 0;
+  EXPECT_FALSE(o.ToJson().contains("qp_bisection"));  // absent unless set (runs keep identity)
+  o.qp_bisection = 6;
+  EXPECT_EQ(o.ToJson()["qp_bisection"], 6);
+  for (int bad : {-1, kMaxQpBisection + 1}) {
+    o.qp_bisection = bad;
+    EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_bisection = " + std::to_string(bad));
+  }
+  o.qp_bisection = 0;
   o.qp_margin = -1;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_margin = -1");
   ShieldOptions y;
   y.ApplyYaml(YAML::Load("{proposal: qp-only, qp_iterations: 3, qp_margin: 0.25, "
-                         "qp_line_search: 4}"),
+                         "qp_line_search: 4, qp_bisection: 5}"),
               "s.yaml");
+  EXPECT_EQ(y.qp_bisection, 5);
   EXPECT_EQ(y.proposal, Proposal::kQpOnly);
   EXPECT_EQ(y.qp_line_search, 4);
   EXPECT_EQ(y.qp_iterations, 3);
@@ -544,110 +618,5 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
 // alpha(h) = 2 h: g(a) = w . a + 0.2, exactly affine. The CBF-QP filter in the policy's metric
 // returns mu + lambda S w, S = diag(sigma^2), lambda = (-0.2 - w . mu) / (w^T S w); the
 // Euclidean one mu + (-0.2 - w . mu) / |w|^2 w.
-TEST(QpMetricShieldTest, TheFilterReturnsTheProjectionInThePolicysMetric) {
-  HalfSpace h1, h2;
-  const Eigen::Vector2d w = h1.w.cast<double>();
-  const Eigen::VectorXf state = Vec({0.2f, 0.3f});    // h = 0.1
-  const Eigen::VectorXf mu = Vec({-1.0f, 1.0f});      // g = -2.8
-  const Eigen::VectorXf sigma = Vec({0.14f, 0.04f});  // Panda's x and y
-  ShieldOptions o;
-  o.proposal = Proposal::kQpOnly;
-  o.class_k_gain = 2.0;
-  o.qp_metric = QpMetric::kPolicy;
-  Shield policy(o, h1.barrier, h1.dynamics);
-  o.qp_metric = QpMetric::kEuclidean;
-  Shield euclidean(o, h2.barrier, h2.dynamics);
-  const Decision d = policy.Decide(state, mu, sigma);
-  const Decision e = euclidean.Decide(state, mu, sigma);
-  ASSERT_EQ(d.status, Status::kSafe) << d.ToJson().dump();
-  ASSERT_EQ(e.status, Status::kSafe) << e.ToJson().dump();
-  const Eigen::Vector2d m = mu.cast<double>(), s2 = sigma.cast<double>().cwiseAbs2();
-  const Eigen::Vector2d sw = s2.cwiseProduct(w);
-  const Eigen::Vector2d expected = m + (-0.2 - w.dot(m)) / w.dot(sw) * sw;
-  EXPECT_NEAR(d.action[0], expected[0], 2e-3);
-  EXPECT_NEAR(d.action[1], expected[1], 2e-3);
-  EXPECT_GE(d.g, 0.0);
-  EXPECT_NEAR(d.g, 0.0, 1e-2);  // on the boundary, plus the rounding allowance
-  // The policy's metric moves the sure axis (y, sigma 0.04) far less than the Euclidean one, and
-  // x more: it is farther in action units and nearer in the policy's metric.
-  EXPECT_LT(std::abs(d.action[1] - mu[1]), 0.5 * std::abs(e.action[1] - mu[1]));  // 0.34, 1.12
-  EXPECT_GT(std::abs(d.action[0] - mu[0]), std::abs(e.action[0] - mu[0]));
-  EXPECT_GT(d.distance_to_mean, e.distance_to_mean);
-  const auto metric = [&](const Eigen::VectorXf& a) {
-    return (a - mu).cwiseQuotient(sigma).squaredNorm();
-  };
-  EXPECT_LT(metric(d.action), metric(e.action));
-  // Equal sigma: the two metrics agree.
-  const Decision de = policy.Decide(state, mu, Vec({0.3f, 0.3f}));
-  const Decision ee = euclidean.Decide(state, mu, Vec({0.3f, 0.3f}));
-  EXPECT_NEAR((de.action - ee.action).norm(), 0.0, 1e-5);
-}
-
-// A sigma with a zero entry has no policy metric: a one-line error where the projection uses it
-// (proposal qp, qp-only); the Euclidean metric and the other proposals take it. A negative sigma
-// stays invalid input whatever the options.
-TEST(QpMetricShieldTest, ASigmaWithAZeroEntryIsAClearError) {
-  HalfSpace h;
-  const Eigen::VectorXf state = Vec({0.2f, 0.3f}), mu = Vec({-1.0f, 1.0f});
-  for (const Proposal proposal :
-       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
-    for (const QpMetric metric : {QpMetric::kEuclidean, QpMetric::kPolicy}) {
-      ShieldOptions o;
-      o.proposal = proposal;
-      o.qp_metric = metric;
-      Shield shield(o, h.barrier, h.dynamics);
-      if (metric == QpMetric::kPolicy &&
-          (proposal == Proposal::kQp || proposal == Proposal::kQpOnly)) {
-        const std::string error = ErrorOf([&] { shield.Decide(state, mu, Vec({0.1f, 0.0f})); });
-        EXPECT_HAS(error, "qp_metric = policy needs the policy's sigma > 0");
-        EXPECT_HAS(error, "sigma[1] = 0");
-        EXPECT_EQ(error.find('\n'), std::string::npos) << error;
-      } else {
-        EXPECT_NE(shield.Decide(state, mu, Vec({0.1f, 0.0f})).status, Status::kInvalidInput)
-            << ToString(kProposalNames, proposal);
-      }
-      EXPECT_EQ(shield.Decide(state, mu, Vec({0.1f, -1.0f})).status, Status::kInvalidInput);
-    }
-  }
-}
-
-TEST(QpMetricShieldTest, TheOptionIsReadWrittenOnlyWhenSetAndChecked) {
-  ShieldOptions o;
-  EXPECT_EQ(o.qp_metric, QpMetric::kEuclidean);
-  o.qp_metric = QpMetric::kPolicy;
-  // Written whenever set, whatever the proposal (a config's options reach secure-qp and cbf-qp
-  // through them, and a result says which metric its projections used).
-  for (const Proposal proposal :
-       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
-    o.proposal = proposal;
-    EXPECT_EQ(o.ToJson()["qp_metric"], "policy");
-  }
-  // The default writes nothing: the options (and run directories) of every existing shield keep
-  // their bytes.
-  for (const Proposal proposal :
-       {Proposal::kNone, Proposal::kQp, Proposal::kQpOnly, Proposal::kRefine}) {
-    ShieldOptions plain;
-    plain.proposal = proposal;
-    EXPECT_FALSE(plain.ToJson().contains("qp_metric"));
-  }
-  // YAML, both values, and back through ToJson.
-  ShieldOptions y;
-  y.ApplyYaml(YAML::Load("{proposal: qp, qp_metric: policy}"), "s.yaml");
-  EXPECT_EQ(y.qp_metric, QpMetric::kPolicy);
-  y.Validate();
-  ShieldOptions z;
-  z.ApplyYaml(YAML::Load(y.ToJson().dump()), "round-trip");
-  EXPECT_EQ(z.qp_metric, QpMetric::kPolicy);
-  EXPECT_EQ(z.ToJson(), y.ToJson());
-  y.ApplyYaml(YAML::Load("{qp_metric: euclidean}"), "s.yaml");
-  EXPECT_EQ(y.qp_metric, QpMetric::kEuclidean);
-  const std::string error =
-      ErrorOf([&] { y.ApplyYaml(YAML::Load("{qp_metric: mahalanobis}"), "s.yaml"); });
-  EXPECT_HAS(error, "s.yaml");
-  EXPECT_HAS(error, "qp_metric");
-  EXPECT_HAS(error, "mahalanobis");
-  EXPECT_EQ(error.find('\n'), std::string::npos) << error;
-}
-
 }  // namespace
 }  // namespace secure::shield

@@ -96,6 +96,16 @@ class LinearActionValue final : public ActionValue {
   Eigen::VectorXf w_;
 };
 
+/// 2-D: an integrator (dt 0.1) under the linear barrier h(s) = w . s + 0.5, w = (1, -2): with a
+/// linear class-K function of gain k, g(a) = w . a + k h(s) exactly, affine in the action.
+struct HalfSpace {
+  const Eigen::Vector2f w{1.0f, -2.0f};
+  FunctionBarrier barrier{2, "linear", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
+                            return static_cast<double>(s[0] - 2.0f * s[1]) + 0.5;
+                          }};
+  const IntegratorDynamics dynamics{2, 0.1};
+};
+
 inline Eigen::VectorXf Vec(std::initializer_list<float> values) {
   Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
   Eigen::Index i = 0;
