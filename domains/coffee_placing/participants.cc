@@ -227,26 +227,27 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
   DemonstrationCollector collector(
       "coffee-placing demonstrations of participant " + std::to_string(participant.index),
       ObservationFeatures(), ActionFeatures());
-  Eigen::VectorXf o(kObservationDim), next(kObservationDim);
+  Eigen::VectorXf o(kObservationDim), a(kActionDim);
   int attempt = 0;
   while (collector.kept_steps() < options.states && attempt < options.max_attempts) {
     ++attempt;
-    collector.BeginEpisode();
     env.Reset(rng, o);
-    bool violated = participant.thresholds.Violated(o[kClearance], o[kTilt]), placed = false;
-    for (int t = 0; t < task.max_steps && !violated && !placed; ++t) {
-      Eigen::Vector4f a = DemonstratorAction(task, options, participant, o);
-      for (int k = 0; k < kActionDim; ++k)
-        a[k] = std::clamp(a[k] + static_cast<float>(participant.action_noise * rng.Normal()), -1.0f,
-                          1.0f);
-      collector.Record(o, a);
-      const StepOutcome r = env.Step(a, next);
-      violated = r.collided;
-      placed = r.reached_goal;
-      o = next;
+    RecordedEpisode episode;
+    if (participant.thresholds.Violated(o[kClearance], o[kTilt])) {
+      episode.collided = true;  // violated from the start: no step
+    } else {
+      episode = RecordEpisode(
+          env, collector, task.max_steps, /*stop_at_goal=*/true, o, a, a,
+          [&](const Eigen::VectorXf& obs, Eigen::VectorXf& act, Eigen::VectorXf&) {
+            const Eigen::Vector4f clean = DemonstratorAction(task, options, participant, obs);
+            for (int k = 0; k < kActionDim; ++k)
+              act[k] =
+                  std::clamp(clean[k] + static_cast<float>(participant.action_noise * rng.Normal()),
+                             -1.0f, 1.0f);
+          },
+          [](const StepOutcome&) {});
     }
-    if (!KeepOrCountDiscarded(violated, placed, &out.discarded_violating, &out.discarded_failed))
-      continue;
+    if (!KeepOrCountDiscarded(episode, &out.discarded_violating, &out.discarded_failed)) continue;
     collector.KeepEpisode();
   }
   SECURE_CHECK(collector.kept_steps() >= options.states,
