@@ -32,9 +32,6 @@ const mjModel* CoffeePlacingModel() {
 }
 
 Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
-Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
-  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
-}
 
 }  // namespace
 
@@ -68,7 +65,8 @@ double Clearance(const PersonOptions& p, const Eigen::Vector3d& ee, double tilt,
 }
 
 double ObservedClearance(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o) {
-  return Clearance(p, At(o, kEePos), o[kTilt], franka::ReadHumanArm(o, kWrist, p.Shoulder()));
+  return Clearance(p, franka::ObservedPoint(o, kEePos), o[kTilt],
+                   franka::ReadHumanArm(o, kWrist, p.Shoulder()));
 }
 
 BookReach DrawBookReach(const PersonOptions& p, Rng& rng) {
