@@ -32,9 +32,6 @@ const mjModel* CoffeePlacingModel() {
 }
 
 Eigen::Vector3d V(const Vec3& v) { return Eigen::Vector3d(v[0], v[1], v[2]); }
-Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
-  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
-}
 
 }  // namespace
 
@@ -68,7 +65,8 @@ double Clearance(const PersonOptions& p, const Eigen::Vector3d& ee, double tilt,
 }
 
 double ObservedClearance(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o) {
-  return Clearance(p, At(o, kEePos), o[kTilt], franka::ReadHumanArm(o, kWrist, p.Shoulder()));
+  return Clearance(p, franka::ObservedPoint(o, kEePos), o[kTilt],
+                   franka::ReadHumanArm(o, kWrist, p.Shoulder()));
 }
 
 BookReach DrawBookReach(const PersonOptions& p, Rng& rng) {
@@ -257,10 +255,6 @@ void CoffeePlacingSim::Observe(Eigen::Ref<Eigen::VectorXf> o) const {
 // ---------------------------------------------------------------------------------------------
 // The shield's model
 
-CoffeeShieldModel::CoffeeShieldModel(const CoffeeShieldModelOptions& options,
-                                     const CoffeePlacingOptions& task)
-    : options_((options.Validate(), options)), task_(task) {}
-
 std::string CoffeeShieldModel::Describe() const {
   std::ostringstream s;
   s << "coffee-placing approximate model (ee += " << options_.position_gain
@@ -270,19 +264,15 @@ std::string CoffeeShieldModel::Describe() const {
   return s.str();
 }
 
-void CoffeeShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-                               const Eigen::Ref<const Eigen::MatrixXf>& actions,
-                               Eigen::Ref<Eigen::MatrixXf> next) const {
-  const float dt = static_cast<float>(options_.dt);
-  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
-    options_.Step(state, actions, c, kEePos, kEeVel, /*carried=*/-1, next);
-    franka::ExtrapolateHumanArm(state, kWrist, dt, next.col(c));
-    const float at = std::clamp(actions(3, c), -1.0f, 1.0f);
-    const float tilt = state[kTilt] + static_cast<float>(task_.tilt_scale) * at +
-                       static_cast<float>(task_.tilt_coupling) * (next(kEeVel, c) - state[kEeVel]);
-    next(kTilt, c) = std::clamp(tilt, static_cast<float>(-kMaxTilt), static_cast<float>(kMaxTilt));
-    next(kClearance, c) = static_cast<float>(ObservedClearance(task_.person, next.col(c)));
-  }
+void CoffeeShieldModel::StepOthers(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                   const Eigen::Ref<const Eigen::MatrixXf>& actions, Eigen::Index c,
+                                   Eigen::Ref<Eigen::MatrixXf> next) const {
+  franka::ExtrapolateHumanArm(state, kWrist, static_cast<float>(options_.dt), next.col(c));
+  const float at = std::clamp(actions(3, c), -1.0f, 1.0f);
+  const float tilt = state[kTilt] + static_cast<float>(task_.tilt_scale) * at +
+                     static_cast<float>(task_.tilt_coupling) * (next(kEeVel, c) - state[kEeVel]);
+  next(kTilt, c) = std::clamp(tilt, static_cast<float>(-kMaxTilt), static_cast<float>(kMaxTilt));
+  next(kClearance, c) = static_cast<float>(ObservedClearance(task_.person, next.col(c)));
 }
 
 // ---------------------------------------------------------------------------------------------

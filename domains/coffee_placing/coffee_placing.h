@@ -178,20 +178,21 @@ struct CoffeeShieldModelOptions : franka::PersonShieldModelOptions {
   void Validate() const { PersonShieldModelOptions::Validate("CoffeeShieldModelOptions"); }
 };
 
-class CoffeeShieldModel final : public DynamicsModel {
+class CoffeeShieldModel final
+    : public franka::EndEffectorModel<CoffeeShieldModelOptions, kObservationDim, kActionDim, kEePos,
+                                      kEeVel> {
  public:
-  CoffeeShieldModel(const CoffeeShieldModelOptions& options, const CoffeePlacingOptions& task);
-  int state_dim() const override { return kObservationDim; }
-  int action_dim() const override { return kActionDim; }
+  CoffeeShieldModel(const CoffeeShieldModelOptions& options, const CoffeePlacingOptions& task)
+      : EndEffectorModel(options), task_(task) {}
   std::string Describe() const override;
 
  protected:
-  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-              const Eigen::Ref<const Eigen::MatrixXf>& actions,
-              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
+  /// The person's arm extrapolated for dt, the tilt, the clearance recomputed.
+  void StepOthers(const Eigen::Ref<const Eigen::VectorXf>& state,
+                  const Eigen::Ref<const Eigen::MatrixXf>& actions, Eigen::Index c,
+                  Eigen::Ref<Eigen::MatrixXf> next) const override;
 
  private:
-  CoffeeShieldModelOptions options_;
   CoffeePlacingOptions task_;
 };
 

@@ -15,12 +15,7 @@ namespace secure::domains::coffee_placing {
 namespace {
 
 bool Finite(double x) { return std::isfinite(x); }
-double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
 double Mid(const Interval& r) { return 0.5 * (r[0] + r[1]); }
-
-Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
-  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
-}
 
 // The arm as the observation shows it, `ahead` seconds later at its velocity.
 ArmPose ObservedArm(const PersonOptions& p, const Eigen::Ref<const Eigen::VectorXf>& o,
@@ -88,11 +83,11 @@ Participant DrawParticipant(const PopulationRanges& r, std::uint64_t seed, int i
   const double u_comfort = rng.Uniform(-1.0, 1.0), u_tilt = rng.Uniform(-1.0, 1.0);
   p.thresholds.comfort_distance = r.comfort_mean + spread * r.comfort_half_range * u_comfort;
   p.thresholds.max_tilt = r.tilt_mean + spread * r.tilt_half_range * u_tilt;
-  p.caution = Draw(rng, r.caution);
-  p.travel_speed = Draw(rng, r.travel_speed);
-  p.ramp = Draw(rng, r.ramp) * p.thresholds.max_tilt;
-  p.action_noise = Draw(rng, r.action_noise);
-  p.label_noise = Draw(rng, r.label_noise);
+  p.caution = franka::DrawUniform(rng, r.caution);
+  p.travel_speed = franka::DrawUniform(rng, r.travel_speed);
+  p.ramp = franka::DrawUniform(rng, r.ramp) * p.thresholds.max_tilt;
+  p.action_noise = franka::DrawUniform(rng, r.action_noise);
+  p.label_noise = franka::DrawUniform(rng, r.label_noise);
   return p;
 }
 
@@ -174,7 +169,7 @@ Eigen::Vector4f DemonstratorAction(const CoffeePlacingOptions& task,
                                    const Participant& participant,
                                    const Eigen::Ref<const Eigen::VectorXf>& o) {
   const PersonOptions& person = task.person;
-  const Eigen::Vector3d ee = At(o, kEePos);
+  const Eigen::Vector3d ee = franka::ObservedPoint(o, kEePos);
   const double tilt = o[kTilt];
   const ArmPose now = ObservedArm(person, o, 0.0);
   const ArmPose ahead = ObservedArm(person, o, options.look_ahead);
@@ -227,26 +222,27 @@ CoffeeDemonstrations GenerateCoffeeDemonstrations(const CoffeePlacingOptions& ta
   DemonstrationCollector collector(
       "coffee-placing demonstrations of participant " + std::to_string(participant.index),
       ObservationFeatures(), ActionFeatures());
-  Eigen::VectorXf o(kObservationDim), next(kObservationDim);
+  Eigen::VectorXf o(kObservationDim), a(kActionDim);
   int attempt = 0;
   while (collector.kept_steps() < options.states && attempt < options.max_attempts) {
     ++attempt;
-    collector.BeginEpisode();
     env.Reset(rng, o);
-    bool violated = participant.thresholds.Violated(o[kClearance], o[kTilt]), placed = false;
-    for (int t = 0; t < task.max_steps && !violated && !placed; ++t) {
-      Eigen::Vector4f a = DemonstratorAction(task, options, participant, o);
-      for (int k = 0; k < kActionDim; ++k)
-        a[k] = std::clamp(a[k] + static_cast<float>(participant.action_noise * rng.Normal()), -1.0f,
-                          1.0f);
-      collector.Record(o, a);
-      const StepOutcome r = env.Step(a, next);
-      violated = r.collided;
-      placed = r.reached_goal;
-      o = next;
+    RecordedEpisode episode;
+    if (participant.thresholds.Violated(o[kClearance], o[kTilt])) {
+      episode.collided = true;  // violated from the start: no step
+    } else {
+      episode = RecordEpisode(
+          env, collector, task.max_steps, /*stop_at_goal=*/true, o, a, a,
+          [&](const Eigen::VectorXf& obs, Eigen::VectorXf& act, Eigen::VectorXf&) {
+            const Eigen::Vector4f clean = DemonstratorAction(task, options, participant, obs);
+            for (int k = 0; k < kActionDim; ++k)
+              act[k] =
+                  std::clamp(clean[k] + static_cast<float>(participant.action_noise * rng.Normal()),
+                             -1.0f, 1.0f);
+          },
+          [](const StepOutcome&) {});
     }
-    if (!KeepOrCountDiscarded(violated, placed, &out.discarded_violating, &out.discarded_failed))
-      continue;
+    if (!KeepOrCountDiscarded(episode, &out.discarded_violating, &out.discarded_failed)) continue;
     collector.KeepEpisode();
   }
   SECURE_CHECK(collector.kept_steps() >= options.states,
@@ -301,7 +297,8 @@ void CoffeeLabelledStates(const CoffeePlacingOptions& task, const CoffeeLabelOpt
       Eigen::Vector3d dir(rng.Normal(), rng.Normal(), rng.Normal());
       if (dir.norm() < 1e-6) continue;
       dir.normalize();
-      Eigen::Vector3d wrist = At(o, kEePos) + rng.Uniform(0.0, options.arm_radius) * dir;
+      Eigen::Vector3d wrist =
+          franka::ObservedPoint(o, kEePos) + rng.Uniform(0.0, options.arm_radius) * dir;
       wrist.z() = std::max(wrist.z(), 0.03);
       const ArmPose arm = ArmPoseForWrist(person, wrist);
       Eigen::Vector3d vel(rng.Normal(), rng.Normal(), rng.Normal());

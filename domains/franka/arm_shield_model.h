@@ -5,13 +5,15 @@
 // velocity_gain * a, a being the action's first three components clipped to [-1, 1]: measured on
 // the simulator, domains/panda_push/README.md) and, for the plug-ins with a person, how far ahead
 // the person's arm is extrapolated (dt, one control period). Each plug-in's model adds what else
-// moves (panda-push's block, kitchen-cutting's blade, coffee-placing's tilt and clearance).
-// MuJoCo-free, so the plug-ins' public headers may include it.
+// moves (panda-push's block, kitchen-cutting's blade, coffee-placing's tilt and clearance). The
+// models themselves derive from EndEffectorModel (their options validated and kept, their
+// dimensions). MuJoCo-free, so the plug-ins' public headers may include it.
 #include <Eigen/Core>
 #include <algorithm>
 #include <nlohmann/json.hpp>
 #include <string>
 #include "secure/common/yaml_fwd.h"
+#include "secure/domains/dynamics.h"
 
 namespace secure::domains::franka {
 
@@ -59,6 +61,48 @@ struct PersonShieldModelOptions : EndEffectorGains {
   nlohmann::json ToJson() const;
   /// Keys: position_gain, velocity_gain, dt. Does not validate.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
+};
+
+/// A Franka plug-in's approximate shield model: `Options` (an EndEffectorGains with Validate())
+/// validated at construction and kept in options_, the model's dimensions (the plug-in's
+/// observation and action), and its step: per action column c, the end effector (position at
+/// kEePos, velocity at kEeVel) by options_.Step, with the position at Carried(state) moved with
+/// the hand, then what else the plug-in's model moves (StepOthers). The plug-in adds Describe and
+/// those two.
+template <typename Options, int kStateDim, int kActionDim, int kEePos, int kEeVel>
+class EndEffectorModel : public DynamicsModel {
+ public:
+  /// @throws secure::Error from options.Validate().
+  explicit EndEffectorModel(const Options& options) : options_((options.Validate(), options)) {}
+  int state_dim() const override { return kStateDim; }
+  int action_dim() const override { return kActionDim; }
+
+ protected:
+  /// Where 3 values that move with the hand start in `state` (e.g. a blade; -1: none). Once per
+  /// DoStep.
+  virtual int Carried(const Eigen::Ref<const Eigen::VectorXf>& state) const {
+    (void)state;
+    return -1;
+  }
+  /// Column c of `next` after the end effector's part: what else the model moves from `state`
+  /// under column c of `actions` (nothing by default).
+  virtual void StepOthers(const Eigen::Ref<const Eigen::VectorXf>& state,
+                          const Eigen::Ref<const Eigen::MatrixXf>& actions, Eigen::Index c,
+                          Eigen::Ref<Eigen::MatrixXf> next) const {
+    (void)state, (void)actions, (void)c, (void)next;
+  }
+
+  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
+              const Eigen::Ref<const Eigen::MatrixXf>& actions,
+              Eigen::Ref<Eigen::MatrixXf> next) const final {
+    const int carried = Carried(state);
+    for (Eigen::Index c = 0; c < actions.cols(); ++c) {
+      options_.Step(state, actions, c, kEePos, kEeVel, carried, next);
+      StepOthers(state, actions, c, next);
+    }
+  }
+
+  Options options_;
 };
 
 }  // namespace secure::domains::franka

@@ -32,9 +32,6 @@ HumanArmPose HumanArmPoseForWrist(const HumanArmGeometry& g, const Eigen::Vector
 }
 
 namespace {
-Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
-  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
-}
 // Offsets within the arm's block.
 constexpr int kWrist = 0, kElbow = 3, kTip = 6, kWristVel = 9, kElbowVel = 12;
 }  // namespace
@@ -55,9 +52,9 @@ HumanArmPose ReadHumanArm(const Eigen::Ref<const Eigen::VectorXf>& o, int offset
                           const Eigen::Vector3d& shoulder, double ahead) {
   HumanArmPose p;
   p.shoulder = shoulder;
-  p.wrist = At(o, offset + kWrist) + ahead * At(o, offset + kWristVel);
-  p.elbow = At(o, offset + kElbow) + ahead * At(o, offset + kElbowVel);
-  p.tip = At(o, offset + kTip) + ahead * At(o, offset + kWristVel);
+  p.wrist = ObservedPoint(o, offset + kWrist) + ahead * ObservedPoint(o, offset + kWristVel);
+  p.elbow = ObservedPoint(o, offset + kElbow) + ahead * ObservedPoint(o, offset + kElbowVel);
+  p.tip = ObservedPoint(o, offset + kTip) + ahead * ObservedPoint(o, offset + kWristVel);
   return p;
 }
 

@@ -43,6 +43,10 @@ double SegmentDistance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1,
 double SegmentToArmDistance(const HumanArmGeometry& g, const Eigen::Vector3d& a,
                             const Eigen::Vector3d& b, const HumanArmPose& arm);
 
+/// The 3 observation features from `offset` (a position or a velocity) as a point.
+inline Eigen::Vector3d ObservedPoint(const Eigen::Ref<const Eigen::VectorXf>& o, int offset) {
+  return Eigen::Vector3d(o[offset], o[offset + 1], o[offset + 2]);
+}
 /// The arm in an observation: kHumanArmFeatures features from an offset, the wrist, elbow and
 /// hand tip (m), then the wrist's and the elbow's velocity (m/s), 3 each (the layout
 /// kitchen-cutting and coffee-placing share).

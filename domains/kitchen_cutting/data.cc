@@ -18,11 +18,6 @@ namespace secure::domains::kitchen_cutting {
 namespace {
 
 bool Finite(double x) { return std::isfinite(x); }
-double Draw(Rng& rng, const Interval& r) { return r[0] + (r[1] - r[0]) * rng.Uniform(); }
-
-Eigen::Vector3d At(const Eigen::Ref<const Eigen::VectorXf>& o, int i) {
-  return Eigen::Vector3d(o[i], o[i + 1], o[i + 2]);
-}
 
 // The person's arm as the observation shows it, `ahead` seconds later at its velocity.
 ArmPose ObservedArm(const HumanArmOptions& h, const Eigen::Ref<const Eigen::VectorXf>& o,
@@ -184,14 +179,15 @@ KitchenJudgement JudgeKitchenState(const KitchenCuttingOptions& task,
                                    const Eigen::Ref<const Eigen::VectorXf>& o) {
   SECURE_CHECK(o.size() == kObservationDim, "JudgeKitchenState: an observation of "
                                                 << kObservationDim << " values, got " << o.size());
-  const Eigen::Vector3d edge = At(o, kBlade), ee_velocity = At(o, kEeVel);
+  const Eigen::Vector3d edge = franka::ObservedPoint(o, kBlade),
+                        ee_velocity = franka::ObservedPoint(o, kEeVel);
   const ArmPose arm = ObservedArm(task.human, o, 0.0);
   if (EdgeToArmDistance(task.human, edge, arm) < task.contact_distance)
     return KitchenJudgement::kDangerous;
-  const bool near =
-      StrokeReaches(task, rule, edge, ee_velocity.z(), arm) ||
-      ArmReaches(task, edge, arm, At(o, kWristVel), At(o, kElbowVel), rule.look_ahead) ||
-      BladeReaches(task, edge, ee_velocity, arm, rule.look_ahead);
+  const bool near = StrokeReaches(task, rule, edge, ee_velocity.z(), arm) ||
+                    ArmReaches(task, edge, arm, franka::ObservedPoint(o, kWristVel),
+                               franka::ObservedPoint(o, kElbowVel), rule.look_ahead) ||
+                    BladeReaches(task, edge, ee_velocity, arm, rule.look_ahead);
   return near ? KitchenJudgement::kNearDangerous : KitchenJudgement::kSafe;
 }
 
@@ -202,7 +198,7 @@ Eigen::Vector3f DemonstratorAction(const KitchenCuttingOptions& task,
                                    const KitchenDemonstrationOptions& options,
                                    const Eigen::Ref<const Eigen::VectorXf>& o, double stroke_speed,
                                    double travel_speed) {
-  const Eigen::Vector3d edge = At(o, kBlade);
+  const Eigen::Vector3d edge = franka::ObservedPoint(o, kBlade);
   const ArmPose now = ObservedArm(task.human, o, 0.0);
   const ArmPose ahead = ObservedArm(task.human, o, options.look_ahead);
   const double clearance = std::min(EdgeToArmDistance(task.human, edge, now),
@@ -245,8 +241,8 @@ KitchenDemonstrations GenerateKitchenDemonstrations(const KitchenCuttingOptions&
   int attempt = 0;
   for (; attempt < options.max_attempts && collector.kept_steps() < options.states; ++attempt) {
     Rng episode_rng(rng.NextU64());
-    const double stroke = Draw(episode_rng, options.stroke_speed);
-    const double travel = Draw(episode_rng, options.travel_speed);
+    const double stroke = franka::DrawUniform(episode_rng, options.stroke_speed);
+    const double travel = franka::DrawUniform(episode_rng, options.travel_speed);
     env.Reset(episode_rng, o);
     const RecordedEpisode episode = RecordEpisode(
         env, collector, task.max_steps, /*stop_at_goal=*/true, o, a, a,
@@ -327,7 +323,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
   while (made < options.count && visited < max_visits) {
     Eigen::VectorXf o = demo.col(order[static_cast<size_t>(visited % demo.cols())]);
     ++visited;
-    const Eigen::Vector3d edge = At(o, kBlade);
+    const Eigen::Vector3d edge = franka::ObservedPoint(o, kBlade);
     const double u = rng.Uniform();
     const bool stroke = u < options.p_stroke;
     // Drawn from the same uniform, so that p_blade = 0 keeps the draws of releases without (c).
@@ -350,7 +346,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         if (!StrokeReaches(task, options, edge, -options.stroke_vz[1], p)) continue;
         franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
         o[kEeVel] = o[kEeVel + 1] = 0.0f;
-        o[kEeVel + 2] = static_cast<float>(-Draw(rng, options.stroke_vz));
+        o[kEeVel + 2] = static_cast<float>(-franka::DrawUniform(rng, options.stroke_vz));
         accepted = true;
       } else if (reach) {
         accepted = ReachPrecursorState(task, options, rng, o);
@@ -364,7 +360,8 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         Eigen::Vector3d towards = (p.wrist - edge).normalized() +
                                   0.3 * Eigen::Vector3d(rng.Normal(), rng.Normal(), rng.Normal());
         if (towards.norm() < 1e-6) continue;
-        const Eigen::Vector3d v = Draw(rng, options.blade_speed) * towards.normalized();
+        const Eigen::Vector3d v =
+            franka::DrawUniform(rng, options.blade_speed) * towards.normalized();
         if (!BladeReaches(task, edge, v, p, options.look_ahead)) continue;  // the rule's (c)
         franka::WriteHumanArm(p, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), kWrist, o);
         for (int k = 0; k < 3; ++k) o[kEeVel + k] = static_cast<float>(v[k]);
@@ -374,7 +371,7 @@ data::StateSet KitchenNearDangerousStates(const KitchenCuttingOptions& task,
         if (!near) continue;
         const ArmPose& p = *near;
         const Eigen::Vector3d towards = (edge - p.wrist).normalized();
-        const double speed = Draw(rng, options.arm_speed);
+        const double speed = franka::DrawUniform(rng, options.arm_speed);
         const Eigen::Vector3d wv = speed * towards, ev = 0.5 * speed * towards;
         if (!ArmReaches(task, edge, p, wv, ev, options.look_ahead)) continue;  // the rule's (b)
         franka::WriteHumanArm(p, wv, ev, kWrist, o);

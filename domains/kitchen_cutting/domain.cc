@@ -40,44 +40,40 @@ KitchenCuttingDomainOptions KitchenCuttingDomainOptions::For(experiments::Profil
 }
 
 void KitchenCuttingDomainOptions::Validate() const {
-  task.Validate();
-  shield_model.Validate();
-  demonstrations.Validate();
-  safe.Validate();
-  near_dangerous.Validate();
+  ValidateParts();
   shield_model.CheckControlPeriod("KitchenCuttingDomainOptions", task.tracking.control_period);
 }
 
-YamlFields KitchenCuttingDomainOptions::Fields() {
-  return YamlFields()
-      .Part("task", &task)
-      .Part("shield_model", &shield_model)
-      .Part("demonstrations", &demonstrations)
-      .Part("safe", &safe)
-      .Part("near_dangerous", &near_dangerous);
-}
+YamlFields KitchenCuttingDomainOptions::Fields() { return AddParts(YamlFields()); }
 
 SECURE_YAML_JSON_FROM_FIELDS(KitchenCuttingDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : ArmDomain(profile) {}
+KitchenCuttingDomain::KitchenCuttingDomain(experiments::Profile profile) : ArmDataDomain(profile) {}
 
 std::unique_ptr<Environment> KitchenCuttingDomain::MakeEnvironment() const {
   return std::make_unique<KitchenCuttingEnv>(options_.task, options_.shield_model);
 }
 
-experiments::DomainData KitchenCuttingDomain::GenerateData(std::uint64_t data_seed) const {
-  options_.Validate();
-  KitchenDemonstrationOptions demo_options = options_.demonstrations;
-  demo_options.seed = data_seed;
-  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(options_.task, demo_options);
-  Rng rng(data_seed + 1);
-  experiments::DomainData d;
-  d.demonstrations = demos.trajectories;
-  d.discarded_demonstrations = demos.discarded_dangerous + demos.discarded_failed;
-  d.safe = KitchenSafeStates(demos, options_.safe, rng);
-  d.near_dangerous = KitchenNearDangerousStates(options_.task, demos, options_.near_dangerous, rng);
-  return d;
+KitchenCuttingDomain::Recipe KitchenCuttingDomain::MakeRecipe() const {
+  Recipe r;
+  r.demonstrate = [this](const KitchenDemonstrationOptions& o) {
+    return GenerateKitchenDemonstrations(options_.task, o);
+  };
+  r.fit_held_out = [](long count, KitchenDemonstrationOptions* o) {
+    o->states = std::max(o->states, count);  // KitchenSafeStates draws without replacement
+  };
+  r.safe = KitchenSafeStates;
+  r.near_dangerous = [this](const KitchenDemonstrations& demos,
+                            const KitchenNearDangerousOptions& o, Rng& rng,
+                            std::vector<NearDangerousScenario>* scenarios) {
+    return KitchenNearDangerousStates(options_.task, demos, o, rng, scenarios);
+  };
+  r.discarded = [](const KitchenDemonstrations& d) {
+    return d.discarded_dangerous + d.discarded_failed;
+  };
+  r.held_out_salt = kCheckDataSalt;
+  return r;
 }
 
 std::string KitchenCuttingDomain::LabelCheckDescription() const {
@@ -93,17 +89,8 @@ std::string KitchenCuttingDomain::LabelCheckDescription() const {
 
 std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::uint64_t data_seed,
                                                                           long max_states) const {
-  options_.Validate();
-  SECURE_CHECK(max_states >= 1, "label check: max_states = " << max_states << ", must be >= 1");
-  KitchenDemonstrationOptions demo_options = options_.demonstrations;
-  demo_options.seed = data_seed;
-  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(options_.task, demo_options);
-  Rng rng(data_seed + 1);
   // The same draws as GenerateData (safe, then near-dangerous).
-  const data::StateSet safe = KitchenSafeStates(demos, options_.safe, rng);
-  std::vector<NearDangerousScenario> kinds;
-  const data::StateSet near =
-      KitchenNearDangerousStates(options_.task, demos, options_.near_dangerous, rng, &kinds);
+  const Draw draw = LabelCheckDraw(data_seed, max_states);
   KitchenLabelCheckOptions check;
   check.max_states = max_states;
   check.velocity_gain = options_.shield_model.velocity_gain;
@@ -112,31 +99,12 @@ std::vector<experiments::LabelCheckRow> KitchenCuttingDomain::CheckLabels(std::u
     const KitchenLabelCheckResult r = CheckKitchenLabels(options_.task, set, check);
     rows.push_back(franka::LabelRow(name, label, r.states, r.dangerous, r.unreachable));
   };
-  add("safe states", "safe", safe);
-  franka::AddScenarioRows(near, kinds,
+  add("safe states", "safe", draw.safe);
+  franka::AddScenarioRows(draw.near_dangerous, draw.scenarios,
                           {NearDangerousScenario::kStroke, NearDangerousScenario::kArm,
                            NearDangerousScenario::kBlade, NearDangerousScenario::kReach},
                           add);
   return rows;
-}
-
-void KitchenCuttingDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
-                                        data::StateSet* near_dangerous) const {
-  options_.Validate();
-  const std::uint64_t stream = data_seed ^ kCheckDataSalt;
-  KitchenDemonstrationOptions demo_options = options_.demonstrations;
-  demo_options.seed = stream;
-  // KitchenSafeStates draws demonstration states without replacement.
-  demo_options.states = std::max(demo_options.states, count);
-  const KitchenDemonstrations demos = GenerateKitchenDemonstrations(options_.task, demo_options);
-  Rng rng(stream + 1);
-  KitchenSafeOptions safe_options = options_.safe;
-  safe_options.count = count;
-  KitchenNearDangerousOptions nd_options = options_.near_dangerous;
-  nd_options.count = count;
-  *safe = KitchenSafeStates(demos, safe_options, rng);
-  *near_dangerous = KitchenNearDangerousStates(options_.task, demos, nd_options, rng);
-  franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
 franka::ArmCheckSpec KitchenCuttingDomain::CheckSpec() const {

@@ -4,22 +4,20 @@
 #include <memory>
 #include <string>
 
+#include "domains/franka/arm_data.h"
 #include "domains/kitchen_cutting/data.h"
-#include "domains/franka/arm_domain.h"
 #include "domains/kitchen_cutting/kitchen_cutting.h"
 #include "secure/common/yaml_fwd.h"
 #include "secure/experiments/experiment.h"
 
 namespace secure::domains::kitchen_cutting {
 
-/// The domain's own options (config section "kitchen_cutting").
-struct KitchenCuttingDomainOptions {
-  KitchenCuttingOptions task;
-  KitchenShieldModelOptions shield_model;
-  KitchenDemonstrationOptions demonstrations;
-  KitchenSafeOptions safe;
-  KitchenNearDangerousOptions near_dangerous;
-
+/// The domain's own options (config section "kitchen_cutting"): task, shield_model,
+/// demonstrations, safe, near_dangerous (franka::ArmDataOptions).
+struct KitchenCuttingDomainOptions
+    : franka::ArmDataOptions<KitchenCuttingOptions, KitchenShieldModelOptions,
+                             KitchenDemonstrationOptions, KitchenSafeOptions,
+                             KitchenNearDangerousOptions> {
   /// The paper's data sizes (Table 2), or the small profile.
   static KitchenCuttingDomainOptions For(experiments::Profile profile);
   void Validate() const;
@@ -30,7 +28,9 @@ struct KitchenCuttingDomainOptions {
   nlohmann::json ToJson() const;
 };
 
-class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomainOptions> {
+class KitchenCuttingDomain final
+    : public franka::ArmDataDomain<KitchenCuttingDomainOptions, KitchenDemonstrations,
+                                   NearDangerousScenario> {
  public:
   explicit KitchenCuttingDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -39,7 +39,8 @@ class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomain
   std::string ConfigSection() const override { return "kitchen_cutting"; }
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
-  experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
+  // GenerateData: franka::ArmDataDomain's (the demonstrations from data_seed, the safe and
+  // near-dangerous states from data_seed + 1, by MakeRecipe()'s generators).
   experiments::ExperimentOptions Preset() const override;
 
   /// Rows: the safe states, the demonstration states, the near-dangerous states by scenario
@@ -59,9 +60,10 @@ class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomain
   std::string LabellerDescription() const override;
 
   /// The barrier check (cbf/barrier_check.h):
-  ///  - held-out states: our generators (data.h) on new demonstrations, drawn from the stream
-  ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1): `count` safe
-  ///    states (KitchenSafeStates) and `count` near-dangerous ones (KitchenNearDangerousStates);
+  ///  - held-out states (franka::ArmDataDomain::CheckHeldOut): our generators (data.h) on new
+  ///    demonstrations (at least `count` states), drawn from the stream data_seed ^ a salt (the
+  ///    training data's are data_seed and data_seed + 1): `count` safe states (KitchenSafeStates)
+  ///    and `count` near-dangerous ones (KitchenNearDangerousStates);
   ///  - region: a held-out safe or near-dangerous observation (probability 1/2 each) perturbed:
   ///    the end-effector and the blade's edge moved together by N(0, 0.005^2) m per axis (the
   ///    knife is fixed to the hand), ee velocity + N(0, 0.05^2) m/s, the person's wrist, elbow
@@ -73,15 +75,16 @@ class KitchenCuttingDomain final : public franka::ArmDomain<KitchenCuttingDomain
   ///    shoulder);
   ///  - dynamics: the environment's shield model (KitchenShieldModel), action box [-1, 1]^3, dt
   ///    and class-K from the shield's options.
-  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
-                    data::StateSet* near_dangerous) const override;
-
   /// Table 3's kitchen row: the real robot, 10 episodes (BC 70 / AIRL 80 / SECURE 90 % success,
   /// 100 / 100 / 0 % dangerous; no standard deviations).
   std::optional<experiments::PaperTable3> PaperReference() const override;
 
  protected:
   franka::ArmCheckSpec CheckSpec() const override;
+  /// GenerateKitchenDemonstrations (held out: at least `count` states, as KitchenSafeStates
+  /// draws them without replacement), KitchenSafeStates, KitchenNearDangerousStates on the
+  /// options' task.
+  Recipe MakeRecipe() const override;
 };
 
 /// The barrier's input: the blade's edge, the end-effector velocity, the person's wrist, elbow

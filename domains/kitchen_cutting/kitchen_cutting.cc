@@ -284,9 +284,6 @@ double KitchenCuttingSim::Clearance() const {
 // ---------------------------------------------------------------------------------------------
 // The shield's model
 
-KitchenShieldModel::KitchenShieldModel(const KitchenShieldModelOptions& options)
-    : options_((options.Validate(), options)) {}
-
 std::string KitchenShieldModel::Describe() const {
   std::ostringstream s;
   s << "kitchen-cutting approximate model (ee and blade += " << options_.position_gain
@@ -295,14 +292,10 @@ std::string KitchenShieldModel::Describe() const {
   return s.str();
 }
 
-void KitchenShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-                                const Eigen::Ref<const Eigen::MatrixXf>& actions,
-                                Eigen::Ref<Eigen::MatrixXf> next) const {
-  const float dt = static_cast<float>(options_.dt);
-  for (Eigen::Index c = 0; c < actions.cols(); ++c) {
-    options_.Step(state, actions, c, kEePos, kEeVel, kBlade, next);  // the blade with the hand
-    franka::ExtrapolateHumanArm(state, kWrist, dt, next.col(c));
-  }
+void KitchenShieldModel::StepOthers(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                    const Eigen::Ref<const Eigen::MatrixXf>&, Eigen::Index c,
+                                    Eigen::Ref<Eigen::MatrixXf> next) const {
+  franka::ExtrapolateHumanArm(state, kWrist, static_cast<float>(options_.dt), next.col(c));
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -184,20 +184,20 @@ struct KitchenShieldModelOptions : franka::PersonShieldModelOptions {
   void Validate() const { PersonShieldModelOptions::Validate("KitchenShieldModelOptions"); }
 };
 
-class KitchenShieldModel final : public DynamicsModel {
+class KitchenShieldModel final
+    : public franka::EndEffectorModel<KitchenShieldModelOptions, kObservationDim, kActionDim,
+                                      kEePos, kEeVel> {
  public:
-  explicit KitchenShieldModel(const KitchenShieldModelOptions& options);
-  int state_dim() const override { return kObservationDim; }
-  int action_dim() const override { return kActionDim; }
+  using EndEffectorModel::EndEffectorModel;
   std::string Describe() const override;
 
  protected:
-  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-              const Eigen::Ref<const Eigen::MatrixXf>& actions,
-              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
-
- private:
-  KitchenShieldModelOptions options_;
+  /// The blade, fixed to the hand.
+  int Carried(const Eigen::Ref<const Eigen::VectorXf>&) const override { return kBlade; }
+  /// The person's arm extrapolated for dt.
+  void StepOthers(const Eigen::Ref<const Eigen::VectorXf>& state,
+                  const Eigen::Ref<const Eigen::MatrixXf>& actions, Eigen::Index c,
+                  Eigen::Ref<Eigen::MatrixXf> next) const override;
 };
 
 /// The task as an Environment (franka::ArmEnvironment: Render() draws offscreen with MuJoCo's

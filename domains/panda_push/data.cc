@@ -248,8 +248,8 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
   DemonstrationCollector collector(
       "scripted panda-push demonstrations (seed " + std::to_string(options.seed) + ")",
       ObservationFeatures(), ActionFeatures());
-  Eigen::VectorXf o(kObservationDim), next(kObservationDim);
-  Eigen::VectorXf a(kActionDim), applied(kActionDim);
+  Eigen::VectorXf o(kObservationDim);
+  Eigen::VectorXf a(kActionDim), applied(kActionDim);  // recorded, applied
   int kept = 0;
   for (int attempt = 0; attempt < options.max_attempts && kept < options.episodes; ++attempt) {
     Rng episode_rng(rng.NextU64());
@@ -265,60 +265,56 @@ PandaDemonstrations GeneratePandaDemonstrations(const PandaPushOptions& task,
     const bool dart = options.dart_noise > 0 || options.dart_brake_rate > 0;
     Rng dart_rng(dart ? episode_rng.NextU64() : 0);
     int braking = 0;  // steps of the current brake left
-    collector.BeginEpisode();
     long push_begin = -1;
-    bool descended = false, success = false, toppled = false;
-    for (int t = 0; t < task.max_steps; ++t) {
-      a.setZero();
-      const double gap = o[kBlockPos] - o[kEePos] - kTouchingDistance;
-      if (!descended && o[kEePos + 2] > h + 0.01) {
-        a[2] = static_cast<float>(-descend);
-      } else {
-        descended = true;
-        a[2] = static_cast<float>(std::clamp(0.5 * (h - o[kEePos + 2]) / 0.05, -1.0, 1.0));
-        a[1] = static_cast<float>(std::clamp(-5.0 * (o[kEePos + 1] - o[kBlockPos + 1]), -0.2, 0.2));
-        // Fast while far, slowing down in proportion to the gap over the last approach_gap
-        // metres (a keyboard user easing off), the push speed once in contact.
-        const double ease = std::clamp(gap / std::max(options.approach_gap, 1e-9), 0.0, 1.0);
-        a[0] = static_cast<float>(push + (approach - push) * ease);
-        if (gap <= 0.005 && push_begin < 0) push_begin = collector.episode_steps();
-        if (options.pause_rate > 0 && paused == 0 && pause_rng.Uniform() < options.pause_rate)
-          paused = static_cast<int>(std::floor(Draw(pause_rng, options.pause_steps) + 0.5));
-        if (paused > 0) {
-          a[0] = 0.0f;
-          --paused;
-        }
-      }
-      for (int k = 0; k < kActionDim; ++k)
-        a[k] = std::clamp(a[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
-                          -1.0f, 1.0f);
-      collector.Record(o, a);
-      applied = a;
-      if (dart && descended) {
-        for (int k = 0; k < kActionDim; ++k)
-          applied[k] += static_cast<float>(options.dart_noise * dart_rng.Normal());
-        if (push_begin >= 0 && options.dart_brake_rate > 0 && braking == 0 &&
-            dart_rng.Uniform() < options.dart_brake_rate)
-          braking = static_cast<int>(std::floor(Draw(dart_rng, options.dart_brake_steps) + 0.5));
-        if (braking > 0) {
-          applied[0] = 0.0f;
-          --braking;
-        }
-        applied = applied.cwiseMax(-1.0f).cwiseMin(1.0f);
-      }
-      const StepOutcome r = env.Step(applied, next);
-      o = next;
-      if (r.collided) {
-        toppled = true;
-        break;
-      }
-      if (r.reached_goal) {
-        success = true;
-        break;
-      }
-    }
-    if (!KeepOrCountDiscarded(toppled, success && push_begin >= 0, &out.discarded_toppled,
-                              &out.discarded_failed))
+    bool descended = false;
+    const RecordedEpisode episode = RecordEpisode(
+        env, collector, task.max_steps, /*stop_at_goal=*/true, o, applied, a,
+        [&](const Eigen::VectorXf& obs, Eigen::VectorXf& act, Eigen::VectorXf& recorded) {
+          recorded.setZero();
+          const double gap = obs[kBlockPos] - obs[kEePos] - kTouchingDistance;
+          if (!descended && obs[kEePos + 2] > h + 0.01) {
+            recorded[2] = static_cast<float>(-descend);
+          } else {
+            descended = true;
+            recorded[2] =
+                static_cast<float>(std::clamp(0.5 * (h - obs[kEePos + 2]) / 0.05, -1.0, 1.0));
+            recorded[1] = static_cast<float>(
+                std::clamp(-5.0 * (obs[kEePos + 1] - obs[kBlockPos + 1]), -0.2, 0.2));
+            // Fast while far, slowing down in proportion to the gap over the last approach_gap
+            // metres (a keyboard user easing off), the push speed once in contact.
+            const double ease = std::clamp(gap / std::max(options.approach_gap, 1e-9), 0.0, 1.0);
+            recorded[0] = static_cast<float>(push + (approach - push) * ease);
+            if (gap <= 0.005 && push_begin < 0) push_begin = collector.episode_steps();
+            if (options.pause_rate > 0 && paused == 0 && pause_rng.Uniform() < options.pause_rate)
+              paused = static_cast<int>(std::floor(Draw(pause_rng, options.pause_steps) + 0.5));
+            if (paused > 0) {
+              recorded[0] = 0.0f;
+              --paused;
+            }
+          }
+          for (int k = 0; k < kActionDim; ++k)
+            recorded[k] = std::clamp(
+                recorded[k] + static_cast<float>(options.action_noise * episode_rng.Normal()),
+                -1.0f, 1.0f);
+          // The applied action: the recorded one, perturbed under DART.
+          act = recorded;
+          if (dart && descended) {
+            for (int k = 0; k < kActionDim; ++k)
+              act[k] += static_cast<float>(options.dart_noise * dart_rng.Normal());
+            if (push_begin >= 0 && options.dart_brake_rate > 0 && braking == 0 &&
+                dart_rng.Uniform() < options.dart_brake_rate)
+              braking =
+                  static_cast<int>(std::floor(Draw(dart_rng, options.dart_brake_steps) + 0.5));
+            if (braking > 0) {
+              act[0] = 0.0f;
+              --braking;
+            }
+            act = act.cwiseMax(-1.0f).cwiseMin(1.0f);
+          }
+        },
+        [](const StepOutcome&) {});
+    if (!KeepOrCountDiscarded(episode.collided, episode.reached_at > 0 && push_begin >= 0,
+                              &out.discarded_toppled, &out.discarded_failed))
       continue;
     out.push_begin.push_back(collector.KeepEpisode() + push_begin);
     ++kept;

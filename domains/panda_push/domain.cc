@@ -39,11 +39,7 @@ PandaPushDomainOptions PandaPushDomainOptions::For(experiments::Profile profile)
 }
 
 void PandaPushDomainOptions::Validate() const {
-  task.Validate();
-  shield_model.Validate();
-  demonstrations.Validate();
-  safe.Validate();
-  near_dangerous.Validate();
+  ValidateParts();
   SECURE_CHECK_FIELD(barrier_data != BarrierData::kReleased || !released_data_dir.empty(),
                      "PandaPushDomainOptions", "released_data_dir", "''",
                      "set (the folder of task_demos.csv and near_dangerous_states.csv) with "
@@ -51,12 +47,7 @@ void PandaPushDomainOptions::Validate() const {
 }
 
 YamlFields PandaPushDomainOptions::Fields() {
-  return YamlFields()
-      .Part("task", &task)
-      .Part("shield_model", &shield_model)
-      .Part("demonstrations", &demonstrations)
-      .Part("safe", &safe)
-      .Part("near_dangerous", &near_dangerous)
+  return AddParts(YamlFields())
       .Section(
           "barrier_data",
           [this](const YAML::Node& n, const std::string& w) {
@@ -75,7 +66,7 @@ YamlFields PandaPushDomainOptions::Fields() {
 SECURE_YAML_JSON_FROM_FIELDS(PandaPushDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
-PandaPushDomain::PandaPushDomain(experiments::Profile profile) : ArmDomain(profile) {}
+PandaPushDomain::PandaPushDomain(experiments::Profile profile) : ArmDataDomain(profile) {}
 
 std::unique_ptr<Environment> PandaPushDomain::MakeEnvironment() const {
   return std::make_unique<PandaPushEnv>(options_.task, options_.shield_model);
@@ -87,7 +78,26 @@ LabelCheckOptions PandaPushDomain::ContinuationOptions() const {
   return c;
 }
 
+PandaPushDomain::Recipe PandaPushDomain::MakeRecipe() const {
+  Recipe r;
+  r.demonstrate = [this](const PandaDemonstrationOptions& o) {
+    return GeneratePandaDemonstrations(options_.task, o);
+  };
+  r.safe = PandaSafeStates;
+  r.near_dangerous = [this](const PandaDemonstrations& demos, const PandaNearDangerousOptions& o,
+                            Rng& rng, std::vector<NearDangerousScenario>* scenarios) {
+    return PandaNearDangerousStates(options_.task, demos, o, ContinuationOptions(), rng, scenarios);
+  };
+  r.discarded = [](const PandaDemonstrations& d) {
+    return d.discarded_toppled + d.discarded_failed;
+  };
+  r.held_out_salt = kCheckDataSalt;
+  return r;
+}
+
 experiments::DomainData PandaPushDomain::GenerateData(std::uint64_t data_seed) const {
+  if (options_.barrier_data != BarrierData::kReleased)
+    return ArmDataDomain::GenerateData(data_seed);
   options_.Validate();
   PandaDemonstrationOptions demo_options = options_.demonstrations;
   demo_options.seed = data_seed;
@@ -96,16 +106,10 @@ experiments::DomainData PandaPushDomain::GenerateData(std::uint64_t data_seed) c
   experiments::DomainData d;
   d.demonstrations = demos.trajectories;
   d.discarded_demonstrations = demos.discarded_toppled + demos.discarded_failed;
-  if (options_.barrier_data == BarrierData::kReleased) {
-    ReleasedPandaData released = ReadReleasedPandaData(options_.released_data_dir, options_.safe,
-                                                       options_.near_dangerous.count, rng);
-    d.safe = std::move(released.safe);
-    d.near_dangerous = std::move(released.near_dangerous);
-  } else {
-    d.safe = PandaSafeStates(demos, options_.safe, rng);
-    d.near_dangerous = PandaNearDangerousStates(options_.task, demos, options_.near_dangerous,
-                                                ContinuationOptions(), rng);
-  }
+  ReleasedPandaData released = ReadReleasedPandaData(options_.released_data_dir, options_.safe,
+                                                     options_.near_dangerous.count, rng);
+  d.safe = std::move(released.safe);
+  d.near_dangerous = std::move(released.near_dangerous);
   return d;
 }
 
@@ -120,24 +124,16 @@ std::string PandaPushDomain::LabelCheckDescription() const {
 }
 
 std::vector<int> PandaPushDomain::Label(const Eigen::Ref<const Eigen::MatrixXf>& states,
-                                       std::uint64_t) const {
+                                        std::uint64_t) const {
   options_.Validate();
   return LabelStates(options_.task, states, ContinuationOptions());
 }
 
 std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64_t data_seed,
                                                                      long max_states) const {
-  options_.Validate();
-  SECURE_CHECK(max_states >= 1, "label check: max_states = " << max_states << ", must be >= 1");
-  PandaDemonstrationOptions demo_options = options_.demonstrations;
-  demo_options.seed = data_seed;
-  const PandaDemonstrations demos = GeneratePandaDemonstrations(options_.task, demo_options);
-  Rng rng(data_seed + 1);
   // The same draws as GenerateData (safe, then near-dangerous).
-  const data::StateSet safe = PandaSafeStates(demos, options_.safe, rng);
-  std::vector<NearDangerousScenario> kinds;
-  const data::StateSet near = PandaNearDangerousStates(
-      options_.task, demos, options_.near_dangerous, ContinuationOptions(), rng, &kinds);
+  const Draw draw = LabelCheckDraw(data_seed, max_states);
+  const PandaDemonstrations& demos = draw.demos;
   LabelCheckOptions check = ContinuationOptions();
   check.max_states = max_states;
   std::vector<experiments::LabelCheckRow> rows;
@@ -145,7 +141,7 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
     const LabelCheckResult r = panda_push::CheckLabels(options_.task, set, check);
     rows.push_back(franka::LabelRow(name, label, r.states, r.toppled, r.unreachable));
   };
-  add("safe states", "safe", safe);
+  add("safe states", "safe", draw.safe);
   std::vector<long> pushing;
   for (long e = 0; e < demos.trajectories.num_episodes(); ++e)
     for (long i = demos.push_begin[e] + 1; i < demos.trajectories.episode_begin[e + 1]; ++i)
@@ -154,7 +150,7 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
   demo_states.features = ObservationFeatures();
   demo_states.states = demos.trajectories.states;
   add("demonstration states while pushing", "safe", franka::SelectStates(demo_states, pushing));
-  franka::AddScenarioRows(near, kinds,
+  franka::AddScenarioRows(draw.near_dangerous, draw.scenarios,
                           {NearDangerousScenario::kUpper, NearDangerousScenario::kFastX,
                            NearDangerousScenario::kFastZ, NearDangerousScenario::kBoth},
                           add);
@@ -167,24 +163,6 @@ std::vector<experiments::LabelCheckRow> PandaPushDomain::CheckLabels(std::uint64
     add("released near-dangerous states", "near-dangerous", released.near_dangerous);
   }
   return rows;
-}
-
-void PandaPushDomain::CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
-                                   data::StateSet* near_dangerous) const {
-  options_.Validate();
-  const std::uint64_t stream = data_seed ^ kCheckDataSalt;
-  PandaDemonstrationOptions demo_options = options_.demonstrations;
-  demo_options.seed = stream;
-  const PandaDemonstrations demos = GeneratePandaDemonstrations(options_.task, demo_options);
-  Rng rng(stream + 1);
-  PandaSafeOptions safe_options = options_.safe;
-  safe_options.count = count;
-  PandaNearDangerousOptions nd_options = options_.near_dangerous;
-  nd_options.count = count;
-  *safe = PandaSafeStates(demos, safe_options, rng);
-  *near_dangerous =
-      PandaNearDangerousStates(options_.task, demos, nd_options, ContinuationOptions(), rng);
-  franka::MarkHeldOut(data_seed, safe, near_dangerous);
 }
 
 franka::ArmCheckSpec PandaPushDomain::CheckSpec() const {

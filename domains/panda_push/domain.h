@@ -4,7 +4,7 @@
 #include <memory>
 #include <string>
 
-#include "domains/franka/arm_domain.h"
+#include "domains/franka/arm_data.h"
 #include "domains/panda_push/data.h"
 #include "domains/panda_push/panda_push.h"
 #include "secure/common/yaml_fwd.h"
@@ -15,13 +15,12 @@ namespace secure::domains::panda_push {
 /// Where the barrier's training states come from.
 enum class BarrierData { kGenerated, kReleased };
 
-/// The domain's own options (config section "panda_push").
-struct PandaPushDomainOptions {
-  PandaPushOptions task;
-  PandaPushShieldModelOptions shield_model;
-  PandaDemonstrationOptions demonstrations;
-  PandaSafeOptions safe;
-  PandaNearDangerousOptions near_dangerous;
+/// The domain's own options (config section "panda_push"): task, shield_model, demonstrations,
+/// safe, near_dangerous (franka::ArmDataOptions), and where the barrier's data come from.
+struct PandaPushDomainOptions
+    : franka::ArmDataOptions<PandaPushOptions, PandaPushShieldModelOptions,
+                             PandaDemonstrationOptions, PandaSafeOptions,
+                             PandaNearDangerousOptions> {
   /// generated: safe and near-dangerous states from our demonstrations (data.h); released: from
   /// the authors' released files in released_data_dir (the transfer variant: a barrier learned
   /// from panda-gym's PyBullet data, used in this simulator). The policies always learn from our
@@ -40,7 +39,9 @@ struct PandaPushDomainOptions {
   nlohmann::json ToJson() const;
 };
 
-class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
+class PandaPushDomain final
+    : public franka::ArmDataDomain<PandaPushDomainOptions, PandaDemonstrations,
+                                   NearDangerousScenario> {
  public:
   explicit PandaPushDomain(experiments::Profile profile = experiments::Profile::kFull);
 
@@ -49,6 +50,9 @@ class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
   std::string ConfigSection() const override { return "panda_push"; }
 
   std::unique_ptr<Environment> MakeEnvironment() const override;
+  /// barrier_data generated: franka::ArmDataDomain's (the demonstrations from data_seed, the safe
+  /// and near-dangerous states from data_seed + 1); released: the same demonstrations, the safe
+  /// and near-dangerous states from the released files (with the stream data_seed + 1).
   experiments::DomainData GenerateData(std::uint64_t data_seed) const override;
   experiments::ExperimentOptions Preset() const override;
   /// The paper's experiments on this domain (Section 6), for `secure reproduce`.
@@ -75,11 +79,12 @@ class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
   }
 
   /// The barrier check (cbf/barrier_check.h):
-  ///  - held-out states: our generators (data.h) on new demonstrations, drawn from the stream
-  ///    data_seed ^ a salt (the training data's are data_seed and data_seed + 1): `count` safe
-  ///    states (PandaSafeStates with the domain's copies) and `count` near-dangerous ones
-  ///    (PandaNearDangerousStates, the domain's generator); also with barrier_data: released,
-  ///    since the barrier is deployed in this simulator;
+  ///  - held-out states (franka::ArmDataDomain::CheckHeldOut): our generators (data.h) on new
+  ///    demonstrations, drawn from the stream data_seed ^ a salt (the training data's are
+  ///    data_seed and data_seed + 1): `count` safe states (PandaSafeStates with the domain's
+  ///    copies) and `count` near-dangerous ones (PandaNearDangerousStates, the domain's
+  ///    generator); also with barrier_data: released, since the barrier is deployed in this
+  ///    simulator;
   ///  - region: a held-out safe or near-dangerous observation (probability 1/2 each) perturbed:
   ///    ee position + N(0, 0.005^2) m and ee velocity + N(0, 0.05^2) m/s per axis, block position
   ///    + N(0, 0.005^2) m, block Euler angles + N(0, 0.02^2) rad, block velocity + N(0, 0.02^2)
@@ -91,9 +96,6 @@ class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
   ///  - dynamics: the environment's shield model (shield_model: approximate, or the privileged
   ///    rollout, which costs one simulated control period per action the check tries), action box
   ///    [-1, 1]^3, dt and class-K from the shield's options.
-  void CheckHeldOut(std::uint64_t data_seed, long count, data::StateSet* safe,
-                    data::StateSet* near_dangerous) const override;
-
   /// The report's pictures (report_hints.cc): the barrier over the end effector's height and
   /// pushing speed; Table 3's Panda Arm Push row.
   std::optional<experiments::ReportHints> MakeReportHints() const override;
@@ -101,6 +103,9 @@ class PandaPushDomain final : public franka::ArmDomain<PandaPushDomainOptions> {
 
  protected:
   franka::ArmCheckSpec CheckSpec() const override;
+  /// GeneratePandaDemonstrations, PandaSafeStates, PandaNearDangerousStates (with
+  /// ContinuationOptions()) on the options' task.
+  Recipe MakeRecipe() const override;
 
  private:
   // The label check's continuation with this domain's shield-model velocity gain (also the

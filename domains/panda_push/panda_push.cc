@@ -272,9 +272,6 @@ void PandaPushShieldModelOptions::ApplyYaml(const YAML::Node& node, const std::s
   Fields().Apply(node, source);
 }
 
-PandaPushShieldModel::PandaPushShieldModel(const PandaPushShieldModelOptions& options)
-    : options_((options.Validate(), options)) {}
-
 std::string PandaPushShieldModel::Describe() const {
   std::ostringstream s;
   s << "panda-push approximate model (ee += " << options_.position_gain
@@ -283,13 +280,10 @@ std::string PandaPushShieldModel::Describe() const {
   return s.str();
 }
 
-void PandaPushShieldModel::DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-                                  const Eigen::Ref<const Eigen::MatrixXf>& actions,
-                                  Eigen::Ref<Eigen::MatrixXf> next) const {
+int PandaPushShieldModel::Carried(const Eigen::Ref<const Eigen::VectorXf>& state) const {
   const bool pushing =
       std::abs(state[kEePos] - state[kBlockPos]) < static_cast<float>(options_.contact_range);
-  for (Eigen::Index c = 0; c < actions.cols(); ++c)  // the block with the hand while pushing
-    options_.Step(state, actions, c, kEePos, kEeVel, pushing ? kBlockPos : -1, next);
+  return pushing ? kBlockPos : -1;
 }
 
 PandaPushRolloutModel::PandaPushRolloutModel(const PandaPushSim& live)

@@ -171,20 +171,16 @@ struct PandaPushShieldModelOptions : franka::EndEffectorGains {
   void ApplyYaml(const YAML::Node& node, const std::string& source);
 };
 
-class PandaPushShieldModel final : public DynamicsModel {
+class PandaPushShieldModel final
+    : public franka::EndEffectorModel<PandaPushShieldModelOptions, kObservationDim, kActionDim,
+                                      kEePos, kEeVel> {
  public:
-  explicit PandaPushShieldModel(const PandaPushShieldModelOptions& options);
-  int state_dim() const override { return kObservationDim; }
-  int action_dim() const override { return kActionDim; }
+  using EndEffectorModel::EndEffectorModel;
   std::string Describe() const override;
 
  protected:
-  void DoStep(const Eigen::Ref<const Eigen::VectorXf>& state,
-              const Eigen::Ref<const Eigen::MatrixXf>& actions,
-              Eigen::Ref<Eigen::MatrixXf> next_states) const override;
-
- private:
-  PandaPushShieldModelOptions options_;
+  /// The block while pushing (|ee_x - block_x| < contact_range), else none.
+  int Carried(const Eigen::Ref<const Eigen::VectorXf>& state) const override;
 };
 
 /// The privileged one-step model: each sampled action is simulated in MuJoCo for one control
@@ -247,7 +243,7 @@ class PandaPushEnv final
 
   PandaPushShieldModelOptions shield_model_options_;
   PandaPushShieldModel shield_model_;
-  std::unique_ptr<PandaPushRolloutModel> rollout_model_;  // kind = rollout
+  std::unique_ptr<PandaPushRolloutModel> rollout_model_;    // kind = rollout
   std::unique_ptr<dynamics::EnsembleModel> learned_model_;  // kind = learned
 };
 
