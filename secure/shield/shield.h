@@ -309,7 +309,9 @@ struct ShieldOptions {
   double qp_margin = 0.0;
   // proposal = qp: the trust region of the projection. A projection farther than this from mu
   // (Euclidean, in action units) is not taken: the QP with the constraint |a - mu| <= qp_max_step
-  // is infeasible, and Algorithms 1-2 decide. 0: no limit. Ignored by the other proposals
+  // is infeasible, and Algorithms 1-2 decide. With qp_bisection > 0 the region bounds the
+  // decision instead: a projection beyond it is checked and bisected back first, and the result
+  // must lie within it. 0: no limit. Ignored by the other proposals
   // (qp-only and refine have no sampling to fall back to). On Panda the projection's step was
   // 2.6-3.3x the sampling shield's correction; capping it removed at most 1.4 points of the
   // extra danger there (docs/RESULTS.md, issue 37), so it is off by default.
@@ -512,6 +514,11 @@ class Shield {
               double g_unsafe, double t_safe, double g_safe);
   // a0 + t (a* - a0) (qp_point_, qp_solution_) into one_action_, clipped onto the box.
   void PointOnLine(double t);
+  // qp_max_step acts (proposal qp).
+  bool TrustRegionActive() const;
+  // With qp_bisection, the accepted decision (after bisection) must lie within qp_max_step of
+  // mu: returns false (outcome infeasible, sampling decides) when it does not.
+  bool AcceptWithinTrustRegion();
   // proposal = refine: the gradient refinement of mu into decision_ (action, g, qp); returns
   // whether an iterate's exact g >= 0 (shield_refine.cc).
   bool RefineMean(const Eigen::Ref<const Eigen::VectorXf>& state,

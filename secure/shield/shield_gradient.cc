@@ -141,11 +141,12 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
       result.status = QpStatus::kInfeasible;
       for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
     }
-    if (options_.qp_max_step > 0 && options_.proposal == Proposal::kQp &&
+    if (TrustRegionActive() && options_.qp_bisection == 0 &&
         result.status != QpStatus::kInfeasible &&
         (qp_solution_ - qp_mu_).norm() > options_.qp_max_step) {
       // Beyond the trust region: the QP with |a - mu| <= qp_max_step is infeasible, and
       // sampling decides (proposal qp only: the filters alone have nothing to fall back to).
+      // With bisection the projection is checked and bisected first (AcceptWithinTrustRegion).
       decision_.qp = QpOutcome::kInfeasible;
       return false;
     }
@@ -154,7 +155,7 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
     EvaluateG(state, h_state, one_action_, one_g_);
     if (Record(decision_, one_action_, one_g_[0])) {
       Bisect(state, h_state, 0.0, g_point, 1.0, one_g_[0]);
-      return true;
+      return AcceptWithinTrustRegion();
     }
     decision_.qp =
         result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
@@ -185,20 +186,32 @@ bool Shield::LineSearch(const Eigen::Ref<const Eigen::VectorXf>& state, double h
     // to g = target alone falls short again by about as much.
     const double t = t_last + 2.0 * (target - g_last) / slope;
     PointOnLine(t);
-    if (options_.qp_max_step > 0 && options_.proposal == Proposal::kQp &&
+    if (TrustRegionActive() && options_.qp_bisection == 0 &&
         (one_action_.col(0).cast<double>() - qp_mu_).norm() > options_.qp_max_step) {
       return false;  // beyond the trust region, as a projection there would be
     }
     EvaluateG(state, h_state, one_action_, one_g_);
     if (Record(decision_, one_action_, one_g_[0])) {
       Bisect(state, h_state, t_last, g_last, t, one_g_[0]);
-      return true;
+      return AcceptWithinTrustRegion();
     }
     t_prev = t_last;
     g_prev = g_last;
     t_last = t;
     g_last = one_g_[0];
   }
+  return false;
+}
+
+bool Shield::TrustRegionActive() const {
+  return options_.qp_max_step > 0 && options_.proposal == Proposal::kQp;
+}
+
+bool Shield::AcceptWithinTrustRegion() {
+  // Without bisection every point was checked against the region before its evaluation.
+  if (!TrustRegionActive() || options_.qp_bisection == 0) return true;
+  if ((decision_.action.cast<double>() - qp_mu_).norm() <= options_.qp_max_step) return true;
+  decision_.qp = QpOutcome::kInfeasible;  // as a projection beyond it: sampling decides
   return false;
 }
 

@@ -115,6 +115,7 @@ ShieldOptions RandomOptions() {
   o.qp_iterations = *rc::gen::inRange(1, 4);
   o.qp_line_search = *rc::gen::inRange(0, 4);
   o.qp_bisection = *rc::gen::element(0, 0, 3, 8);
+  o.qp_max_step = *rc::gen::element(0.0, 0.0, 1.0, 4.0);
   o.qp_margin = *rc::gen::element(0.0, 0.1);
   o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
   o.qp_metric = *rc::gen::element(QpMetric::kEuclidean, QpMetric::kPolicy);  // sigma > 0 here
@@ -463,6 +464,24 @@ TEST(QpShieldTest, BisectionBringsAnOvershootingProjectionBackToTheExactBoundary
   EXPECT_EQ(f.iterations, 0);
   EXPECT_TRUE(BitEqual(f.action, d.action));
 
+  // With a trust region the bisected decision is what must lie in it: 1.62 from mu is inside
+  // qp_max_step = 2 (the projection, 62 away, is not), outside 1.5, where sampling decides.
+  ShieldOptions trusted = Step::Options(Proposal::kQp, 12);
+  trusted.qp_max_step = 2.0;
+  Shield within(trusted, step.barrier, step.dynamics);
+  const Decision& w = within.Decide(step.state, step.mu, Vec({0.3f}));
+  EXPECT_EQ(w.qp, QpOutcome::kAccepted);
+  EXPECT_TRUE(BitEqual(w.action, d.action));
+  trusted.qp_max_step = 1.5;
+  Shield beyond(trusted, step.barrier, step.dynamics);
+  const Decision& b = beyond.Decide(step.state, step.mu, Vec({0.3f}));
+  EXPECT_EQ(b.qp, QpOutcome::kInfeasible) << b.ToJson().dump();
+  EXPECT_GE(b.iterations, 1);  // Algorithms 1-2 decided
+  Shield sampling(Step::Options(Proposal::kNone, 0), step.barrier, step.dynamics);
+  const Decision& e = sampling.Decide(step.state, step.mu, Vec({0.3f}));
+  EXPECT_TRUE(BitEqual(b.action, e.action));
+  EXPECT_EQ(b.status, e.status);
+
   // Where g is linear along the line (an affine model under a linear barrier) the projection
   // lands on the boundary, nothing overshoots, and bisection leaves the decision as it was.
   HalfSpace h1, h2;
@@ -560,22 +579,20 @@ TEST(QpShieldTest, OptionsAreCheckedReadAndWrittenOnlyWhereTheyAct) {
   o.qp_iterations = 0;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_iterations = 0");
   o.qp_iterations = 1;
-  EXPECT_FALSE(o.ToJson().contains("qp_line_search"));  // absent unless set (runs keep identity)
-  o.qp_line_search = 2;
-  EXPECT_EQ(o.ToJson()["qp_line_search"], 2);
-  for (int bad : {-1, kMaxQpLineSearch + 1}) {
-    o.qp_line_search = bad;
-    EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_line_search = " + std::to_string(bad));
-  }
-  o.qp_line_search = 0;
-  EXPECT_FALSE(o.ToJson().contains("qp_bisection"));  // absent unless set (runs keep identity)
-  o.qp_bisection = 6;
-  EXPECT_EQ(o.ToJson()["qp_bisection"], 6);
-  for (int bad : {-1, kMaxQpBisection + 1}) {
-    o.qp_bisection = bad;
-    EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_bisection = " + std::to_string(bad));
-  }
-  o.qp_bisection = 0;
+  // The step counts of the line search and the bisection: absent from the JSON unless set (runs
+  // keep their identity), written when set, checked at both ends of their range.
+  const auto check_count = [&](const std::string& name, int ShieldOptions::*field, int max) {
+    EXPECT_FALSE(o.ToJson().contains(name));
+    o.*field = 2;
+    EXPECT_EQ(o.ToJson()[name], 2);
+    for (int bad : {-1, max + 1}) {
+      o.*field = bad;
+      EXPECT_HAS(ErrorOf([&] { o.Validate(); }), name + " = " + std::to_string(bad));
+    }
+    o.*field = 0;
+  };
+  check_count("qp_line_search", &ShieldOptions::qp_line_search, kMaxQpLineSearch);
+  check_count("qp_bisection", &ShieldOptions::qp_bisection, kMaxQpBisection);
   o.qp_margin = -1;
   EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "qp_margin = -1");
   ShieldOptions y;
