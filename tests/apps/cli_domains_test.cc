@@ -86,6 +86,9 @@ TEST(CliDomainsTest, HelpShowsThePresetWhereADomainIsChosen) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_HAS(r.out, "--class-k-gain 20 ");
   EXPECT_HAS(r.out, "--aggregation policy-mean ");
+  EXPECT_HAS(r.out, "--qp-line-search 1 ");  // the gradient-first shield's preset
+  EXPECT_HAS(r.out, "--qp-bisection 5 ");
+  EXPECT_HAS(r.out, "--qp-max-step 0.5 ");
   r = RunCli("domains panda-push --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
