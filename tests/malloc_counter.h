@@ -7,8 +7,9 @@
 // skips itself (`if (SECURE_TEST_ASAN) GTEST_SKIP()`, tests/sanitizers.h).
 //
 // This header DEFINES the C functions: include it in exactly one source file of a test
-// executable (a second one fails to link). Used by tests/domains/domain_alloc_test.cc and
-// domains/derby/tests/derby_test.cc.
+// executable (a second one fails to link). Used by tests/domains/domain_alloc_test.cc,
+// domains/derby/tests/derby_test.cc and tests/shield/shield_alloc_test.cc (which adds
+// posix_memalign and operator new).
 #include <atomic>
 #include <cstddef>
 

@@ -1,6 +1,6 @@
 // Shield::Decide() must not allocate (shield.h: "construct once, then Decide() allocates
 // nothing"). This executable replaces the global operator new/delete (every variant) with counting
-// versions, and also interposes the C allocator (malloc, calloc, realloc, the aligned variants):
+// versions, and also interposes the C allocator (tests/malloc_counter.h, plus posix_memalign):
 // Eigen allocates its heap buffers (e.g. GEMM packing blocks) with std::malloc, not operator new,
 // so counting operator new alone would miss them. Counting is off except inside CountDuring().
 //
@@ -33,55 +33,30 @@
 #include "secure/dynamics/ensemble.h"
 #include "secure/nn/mlp.h"
 #include "secure/policy/airl_reward.h"
+#include "tests/malloc_counter.h"
 
 // ------------------------------------------------------------------------------------------------
 // Counting allocators.
 
 namespace {
 
-std::atomic<bool> counting{false};
-std::atomic<long> new_calls{0};     // operator new / new[] (all variants)
-std::atomic<long> malloc_calls{0};  // malloc, calloc, realloc, memalign, posix_memalign, ...
+std::atomic<long> new_calls{0};  // operator new / new[] (all variants)
 
 void CountNew() {
-  if (counting.load(std::memory_order_relaxed)) new_calls.fetch_add(1, std::memory_order_relaxed);
-}
-void CountMalloc() {
-  if (counting.load(std::memory_order_relaxed))
-    malloc_calls.fetch_add(1, std::memory_order_relaxed);
+  if (secure::test::malloc_counting.load(std::memory_order_relaxed))
+    new_calls.fetch_add(1, std::memory_order_relaxed);
 }
 
 }  // namespace
 
+// malloc, calloc, realloc, memalign and aligned_alloc count through tests/malloc_counter.h; this
+// executable adds posix_memalign (Eigen's aligned allocations may take it) and operator new.
 extern "C" {
 void* __libc_malloc(std::size_t size);
-void* __libc_calloc(std::size_t count, std::size_t size);
-void* __libc_realloc(void* pointer, std::size_t size);
-void* __libc_memalign(std::size_t alignment, std::size_t size);
 void __libc_free(void* pointer);
 
-void* malloc(std::size_t size) noexcept {
-  CountMalloc();
-  return __libc_malloc(size);
-}
-void* calloc(std::size_t count, std::size_t size) noexcept {
-  CountMalloc();
-  return __libc_calloc(count, size);
-}
-void* realloc(void* pointer, std::size_t size) noexcept {
-  CountMalloc();
-  return __libc_realloc(pointer, size);
-}
-void* memalign(std::size_t alignment, std::size_t size) noexcept {
-  CountMalloc();
-  return __libc_memalign(alignment, size);
-}
-void* aligned_alloc(std::size_t alignment, std::size_t size) noexcept {
-  CountMalloc();
-  return __libc_memalign(alignment, size);
-}
 int posix_memalign(void** pointer, std::size_t alignment, std::size_t size) noexcept {
-  CountMalloc();
+  secure::test::CountMalloc();
   if (alignment < sizeof(void*) || (alignment & (alignment - 1)) != 0) return 22;  // EINVAL
   void* p = __libc_memalign(alignment, size);
   if (p == nullptr && size != 0) return 12;  // ENOMEM
@@ -164,11 +139,10 @@ struct Allocations {
 template <typename Fn>
 Allocations CountDuring(Fn&& fn) {
   new_calls.store(0);
-  malloc_calls.store(0);
-  counting.store(true);
+  secure::test::BeginCountingMalloc();
   fn();
-  counting.store(false);
-  return {new_calls.load(), malloc_calls.load()};
+  const long mallocs = secure::test::EndCountingMalloc();
+  return {new_calls.load(), mallocs};
 }
 
 std::string Describe(const Allocations& a) {
