@@ -292,8 +292,8 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
       ShieldFlag(cmd, "--qp-margin", &so->qp_margin, &O::qp_margin,
                  "proposal: the projection asks the linearised g >= this margin"),
       ShieldFlag(cmd, "--qp-max-step", &so->qp_max_step, &O::qp_max_step,
-                 "proposal qp: a projection farther than this from the mean falls back to "
-                 "sampling (0: no limit)"),
+                 "proposal qp: a projection (with --qp-bisection, the bisected decision) farther "
+                 "than this from the mean falls back to sampling (0: no limit)"),
       ShieldFlag(cmd, "--qp-metric", &qp_metric, &O::qp_metric,
                  "proposal qp, qp-only: the projection's metric: euclidean | policy (the "
                  "policy's Gaussian, (a - mu)^T diag(sigma)^-2 (a - mu))"),

@@ -335,7 +335,8 @@ class Shield:
     qp_bisection=0 (proposal 'qp' / 'qp-only': bisection steps on the exact g back along the line of
     an accepted projection that overshot), qp_target='boundary' (or 'safe-mean': the mean of the
     policy's Gaussian over the linearised safe half-space; needs qp_metric='policy'),
-    qp_margin=0, qp_max_step=0 (proposal 'qp': a projection farther from the mean falls back to sampling; 0: none),
+    qp_margin=0, qp_max_step=0 (proposal 'qp': a projection farther from the mean (with qp_bisection,
+    the bisected decision) falls back to sampling; 0: none),
     qp_metric='euclidean' (or 'policy': proposal 'qp' / 'qp-only' project in the policy's metric
     (a - mu)^T diag(sigma)^-2 (a - mu); needs sigma > 0),
     refine_steps=5); aggregation may also be 'first-safe' (the first-safe sampler).
