@@ -169,7 +169,8 @@ QpResult ProjectInGaussianMetric(const Eigen::Ref<const Eigen::VectorXd>& mu,
 double InverseMillsRatio(double x) {
   SECURE_CHECK(std::isfinite(x), "InverseMillsRatio: x = " << x << ", must be finite");
   // 1 - Phi(x) = erfc(x / sqrt(2)) / 2 keeps full relative precision up to x ~ 37 (then
-  // underflows); from x = 25 the series x + 1/x - 2/x^3 + 10/x^5 - 74/x^7 is good to < 1e-11 (relative).
+  // underflows); from x = 25 the series x + 1/x - 2/x^3 + 10/x^5 - 74/x^7 is good to a relative
+  // 1e-11.
   if (x > 25.0) {
     const double r = 1.0 / (x * x);
     return x + (1.0 / x) * (1.0 - r * (2.0 - r * (10.0 - 74.0 * r)));
