@@ -294,6 +294,9 @@ void ShieldFlags::Add(CLI::App* cmd, shield::ShieldOptions* so, bool domain_pres
       ShieldFlag(cmd, "--qp-max-step", &so->qp_max_step, &O::qp_max_step,
                  "proposal qp: a projection (with --qp-bisection, the bisected decision) farther "
                  "than this from the mean falls back to sampling (0: no limit)"),
+      ShieldFlag(cmd, "--qp-smoothing", &so->qp_smoothing, &O::qp_smoothing,
+                 "proposal qp: after failed projections, one more round on the slope of the "
+                 "exact g at mu +- this many sigma along each action (0: off)"),
       ShieldFlag(cmd, "--qp-metric", &qp_metric, &O::qp_metric,
                  "proposal qp, qp-only: the projection's metric: euclidean | policy (the "
                  "policy's Gaussian, (a - mu)^T diag(sigma)^-2 (a - mu))"),

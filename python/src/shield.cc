@@ -348,6 +348,8 @@ an accepted projection that overshot), qp_target='boundary' (or 'safe-mean': the
 policy's Gaussian over the linearised safe half-space; needs qp_metric='policy'),
 qp_margin=0, qp_max_step=0 (proposal 'qp': a projection farther from the mean (with qp_bisection,
 the bisected decision) falls back to sampling; 0: none),
+qp_smoothing=0 (proposal 'qp': after failed projections, one more round on the slope of
+the exact g at mu +- qp_smoothing sigma along each action; 0: off),
 qp_metric='euclidean' (or 'policy': proposal 'qp' / 'qp-only' project in the policy's metric
 (a - mu)^T diag(sigma)^-2 (a - mu); needs sigma > 0),
 refine_steps=5); aggregation may also be 'first-safe' (the first-safe sampler).

@@ -84,6 +84,7 @@ Shield::Shield(const ShieldOptions& options, cbf::Barrier& barrier,
     qp_h_.resize(1);
     qp_gradient_.resize(state_dim_, 1);
     qp_jacobian_.resize(state_dim_, action_dim_);
+    qp_g_.resize(2 * action_dim_);
     qp_normal_.resize(action_dim_);
     qp_mu_.resize(action_dim_);
     qp_low_.resize(action_dim_);

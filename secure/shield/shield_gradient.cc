@@ -4,8 +4,9 @@
 // (proposal refine). The projection is Euclidean or in the policy's metric (qp_metric), onto the
 // linearised boundary or the Gaussian's mean over the linearised half-space (qp_target); a line
 // search (qp_line_search) and a bisection (qp_bisection) on the exact g along the projection's
-// line mend a linearisation that fell short or overshot. Each checks what it returns with the
-// exact g, as every sample is checked.
+// line mend a linearisation that fell short or overshot, and a last round on g's slope over the
+// policy's scale (qp_smoothing) one that pointed the wrong way. Each checks what it returns with
+// the exact g, as every sample is checked.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -76,6 +77,28 @@ double Shield::Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double 
   return (static_cast<double>(qp_h_[0]) - h_state) * inv_dt + ClassKValue(options_, h_state);
 }
 
+void Shield::LineariseSmoothed(const Eigen::Ref<const Eigen::VectorXf>& state,
+                               const Eigen::Ref<const Eigen::VectorXf>& sigma, double h_state) {
+  const int n = action_dim_;
+  // a0 +- qp_smoothing sigma_r along each action (inside the box: shorter at a face), their exact
+  // g in one batch, and the central difference of each pair.
+  for (int r = 0; r < n; ++r) {
+    const float a0 = qp_actions_(r, 0);
+    const float step = static_cast<float>(options_.qp_smoothing) * sigma[r];
+    qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
+    qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
+    qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
+    qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
+  }
+  EvaluateG(state, h_state, qp_actions_.rightCols(2 * n), qp_g_);
+  for (int r = 0; r < n; ++r) {
+    const double width =
+        static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
+    // sigma_r = 0 (or a box of zero width): no slope along this action.
+    qp_normal_[r] = width > 0 ? (qp_g_[2 * r] - qp_g_[2 * r + 1]) / width : 0.0;
+  }
+}
+
 QpResult Shield::Project(const Eigen::Ref<const Eigen::VectorXf>& sigma, double offset) {
   if (options_.qp_metric == QpMetric::kPolicy) {
     for (int r = 0; r < action_dim_; ++r) qp_sigma_[r] = sigma[r];
@@ -123,52 +146,71 @@ bool Shield::ProposeQp(const Eigen::Ref<const Eigen::VectorXf>& state,
     // gave 17-20 % fewer rejected projections than the pessimistic value (docs/RESULTS.md).
     for (int r = 0; r < n; ++r) qp_point_[r] = qp_actions_(r, 0);
     const double g0 = Linearise(state, h_state);
-    // The half-space c . a >= c . a0 - g0 + margin, where the margin adds to qp_margin what float
-    // rounding of h costs g.
-    double offset = options_.qp_margin + RoundingMargin(h_state, options_.dt) - g0;
-    for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
-    QpResult result;
-    if (qp_normal_.allFinite() && std::isfinite(offset)) {
-      if (options_.qp_target == QpTarget::kSafeMean) {
-        // The half-space tightened so that its projection in the policy's metric is the mean of
-        // N(mu, sigma^2) over c . a >= offset (qp.h).
-        for (int r = 0; r < n; ++r) qp_sigma_[r] = sigma[r];
-        offset = GaussianHalfSpaceMeanOffset(qp_mu_, qp_sigma_, qp_normal_, offset);
-      }
-      result = Project(sigma, offset);
-    } else {
-      // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
-      result.status = QpStatus::kInfeasible;
-      for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
-    }
-    if (TrustRegionActive() && options_.qp_bisection == 0 &&
-        result.status != QpStatus::kInfeasible &&
-        (qp_solution_ - qp_mu_).norm() > options_.qp_max_step) {
-      // Beyond the trust region: the QP with |a - mu| <= qp_max_step is infeasible, and
-      // sampling decides (proposal qp only: the filters alone have nothing to fall back to).
-      // With bisection the projection is checked and bisected first (AcceptWithinTrustRegion).
-      decision_.qp = QpOutcome::kInfeasible;
-      return false;
-    }
-    one_action_.col(0) = qp_solution_.cast<float>();
-    ClipToBox(one_action_);  // rounding to float stays in the box
-    EvaluateG(state, h_state, one_action_, one_g_);
-    if (Record(decision_, one_action_, one_g_[0])) {
-      Bisect(state, h_state, 0.0, g_point, 1.0, one_g_[0]);
-      return AcceptWithinTrustRegion();
-    }
-    decision_.qp =
-        result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
-    // The next linearisation point (qp_iterations > 1): the projection as checked.
-    qp_actions_.col(0) = one_action_.col(0);
-    const double g_solution = one_g_[0];
-    if (result.status != QpStatus::kInfeasible &&
-        LineSearch(state, h_state, g_point, g_solution)) {
-      return true;
-    }
-    g_point = g_solution;
+    const QpRound end = ProjectAndCheck(state, sigma, h_state, g0, g_point);
+    if (end == QpRound::kAccepted) return true;
+    if (end == QpRound::kStop) break;
+  }
+  if (options_.qp_smoothing > 0 && options_.proposal == Proposal::kQp) {
+    // One more round from mu on the slope of g over the policy's own scale (qp_smoothing).
+    qp_actions_.col(0) = mu;
+    ClipToBox(qp_actions_.leftCols(1));
+    for (int r = 0; r < n; ++r) qp_point_[r] = qp_actions_(r, 0);
+    LineariseSmoothed(state, sigma, h_state);
+    g_point = g_mu;
+    return ProjectAndCheck(state, sigma, h_state, g_mu, g_point) == QpRound::kAccepted;
   }
   return false;
+}
+
+Shield::QpRound Shield::ProjectAndCheck(const Eigen::Ref<const Eigen::VectorXf>& state,
+                                        const Eigen::Ref<const Eigen::VectorXf>& sigma,
+                                        double h_state, double g0, double& g_point) {
+  const int n = action_dim_;
+  // The half-space c . a >= c . a0 - g0 + margin, where the margin adds to qp_margin what float
+  // rounding of h costs g.
+  double offset = options_.qp_margin + RoundingMargin(h_state, options_.dt) - g0;
+  for (int r = 0; r < n; ++r) offset += qp_normal_[r] * qp_actions_(r, 0);
+  QpResult result;
+  if (qp_normal_.allFinite() && std::isfinite(offset)) {
+    if (options_.qp_target == QpTarget::kSafeMean) {
+      // The half-space tightened so that its projection in the policy's metric is the mean of
+      // N(mu, sigma^2) over c . a >= offset (qp.h).
+      for (int r = 0; r < n; ++r) qp_sigma_[r] = sigma[r];
+      offset = GaussianHalfSpaceMeanOffset(qp_mu_, qp_sigma_, qp_normal_, offset);
+    }
+    result = Project(sigma, offset);
+  } else {
+    // A non-finite gradient or value: nothing to project onto; mu (clipped) is checked as is.
+    result.status = QpStatus::kInfeasible;
+    for (int r = 0; r < n; ++r) qp_solution_[r] = qp_actions_(r, 0);
+  }
+  if (TrustRegionActive() && options_.qp_bisection == 0 &&
+      result.status != QpStatus::kInfeasible &&
+      (qp_solution_ - qp_mu_).norm() > options_.qp_max_step) {
+    // Beyond the trust region: the QP with |a - mu| <= qp_max_step is infeasible, and
+    // sampling decides (proposal qp only: the filters alone have nothing to fall back to).
+    // With bisection the projection is checked and bisected first (AcceptWithinTrustRegion).
+    decision_.qp = QpOutcome::kInfeasible;
+    return QpRound::kStop;
+  }
+  one_action_.col(0) = qp_solution_.cast<float>();
+  ClipToBox(one_action_);  // rounding to float stays in the box
+  EvaluateG(state, h_state, one_action_, one_g_);
+  if (Record(decision_, one_action_, one_g_[0])) {
+    Bisect(state, h_state, 0.0, g_point, 1.0, one_g_[0]);
+    return AcceptWithinTrustRegion() ? QpRound::kAccepted : QpRound::kStop;
+  }
+  decision_.qp =
+      result.status == QpStatus::kInfeasible ? QpOutcome::kInfeasible : QpOutcome::kRejected;
+  // The next linearisation point (qp_iterations > 1): the projection as checked.
+  qp_actions_.col(0) = one_action_.col(0);
+  const double g_solution = one_g_[0];
+  if (result.status != QpStatus::kInfeasible &&
+      LineSearch(state, h_state, g_point, g_solution)) {
+    return QpRound::kAccepted;
+  }
+  g_point = g_solution;
+  return QpRound::kContinue;
 }
 
 bool Shield::LineSearch(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state,

@@ -43,6 +43,8 @@ void ShieldOptions::Validate() const {
                      qp_margin, ">= 0");
   SECURE_CHECK_FIELD(std::isfinite(qp_max_step) && qp_max_step >= 0, "ShieldOptions",
                      "qp_max_step", qp_max_step, ">= 0 (0: no limit)");
+  SECURE_CHECK_FIELD(std::isfinite(qp_smoothing) && qp_smoothing >= 0, "ShieldOptions",
+                     "qp_smoothing", qp_smoothing, ">= 0 (0: off)");
   SECURE_CHECK_FIELD(refine_steps >= 1 && refine_steps <= kMaxRefineSteps, "ShieldOptions",
                      "refine_steps", refine_steps, "in [1, " << kMaxRefineSteps << "]");
   SECURE_CHECK(qp_target == QpTarget::kBoundary || qp_metric == QpMetric::kPolicy,
@@ -99,6 +101,7 @@ nlohmann::json ShieldOptions::ToJson() const {
     json["qp_margin"] = qp_margin;
     // (absent: no limit, as before; it acts only with proposal = qp)
     if (qp_max_step > 0 && proposal == Proposal::kQp) json["qp_max_step"] = qp_max_step;
+    if (qp_smoothing > 0 && proposal == Proposal::kQp) json["qp_smoothing"] = qp_smoothing;
   }
   // Absent when euclidean (every shield before it keeps its bytes); written whenever set, also
   // with proposal none: a config sets it for every method and secure-qp / cbf-qp take it from
@@ -133,6 +136,7 @@ void ShieldOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
       .Field("qp_bisection", &qp_bisection)
       .Field("qp_margin", &qp_margin)
       .Field("qp_max_step", &qp_max_step)
+      .Field("qp_smoothing", &qp_smoothing)
       .Enum("qp_metric", &qp_metric, kQpMetricNames)
       .Enum("qp_target", &qp_target, kQpTargetNames)
       .Field("refine_steps", &refine_steps)

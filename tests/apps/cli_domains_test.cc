@@ -89,6 +89,7 @@ TEST(CliDomainsTest, HelpShowsThePresetWhereADomainIsChosen) {
   EXPECT_HAS(r.out, "--qp-line-search 1 ");  // the gradient-first shield's preset
   EXPECT_HAS(r.out, "--qp-bisection 5 ");
   EXPECT_HAS(r.out, "--qp-max-step 0.5 ");
+  EXPECT_HAS(r.out, "--qp-smoothing 2 ");
   r = RunCli("domains panda-push --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);

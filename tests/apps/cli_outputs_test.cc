@@ -363,7 +363,7 @@ TEST(CliTest, EvalAndShieldRunTakeTheProjectionOptions) {
   EXPECT_EQ(
       shield_of(RunCli(base + " --config " + search + " --qp-line-search 1"))["qp_line_search"], 1);
   ExpectOneErrorLine(RunCli(base + " --qp-line-search 11"), "qp_line_search = 11");
-  // --qp-bisection and --qp-target likewise.
+  // --qp-bisection, --qp-smoothing and --qp-target likewise.
   const std::string bisect =
       Write("qp_bisection.yaml", "pipeline:\n  shield: {qp_bisection: 6}\n");
   EXPECT_FALSE(shield_of(RunCli(base)).contains("qp_bisection"));
@@ -371,6 +371,16 @@ TEST(CliTest, EvalAndShieldRunTakeTheProjectionOptions) {
   EXPECT_EQ(shield_of(RunCli(base + " --config " + bisect + " --qp-bisection 2"))["qp_bisection"],
             2);
   ExpectOneErrorLine(RunCli(base + " --qp-bisection 31"), "qp_bisection = 31");
+  // (--qp-smoothing acts with proposal qp only, and is written only there.)
+  const std::string first = base.substr(0, base.find("--proposal")) + "--json --proposal qp";
+  const std::string smooth =
+      Write("qp_smoothing.yaml", "pipeline:\n  shield: {qp_smoothing: 1.5}\n");
+  EXPECT_FALSE(shield_of(RunCli(first)).contains("qp_smoothing"));
+  EXPECT_FALSE(shield_of(RunCli(base + " --config " + smooth)).contains("qp_smoothing"));
+  EXPECT_EQ(shield_of(RunCli(first + " --config " + smooth))["qp_smoothing"], 1.5);
+  EXPECT_EQ(shield_of(RunCli(first + " --config " + smooth + " --qp-smoothing 2"))["qp_smoothing"],
+            2.0);
+  ExpectOneErrorLine(RunCli(base + " --qp-smoothing -1"), "qp_smoothing = -1");
   EXPECT_EQ(shield_of(RunCli(base + " --qp-metric policy --qp-target safe-mean"))["qp_target"],
             "safe-mean");
   ExpectOneErrorLine(RunCli(base + " --qp-target safe-mean"),

@@ -410,6 +410,9 @@ std::vector<Scenario> DoubleIntegratorScenarios(bool learned) {
       searched.name += ", qp_bisection 4";  // and bisection back along an overshooting one
       searched.options.qp_bisection = 4;
       scenarios.push_back(searched);
+      searched.name += ", qp_smoothing 2";  // and a last round on the slope over sigma
+      searched.options.qp_smoothing = 2.0;
+      scenarios.push_back(searched);
     }
     for (Scenario metric : {unsafe, boxed}) {  // the projection in the policy's metric
       metric.name += ", qp_metric policy";

@@ -1,6 +1,7 @@
 // The CBF-QP projection in the shield (ShieldOptions::proposal): the gradient-first mode (qp),
 // the CBF-QP filter alone (qp-only) and the gradient refinement of the mean (refine)
-// (the projection's metric and target: shield_qp_metric_test.cc). Properties with RapidCheck over the double integrator (its
+// (the projection's metric and target: shield_qp_metric_test.cc; the smoothed round:
+// shield_qp_smoothing_test.cc). Properties with RapidCheck over the double integrator (its
 // ground truth, whose gradient is by finite differences, and a random barrier network) and Derby
 // (a random per-car barrier and its shield model); exact cases on an integrator.
 
@@ -116,6 +117,7 @@ ShieldOptions RandomOptions() {
   o.qp_line_search = *rc::gen::inRange(0, 4);
   o.qp_bisection = *rc::gen::element(0, 0, 3, 8);
   o.qp_max_step = *rc::gen::element(0.0, 0.0, 1.0, 4.0);
+  o.qp_smoothing = *rc::gen::element(0.0, 0.0, 1.0, 2.0);
   o.qp_margin = *rc::gen::element(0.0, 0.1);
   o.action_bounds = *rc::gen::element(ActionBounds::kClip, ActionBounds::kReject);
   o.qp_metric = *rc::gen::element(QpMetric::kEuclidean, QpMetric::kPolicy);  // sigma > 0 here
