@@ -18,9 +18,6 @@ namespace {
 
 using secure::test::ErrorOf;
 using test::BitEqual;
-using test::FunctionBarrier;
-using test::HalfSpace;
-using test::IntegratorDynamics;
 using test::Vec;
 
 // On an integrator (y' = y + 0.1 a, from y = 0) the barrier h(y) = 0.83 - y + 0.003 sin(1000 y)
@@ -29,30 +26,26 @@ using test::Vec;
 // linearisation at mu points to larger a, where g only falls: the projection (a = 1.09) fails its
 // exact check. Over mu +- 1 (qp_smoothing 2, sigma 0.5) the slope is -1.015, and the projection
 // lands at a = 0.832, where g = +0.027 (the safe set's edge below mu is at 0.8435).
-struct Ripple {
-  FunctionBarrier barrier{1, "ripple", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
-                            const double y = s[0];
-                            return 0.83 - y + 0.003 * std::sin(1000.0 * y);
-                          }};
-  const IntegratorDynamics dynamics{1, 0.1};
-  const Eigen::VectorXf state = Vec({0.0f});
+struct Ripple : test::Integrator1d {
+  Ripple()
+      : Integrator1d("ripple", [](double y) { return 0.83 - y + 0.003 * std::sin(1000.0 * y); }) {}
   const Eigen::VectorXf mu = Vec({static_cast<float>(0.32 * M_PI)});
   const Eigen::VectorXf sigma = Vec({0.5f});
   static double G(double a) { return 0.83 - a + 0.03 * std::sin(100.0 * a); }
-  static ShieldOptions Options(Proposal proposal, double smoothing) {
-    ShieldOptions o;
-    o.proposal = proposal;
-    o.class_k_gain = 1.0;
-    o.qp_smoothing = smoothing;
-    return o;
-  }
 };
+
+// The shield's options on Ripple: alpha(h) = h.
+ShieldOptions Smoothed(Proposal proposal, double smoothing) {
+  ShieldOptions o = test::Integrator1d::Options(proposal, 1.0);
+  o.qp_smoothing = smoothing;
+  return o;
+}
 
 TEST(QpSmoothingShieldTest, TheSlopeOverSigmaRecoversAProjectionTheLocalGradientMisled) {
   Ripple ripple;
   ASSERT_NEAR(Ripple::G(ripple.mu[0]), -0.175, 1e-3);
   // The analytic linearisation alone: its projection goes the wrong way and fails.
-  Shield local(Ripple::Options(Proposal::kQpOnly, 0.0), ripple.barrier, ripple.dynamics);
+  Shield local(Smoothed(Proposal::kQpOnly, 0.0), ripple.barrier, ripple.dynamics);
   const Decision& l = local.Decide(ripple.state, ripple.mu, ripple.sigma);
   EXPECT_NE(l.qp, QpOutcome::kAccepted) << l.ToJson().dump();
   EXPECT_EQ(l.status, Status::kNoSafeAction);
@@ -61,7 +54,7 @@ TEST(QpSmoothingShieldTest, TheSlopeOverSigmaRecoversAProjectionTheLocalGradient
 
   // The gradient-first shield's last round before sampling: the projection on the smoothed
   // slope is the decision, with no sampling round.
-  Shield smoothed(Ripple::Options(Proposal::kQp, 2.0), ripple.barrier, ripple.dynamics);
+  Shield smoothed(Smoothed(Proposal::kQp, 2.0), ripple.barrier, ripple.dynamics);
   const Decision& d = smoothed.Decide(ripple.state, ripple.mu, ripple.sigma);
   ASSERT_EQ(d.qp, QpOutcome::kAccepted) << d.ToJson().dump();
   EXPECT_EQ(d.iterations, 0);
@@ -74,17 +67,17 @@ TEST(QpSmoothingShieldTest, TheSlopeOverSigmaRecoversAProjectionTheLocalGradient
 
   // Without the option Algorithms 1-2 decide; the filter alone ignores it (its decision keeps
   // its bits).
-  Shield sampling_decides(Ripple::Options(Proposal::kQp, 0.0), ripple.barrier, ripple.dynamics);
+  Shield sampling_decides(Smoothed(Proposal::kQp, 0.0), ripple.barrier, ripple.dynamics);
   const Decision& s = sampling_decides.Decide(ripple.state, ripple.mu, ripple.sigma);
   EXPECT_NE(s.qp, QpOutcome::kAccepted);
   EXPECT_GE(s.iterations, 1);
-  Shield filter(Ripple::Options(Proposal::kQpOnly, 2.0), ripple.barrier, ripple.dynamics);
+  Shield filter(Smoothed(Proposal::kQpOnly, 2.0), ripple.barrier, ripple.dynamics);
   const Decision& q = filter.Decide(ripple.state, ripple.mu, ripple.sigma);
   EXPECT_EQ(q.qp, l.qp);
   EXPECT_TRUE(BitEqual(q.action, l.action));
 
   // A trust region smaller than the step (0.17 from mu) sends it to sampling too.
-  ShieldOptions trusted = Ripple::Options(Proposal::kQp, 2.0);
+  ShieldOptions trusted = Smoothed(Proposal::kQp, 2.0);
   trusted.qp_max_step = 0.1;
   Shield beyond(trusted, ripple.barrier, ripple.dynamics);
   const Decision& b = beyond.Decide(ripple.state, ripple.mu, ripple.sigma);
@@ -96,7 +89,7 @@ TEST(QpSmoothingShieldTest, ADeterministicPolicyHasNoSlopeToSmoothOver) {
   // sigma = 0: the smoothed slope is 0 in every action, the half-space g(mu) + 0 . (a - mu) >= 0
   // is empty, and Algorithms 1-2 decide.
   Ripple ripple;
-  Shield smoothed(Ripple::Options(Proposal::kQp, 2.0), ripple.barrier, ripple.dynamics);
+  Shield smoothed(Smoothed(Proposal::kQp, 2.0), ripple.barrier, ripple.dynamics);
   const Decision& d = smoothed.Decide(ripple.state, ripple.mu, Vec({0.0f}));
   EXPECT_NE(d.qp, QpOutcome::kAccepted) << d.ToJson().dump();
   EXPECT_GE(d.iterations, 1);
@@ -105,19 +98,7 @@ TEST(QpSmoothingShieldTest, ADeterministicPolicyHasNoSlopeToSmoothOver) {
 TEST(QpSmoothingShieldTest, AnAcceptedFirstProjectionIsLeftAsItWas) {
   // g affine in the action: the first projection is exact and accepted, so the smoothed round
   // never runs and the decision keeps its bits.
-  HalfSpace h1, h2;
-  ShieldOptions o;
-  o.proposal = Proposal::kQp;
-  o.class_k_gain = 2.0;
-  Shield plain(o, h1.barrier, h1.dynamics);
-  o.qp_smoothing = 1.0;
-  Shield smoothed(o, h2.barrier, h2.dynamics);
-  const Eigen::VectorXf state = Vec({0.2f, 0.3f}), mu = Vec({-1.0f, 1.0f});
-  const Decision p = plain.Decide(state, mu, Vec({0.1f, 0.1f}));
-  const Decision& s = smoothed.Decide(state, mu, Vec({0.1f, 0.1f}));
-  ASSERT_EQ(p.qp, QpOutcome::kAccepted);
-  EXPECT_TRUE(BitEqual(p.action, s.action));
-  EXPECT_EQ(p.g, s.g);
+  test::ExpectTheSameAffineProjection(Smoothed(Proposal::kQp, 0.0), Smoothed(Proposal::kQp, 1.0));
 }
 
 TEST(QpSmoothingShieldTest, TheOptionIsCheckedReadAndWrittenOnlyWhereItActs) {

@@ -417,21 +417,15 @@ TEST(QpShieldTest, ALineSearchOnTheExactGRecoversARejectedProjection) {
 // 1 + atanh(-0.232) / 2 = 0.8818. From mu = 2.5, on the flat part of the step (g = -12.3, slope
 // -0.2), the linearisation puts the boundary at a = -59.8: the projection lands there, and the
 // exact g accepts it. Bisection on the exact g along the line brings it back to just inside a_b.
-struct Step {
-  FunctionBarrier barrier{1, "step", [](const Eigen::Ref<const Eigen::VectorXf>& s) {
-                            return 0.5 - std::tanh(20.0 * (static_cast<double>(s[0]) - 0.1));
-                          }};
-  const IntegratorDynamics dynamics{1, 0.1};
-  const Eigen::VectorXf state = Vec({0.0f});
+struct Step : test::Integrator1d {
+  Step() : Integrator1d("step", [](double y) { return 0.5 - std::tanh(20.0 * (y - 0.1)); }) {}
   const Eigen::VectorXf mu = Vec({2.5f});
   static double G(double a) {
     const double h0 = 0.5 - std::tanh(-2.0);
     return (0.5 - std::tanh(20.0 * (0.1 * a - 0.1)) - h0) / 0.1 + 5.0 * h0;
   }
   static ShieldOptions Options(Proposal proposal, int bisection) {
-    ShieldOptions o;
-    o.proposal = proposal;
-    o.class_k_gain = 5.0;
+    ShieldOptions o = Integrator1d::Options(proposal, 5.0);
     o.qp_bisection = bisection;
     return o;
   }
@@ -486,18 +480,11 @@ TEST(QpShieldTest, BisectionBringsAnOvershootingProjectionBackToTheExactBoundary
 
   // Where g is linear along the line (an affine model under a linear barrier) the projection
   // lands on the boundary, nothing overshoots, and bisection leaves the decision as it was.
-  HalfSpace h1, h2;
-  ShieldOptions o = Step::Options(Proposal::kQpOnly, 0);
-  o.class_k_gain = 2.0;
-  Shield plain(o, h1.barrier, h1.dynamics);
-  o.qp_bisection = 12;
-  Shield unchanged(o, h2.barrier, h2.dynamics);
-  const Eigen::VectorXf state = Vec({0.2f, 0.3f}), mu = Vec({-1.0f, 1.0f});
-  const Decision& p = plain.Decide(state, mu, Vec({0.1f, 0.1f}));
-  const Decision& u = unchanged.Decide(state, mu, Vec({0.1f, 0.1f}));
-  ASSERT_EQ(p.qp, QpOutcome::kAccepted);
-  EXPECT_TRUE(BitEqual(p.action, u.action));
-  EXPECT_EQ(p.g, u.g);
+  ShieldOptions affine = Step::Options(Proposal::kQpOnly, 0);
+  affine.class_k_gain = 2.0;
+  ShieldOptions affine_bisected = affine;
+  affine_bisected.qp_bisection = 12;
+  test::ExpectTheSameAffineProjection(affine, affine_bisected);
 }
 
 TEST(QpShieldTest, RefinementMovesAViolatingMeanIntoTheHalfSpaceWithinTheBox) {

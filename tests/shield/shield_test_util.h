@@ -2,6 +2,7 @@
 // Small systems and helpers shared by the shield tests.
 
 #include <Eigen/Core>
+#include <gtest/gtest.h>
 #include <cstdint>
 #include <cstring>
 #include <functional>
@@ -96,6 +97,13 @@ class LinearActionValue final : public ActionValue {
   Eigen::VectorXf w_;
 };
 
+inline Eigen::VectorXf Vec(std::initializer_list<float> values) {
+  Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
+  Eigen::Index i = 0;
+  for (float x : values) v[i++] = x;
+  return v;
+}
+
 /// 2-D: an integrator (dt 0.1) under the linear barrier h(s) = w . s + 0.5, w = (1, -2): with a
 /// linear class-K function of gain k, g(a) = w . a + k h(s) exactly, affine in the action.
 struct HalfSpace {
@@ -106,12 +114,40 @@ struct HalfSpace {
   const IntegratorDynamics dynamics{2, 0.1};
 };
 
-inline Eigen::VectorXf Vec(std::initializer_list<float> values) {
-  Eigen::VectorXf v(static_cast<Eigen::Index>(values.size()));
-  Eigen::Index i = 0;
-  for (float x : values) v[i++] = x;
-  return v;
+
+/// On HalfSpace, where g is affine in the action and the first projection is exact and accepted,
+/// the shields of `options` and of `mended` (the same with an option that mends a projection)
+/// decide the same, bit for bit.
+inline void ExpectTheSameAffineProjection(const ShieldOptions& options,
+                                          const ShieldOptions& mended) {
+  HalfSpace h1, h2;
+  Shield plain(options, h1.barrier, h1.dynamics), other(mended, h2.barrier, h2.dynamics);
+  const Eigen::VectorXf state = Vec({0.2f, 0.3f}), mu = Vec({-1.0f, 1.0f});
+  const Decision& p = plain.Decide(state, mu, Vec({0.1f, 0.1f}));
+  const Decision& m = other.Decide(state, mu, Vec({0.1f, 0.1f}));
+  ASSERT_EQ(p.qp, QpOutcome::kAccepted) << p.ToJson().dump();
+  EXPECT_TRUE(BitEqual(p.action, m.action));
+  EXPECT_EQ(p.g, m.g);
 }
+
+/// 1-D: an integrator (y' = y + 0.1 a) from y = 0 under the barrier h(y) = fn(y), and the options
+/// of a projection proposal with alpha(h) = gain h; the exact cases of the CBF-QP's mending
+/// options build on it.
+struct Integrator1d {
+  Integrator1d(std::string name, std::function<double(double)> fn)
+      : barrier(1, std::move(name), [fn](const Eigen::Ref<const Eigen::VectorXf>& s) {
+          return fn(static_cast<double>(s[0]));
+        }) {}
+  static ShieldOptions Options(Proposal proposal, double gain) {
+    ShieldOptions o;
+    o.proposal = proposal;
+    o.class_k_gain = gain;
+    return o;
+  }
+  FunctionBarrier barrier;
+  const IntegratorDynamics dynamics{1, 0.1};
+  const Eigen::VectorXf state = Vec({0.0f});
+};
 
 /// g(action) computed outside the shield, from the barrier and the dynamics (same float path).
 inline double IndependentG(cbf::Barrier& barrier, const domains::DynamicsModel& dynamics,
