@@ -96,6 +96,10 @@ void PessimismFlags::Add(CLI::App* cmd) {
   cmd->add_flag("--pessimism-linear", linear,
                 "learned model: the members' h(s+) to first order through the barrier's gradient "
                 "at s (h on M states instead of K M)");
+  cmd->add_option("--dynamics-hold", hold,
+                  "learned model: the action held for this many model steps per shield step, "
+                  "each member on its own chain, the pessimism at the end (1: one step)")
+      ->capture_default_str();
 }
 
 dynamics::PessimismOptions PessimismFlags::Options() const {
@@ -105,6 +109,9 @@ dynamics::PessimismOptions PessimismFlags::Options() const {
   SECURE_CHECK(std::isfinite(kappa) && kappa >= 0,
                "--pessimism-kappa = " << kappa << ", must be finite and >= 0");
   options.linear = linear;
+  options.hold = hold;
+  SECURE_CHECK(hold >= 1 && hold <= dynamics::kMaxHold,
+               "--dynamics-hold = " << hold << ", must be in [1, " << dynamics::kMaxHold << "]");
   return options;
 }
 

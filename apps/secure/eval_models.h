@@ -61,11 +61,12 @@ class SeedModelSet {
 };
 
 /// How a shield through a learned model aggregates its members (dynamics::PessimismOptions):
-/// `--pessimism min|mean-std`, `--pessimism-kappa`, `--pessimism-linear`.
+/// `--pessimism min|mean-std`, `--pessimism-kappa`, `--pessimism-linear`, `--dynamics-hold`.
 struct PessimismFlags {
   std::string aggregate = "min";
   double kappa = 1.0;
   bool linear = false;
+  int hold = 1;
   void Add(CLI::App* cmd);
   /// @throws secure::Error naming the flag and value.
   dynamics::PessimismOptions Options() const;

@@ -248,14 +248,16 @@ class Dynamics:
         """next = A s + B a; A is (d, d), B is (d, n) (copied)."""
         ...
     @staticmethod
-    def learned(path: str, max_batch: int = 1024, *, pessimism: str = 'min', pessimism_kappa: float = 1.0, pessimism_linear: bool = False) -> Dynamics:
+    def learned(path: str, max_batch: int = 1024, *, pessimism: str = 'min', pessimism_kappa: float = 1.0, pessimism_linear: bool = False, hold: int = 1) -> Dynamics:
         """A learned dynamics ensemble from its model file (`secure dynamics train`): step() gives the
         members' mean; a Shield on it scores an action pessimistically over the members' h(s+), so the
         ensemble's disagreement makes the shield careful: pessimism='min' (the minimum over the members)
         or 'mean-std' (their mean minus pessimism_kappa standard deviations); pessimism_linear=True takes
         the members' h(s+) to first order through the barrier's gradient (h on M states instead of K M),
-        as `secure eval --pessimism --pessimism-kappa --pessimism-linear`. max_batch bounds the actions
-        per step (the shield's max(num_samples, num_probes)). Inference only (no LibTorch).
+        as `secure eval --pessimism --pessimism-kappa --pessimism-linear`. hold=H: one step() is H model
+        steps with the action held, each member on its own chain, the pessimism at the end (a model that
+        looks as far as a hand-written one holding the action; `--dynamics-hold`). max_batch bounds the
+        actions per step (the shield's max(num_samples, num_probes)). Inference only (no LibTorch).
         """
         ...
     @staticmethod

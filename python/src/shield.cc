@@ -83,12 +83,14 @@ std::shared_ptr<Dynamics> Linear(ArrayLike a, ArrayLike b) {
 
 std::shared_ptr<Dynamics> Learned(const std::string& path, int max_batch,
                                   const std::string& pessimism, double pessimism_kappa,
-                                  bool pessimism_linear) {
-  // As `secure eval --dynamics M --pessimism ... --pessimism-kappa ... --pessimism-linear`.
+                                  bool pessimism_linear, int hold) {
+  // As `secure eval --dynamics M --pessimism ... --pessimism-kappa ... --pessimism-linear
+  // --dynamics-hold ...`.
   dynamics::PessimismOptions how;
   how.aggregate = dynamics::PessimismOptions::ParseAggregate(pessimism, "pessimism");
   how.kappa = pessimism_kappa;
   how.linear = pessimism_linear;
+  how.hold = hold;
   how.Validate();
   auto ensemble = std::make_shared<const dynamics::EnsembleDynamics>(
       dynamics::EnsembleDynamics::Load(path));
@@ -277,14 +279,16 @@ A dynamics model T(s, a) the shield looks one step ahead with. Made by
                   "next = A s + B a; A is (d, d), B is (d, n) (copied).")
       .def_static("learned", &Learned, py::arg("path"), py::arg("max_batch") = 1024,
                   py::kw_only(), py::arg("pessimism") = "min", py::arg("pessimism_kappa") = 1.0,
-                  py::arg("pessimism_linear") = false, R"doc(
+                  py::arg("pessimism_linear") = false, py::arg("hold") = 1, R"doc(
 A learned dynamics ensemble from its model file (`secure dynamics train`): step() gives the
 members' mean; a Shield on it scores an action pessimistically over the members' h(s+), so the
 ensemble's disagreement makes the shield careful: pessimism='min' (the minimum over the members)
 or 'mean-std' (their mean minus pessimism_kappa standard deviations); pessimism_linear=True takes
 the members' h(s+) to first order through the barrier's gradient (h on M states instead of K M),
-as `secure eval --pessimism --pessimism-kappa --pessimism-linear`. max_batch bounds the actions
-per step (the shield's max(num_samples, num_probes)). Inference only (no LibTorch).)doc")
+as `secure eval --pessimism --pessimism-kappa --pessimism-linear`. hold=H: one step() is H model
+steps with the action held, each member on its own chain, the pessimism at the end (a model that
+looks as far as a hand-written one holding the action; `--dynamics-hold`). max_batch bounds the
+actions per step (the shield's max(num_samples, num_probes)). Inference only (no LibTorch).)doc")
       .def_static("from_callable", &FromCallable, py::arg("fn"), py::arg("state_dim"),
                   py::arg("action_dim"), py::arg("name") = "python dynamics", R"doc(
 A model written in Python: fn(state, actions) gets a (state_dim,) float32 array and an

@@ -94,3 +94,28 @@ def test_learned_pessimism_options(learned_model):
     assert np.any(g_mean > g_min + 1e-6)  # the members disagree somewhere
     g_linear = g(pessimism_linear=True)
     assert np.all(np.abs(g_linear - g_min) < 0.1 * np.abs(g_min) + 0.5)
+
+
+def test_learned_hold_option(learned_model):
+    """hold=H: one step() is H model steps with the action held (the double integrator's learned
+    model stepped three times by hand from the mean agrees with it to the members' spread); 1 is
+    the model as trained; outside [1, 20] is an error naming it."""
+    state = np.array([5.0, 7.4, 0.0, -1.0], dtype=np.float32)
+    actions = np.array([[0.0, -3.0], [0.0, 0.0], [1.0, 3.0]], dtype=np.float32)
+    one = secure.Dynamics.learned(learned_model)
+    held = secure.Dynamics.learned(learned_model, hold=3)
+    by_hand = []
+    for a in actions:
+        s = state
+        for _ in range(3):
+            s = one.step(s, a[None, :])[0]
+        by_hand.append(s)
+    by_hand = np.array(by_hand)
+    three = held.step(state, actions)
+    assert np.all(np.abs(three - by_hand) < 0.05 * (1 + np.abs(by_hand)))
+    assert np.max(np.abs(three - one.step(state, actions))) > 0.01  # three steps are not one
+    assert np.array_equal(secure.Dynamics.learned(learned_model, hold=1).step(state, actions),
+                          one.step(state, actions))
+    for bad in (0, 21):
+        with pytest.raises(ValueError, match=f"hold = {bad}"):
+            secure.Dynamics.learned(learned_model, hold=bad)

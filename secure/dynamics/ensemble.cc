@@ -32,6 +32,8 @@ std::string MemberPrefix(int k) { return "member" + std::to_string(k); }
 void PessimismOptions::Validate() const {
   SECURE_CHECK(std::isfinite(kappa) && kappa >= 0,
                "pessimism: kappa = " << kappa << ", must be finite and >= 0");
+  SECURE_CHECK(hold >= 1 && hold <= kMaxHold,
+               "pessimism: hold = " << hold << ", must be in [1, " << kMaxHold << "]");
 }
 
 std::string PessimismOptions::Describe() const {
@@ -41,6 +43,7 @@ std::string PessimismOptions::Describe() const {
     out << "min";
   else
     out << "mean-" << kappa << "std";
+  if (hold > 1) out << ", hold " << hold;
   return out.str();
 }
 
@@ -188,6 +191,17 @@ void EnsembleModel::Predict(const Eigen::Ref<const Eigen::VectorXf>& state,
     out = y;
     out.array().colwise() *= delta_scale_.array();
     out.colwise() += offset_;
+  }
+  // The hold: member k steps again from its own prediction, the action unchanged.
+  for (int step = 1; step < pessimism_.hold; ++step) {
+    for (int k = 0; k < num_members(); ++k) {
+      auto out = members_.middleCols(static_cast<Eigen::Index>(k) * m, m);
+      x.topRows(d) = out;
+      nets_[static_cast<std::size_t>(k)].Forward(x, workspaces_[static_cast<std::size_t>(k)], y);
+      y.array().colwise() *= delta_scale_.array();
+      y.colwise() += delta_mean_;
+      out += y;
+    }
   }
 }
 

@@ -36,6 +36,8 @@ inline constexpr const char* kEnsembleModelKind = "dynamics_ensemble";
 /// The largest ensemble (members) and the largest batch of actions an EnsembleModel takes.
 inline constexpr int kMaxMembers = 64;
 inline constexpr int kMaxBatch = 4096;
+/// The longest PessimismOptions::hold.
+inline constexpr int kMaxHold = 20;
 
 /// How PessimisticBarrier turns the members' h(s⁺_k) into one h per action.
 ///   aggregate   min: min_k (never above any member); mean-std: mean_k − κ·std_k (population
@@ -46,11 +48,18 @@ inline constexpr int kMaxBatch = 4096;
 ///               (cached), so the decision costs about what the hand-written model's does.
 ///               An approximation: exact for a barrier affine in s, otherwise off by the
 ///               curvature times the members' spread.
+///   hold        the action held for this many model steps inside one Step(), each member on its
+///               own chain (s⁺_k = member k applied `hold` times), the pessimism over the
+///               members at the end: a model that looks as far as a hand-written one that holds
+///               the action (Derby's holds it 3 periods), with the shield's one-step condition
+///               (its bound b₁), instead of the shield's look-ahead chaining the members' mean.
+///               1: one step (the model as trained).
 struct PessimismOptions {
   enum class Aggregate { kMin, kMeanStd };
   Aggregate aggregate = Aggregate::kMin;
   double kappa = 1.0;  // mean-std only, >= 0
   bool linear = false;
+  int hold = 1;  // in [1, kMaxHold]
 
   /// @throws secure::Error naming the field and value.
   void Validate() const;
@@ -125,7 +134,8 @@ class EnsembleModel final : public domains::DynamicsModel {
               Eigen::Ref<Eigen::MatrixXf> next_states) const override;
 
  private:
-  // All K predictions into members_ (columns [k M, (k + 1) M)).
+  // All K predictions into members_ (columns [k M, (k + 1) M)); with pessimism_.hold > 1 each
+  // member's own chain over the hold.
   void Predict(const Eigen::Ref<const Eigen::VectorXf>& state,
                const Eigen::Ref<const Eigen::MatrixXf>& actions) const;
 

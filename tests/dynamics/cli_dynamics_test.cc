@@ -39,6 +39,8 @@ TEST(CliDynamicsTest, CollectTrainValidateAndThePessimismFlags) {
                      "--pessimism = 'max', must be min | mean-std");
   ExpectOneErrorLine(RunCli(eval + " --pessimism mean-std --pessimism-kappa -1"),
                      "--pessimism-kappa = -1, must be finite and >= 0");
+  ExpectOneErrorLine(RunCli(eval + " --dynamics-hold 0"),
+                     "--dynamics-hold = 0, must be in [1, 20]");
 }
 
 }  // namespace

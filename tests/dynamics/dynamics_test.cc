@@ -2,6 +2,7 @@
 // reference, training (a linear system, determinism), the pessimistic barrier, transitions files.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -38,6 +39,13 @@ EnsembleDynamics RandomEnsemble(int d, int a, int k, std::vector<int> hidden, un
   e.delta.mean.setConstant(0.01f);
   e.provenance = {{"test", true}};
   return e;
+}
+
+// rows x cols standard normal draws.
+Eigen::MatrixXf Normal(Rng& rng, int rows, int cols) {
+  Eigen::MatrixXf x(rows, cols);
+  for (Eigen::Index j = 0; j < x.size(); ++j) x(j) = static_cast<float>(rng.Normal());
+  return x;
 }
 
 // h(s) = c . s + b.
@@ -123,10 +131,8 @@ TEST_F(DynamicsTest, ModelFileRoundTripsAndStepMatchesTheReference) {
   auto shared = std::make_shared<const EnsembleDynamics>(back);
   const EnsembleModel model(shared, 64);
   Rng rng(3);
-  Eigen::VectorXf s(4);
-  for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(rng.Normal());
-  Eigen::MatrixXf actions(2, 40);
-  for (Eigen::Index j = 0; j < actions.size(); ++j) actions(j) = static_cast<float>(rng.Normal());
+  const Eigen::VectorXf s = Normal(rng, 4, 1);
+  const Eigen::MatrixXf actions = Normal(rng, 2, 40);
   Eigen::MatrixXf next(4, 40), members(4, 120);
   model.Step(s, actions, next);
   model.StepMembers(s, actions, members);
@@ -393,6 +399,58 @@ TEST_F(DynamicsTest, PessimismMeanStdAndLinearOptions) {
   const EnsembleModel soft_model(shared, 8, nn::MatmulBackend::kAuto, mean_std);
   EXPECT_HAS(ForShieldModel(std::make_unique<LinearBarrier>(c, 0.2f), soft_model)->Describe(),
              "mean-1.5std over the 5 members");
+}
+
+// hold = H: one Step is each member applied H times from s with the action held, against the
+// double reference chained by hand; the members of the last Step are those chains' ends, so the
+// pessimistic barrier is the minimum over them; hold = 1 is the plain model, bit for bit.
+TEST_F(DynamicsTest, AHeldActionChainsEachMemberAndThePessimismIsAtItsEnd) {
+  auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(4, 2, 3, {16, 16}, 5));
+  PessimismOptions held;
+  held.hold = 3;
+  const EnsembleModel model(shared, 64, nn::MatmulBackend::kAuto, held);
+  const EnsembleModel one_step(shared, 64);
+  Rng rng(7);
+  const Eigen::VectorXf s = Normal(rng, 4, 1);
+  const Eigen::MatrixXf actions = Normal(rng, 2, 24);
+  Eigen::MatrixXf next(4, 24), members(4, 72), once(4, 24);
+  model.Step(s, actions, next);
+  model.StepMembers(s, actions, members);
+  one_step.Step(s, actions, once);
+  Eigen::MatrixXd mean = Eigen::MatrixXd::Zero(4, 24);
+  for (int k = 0; k < 3; ++k) {
+    Eigen::MatrixXd chain = s.replicate(1, 24).cast<double>();
+    for (int step = 0; step < 3; ++step)
+      chain = shared->ReferenceNext(k, chain.cast<float>(), actions);
+    mean += chain / 3.0;
+    EXPECT_LT((members.middleCols(24 * k, 24).cast<double>() - chain).cwiseAbs().maxCoeff(), 1e-4)
+        << "member " << k;
+  }
+  EXPECT_LT((next.cast<double>() - mean).cwiseAbs().maxCoeff(), 1e-4);
+  EXPECT_GT((next - once).cwiseAbs().maxCoeff(), 1e-3);  // three steps are not one
+  Eigen::VectorXf c(4);
+  c << 1.0f, -2.0f, 0.5f, 3.0f;
+  PessimisticBarrier pessimistic(std::make_unique<LinearBarrier>(c, 0.2f), model);
+  LinearBarrier plain(c, 0.2f);
+  model.Step(s, actions, next);
+  Eigen::VectorXf h(24), hk(72);
+  pessimistic.Evaluate(next, h);
+  plain.Evaluate(members, hk);
+  for (int i = 0; i < 24; ++i)
+    EXPECT_EQ(h[i], std::min({hk[i], hk[24 + i], hk[48 + i]})) << i;
+  // hold 1 is the model as trained; the range is checked and the hold is named.
+  PessimismOptions single;
+  const EnsembleModel plain_model(shared, 64, nn::MatmulBackend::kAuto, single);
+  Eigen::MatrixXf again(4, 24);
+  plain_model.Step(s, actions, again);
+  EXPECT_EQ(again, once);
+  EXPECT_EQ(held.Describe(), "min, hold 3");
+  EXPECT_EQ(single.Describe(), "min");
+  for (int bad : {0, kMaxHold + 1}) {
+    PessimismOptions wrong;
+    wrong.hold = bad;
+    EXPECT_HAS(test::ErrorOf([&] { wrong.Validate(); }), "hold = " + std::to_string(bad));
+  }
 }
 
 TEST_F(DynamicsTest, ForShieldModelWrapsOnlyAnEnsemble) {
