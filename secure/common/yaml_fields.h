@@ -59,6 +59,20 @@ class YamlFields {
                         [field, &table] { return nlohmann::json(ToString(table, *field)); }});
     return *this;
   }
+  /// `key` read by `read(node, key, source)` with the reader's own rules and messages (e.g. a
+  /// list of layer widths); ToJson writes write() under `key` (without `write`, the key is read
+  /// only).
+  using Reader = std::function<void(const YAML::Node& node, const std::string& key,
+                                    const std::string& source)>;
+  YamlFields& Custom(const std::string& key, Reader read, Writer write = nullptr) {
+    entries_.push_back(
+        {key,
+         [key, read = std::move(read)](const YAML::Node& node, const std::string& where) {
+           read(node, key, where);
+         },
+         std::move(write)});
+    return *this;
+  }
   /// `key` is a nested mapping handled by `apply` (given the node and "source [key]"); ToJson
   /// writes write() under `key` (without `write`, the owner writes that key itself).
   YamlFields& Section(const std::string& key, Handler apply, Writer write = nullptr) {
