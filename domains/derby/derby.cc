@@ -10,7 +10,7 @@
 
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
-#include "secure/common/yaml_value.h"
+#include "secure/common/yaml_fields.h"
 
 namespace secure::domains::derby {
 namespace {
@@ -115,62 +115,28 @@ void DerbyOptions::Validate() const {
                      "lookahead_steps", lookahead_steps, "in [1, " << kLookaheadFrames << "]");
 }
 
-nlohmann::json DerbyOptions::ToJson() const {
-  return {{"num_cars", num_cars},
-          {"dt", dt},
-          {"max_steps", max_steps},
-          {"arena_side", arena_side},
-          {"start_jitter", start_jitter},
-          {"goal_jitter", goal_jitter},
-          {"goal_radius", goal_radius},
-          {"collision_radius", collision_radius},
-          {"accel_bound", accel_bound},
-          {"min_separation", min_separation},
-          {"ego_clearance", ego_clearance},
-          {"car_goal_offset", car_goal_offset},
-          {"car_kp", car_kp},
-          {"car_kd", car_kd},
-          {"car_noise", car_noise},
-          {"lookahead_steps", lookahead_steps}};
+YamlFields DerbyOptions::Fields() {
+  return YamlFields()
+      .Named("demolition derby task options")
+      .Field("num_cars", &num_cars)
+      .Field("dt", &dt)
+      .Field("max_steps", &max_steps)
+      .Field("arena_side", &arena_side)
+      .Field("start_jitter", &start_jitter)
+      .Field("goal_jitter", &goal_jitter)
+      .Field("goal_radius", &goal_radius)
+      .Field("collision_radius", &collision_radius)
+      .Field("accel_bound", &accel_bound)
+      .Field("min_separation", &min_separation)
+      .Field("ego_clearance", &ego_clearance)
+      .Field("car_goal_offset", &car_goal_offset)
+      .Field("car_kp", &car_kp)
+      .Field("car_kd", &car_kd)
+      .Field("car_noise", &car_noise)
+      .Field("lookahead_steps", &lookahead_steps);
 }
 
-void DerbyOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  SECURE_CHECK(node.IsMap(), source << ": expected a mapping of demolition derby task options");
-  for (const auto& item : node) {
-    const std::string key = YamlKey(item.first, source);
-    const YAML::Node& v = item.second;
-    if (key == "num_cars") {
-      num_cars = YamlValue<int>(v, key, source);
-    } else if (key == "max_steps") {
-      max_steps = YamlValue<int>(v, key, source);
-    } else if (key == "lookahead_steps") {
-      lookahead_steps = YamlValue<int>(v, key, source);
-    } else {
-      double* field = key == "dt"                 ? &dt
-                      : key == "arena_side"       ? &arena_side
-                      : key == "start_jitter"     ? &start_jitter
-                      : key == "goal_jitter"      ? &goal_jitter
-                      : key == "goal_radius"      ? &goal_radius
-                      : key == "collision_radius" ? &collision_radius
-                      : key == "accel_bound"      ? &accel_bound
-                      : key == "min_separation"   ? &min_separation
-                      : key == "ego_clearance"    ? &ego_clearance
-                      : key == "car_goal_offset"  ? &car_goal_offset
-                      : key == "car_kp"           ? &car_kp
-                      : key == "car_kd"           ? &car_kd
-                      : key == "car_noise"        ? &car_noise
-                                                  : nullptr;
-      if (field == nullptr) {
-        const nlohmann::json all = ToJson();  // exactly the keys read here
-        std::string valid;
-        for (const auto& entry : all.items()) valid += (valid.empty() ? "" : ", ") + entry.key();
-        SECURE_THROW(source << ": unknown field '" << key
-                            << "' in the demolition derby task options (valid: " << valid << ")");
-      }
-      *field = YamlValue<double>(v, key, source);
-    }
-  }
-}
+SECURE_YAML_JSON_FROM_FIELDS(DerbyOptions)
 
 // ---------------------------------------------------------------------------------------------
 // Observation

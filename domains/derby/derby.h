@@ -105,6 +105,9 @@ struct DerbyOptions {
 
   /// Throws secure::Error naming the field, value and rule ("DerbyOptions::dt = 0, must be > 0").
   void Validate() const;
+  /// The field table (the YAML keys and JSON fields, the field names above): ApplyYaml and
+  /// ToJson.
+  YamlFields Fields();
   /// Keys: the field names above.
   nlohmann::json ToJson() const;
   /// Overrides the fields present in `node` (a mapping with the keys of ToJson()); unknown keys

@@ -309,8 +309,7 @@ void DerbyExpert::Act(const DerbyEnv& env, Rng& rng, Eigen::Ref<Eigen::VectorXf>
 // Demonstrations
 
 Rng DerbyAttemptRng(std::uint64_t seed, long attempt) {
-  return Rng(seed ^ (0xd1b54a32d192ed03ULL * static_cast<std::uint64_t>(attempt + 1)) ^
-             0x5eedde4b7ULL);
+  return AttemptRng(seed, attempt, 0x5eedde4b7ULL);
 }
 
 DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
@@ -332,36 +331,33 @@ DerbyDemonstrations GenerateDerbyDemonstrations(const DerbyOptions& task,
   Eigen::Vector2f action, applied;
   const float bound = static_cast<float>(task.accel_bound);
   double min_distance = std::numeric_limits<double>::infinity();
-  long kept = 0;
-  while (kept < demo.episodes && out.attempted < max_attempts) {
-    const long attempt = out.attempted++;
-    Rng rng = DerbyAttemptRng(demo.seed, attempt);
-    env.Reset(rng, observation);
-    expert.BeginEpisode(rng);
-    double episode_min = env.NearestCarDistance();
-    const RecordedEpisode episode = RecordEpisode(
-        env, collector, horizon, /*stop_at_goal=*/false, observation, action, applied,
-        [&](const Eigen::VectorXf&, Eigen::Vector2f& a, Eigen::Vector2f& recorded) {
-          expert.Act(env, rng, a);
-          for (int i = 0; i < kActionDim; ++i)  // the applied action (the expert's is in the box)
-            recorded[i] = std::clamp(a[i], -bound, bound);
-        },
-        [&](const StepOutcome&) {
-          episode_min = std::min<double>(episode_min, env.NearestCarDistance());
-        });
-    if (!KeepOrCountDiscarded(episode, &out.discarded_collisions, &out.discarded_no_goal))
-      continue;
-    ++kept;
-    min_distance = std::min(min_distance, episode_min);
-    out.steps_to_goal.push_back(episode.reached_at);
-    out.attempts.push_back(attempt);
-    collector.KeepEpisode();
-  }
+  double episode_min = 0.0;
+  const AttemptPlan plan{"GenerateDerbyDemonstrations", "DerbyDemonstrationOptions::episodes",
+                         demo.episodes, max_attempts, demo.require_all};
+  const long kept = KeepReachingEpisodes(
+      plan, collector, out,
+      [&](long attempt) {
+        Rng rng = DerbyAttemptRng(demo.seed, attempt);
+        env.Reset(rng, observation);
+        expert.BeginEpisode(rng);
+        episode_min = env.NearestCarDistance();
+        return RecordEpisode(
+            env, collector, horizon, /*stop_at_goal=*/false, observation, action, applied,
+            [&](const Eigen::VectorXf&, Eigen::Vector2f& a, Eigen::Vector2f& recorded) {
+              expert.Act(env, rng, a);
+              // The applied action (the expert's is in the box).
+              for (int i = 0; i < kActionDim; ++i) recorded[i] = std::clamp(a[i], -bound, bound);
+            },
+            [&](const StepOutcome&) {
+              episode_min = std::min<double>(episode_min, env.NearestCarDistance());
+            });
+      },
+      [&](long attempt) {
+        min_distance = std::min(min_distance, episode_min);
+        out.attempts.push_back(attempt);
+      });
   out.expert = expert.stats();
   out.min_car_distance = kept > 0 ? min_distance : 0.0;
-  if (demo.require_all)
-    CheckAllKept("GenerateDerbyDemonstrations", "DerbyDemonstrationOptions::episodes", kept,
-                 demo.episodes, out.attempted, out.discarded_collisions, out.discarded_no_goal);
   out.trajectories = collector.Finish();
   out.seconds = clock.Seconds();
   return out;

@@ -153,22 +153,18 @@ struct DerbyDemonstrationOptions {
   nlohmann::json ToJson() const;
 };
 
-struct DerbyDemonstrations {
+/// The counts (attempted, discarded_collisions, discarded_no_goal, steps_to_goal: per kept
+/// episode, the first step inside the goal radius; expert, seconds): ExpertDemonstrationCounts.
+struct DerbyDemonstrations : domains::ExpertDemonstrationCounts {
   // ObservationFeatures(), ActionFeatures(); every episode runs max_steps steps (the expert
   // holds at the goal once reached); the action recorded is the applied (clipped) one.
   data::TrajectorySet trajectories;
-  long attempted = 0;
-  long discarded_collisions = 0;
-  long discarded_no_goal = 0;
-  std::vector<int> steps_to_goal;  // per kept episode: the first step inside the goal radius
   // Per kept episode, its attempt index: DerbyEnv(task).Reset(DerbyAttemptRng(seed, attempt))
   // regenerates its world (goal and car trajectories; the ego position of frame t is
   // goal - observation[0..1]).
   std::vector<long> attempts;
   std::uint64_t seed = 0;
   double min_car_distance = 0.0;  // over all frames of the kept demonstrations
-  DerbyExpertStats expert;
-  double seconds = 0.0;
 
   nlohmann::json ToJson() const;
 };

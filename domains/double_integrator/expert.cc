@@ -18,11 +18,6 @@ namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
 
-// Attempt i's stream: the seed and the index mixed (Rng::Seed runs splitmix64 over the result).
-Rng AttemptRng(std::uint64_t seed, long attempt) {
-  return Rng(seed ^ (0xd1b54a32d192ed03ULL * static_cast<std::uint64_t>(attempt + 1)));
-}
-
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -297,33 +292,28 @@ Demonstrations GenerateDemonstrations(const ReachAvoidOptions& task,
                                    StateFeatures(), ActionFeatures());
   Eigen::Vector4f observation;
   Eigen::Vector2f action, applied;
-  long kept = 0;
-  while (kept < demo.episodes && out.attempted < max_attempts) {
-    Rng rng = AttemptRng(demo.seed, out.attempted);
-    ++out.attempted;
-    env.Reset(rng, observation);
-    expert.BeginEpisode(rng);
-    const RecordedEpisode episode = RecordEpisode(
-        env, collector, horizon, demo.stop_at_goal, observation, action, applied,
-        [&](const Eigen::Vector4f& o, Eigen::Vector2f& a, Eigen::Vector2f& recorded) {
-          expert.Act(o, rng, a);
-          // The action the environment applies: the clipped one (the expert's is inside the box).
-          recorded = a.cwiseMax(-static_cast<float>(task.accel_bound))
-                         .cwiseMin(static_cast<float>(task.accel_bound));
-        },
-        [](const StepOutcome&) {});
-    // Kept: reached the goal (its first step there: reached_at) without a collision (which
-    // stopped the episode).
-    if (!KeepOrCountDiscarded(episode, &out.discarded_collisions, &out.discarded_no_goal))
-      continue;
-    ++kept;
-    out.steps_to_goal.push_back(episode.reached_at);
-    collector.KeepEpisode();
-  }
+  const AttemptPlan plan{"GenerateDemonstrations", "DemonstrationOptions::episodes", demo.episodes,
+                         max_attempts, demo.require_all};
+  KeepReachingEpisodes(
+      plan, collector, out,
+      [&](long attempt) {
+        // Attempt i's stream (AttemptRng: the seed and the index mixed).
+        Rng rng = AttemptRng(demo.seed, attempt);
+        env.Reset(rng, observation);
+        expert.BeginEpisode(rng);
+        return RecordEpisode(
+            env, collector, horizon, demo.stop_at_goal, observation, action, applied,
+            [&](const Eigen::Vector4f& o, Eigen::Vector2f& a, Eigen::Vector2f& recorded) {
+              expert.Act(o, rng, a);
+              // The action the environment applies: the clipped one (the expert's is inside the
+              // box).
+              recorded = a.cwiseMax(-static_cast<float>(task.accel_bound))
+                             .cwiseMin(static_cast<float>(task.accel_bound));
+            },
+            [](const StepOutcome&) {});
+      },
+      [](long) {});
   out.expert = expert.stats();
-  if (demo.require_all)
-    CheckAllKept("GenerateDemonstrations", "DemonstrationOptions::episodes", kept, demo.episodes,
-                 out.attempted, out.discarded_collisions, out.discarded_no_goal);
   out.trajectories = collector.Finish();
   out.seconds = clock.Seconds();
   return out;

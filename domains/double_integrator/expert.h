@@ -203,17 +203,12 @@ struct DemonstrationOptions {
   nlohmann::json ToJson() const;
 };
 
-struct Demonstrations {
+/// The counts (attempted, discarded_collisions: entered the obstacle at least once,
+/// discarded_no_goal, steps_to_goal, expert, seconds): ExpertDemonstrationCounts.
+struct Demonstrations : ExpertDemonstrationCounts {
   // State features StateFeatures(), action features ActionFeatures(); the action recorded at
   // each state is the action the environment applied (after clipping).
   data::TrajectorySet trajectories;
-  long attempted = 0;
-  long discarded_collisions = 0;  // entered the obstacle at least once
-  long discarded_no_goal = 0;     // did not collide but never reached the goal
-  // For each kept demonstration, the first step (1-based) whose state is in the goal.
-  std::vector<int> steps_to_goal;
-  ExpertStats expert;    // the filter's counts over all attempts
-  double seconds = 0.0;  // wall time
 
   /// Counts and options (not the trajectories).
   nlohmann::json ToJson() const;

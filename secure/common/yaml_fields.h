@@ -20,6 +20,7 @@
 #include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -58,6 +59,20 @@ class YamlFields {
                         [field, &table] { return nlohmann::json(ToString(table, *field)); }});
     return *this;
   }
+  /// `key` read by `read(node, key, source)` with the reader's own rules and messages (e.g. a
+  /// list of layer widths); ToJson writes write() under `key` (without `write`, the key is read
+  /// only).
+  using Reader = std::function<void(const YAML::Node& node, const std::string& key,
+                                    const std::string& source)>;
+  YamlFields& Custom(const std::string& key, Reader read, Writer write = nullptr) {
+    entries_.push_back(
+        {key,
+         [key, read = std::move(read)](const YAML::Node& node, const std::string& where) {
+           read(node, key, where);
+         },
+         std::move(write)});
+    return *this;
+  }
   /// `key` is a nested mapping handled by `apply` (given the node and "source [key]"); ToJson
   /// writes write() under `key` (without `write`, the owner writes that key itself).
   YamlFields& Section(const std::string& key, Handler apply, Writer write = nullptr) {
@@ -87,6 +102,14 @@ class YamlFields {
         [part] { return part->ToJson(); });
   }
 
+  /// Names the options in Apply's errors, which then are ForEachYamlField's (the wording of the
+  /// hand-written readers a table replaced): "expected a mapping of <what>" and "unknown field
+  /// 'k' in the <what> (valid: ...)", the keys in sorted order.
+  YamlFields& Named(std::string what) {
+    what_ = std::move(what);
+    return *this;
+  }
+
   /// The JSON object of the fields' current values, each under its key (sections without a
   /// writer left out).
   nlohmann::json ToJson() const {
@@ -99,12 +122,19 @@ class YamlFields {
   /// Applies every entry of the mapping `node`. @throws secure::Error naming `source` if `node`
   /// is not a mapping, a key is unknown (listing the valid keys) or a value has the wrong type.
   void Apply(const YAML::Node& node, const std::string& source) const {
+    if (!what_.empty()) {
+      std::set<std::string> known;
+      for (const Entry& e : entries_) known.insert(e.key);
+      ForEachYamlField(node, known, what_, source,
+                       [&](const std::string& key, const YAML::Node& v) {
+                         Find(key)->read(v, source);
+                       });
+      return;
+    }
     SECURE_CHECK(node.IsMap(), source << ": expected a mapping");
     for (const auto& item : node) {
       const std::string key = YamlKey(item.first, source);
-      const Entry* entry = nullptr;
-      for (const Entry& e : entries_)
-        if (e.key == key) entry = &e;
+      const Entry* entry = Find(key);
       SECURE_CHECK(entry != nullptr,
                    source << ": unknown key '" << key << "' (valid: " << Keys() << ")");
       entry->read(item.second, source);
@@ -124,7 +154,15 @@ class YamlFields {
     Handler read;
     Writer write;
   };
+  // The entry of `key` (the last one, should a key be bound twice), or null.
+  const Entry* Find(const std::string& key) const {
+    const Entry* entry = nullptr;
+    for (const Entry& e : entries_)
+      if (e.key == key) entry = &e;
+    return entry;
+  }
   std::vector<Entry> entries_;
+  std::string what_;  // Named(); empty: the generic wording
 };
 
 /// The JSON object of `options`' field table (its member `YamlFields Fields()`, which binds the

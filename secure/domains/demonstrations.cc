@@ -73,6 +73,10 @@ bool KeepOrCountDiscarded(bool dangerous, bool reached_goal, long* discarded_dan
   return true;
 }
 
+Rng AttemptRng(std::uint64_t seed, long attempt, std::uint64_t salt) {
+  return Rng(seed ^ (0xd1b54a32d192ed03ULL * static_cast<std::uint64_t>(attempt + 1)) ^ salt);
+}
+
 void CheckAllKept(const std::string& generator, const std::string& option, long kept, long wanted,
                   long attempted, long discarded_collisions, long discarded_no_goal) {
   SECURE_CHECK(kept == wanted, generator << ": kept " << kept << " of " << option << " = "

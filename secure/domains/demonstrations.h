@@ -15,13 +15,18 @@
 //
 // RecordEpisode runs one episode of a demonstrator into a collector: the step loop with its
 // stops (a collision; the goal, if the generator stops there) that the generators share.
+// KeepReachingEpisodes is the two CBF-QP experts' attempt loop around it, AttemptRng the stream
+// of one attempt.
 #include <Eigen/Core>
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "secure/common/rng.h"
 #include "secure/data/data.h"
 #include "secure/domains/environment.h"
+#include "secure/domains/filtering_expert.h"
 
 namespace secure::domains {
 
@@ -106,6 +111,49 @@ RecordedEpisode RecordEpisode(Env& environment, DemonstrationCollector& collecto
     }
   }
   return episode;
+}
+
+/// The stream of attempt `attempt` (0, 1, ...) of a demonstration run with `seed`: the seed and
+/// the index mixed (Rng::Seed runs splitmix64 over the result), then xor `salt` (a generator's
+/// own, so that two generators with one seed draw different worlds).
+Rng AttemptRng(std::uint64_t seed, long attempt, std::uint64_t salt = 0);
+
+/// How many demonstrations an expert generator keeps, in how many attempts, and what a shortfall
+/// says (CheckAllKept's generator and option names).
+struct AttemptPlan {
+  std::string generator;  // "GenerateDemonstrations"
+  std::string option;     // "DemonstrationOptions::episodes"
+  long episodes = 0;      // to keep
+  long max_attempts = 0;  // attempts at most
+  bool require_all = true;
+};
+
+/// The CBF-QP experts' attempt loop: until plan.episodes are kept or plan.max_attempts made,
+/// `run(attempt)` records attempt `attempt` (0, 1, ...; counted in counts.attempted) in
+/// `collector` and returns how it ended. An attempt is kept if it reached the goal without a
+/// collision (KeepOrCountDiscarded into counts); a kept one adds its first step in the goal to
+/// counts.steps_to_goal, calls `on_keep(attempt)` and keeps the collector's episode. Then, with
+/// plan.require_all, CheckAllKept. Returns the episodes kept.
+template <typename Run, typename OnKeep>
+long KeepReachingEpisodes(const AttemptPlan& plan, DemonstrationCollector& collector,
+                          ExpertDemonstrationCounts& counts, Run&& run, OnKeep&& on_keep) {
+  long kept = 0;
+  while (kept < plan.episodes && counts.attempted < plan.max_attempts) {
+    const long attempt = counts.attempted++;
+    const RecordedEpisode episode = run(attempt);
+    // Kept: reached the goal (its first step there: reached_at) without a collision (which
+    // stopped the episode).
+    if (!KeepOrCountDiscarded(episode, &counts.discarded_collisions, &counts.discarded_no_goal))
+      continue;
+    ++kept;
+    counts.steps_to_goal.push_back(episode.reached_at);
+    on_keep(attempt);
+    collector.KeepEpisode();
+  }
+  if (plan.require_all)
+    CheckAllKept(plan.generator, plan.option, kept, plan.episodes, counts.attempted,
+                 counts.discarded_collisions, counts.discarded_no_goal);
+  return kept;
 }
 
 }  // namespace secure::domains

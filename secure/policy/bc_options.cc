@@ -1,12 +1,12 @@
 // BcOptions, BcSummary and CheckDemos: validation, YAML, JSON and reports (no LibTorch here).
 #include <cmath>
 #include <cstdio>
-#include <set>
 
 #include "secure/common/error.h"
 #include "secure/common/limits.h"
 #include "secure/common/option_check.h"
 #include "secure/common/strings.h"
+#include "secure/common/yaml_fields.h"
 #include "secure/common/yaml_value.h"
 #include "secure/policy/bc_trainer.h"
 #include "secure/policy/internal/options_util.h"
@@ -37,59 +37,45 @@ void BcOptions::Validate() const {
   CheckFeatureNames(input_features, "BcOptions", "input_features");
 }
 
-void BcOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  using internal::YamlValue;
-  static const std::set<std::string> known = {
-      "hidden",      "activation", "input_features", "learning_rate", "final_learning_rate",
-      "epochs",      "batch_size", "weight_decay",   "validation_fraction",
-      "min_log_std", "seed",       "verbose",        "curve_path"};
-  const auto apply = [&](const std::string& key, const YAML::Node& v) {
-    if (key == "hidden") {
-      hidden = internal::YamlWidths(v, key, source);
-    } else if (key == "activation") {
-      activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
-                              source + ": activation");
-    } else if (key == "input_features") {
-      input_features = internal::YamlStrings(v, key, source);
-    } else if (key == "learning_rate") {
-      learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "final_learning_rate") {
-      final_learning_rate = YamlValue<double>(v, key, source);
-    } else if (key == "epochs") {
-      epochs = YamlValue<int>(v, key, source);
-    } else if (key == "batch_size") {
-      batch_size = YamlValue<int>(v, key, source);
-    } else if (key == "weight_decay") {
-      weight_decay = YamlValue<double>(v, key, source);
-    } else if (key == "validation_fraction") {
-      validation_fraction = YamlValue<double>(v, key, source);
-    } else if (key == "min_log_std") {
-      min_log_std = YamlValue<double>(v, key, source);
-    } else if (key == "seed") {
-      seed = YamlValue<std::uint64_t>(v, key, source);
-    } else if (key == "verbose") {
-      verbose = YamlValue<bool>(v, key, source);
-    } else if (key == "curve_path") {
-      curve_path = YamlValue<std::string>(v, key, source);
-    }
-  };
-  ForEachYamlField(node, known, "behaviour cloning options", source, apply);
+YamlFields BcOptions::Fields() {
+  return YamlFields()
+      .Named("behaviour cloning options")
+      .Custom(
+          "hidden",
+          [this](const YAML::Node& v, const std::string& key, const std::string& source) {
+            hidden = internal::YamlWidths(v, key, source);
+          },
+          [this] { return nlohmann::json(hidden); })
+      .Custom(
+          "activation",
+          [this](const YAML::Node& v, const std::string& key, const std::string& source) {
+            activation = FromString(nn::kActivationNames, YamlValue<std::string>(v, key, source),
+                                    source + ": activation");
+          },
+          [this] { return nlohmann::json(ToString(nn::kActivationNames, activation)); })
+      .Custom(
+          "input_features",
+          [this](const YAML::Node& v, const std::string& key, const std::string& source) {
+            input_features = internal::YamlStrings(v, key, source);
+          },
+          [this] { return nlohmann::json(input_features); })
+      .Field("learning_rate", &learning_rate)
+      .Field("final_learning_rate", &final_learning_rate)
+      .Field("epochs", &epochs)
+      .Field("batch_size", &batch_size)
+      .Field("weight_decay", &weight_decay)
+      .Field("validation_fraction", &validation_fraction)
+      .Field("min_log_std", &min_log_std)
+      .Field("seed", &seed)
+      // Read, not written: a run's JSON does not depend on its progress lines.
+      .Custom("verbose",
+              [this](const YAML::Node& v, const std::string& key, const std::string& source) {
+                verbose = YamlValue<bool>(v, key, source);
+              })
+      .Field("curve_path", &curve_path);
 }
 
-nlohmann::json BcOptions::ToJson() const {
-  return {{"hidden", hidden},
-          {"activation", ToString(nn::kActivationNames, activation)},
-          {"input_features", input_features},
-          {"learning_rate", learning_rate},
-          {"final_learning_rate", final_learning_rate},
-          {"epochs", epochs},
-          {"batch_size", batch_size},
-          {"weight_decay", weight_decay},
-          {"validation_fraction", validation_fraction},
-          {"min_log_std", min_log_std},
-          {"seed", seed},
-          {"curve_path", curve_path}};
-}
+SECURE_YAML_JSON_FROM_FIELDS(BcOptions)
 
 std::string BcSummary::BriefReport() const {
   std::string sig;

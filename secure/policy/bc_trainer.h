@@ -27,13 +27,10 @@
 #include <string>
 #include <vector>
 
+#include "secure/common/yaml_fwd.h"
 #include "secure/data/data.h"
 #include "secure/nn/mlp.h"
 #include "secure/policy/gaussian_policy.h"
-
-namespace YAML {
-class Node;
-}
 
 namespace secure::policy {
 
@@ -66,6 +63,8 @@ struct BcOptions {
   /// Throws secure::Error naming the field, value and rule ("BcOptions::epochs = 0, must be
   /// > 0").
   void Validate() const;
+  /// The field table (the YAML keys; the JSON fields, all but verbose): ApplyYaml and ToJson.
+  YamlFields Fields();
   /// Reads fields from a YAML mapping; unknown keys are an error naming the key and `source`.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
