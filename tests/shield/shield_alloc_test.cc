@@ -681,6 +681,17 @@ TEST(ShieldAllocTest, LearnedDynamicsEnsembleDecisionsDoNotAllocate) {
     s.name = "learned ensemble K = 5, M = 128, resampling, linear mean-std";
     ExpectNoAllocations(s, barrier, model, 100);
   }
+  {
+    // A model that holds the action 3 steps, each member on its own chain (--dynamics-hold).
+    dynamics::PessimismOptions held;
+    held.hold = 3;
+    const dynamics::EnsembleModel holding(ensemble, 128, nn::MatmulBackend::kAuto, held);
+    const std::unique_ptr<cbf::Barrier> evaluator = net.MakeEvaluator();
+    dynamics::PessimisticBarrier barrier(
+        std::make_unique<TiltedBarrier>(*evaluator, 0, -1000.0f, s.state[0]), holding);
+    s.name = "learned ensemble K = 5, M = 128, resampling, hold 3";
+    ExpectNoAllocations(s, barrier, holding, 100);
+  }
 }
 
 }  // namespace
