@@ -514,6 +514,11 @@ class Shield {
   // neighbours (qp_next_), h and grad h at T(s, a0), the Jacobian, and the normal c = J^T grad h
   // / dt (qp_normal_). Returns g(a0) from that h.
   double Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state);
+  // Columns 1 + 2r and 2 + 2r of qp_actions_: a0 = qp_actions_.col(0) moved by +step and -step
+  // along action r, inside the box (shorter at a face).
+  void SetNeighbours(int r, float step);
+  // The width of that pair along action r (0 where the box leaves no room).
+  double NeighbourWidth(int r) const;
   // qp_smoothing's linearisation at a0 = qp_actions_.col(0): the normal c (qp_normal_) from
   // central differences of the exact g at a0 +- qp_smoothing sigma_r along each action (inside
   // the box), 2n exact g in one batch.

@@ -40,24 +40,28 @@ bool Record(Decision& decision, const Eigen::MatrixXf& action, double g) {
 
 }  // namespace
 
+void Shield::SetNeighbours(int r, float step) {
+  const float a0 = qp_actions_(r, 0);
+  qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
+  qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
+  qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
+  qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
+}
+
+double Shield::NeighbourWidth(int r) const {
+  return static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
+}
+
 double Shield::Linearise(const Eigen::Ref<const Eigen::VectorXf>& state, double h_state) {
   const int n = action_dim_;
   const double inv_dt = 1.0 / options_.dt;
   // The point and its 2n neighbours (central differences of T in each action, inside the box:
   // one-sided at a face), then grad h at the predicted state T(s, a0).
-  for (int r = 0; r < n; ++r) {
-    const float a0 = qp_actions_(r, 0);
-    const float step = 1e-2f * std::max(1.0f, std::abs(a0));
-    qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
-    qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
-    qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
-    qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
-  }
+  for (int r = 0; r < n; ++r) SetNeighbours(r, 1e-2f * std::max(1.0f, std::abs(qp_actions_(r, 0))));
   dynamics_.Step(state, qp_actions_, qp_next_);
   barrier_.EvaluateGradient(qp_next_.leftCols(1), qp_h_, qp_gradient_);
   for (int r = 0; r < n; ++r) {
-    const double width =
-        static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
+    const double width = NeighbourWidth(r);
     if (width > 0) {
       qp_jacobian_.col(r) =
           (qp_next_.col(1 + 2 * r).cast<double>() - qp_next_.col(2 + 2 * r).cast<double>()) /
@@ -82,18 +86,11 @@ void Shield::LineariseSmoothed(const Eigen::Ref<const Eigen::VectorXf>& state,
   const int n = action_dim_;
   // a0 +- qp_smoothing sigma_r along each action (inside the box: shorter at a face), their exact
   // g in one batch, and the central difference of each pair.
-  for (int r = 0; r < n; ++r) {
-    const float a0 = qp_actions_(r, 0);
-    const float step = static_cast<float>(options_.qp_smoothing) * sigma[r];
-    qp_actions_.col(1 + 2 * r) = qp_actions_.col(0);
-    qp_actions_.col(2 + 2 * r) = qp_actions_.col(0);
-    qp_actions_(r, 1 + 2 * r) = bounds_active() ? std::min(a0 + step, high_[r]) : a0 + step;
-    qp_actions_(r, 2 + 2 * r) = bounds_active() ? std::max(a0 - step, low_[r]) : a0 - step;
-  }
+  for (int r = 0; r < n; ++r)
+    SetNeighbours(r, static_cast<float>(options_.qp_smoothing) * sigma[r]);
   EvaluateG(state, h_state, qp_actions_.rightCols(2 * n), qp_g_);
   for (int r = 0; r < n; ++r) {
-    const double width =
-        static_cast<double>(qp_actions_(r, 1 + 2 * r)) - qp_actions_(r, 2 + 2 * r);
+    const double width = NeighbourWidth(r);
     // sigma_r = 0 (or a box of zero width): no slope along this action.
     qp_normal_[r] = width > 0 ? (qp_g_[2 * r] - qp_g_[2 * r + 1]) / width : 0.0;
   }
