@@ -44,11 +44,12 @@ void DerbyDomainOptions::Validate() const {
                      "safe_states", safe_states, "in [1, " << kMaxStates << "]");
 }
 
-void DerbyDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Section("task", [this](const YAML::Node& n, const std::string& where) {
-        task.ApplyYaml(n, where);
-      })
+// The keys a config file sets, read and written by one table: the options JSON (OptionsJson, a
+// run's record, Python's read_config_section) is read back by ApplyYaml. The expert's and the
+// near-dangerous generator's other fields are code constants, recorded by the build's git_sha.
+YamlFields DerbyDomainOptions::Fields() {
+  return YamlFields()
+      .Part("task", &task)
       .Field("safe_states", &safe_states)
       .Section("demonstrations", YamlFields()
                                      .Field("episodes", &demonstrations.episodes)
@@ -56,17 +57,10 @@ void DerbyDomainOptions::ApplyYaml(const YAML::Node& node, const std::string& so
       .Section("near_dangerous", YamlFields()
                                      .Field("count", &near_dangerous.count)
                                      .Field("nearest", &near_dangerous.nearest)
-                                     .Field("max_redraws", &near_dangerous.max_redraws))
-      .Apply(node, source);
+                                     .Field("max_redraws", &near_dangerous.max_redraws));
 }
 
-nlohmann::json DerbyDomainOptions::ToJson() const {
-  return {{"task", task.ToJson()},
-          {"expert", expert.ToJson()},
-          {"demonstrations", demonstrations.ToJson()},
-          {"near_dangerous", near_dangerous.ToJson()},
-          {"safe_states", safe_states}};
-}
+SECURE_YAML_JSON_FROM_FIELDS(DerbyDomainOptions)
 
 // ---------------------------------------------------------------------------------------------
 DerbyDomain::DerbyDomain(experiments::Profile profile) : OptionsDomain(profile) {}

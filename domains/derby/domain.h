@@ -27,8 +27,10 @@ struct DerbyDomainOptions {
   void Validate() const;
   /// Keys: task (DerbyOptions), safe_states, demonstrations {episodes, max_attempts},
   /// near_dangerous {count, nearest, max_redraws}.
+  /// ToJson writes exactly these keys, so that ApplyYaml reads it back.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
+  YamlFields Fields();
 };
 
 class DerbyDomain final : public experiments::OptionsDomain<DerbyDomainOptions> {

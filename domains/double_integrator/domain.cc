@@ -45,11 +45,12 @@ void DomainOptions::Validate() const {
                      "<= " << kMaxStates);
 }
 
-void DomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source) {
-  YamlFields()
-      .Section("task", [this](const YAML::Node& n, const std::string& where) {
-        task.ApplyYaml(n, where);
-      })
+// The keys a config file sets, read and written by one table: the options JSON (OptionsJson, a
+// run's record, Python's read_config_section) is read back by ApplyYaml. The expert's fields are
+// code constants, recorded by the build's git_sha.
+YamlFields DomainOptions::Fields() {
+  return YamlFields()
+      .Part("task", &task)
       .Field("safe_states", &safe_states)
       .Field("slowed_copies", &slowed_copies)
       .Section("demonstrations", YamlFields()
@@ -61,18 +62,10 @@ void DomainOptions::ApplyYaml(const YAML::Node& node, const std::string& source)
                                      .Field("rho_min", &near_dangerous.rho_min)
                                      .Field("rho_max", &near_dangerous.rho_max)
                                      .Field("velocity_lo", &near_dangerous.velocity_lo)
-                                     .Field("velocity_hi", &near_dangerous.velocity_hi))
-      .Apply(node, source);
+                                     .Field("velocity_hi", &near_dangerous.velocity_hi));
 }
 
-nlohmann::json DomainOptions::ToJson() const {
-  return {{"task", task.ToJson()},
-          {"expert", expert.ToJson()},
-          {"demonstrations", demonstrations.ToJson()},
-          {"near_dangerous", near_dangerous.ToJson()},
-          {"safe_states", safe_states},
-          {"slowed_copies", slowed_copies}};
-}
+SECURE_YAML_JSON_FROM_FIELDS(DomainOptions)
 
 // ---------------------------------------------------------------------------------------------
 DoubleIntegratorDomain::DoubleIntegratorDomain(experiments::Profile profile)

@@ -32,8 +32,10 @@ struct DomainOptions {
   /// Keys: task (ReachAvoidOptions), safe_states, slowed_copies, demonstrations {episodes,
   /// stop_at_goal, max_attempts}, near_dangerous {count, rho_min, rho_max, velocity_lo,
   /// velocity_hi}.
+  /// ToJson writes exactly these keys, so that ApplyYaml reads it back.
   void ApplyYaml(const YAML::Node& node, const std::string& source);
   nlohmann::json ToJson() const;
+  YamlFields Fields();
 };
 
 class DoubleIntegratorDomain final : public experiments::OptionsDomain<DomainOptions> {

@@ -164,9 +164,20 @@ void ToyCartDomain::ApplyYaml(const YAML::Node& node, const std::string& source)
       options_.near_dangerous = YamlValue<long>(entry.second, key, source);
     } else if (key == "task") {
       ApplyTaskYaml(entry.second, source + " [task]");
+    } else if (key == "target") {  // the expert's (ToJson writes every key read here)
+      options_.target = YamlValue<double>(entry.second, key, source);
+    } else if (key == "max_speed") {
+      options_.max_speed = YamlValue<double>(entry.second, key, source);
+    } else if (key == "brake_fraction") {
+      options_.brake_fraction = YamlValue<double>(entry.second, key, source);
+    } else if (key == "expert_gain") {
+      options_.expert_gain = YamlValue<double>(entry.second, key, source);
+    } else if (key == "expert_noise") {
+      options_.expert_noise = YamlValue<double>(entry.second, key, source);
     } else {
       SECURE_THROW(source << ": unknown key '" << key
-                          << "' (valid: demonstrations, safe_states, near_dangerous, task)");
+                          << "' (valid: demonstrations, safe_states, near_dangerous, task, target, "
+                             "max_speed, brake_fraction, expert_gain, expert_noise)");
     }
   }
 }

@@ -143,7 +143,8 @@ class ToyCartDomain final : public experiments::Domain {
   std::string Title() const override { return "the toy cart (an example plug-in)"; }
   std::string ConfigSection() const override { return "toy_cart"; }
   /// Keys: demonstrations, safe_states, near_dangerous (counts), task (dt, accel_bound, wall,
-  /// goal_lo, goal_speed, max_steps).
+  /// goal_lo, goal_speed, max_steps), and the expert's target, max_speed, brake_fraction,
+  /// expert_gain, expert_noise: every key OptionsJson writes, so that it reads back.
   void ApplyYaml(const YAML::Node& node, const std::string& source) override;
   void Validate() const override { options_.Validate(); }
   nlohmann::json OptionsJson() const override { return options_.ToJson(); }

@@ -41,3 +41,13 @@ def test_errors_name_the_file_and_the_field(tmp_path):
         secure.read_config_section(path, "double-integrator")
     with pytest.raises(FileNotFoundError):
         secure.read_config_section(str(tmp_path / "missing.yaml"), "double-integrator")
+
+
+def test_every_domains_options_go_back_into_make_env(tmp_path):
+    # The section's 'domain' dict is what make_env takes: every key it holds is one the domain
+    # reads (Derby, the double integrator and the toy plug-in used to write keys they rejected).
+    other = write(tmp_path, "bc: {epochs: 3}\n")
+    for name in secure.domains():
+        options = secure.read_config_section(other, name, "quick")["domain"]
+        secure.make_env(name, profile="quick", **options).close()
+        assert secure.EnvCore(name, "quick", options=options).options == options, name

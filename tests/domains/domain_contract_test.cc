@@ -3,7 +3,8 @@
 // domains/ and the example plug-in examples/toy_domain). A new plug-in runs through this suite
 // without any change here (docs/ADDING_A_DOMAIN.md). Quick profiles throughout.
 //
-// Per domain: the registry lists and makes it; its options and preset validate; an episode is
+// Per domain: the registry lists and makes it; its options and preset validate, and its options
+// JSON is read back by its ApplyYaml; an episode is
 // replayed exactly from the same Rng; a clone is independent; bad actions are rejected; the
 // backup action (where claimed) is finite; collisions count entries into danger; the action box
 // is the clip of Step(); the shield model has the environment's dimensions and,
@@ -13,6 +14,7 @@
 // labels, and its validation grid is well formed.
 
 #include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cmath>
@@ -120,6 +122,22 @@ TEST_P(DomainContract, OptionsAndPresetValidateInBothProfiles) {
     EXPECT_NO_THROW(o.Validate());
     EXPECT_NO_THROW(experiments::CheckExperimentOptions(*d, o));
     EXPECT_TRUE(o.ToJson().is_object());
+  }
+}
+
+// A domain's options JSON (a run's record, Python's read_config_section, which make_env takes
+// back) holds only keys its ApplyYaml reads, and reading it back changes nothing: in both
+// profiles, and after a change, so that a value the writer left out would show.
+TEST_P(DomainContract, OptionsJsonIsReadBackByApplyYaml) {
+  for (Profile p : {Profile::kQuick, Profile::kFull}) {
+    const std::unique_ptr<experiments::Domain> d = DomainRegistry::Global().Make(GetParam(), p);
+    const nlohmann::json written = d->OptionsJson();
+    const std::unique_ptr<experiments::Domain> other =
+        DomainRegistry::Global().Make(GetParam(), p == Profile::kQuick ? Profile::kFull
+                                                                      : Profile::kQuick);
+    ASSERT_NO_THROW(other->ApplyYaml(YAML::Load(written.dump()), "round trip"))
+        << GetParam() << ": " << written.dump();
+    EXPECT_EQ(other->OptionsJson(), written) << GetParam();
   }
 }
 
