@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <mutex>
 
 #include "secure/common/error.h"
 
@@ -152,15 +153,41 @@ int BlasThreads() {
   return get != nullptr ? get() : 0;
 }
 
-ScopedTorchThreads::ScopedTorchThreads(int threads)
-    : previous_torch_(TorchThreads()), previous_blas_(BlasThreads()) {
-  SetTorchThreads(threads);
+// OpenBLAS's count is process-wide, so concurrent scopes (trainers on several std::threads) share
+// one setting: the first scope saves the count and sets it, later ones join it, the last one to
+// leave restores it. Before, each scope restored what it had seen on entry, so a trainer that
+// finished first put the count back under one still running, whose products then ran on
+// another number of BLAS threads and rounded differently (seen on AMD Zen 5:
+// car_barrier_train_test's concurrent trainings gave other model bytes than solo ones).
+namespace {
+std::mutex blas_scope_mutex;
+int blas_scopes = 0;         // scopes alive, on any thread
+int blas_scope_threads = 0;  // the count they hold
+int blas_saved = 0;          // the count before the first of them
+}  // namespace
+
+ScopedTorchThreads::ScopedTorchThreads(int threads) : previous_torch_(TorchThreads()) {
+  SECURE_CHECK(threads > 0, "ScopedTorchThreads: threads = " << threads << ", must be > 0");
+  const std::lock_guard<std::mutex> lock(blas_scope_mutex);
+  SECURE_CHECK(blas_scopes == 0 || threads == blas_scope_threads,
+               "ScopedTorchThreads: " << threads << " threads asked while a concurrent training "
+                                      << "holds OpenBLAS's process-wide count at "
+                                      << blas_scope_threads
+                                      << "; concurrent trainings need one thread count");
+  torch::set_num_threads(threads);  // this thread's (OpenMP backend)
+  if (blas_scopes == 0) {
+    blas_saved = BlasThreads();
+    if (const SetBlasThreadsFn set = SetBlasThreadsSymbol()) set(threads);
+    blas_scope_threads = threads;
+  }
+  ++blas_scopes;
 }
 
 ScopedTorchThreads::~ScopedTorchThreads() {
   torch::set_num_threads(previous_torch_);
-  if (previous_blas_ > 0) {
-    if (const SetBlasThreadsFn set = SetBlasThreadsSymbol()) set(previous_blas_);
+  const std::lock_guard<std::mutex> lock(blas_scope_mutex);
+  if (--blas_scopes == 0 && blas_saved > 0) {
+    if (const SetBlasThreadsFn set = SetBlasThreadsSymbol()) set(blas_saved);
   }
 }
 

@@ -12,8 +12,11 @@ int TorchThreads();
 /// OpenBLAS's current thread count, or 0 when OpenBLAS is not the BLAS in use.
 int BlasThreads();
 
-/// Sets LibTorch's and OpenBLAS's thread counts for a scope (SetTorchThreads) and restores
-/// both previous counts on exit. The one guard of the trainers that take a `threads` option.
+/// Sets LibTorch's (this thread's) and OpenBLAS's (process-wide) thread counts for a scope and
+/// restores them on exit. The one guard of the trainers that take a `threads` option. Scopes on
+/// several threads at once share OpenBLAS's count: the first sets it, the last restores it, and
+/// each training runs on that count throughout (its bytes do not depend on when another ends).
+/// @throws secure::Error if threads <= 0, or if it differs from the count concurrent scopes hold.
 class ScopedTorchThreads {
  public:
   explicit ScopedTorchThreads(int threads);
@@ -23,7 +26,6 @@ class ScopedTorchThreads {
 
  private:
   int previous_torch_;
-  int previous_blas_;  // 0: no OpenBLAS, nothing to restore
 };
 
 }  // namespace secure::nn

@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <future>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "secure/common/error.h"
@@ -363,5 +365,34 @@ TEST(ScopedTorchThreadsTest, SetsAndRestoresLibTorchsAndOpenBlassCounts) {
   }
   EXPECT_EQ(secure::nn::TorchThreads(), 2);
   EXPECT_EQ(secure::nn::BlasThreads(), 2);
+  secure::nn::SetTorchThreads(1);
+}
+
+// Scopes on two threads share OpenBLAS's process-wide count: the first to leave does not put the
+// count back under the one still running, the last one does, and another count asked while a
+// scope holds one is an error.
+TEST(ScopedTorchThreadsTest, ConcurrentScopesHoldOpenBlassCountUntilTheLastLeaves) {
+  ASSERT_GT(secure::nn::BlasThreads(), 0) << "this build's BLAS is not OpenBLAS (scripts/setup.sh)";
+  secure::nn::SetTorchThreads(2);
+  std::promise<void> entered, first_left;
+  int blas_after_first_left = -1;
+  std::thread other;
+  {
+    const secure::nn::ScopedTorchThreads first(1);
+    other = std::thread([&] {
+      const secure::nn::ScopedTorchThreads second(1);
+      entered.set_value();
+      first_left.get_future().wait();
+      blas_after_first_left = secure::nn::BlasThreads();
+    });
+    entered.get_future().wait();
+    EXPECT_THROW(secure::nn::ScopedTorchThreads(3), secure::Error);
+    EXPECT_EQ(secure::nn::BlasThreads(), 1);
+  }
+  first_left.set_value();
+  other.join();
+  EXPECT_EQ(blas_after_first_left, 1);
+  EXPECT_EQ(secure::nn::BlasThreads(), 2);
+  EXPECT_EQ(secure::nn::TorchThreads(), 2);
   secure::nn::SetTorchThreads(1);
 }
