@@ -1,4 +1,4 @@
-"""secure/dynamics/tools/shield_model_diff.py: two shield models on the same episodes (paired by
+"""tools/diagnostics/shield_model_diff.py: two shield models on the same episodes (paired by
 episode and shield seed) and where their g disagree by |a|. The double integrator's ground-truth
 barrier and exact model, against a model that differs only for large actions."""
 import os
@@ -8,8 +8,8 @@ import numpy as np
 
 import secure
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "secure",
-                                "dynamics", "tools"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools",
+                                "diagnostics"))
 import shield_model_diff  # noqa: E402
 
 OPTIONS = dict(num_samples=32, num_probes=32, dt=0.1, class_k_gain=1.0)

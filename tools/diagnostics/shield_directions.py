@@ -25,11 +25,11 @@ import math
 import os
 import statistics
 import sys
-import tempfile
 
 import numpy as np
 
 import secure
+from diagnostics_common import read_section
 
 
 def quantile(xs, p):
@@ -119,13 +119,7 @@ def main():
         seeds = [int(s) for s in args.seeds.split(",")]
     except ValueError:
         ap.error(f"--seeds = '{args.seeds}', expected comma-separated integers")
-    if args.config:
-        section = secure.read_config_section(args.config, args.domain)
-    else:
-        with tempfile.NamedTemporaryFile("w", suffix=".yaml") as empty:
-            empty.write("{}\n")
-            empty.flush()
-            section = secure.read_config_section(empty.name, args.domain)
+    section = read_section(args.domain, args.config)
     shield_options = {k: v for k, v in section["experiment"]["shield"].items() if k != "seed"}
     rows = []
     for seed in seeds:

@@ -15,30 +15,33 @@ fixed uniform draw of actions in the actuator box).
 Usage:
   shield_model_diff.py --domain derby --run RUN --seed 0 --model dyn.model [--hold 3]
       [--pessimism min|mean-std --pessimism-kappa K] [--policy airl.model] [--config C.yaml]
-      [--episodes 100] [--g-episodes 40] [--out records.json]
+      [--episodes 100] [--g-episodes 40] [--stream-seed 10000] [--out records.json]
 The shield's options are the domain's preset, with the config file's `shield:` over it
-(secure.read_config_section). Needs the `secure` Python module (PYTHONPATH=build/python).
+(secure.read_config_section), the episode stream that of tools/diagnostics/shield_directions.py.
+Needs the `secure` Python module (PYTHONPATH=build/python).
 docs/RESULTS.md, issue 36 (Derby): the measurement this was written for.
 """
 import argparse
 import json
 import os
 import sys
-import tempfile
 
 import numpy as np
 
 import secure
+from diagnostics_common import read_section
 
 
-def drive(env, policy_mean, sigma, shields, first, other, episodes, seed, max_steps=None):
+def drive(env, policy_mean, sigma, shields, first, other, episodes, seed, max_steps=None,
+          stream_seed=0):
     """Episodes under shields[first], asking shields[other] at every decision. The episode and the
-    shields' seeds depend only on (seed, episode), so two drives see the same episodes."""
+    shields' seeds depend only on (seed, episode), so two drives see the same episodes: episode e
+    starts from secure.episode_seed(stream_seed + seed, e)."""
     records = []
     for e in range(episodes):
         for name in (first, other):
             shields[name].seed(1000 * seed + e)
-        obs, _ = env.reset(seed=secure.episode_seed(seed, e))
+        obs, _ = env.reset(seed=secure.episode_seed(stream_seed + seed, e))
         rec = {"drive": first, "episode": e, "steps": 0, "success": False, "dangerous": False,
                "interventions": 0, "no_safe_action": 0, "other_no_safe_action": 0,
                "ratio": [], "other_ratio": []}
@@ -109,19 +112,15 @@ def main():
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--g-episodes", type=int, default=40)
     p.add_argument("--actions", type=int, default=1024, help="uniform actions for the g check")
+    p.add_argument("--stream-seed", type=int, default=10_000,
+                   help="episode e of seed S starts from secure.episode_seed(stream_seed + S, e)")
     p.add_argument("--out")
     args = p.parse_args()
     seed_dir = os.path.join(args.run, f"seed-{args.seed}")
     for f in ("barrier.model", args.policy):
         if not os.path.isfile(os.path.join(seed_dir, f)):
             sys.exit(f"{os.path.join(seed_dir, f)}: not a regular file")
-    if args.config:
-        section = secure.read_config_section(args.config, args.domain)
-    else:
-        with tempfile.NamedTemporaryFile("w", suffix=".yaml") as empty:
-            empty.write("{}\n")
-            empty.flush()
-            section = secure.read_config_section(empty.name, args.domain)
+    section = read_section(args.domain, args.config)
     env = secure.EnvCore(args.domain, options=section["domain"])
     barrier = secure.Barrier.load(os.path.join(seed_dir, "barrier.model"))
     policy = secure.Policy.load(os.path.join(seed_dir, args.policy))
@@ -134,7 +133,8 @@ def main():
     sigma = np.asarray(policy.sigma, dtype=np.float32)
     records = []
     for first, other in (("hand-written", "learned"), ("learned", "hand-written")):
-        records += drive(env, policy.mean, sigma, shields, first, other, args.episodes, args.seed)
+        records += drive(env, policy.mean, sigma, shields, first, other, args.episodes, args.seed,
+                         stream_seed=args.stream_seed)
     summary = paired(records)
     for name in ("hand-written", "learned"):
         mine = [r for r in records if r["drive"] == name]
@@ -154,7 +154,7 @@ def main():
     states = []
     for e in range(min(args.g_episodes, args.episodes)):
         shields["learned"].seed(1000 * args.seed + e)
-        obs, _ = env.reset(seed=secure.episode_seed(args.seed, e))
+        obs, _ = env.reset(seed=secure.episode_seed(args.stream_seed + args.seed, e))
         for _ in range(env.max_steps):
             states.append(obs.copy())
             d = shields["learned"].decide(obs, policy.mean(obs), sigma)
