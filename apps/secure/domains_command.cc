@@ -132,7 +132,11 @@ struct DomainsCommand {
               << "experiment preset (secure experiment; eval, render and cbf check start from it):"
               << " seeds " << preset.seeds << ", episodes " << preset.episodes << ", data_seed "
               << preset.data_seed << ", barrier "
-              << ToString(experiments::kBarrierKindNames, preset.barrier_kind) << "\n"
+              << ToString(experiments::kBarrierKindNames, preset.barrier_kind)
+              << (preset.closed_loop.enabled
+                      ? ", closed-loop check " + preset.closed_loop.ToJson().dump()
+                      : std::string())
+              << "\n"
               << "  shield (the =preset flags of eval and render): " << FlagLine(shield) << "\n";
     if (d->HasGroundTruth()) {
       std::cout << "ground truth: " << d->GroundTruthJson().dump()

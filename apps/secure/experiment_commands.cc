@@ -201,7 +201,8 @@ struct ExperimentCommand {
     closed_loop_option = cmd->add_option("--closed-loop", closed_loop_candidates,
                     "N: the closed-loop check before deployment, trying up to N training "
                     "initialisations per seed (kinds method-comparison, ablation; thresholds "
-                    "in the config's closed_loop section; docs/RESULTS.md)");
+                    "in the config's closed_loop section; docs/RESULTS.md); 0: off. Default: "
+                    "the domain's preset (`secure domains NAME`; on in panda-push's)");
     repair_option = cmd->add_option(
         "--closed-loop-repair", repair_rounds,
         "R: with --closed-loop, repair a failing candidate up to R times before replacing it: "
@@ -238,9 +239,9 @@ struct ExperimentCommand {
                  "experiment's)");
     if (!methods.empty()) options.methods = eval::ParseMethods(methods);
     if (closed_loop_option->count() > 0) {
-      CheckRange("--closed-loop", closed_loop_candidates, 1, 64);
-      options.closed_loop.enabled = true;
-      options.closed_loop.max_candidates = closed_loop_candidates;
+      CheckRange("--closed-loop", closed_loop_candidates, 0, 64);
+      options.closed_loop.enabled = closed_loop_candidates > 0;
+      if (closed_loop_candidates > 0) options.closed_loop.max_candidates = closed_loop_candidates;
     }
     if (repair_option->count() > 0) {
       CheckRange("--closed-loop-repair", repair_rounds, 0, 16);

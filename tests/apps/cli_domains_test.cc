@@ -96,6 +96,20 @@ TEST(CliDomainsTest, HelpShowsThePresetWhereADomainIsChosen) {
   EXPECT_DOUBLE_EQ(j["preset"]["shield"]["class_k_gain"].get<double>(), 20.0);
   EXPECT_FALSE(j.contains("shield_run"));
   EXPECT_EQ(j["observation_features"][0], "ee_x");
+  // Panda's preset runs the closed-loop check before deployment (its full profile); --closed-loop
+  // 0 turns it off, so the repair that needs it is refused.
+  EXPECT_EQ(j["preset"]["closed_loop"]["enabled"], true) << j["preset"].dump();
+  EXPECT_EQ(j["preset"]["closed_loop"]["max_candidates"], 4);
+  EXPECT_HAS(RunCli("domains panda-push").out, ", closed-loop check {");
+  EXPECT_EQ(RunCli("domains derby").out.find("closed-loop check"), std::string::npos);
+  const std::string never = (TempDir() / "never_closed_loop").string();
+  ExpectOneErrorLine(RunCli("experiment method-comparison --domain panda-push --closed-loop 0 "
+                            "--closed-loop-repair 1 --out " + never),
+                     "--closed-loop-repair needs the closed-loop check");
+  ExpectOneErrorLine(RunCli("experiment method-comparison --domain panda-push --closed-loop -1 "
+                            "--out " + never),
+                     "--closed-loop = -1, must be in [0, 64]");
+  EXPECT_FALSE(fs::exists(never));
   // The double integrator's shield run and ground truth, as `shield run` and `cbf table1` use them.
   r = RunCli("domains double-integrator --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;

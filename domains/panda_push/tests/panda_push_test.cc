@@ -470,6 +470,16 @@ TEST(PandaPushDomain, OptionsRejectBadValuesAndUnknownKeys) {
   EXPECT_THROW(released.ApplyYaml(YAML::Load("{barrier_data: other}"), "cfg.yaml"), Error);
 }
 
+// The full preset checks each seed in closed loop before deployment (a stalled seed is replaced);
+// the quick profile, for tests and smoke runs, does not.
+TEST(PandaPushDomain, TheFullPresetRunsTheClosedLoopCheck) {
+  const experiments::ExperimentOptions full = PandaPushDomain(experiments::Profile::kFull).Preset();
+  EXPECT_TRUE(full.closed_loop.enabled);
+  EXPECT_EQ(full.closed_loop.max_candidates, 4);
+  EXPECT_EQ(full.closed_loop.episodes, 50);
+  EXPECT_FALSE(PandaPushDomain(experiments::Profile::kQuick).Preset().closed_loop.enabled);
+}
+
 // The barrier check's unsafe test (c): the block's tilt from upright as the observed Euler
 // angles give it, against the topple angle; the simulator's own tilt of the same state agrees.
 TEST(PandaPushCheck, TheUnsafeTestIsTheObservedTiltBeyondTheToppleAngle) {
