@@ -78,3 +78,16 @@ def test_drives_of_one_model_pair_episode_by_episode():
     summary = shield_model_diff.paired(first + second)
     assert summary["hand-written"] == summary["learned"]
     assert summary["lost only by hand-written"] == [] and summary["lost only by learned"] == []
+
+
+def test_counts_below_one_are_one_line_errors(tmp_path):
+    import subprocess
+    script = os.path.join(os.path.dirname(shield_model_diff.__file__), "shield_model_diff.py")
+    for flag in ("--episodes", "--g-episodes", "--actions", "--hold"):
+        done = subprocess.run(
+            [sys.executable, script, "--domain", "double-integrator", "--run", str(tmp_path),
+             "--seed", "0", "--model", "m.model", flag, "0"],
+            capture_output=True, text=True, env=dict(os.environ))
+        assert done.returncode == 1, (flag, done.stderr)
+        assert done.stderr.strip() == f"shield_model_diff: {flag} = 0, must be at least 1"
+

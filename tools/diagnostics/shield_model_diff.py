@@ -116,6 +116,10 @@ def main():
                    help="episode e of seed S starts from secure.episode_seed(stream_seed + S, e)")
     p.add_argument("--out")
     args = p.parse_args()
+    for flag in ("episodes", "g_episodes", "actions", "hold"):
+        if getattr(args, flag) < 1:
+            sys.exit(f"shield_model_diff: --{flag.replace('_', '-')} = {getattr(args, flag)}, "
+                     "must be at least 1")
     seed_dir = os.path.join(args.run, f"seed-{args.seed}")
     for f in ("barrier.model", args.policy):
         if not os.path.isfile(os.path.join(seed_dir, f)):
