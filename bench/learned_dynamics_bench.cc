@@ -11,6 +11,8 @@
 //            predicted states in one batched forward, min over members; with linear = 1 the
 //            first-order pessimism (PessimismOptions::linear): h on the M mean states plus one
 //            barrier gradient at s per decision, the members' spread taken through it.
+// mean = 1: the members' mean of h instead of their minimum (mean-std with kappa 0); with
+// linear = 1 that is h at the members' mean prediction (the first-order deviations average to 0).
 // Regimes: NoResampling (h lifted so every sample is safe: 1 + M + 1 states per decision for the
 // hand model, 1 + K M + K states for the learned one, 1 + M + 1 and a gradient with linear) and Resampling (h tilted through the
 // state, so that most samples are unsafe and Algorithm 2 runs with its probes).
@@ -89,6 +91,10 @@ void BM_LearnedVsHandDecision(benchmark::State& st) {
   dynamics::PessimismOptions pessimism;
   pessimism.linear = st.range(2) != 0;
   const bool gradient_first = st.range(3) != 0;
+  if (st.range(4) != 0) {  // the members' mean of h (mean-std, kappa 0)
+    pessimism.aggregate = dynamics::PessimismOptions::Aggregate::kMeanStd;
+    pessimism.kappa = 0.0;
+  }
   namespace pp = domains::panda_push;
   const std::vector<std::string>& features = pp::ObservationFeatures();
   const int d = pp::kObservationDim, a = pp::kActionDim;
@@ -197,8 +203,13 @@ void BM_LearnedVsHandDecision(benchmark::State& st) {
 }  // namespace
 
 BENCHMARK(BM_LearnedVsHandDecision)
-    ->ArgsProduct({{1, 5}, {0, 1}, {0, 1}, {0, 1}})
-    ->ArgNames({"K", "resampling", "linear", "qp"})
+    ->ArgsProduct({{1, 5}, {0, 1}, {0, 1}, {0, 1}, {0}})
+    // mean = 1: the members' mean of h (`--pessimism mean-std --pessimism-kappa 0`), K = 5
+    ->Args({5, 0, 0, 0, 1})
+    ->Args({5, 1, 0, 0, 1})
+    ->Args({5, 0, 1, 0, 1})
+    ->Args({5, 1, 1, 0, 1})
+    ->ArgNames({"K", "resampling", "linear", "qp", "mean"})
     ->Unit(benchmark::kMicrosecond);
 
 BENCHMARK_MAIN();
