@@ -59,6 +59,7 @@
 #include "domains/double_integrator/ground_truth_barrier.h"
 #include "secure/cbf/barrier.h"
 #include "secure/cbf/barrier_net.h"
+#include "secure/common/enum_strings.h"
 #include "secure/common/rng.h"
 #include "secure/domains/dynamics.h"
 #include "secure/nn/inference_mlp.h"
@@ -233,21 +234,14 @@ class PandaDynamics final : public domains::DynamicsModel {
 enum class Net { kDoubleIntegrator, kDerby, kPanda, kDoubleIntegratorTruth, kPandaEnsemble3 };
 enum class Regime { kNoResampling, kResampling };
 
-const char* NetName(Net net) {
-  switch (net) {
-    case Net::kDoubleIntegrator:
-      return "DI";
-    case Net::kDerby:
-      return "Derby";
-    case Net::kPanda:
-      return "Panda";
-    case Net::kDoubleIntegratorTruth:
-      return "DITruth";
-    case Net::kPandaEnsemble3:
-      return "Panda ensemble";
-  }
-  return "?";
-}
+constexpr EnumTable<Net, 5> kNetNames{{
+    {Net::kDoubleIntegrator, "DI"},
+    {Net::kDerby, "Derby"},
+    {Net::kPanda, "Panda"},
+    {Net::kDoubleIntegratorTruth, "DITruth"},
+    {Net::kPandaEnsemble3, "Panda ensemble"},
+}};
+const char* NetName(Net net) { return NameOf(kNetNames, net); }
 
 /// Everything one decision needs, built outside the timed loop. Members are heap-held so that the
 /// shield's references stay valid when a Case is moved.

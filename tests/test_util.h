@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "secure/common/error.h"
 
@@ -24,6 +25,14 @@ std::string ErrorOf(Fn&& fn) {
   }
   ADD_FAILURE() << "expected secure::Error";
   return "";
+}
+
+/// Expects `message` to contain every one of `parts`, naming each that it lacks.
+inline void ExpectContainsAll(const std::string& message, const std::vector<std::string>& parts) {
+  for (const std::string& part : parts) {
+    EXPECT_NE(message.find(part), std::string::npos)
+        << "message '" << message << "' lacks '" << part << "'";
+  }
 }
 
 /// A fresh directory per test (named after the test and the process, since ctest runs tests in

@@ -224,13 +224,11 @@ experiments::ExperimentOptions CoffeePlacingDomain::Preset() const {
 
 namespace secure::plugins {
 void Register_coffee_placing(experiments::DomainRegistry& registry) {
-  registry.Add("coffee-placing",
-               "Coffee placing: a Franka arm carries a cup to a target square while a simulated "
-               "person reaches for a book beside it; twelve simulated participants with their own "
-               "comfort distance and cup tilt for the user study (MuJoCo; paper Section 7.2 in "
-               "simulation)",
-               [](experiments::Profile p) {
-                 return std::make_unique<domains::coffee_placing::CoffeePlacingDomain>(p);
-               });
+  registry.Add<domains::coffee_placing::CoffeePlacingDomain>(
+      "coffee-placing",
+      "Coffee placing: a Franka arm carries a cup to a target square while a simulated "
+      "person reaches for a book beside it; twelve simulated participants with their own "
+      "comfort distance and cup tilt for the user study (MuJoCo; paper Section 7.2 in "
+      "simulation)");
 }
 }  // namespace secure::plugins

@@ -215,8 +215,7 @@ cbf::BarrierCheckProblem MakeDerbyCheckProblem(const DerbyOptions& task,
 
 namespace secure::plugins {
 void Register_derby(experiments::DomainRegistry& registry) {
-  registry.Add("derby",
-               "Demolition Derby: reach a goal among 16 randomly moving cars (paper Section 6)",
-               [](experiments::Profile p) { return std::make_unique<domains::derby::DerbyDomain>(p); });
+  registry.Add<domains::derby::DerbyDomain>(
+      "derby", "Demolition Derby: reach a goal among 16 randomly moving cars (paper Section 6)");
 }
 }  // namespace secure::plugins

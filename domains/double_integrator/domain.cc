@@ -178,11 +178,9 @@ cbf::BarrierCheckProblem MakeDoubleIntegratorCheckProblem(
 
 namespace secure::plugins {
 void Register_double_integrator(experiments::DomainRegistry& registry) {
-  registry.Add("double-integrator",
-               "a point mass with bounded acceleration reaches a goal past a round obstacle "
-               "(paper Section 6, Table 1)",
-               [](experiments::Profile p) {
-                 return std::make_unique<domains::double_integrator::DoubleIntegratorDomain>(p);
-               });
+  registry.Add<domains::double_integrator::DoubleIntegratorDomain>(
+      "double-integrator",
+      "a point mass with bounded acceleration reaches a goal past a round obstacle "
+      "(paper Section 6, Table 1)");
 }
 }  // namespace secure::plugins

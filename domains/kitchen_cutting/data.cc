@@ -9,6 +9,7 @@
 #include <numeric>
 #include <optional>
 
+#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
@@ -130,19 +131,16 @@ void KitchenNearDangerousOptions::ApplyYaml(const YAML::Node& node, const std::s
   Fields().Apply(node, source);
 }
 
-const char* ScenarioName(NearDangerousScenario s) {
-  switch (s) {
-    case NearDangerousScenario::kStroke:
-      return "stroke into the arm";
-    case NearDangerousScenario::kArm:
-      return "arm into the blade";
-    case NearDangerousScenario::kBlade:
-      return "blade into the resting arm";
-    case NearDangerousScenario::kReach:
-      return "the person's reach, before contact";
-  }
-  return "?";
-}
+namespace {
+constexpr EnumTable<NearDangerousScenario, 4> kScenarioNames{{
+    {NearDangerousScenario::kStroke, "stroke into the arm"},
+    {NearDangerousScenario::kArm, "arm into the blade"},
+    {NearDangerousScenario::kBlade, "blade into the resting arm"},
+    {NearDangerousScenario::kReach, "the person's reach, before contact"},
+}};
+}  // namespace
+
+const char* ScenarioName(NearDangerousScenario s) { return NameOf(kScenarioNames, s); }
 
 // ---------------------------------------------------------------------------------------------
 // The person's rule (data.h)

@@ -183,11 +183,9 @@ experiments::ExperimentOptions KitchenCuttingDomain::Preset() const {
 
 namespace secure::plugins {
 void Register_kitchen_cutting(experiments::DomainRegistry& registry) {
-  registry.Add("kitchen-cutting",
-               "Kitchen cutting: a Franka arm cuts through a line on a board while a simulated "
-               "person's arm reaches nearby (MuJoCo; paper Section 7.1 in simulation)",
-               [](experiments::Profile p) {
-                 return std::make_unique<domains::kitchen_cutting::KitchenCuttingDomain>(p);
-               });
+  registry.Add<domains::kitchen_cutting::KitchenCuttingDomain>(
+      "kitchen-cutting",
+      "Kitchen cutting: a Franka arm cuts through a line on a board while a simulated "
+      "person's arm reaches nearby (MuJoCo; paper Section 7.1 in simulation)");
 }
 }  // namespace secure::plugins

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <numeric>
 
+#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 #include "secure/common/yaml_fields.h"
@@ -221,19 +222,16 @@ YamlFields PandaNearDangerousOptions::Fields() {
 
 SECURE_YAML_JSON_FROM_FIELDS(PandaNearDangerousOptions)
 
-const char* ScenarioName(NearDangerousScenario s) {
-  switch (s) {
-    case NearDangerousScenario::kUpper:
-      return "upper";
-    case NearDangerousScenario::kFastX:
-      return "fast-x";
-    case NearDangerousScenario::kFastZ:
-      return "fast-z";
-    case NearDangerousScenario::kBoth:
-      return "both";
-  }
-  return "?";
-}
+namespace {
+constexpr EnumTable<NearDangerousScenario, 4> kScenarioNames{{
+    {NearDangerousScenario::kUpper, "upper"},
+    {NearDangerousScenario::kFastX, "fast-x"},
+    {NearDangerousScenario::kFastZ, "fast-z"},
+    {NearDangerousScenario::kBoth, "both"},
+}};
+}  // namespace
+
+const char* ScenarioName(NearDangerousScenario s) { return NameOf(kScenarioNames, s); }
 
 // ---------------------------------------------------------------------------------------------
 // Demonstrations

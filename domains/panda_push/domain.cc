@@ -245,11 +245,9 @@ double ObservedBlockTilt(const Eigen::Ref<const Eigen::VectorXf>& o) {
 
 namespace secure::plugins {
 void Register_panda_push(experiments::DomainRegistry& registry) {
-  registry.Add("panda-push",
-               "Panda Arm Push: a Franka arm pushes a tall block to a target without toppling it "
-               "(MuJoCo; paper Section 6)",
-               [](experiments::Profile p) {
-                 return std::make_unique<domains::panda_push::PandaPushDomain>(p);
-               });
+  registry.Add<domains::panda_push::PandaPushDomain>(
+      "panda-push",
+      "Panda Arm Push: a Franka arm pushes a tall block to a target without toppling it "
+      "(MuJoCo; paper Section 6)");
 }
 }  // namespace secure::plugins

@@ -359,9 +359,7 @@ std::optional<experiments::ReportHints> ToyCartDomain::MakeReportHints() const {
 namespace secure::plugins {
 // The plug-in's registration (secure_add_domain(toy_cart ...): Register_<name>).
 void Register_toy_cart(experiments::DomainRegistry& registry) {
-  registry.Add("toy-cart", "a cart must stop in front of a wall (the example plug-in)",
-               [](experiments::Profile p) {
-                 return std::make_unique<examples::toy_cart::ToyCartDomain>(p);
-               });
+  registry.Add<examples::toy_cart::ToyCartDomain>(
+      "toy-cart", "a cart must stop in front of a wall (the example plug-in)");
 }
 }  // namespace secure::plugins

@@ -5,6 +5,7 @@
 //   inline constexpr EnumTable<Activation, 2> kActivationNames{{
 //       {Activation::kRelu, "relu"}, {Activation::kTanh, "tanh"}}};
 //   ToString(kActivationNames, a);  FromString(kActivationNames, "tanh", "activation");
+//   NameOf(kActivationNames, a);  // the same name as a const char*
 
 #include <array>
 #include <string>
@@ -23,6 +24,15 @@ std::string ToString(const EnumTable<E, N>& table, E value) {
   for (const auto& [v, name] : table)
     if (v == value) return std::string(name);
   SECURE_INTERNAL_CHECK(false, "enum value missing from its name table");
+}
+
+/// The name of `value` as a C string (the table's names are string literals), or `unknown` if the
+/// table lacks it: for names kept as `const char*` (reports, labels, benchmarks).
+template <typename E, std::size_t N>
+const char* NameOf(const EnumTable<E, N>& table, E value, const char* unknown = "?") {
+  for (const auto& [v, name] : table)
+    if (v == value) return name.data();
+  return unknown;
 }
 
 /// Parses `text`; `what` names the field in the error ("activation = 'sigmoid', must be one of

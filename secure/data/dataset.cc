@@ -263,29 +263,35 @@ std::vector<std::vector<long>> RandomSplit(long n, const std::vector<double>& fr
   return parts;
 }
 
+namespace {
+// The check SelectColumns and SelectRows share: every index in [0, size), else the first that is
+// not is named ("<what>: index 7 (entry 2) is outside [0, 5)").
+template <class Index>
+void CheckSelection(const std::vector<Index>& indices, Eigen::Index size, const char* what) {
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    const Index index = indices[k];
+    SECURE_CHECK(index >= 0 && index < size,
+                 what << ": index " << index << " (entry " << k << ") is outside [0, " << size
+                      << ")");
+  }
+}
+}  // namespace
+
 Eigen::MatrixXf SelectColumns(const Eigen::Ref<const Eigen::MatrixXf>& states,
                               const std::vector<long>& indices) {
+  CheckSelection(indices, states.cols(), "select columns");
   Eigen::MatrixXf out(states.rows(), static_cast<Eigen::Index>(indices.size()));
-  for (std::size_t k = 0; k < indices.size(); ++k) {
-    const long index = indices[k];
-    SECURE_CHECK(index >= 0 && index < states.cols(),
-                 "select columns: index " << index << " (entry " << k << ") is outside [0, "
-                                          << states.cols() << ")");
-    out.col(static_cast<Eigen::Index>(k)) = states.col(index);
-  }
+  for (std::size_t k = 0; k < indices.size(); ++k)
+    out.col(static_cast<Eigen::Index>(k)) = states.col(indices[k]);
   return out;
 }
 
 Eigen::MatrixXf SelectRows(const Eigen::Ref<const Eigen::MatrixXf>& states,
                            const std::vector<int>& indices) {
+  CheckSelection(indices, states.rows(), "select rows");
   Eigen::MatrixXf out(static_cast<Eigen::Index>(indices.size()), states.cols());
-  for (std::size_t k = 0; k < indices.size(); ++k) {
-    const int index = indices[k];
-    SECURE_CHECK(index >= 0 && index < states.rows(),
-                 "select rows: index " << index << " (entry " << k << ") is outside [0, "
-                                       << states.rows() << ")");
-    out.row(static_cast<Eigen::Index>(k)) = states.row(index);
-  }
+  for (std::size_t k = 0; k < indices.size(); ++k)
+    out.row(static_cast<Eigen::Index>(k)) = states.row(indices[k]);
   return out;
 }
 

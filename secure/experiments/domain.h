@@ -326,6 +326,14 @@ class DomainRegistry {
 
   /// Adds a domain. @throws secure::Error if the name is empty, malformed or taken.
   void Add(const std::string& name, const std::string& summary, DomainFactory factory);
+  /// Adds the domain class D, made as D(profile) (a plug-in's registration:
+  /// `registry.Add<MyDomain>("my-domain", "...")`). @throws secure::Error as Add above.
+  template <class D>
+  void Add(const std::string& name, const std::string& summary) {
+    Add(name, summary, [](Profile profile) -> std::unique_ptr<Domain> {
+      return std::make_unique<D>(profile);
+    });
+  }
   /// The domain `name` with its options for `profile`. @throws secure::Error naming `name` and
   /// listing the registered domains if there is none.
   std::unique_ptr<Domain> Make(const std::string& name, Profile profile = Profile::kFull) const;

@@ -3,22 +3,21 @@
 #include <algorithm>
 #include <cmath>
 
+#include "secure/common/enum_strings.h"
 #include "secure/common/error.h"
 #include "secure/common/option_check.h"
 
 namespace secure::nn {
 
-const char* ToString(StopReason reason) {
-  switch (reason) {
-    case StopReason::kMaxEpochs:
-      return "max_epochs";
-    case StopReason::kEarlyStopping:
-      return "early_stopping";
-    case StopReason::kCallback:
-      return "callback";
-  }
-  return "?";
-}
+namespace {
+constexpr EnumTable<StopReason, 3> kStopReasonNames{{
+    {StopReason::kMaxEpochs, "max_epochs"},
+    {StopReason::kEarlyStopping, "early_stopping"},
+    {StopReason::kCallback, "callback"},
+}};
+}  // namespace
+
+const char* ToString(StopReason reason) { return NameOf(kStopReasonNames, reason); }
 
 void TrainingLoopOptions::Validate() const {
   SECURE_CHECK_FIELD(max_epochs > 0, "TrainingLoopOptions", "max_epochs", max_epochs, "> 0");

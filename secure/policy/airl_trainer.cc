@@ -229,9 +229,8 @@ class AirlRun {
 
     watch.Restart();
     if (joint_ != nullptr) joint_->Prepare(rollout_.obs, act_dim_);
-    internal::PpoUpdate(o_, episodes_, horizon_,
-                        {policy_, value_, disc_, *policy_opt_, *value_opt_}, expert_, joint_,
-                        reward_stat_, x, x_next, a, ppo_rng, stats);
+    internal::PpoUpdate(o_, episodes_, horizon_, Modules(), expert_, joint_, reward_stat_, x,
+                        x_next, a, ppo_rng, stats);
     timing.ppo_seconds += watch.Seconds();
 
     ++completed_;
@@ -292,7 +291,7 @@ class AirlRun {
   }
 
   internal::CheckpointModules Modules() {
-    return {policy_, value_, disc_, *policy_opt_, *value_opt_, *disc_opt_, normalizer_};
+    return {{policy_, value_, disc_, *policy_opt_, *value_opt_}, *disc_opt_, normalizer_};
   }
 
   const AirlOptions& o_;

@@ -170,13 +170,15 @@ std::vector<double> Midranks(const std::vector<double>& values) {
 
 // ---------------------------------------------------------------------------------------------
 
-nlohmann::json MannWhitneyResult::ToJson() const {
-  return {{"u", u},
-          {"p_value", p_value},
-          {"method", method},
-          {"z", std::isfinite(z) ? nlohmann::json(z) : nlohmann::json(nullptr)},
-          {"rank_biserial", rank_biserial}};
+nlohmann::json RankTestResult::WithRankTestFields(nlohmann::json fields) const {
+  fields["p_value"] = p_value;
+  fields["method"] = method;
+  fields["z"] = std::isfinite(z) ? nlohmann::json(z) : nlohmann::json(nullptr);
+  fields["rank_biserial"] = rank_biserial;
+  return fields;
 }
+
+nlohmann::json MannWhitneyResult::ToJson() const { return WithRankTestFields({{"u", u}}); }
 
 MannWhitneyResult MannWhitneyU(const std::vector<double>& a, const std::vector<double>& b,
                                MannWhitneyMethod method) {
@@ -477,15 +479,11 @@ FriedmanResult Friedman(const std::vector<std::vector<double>>& data) {
 // ---------------------------------------------------------------------------------------------
 
 nlohmann::json WilcoxonResult::ToJson() const {
-  return {{"statistic", statistic},
-          {"w_plus", w_plus},
-          {"w_minus", w_minus},
-          {"n", n},
-          {"zeros", zeros},
-          {"p_value", p_value},
-          {"method", method},
-          {"z", std::isfinite(z) ? nlohmann::json(z) : nlohmann::json(nullptr)},
-          {"rank_biserial", rank_biserial}};
+  return WithRankTestFields({{"statistic", statistic},
+                             {"w_plus", w_plus},
+                             {"w_minus", w_minus},
+                             {"n", n},
+                             {"zeros", zeros}});
 }
 
 WilcoxonResult WilcoxonSignedRank(const std::vector<double>& x, const std::vector<double>& y,

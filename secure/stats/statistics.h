@@ -76,18 +76,29 @@ inline constexpr EnumTable<MannWhitneyMethod, 3> kMannWhitneyMethodNames{{
 /// The samples at which kAuto still uses the exact distribution (both samples at most this big).
 inline constexpr long kMannWhitneyExactMaxSize = 50;
 
-struct MannWhitneyResult {
+/// What the two rank tests (Mann–Whitney U, Wilcoxon signed-rank) report alike; each result
+/// adds its statistic and says what its z and rank_biserial measure.
+struct RankTestResult {
+  double p_value = 1;  // two-sided
+  std::string method;  // the method used: "exact" or "asymptotic" (never "auto")
+  // Asymptotic only: the standard score of the statistic. NaN for the exact method (null in
+  // JSON).
+  double z = 0;
+  // Effect size in [-1, 1]: 0 for no tendency.
+  double rank_biserial = 0;
+
+ protected:
+  /// `fields` (the test's own) with p_value, method, z and rank_biserial added.
+  nlohmann::json WithRankTestFields(nlohmann::json fields) const;
+};
+
+/// z: the continuity-corrected standard score of U, signed as U - n_a n_b / 2 (positive when a
+/// tends to be larger). rank_biserial: 2U / (n_a n_b) - 1, +1 if every value of a exceeds every
+/// value of b, -1 if every value of b exceeds every value of a.
+struct MannWhitneyResult : RankTestResult {
   // U of the first sample (SciPy's convention): the number of pairs (x in a, y in b) with x > y,
   // plus half the number of tied pairs. U(a, b) + U(b, a) = n_a n_b.
   double u = 0;
-  double p_value = 1;  // two-sided
-  std::string method;  // the method used: "exact" or "asymptotic" (never "auto")
-  // Asymptotic only: the continuity-corrected standard score of U, signed as U - n_a n_b / 2
-  // (positive when a tends to be larger). NaN for the exact method (null in JSON).
-  double z = 0;
-  // Effect size 2U / (n_a n_b) - 1 in [-1, 1]: +1 if every value of a exceeds every value of b,
-  // -1 if every value of b exceeds every value of a, 0 for no tendency.
-  double rank_biserial = 0;
   nlohmann::json ToJson() const;
 };
 
@@ -238,20 +249,16 @@ inline constexpr EnumTable<WilcoxonMethod, 3> kWilcoxonMethodNames{{
 /// The number of differences up to which kAuto still uses the exact distribution.
 inline constexpr long kWilcoxonExactMaxSize = 50;
 
-struct WilcoxonResult {
+/// z: (w_plus - n (n + 1) / 4) / sigma, positive when x tends to be larger (SciPy reports
+/// -|z|). rank_biserial: the matched-pairs rank-biserial correlation (w_plus - w_minus) /
+/// (w_plus + w_minus), +1 if every non-zero difference is positive, -1 if every one is negative;
+/// 0 if n = 0.
+struct WilcoxonResult : RankTestResult {
   double statistic = 0;  // min(w_plus, w_minus): SciPy's two-sided statistic
   double w_plus = 0;     // sum of the midranks of |d| over the positive differences d = x - y
   double w_minus = 0;    // ... over the negative ones; w_plus + w_minus = n (n + 1) / 2
   long n = 0;            // non-zero differences: the ones ranked
   long zeros = 0;        // zero differences (x = y exactly), dropped before ranking
-  double p_value = 1;    // two-sided
-  std::string method;    // the method used: "exact" or "asymptotic" (never "auto")
-  // Asymptotic only: (w_plus - n (n + 1) / 4) / sigma, positive when x tends to be larger (SciPy
-  // reports -|z|). NaN for the exact method (null in JSON).
-  double z = 0;
-  // Matched-pairs rank-biserial correlation (w_plus - w_minus) / (w_plus + w_minus) in [-1, 1]:
-  // +1 if every non-zero difference is positive, -1 if every one is negative; 0 if n = 0.
-  double rank_biserial = 0;
   nlohmann::json ToJson() const;
 };
 

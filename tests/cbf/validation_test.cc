@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "secure/common/error.h"
+#include "tests/test_util.h"
 
 namespace secure::cbf {
 namespace {
@@ -105,13 +106,11 @@ TEST(ValidateOnGridTest, RejectsBarriersOfTheWrongDimension) {
     void DoEvaluate(const Eigen::Ref<const Eigen::MatrixXf>&,
                     Eigen::Ref<Eigen::VectorXf>) override {}
   };
-  try {
-    ValidateAgainstGroundTruth([] { return std::make_unique<ThreeD>(); }, di::GroundTruth{}, SmallGrid());
-    FAIL() << "expected an error";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("three-d takes 3-dimensional states"), std::string::npos)
-        << e.what();
-  }
+  EXPECT_HAS(test::ErrorOf([] {
+               ValidateAgainstGroundTruth([] { return std::make_unique<ThreeD>(); },
+                                          di::GroundTruth{}, SmallGrid());
+             }),
+             "three-d takes 3-dimensional states");
 }
 
 TEST(ValidateOnGridTest, AnErrorInAWorkerThreadReachesTheCaller) {

@@ -66,6 +66,13 @@ TEST(EnumStringsTest, ErrorListsEveryChoiceOfTheTable) {
   EXPECT_HAS(message, "red, green, blue");
 }
 
+TEST(EnumStringsTest, NameOfIsTheTablesNameAsACStringElseTheUnknownText) {
+  EXPECT_STREQ(NameOf(kColorNames, Color::kGreen), "green");
+  EXPECT_STREQ(NameOf(kColorNames, Color::kBlue), "blue");
+  EXPECT_STREQ(NameOf(kColorNames, static_cast<Color>(42)), "?");
+  EXPECT_STREQ(NameOf(kColorNames, static_cast<Color>(42), "none"), "none");
+}
+
 TEST(EnumStringsDeathTest, ToStringOfAValueMissingFromTheTableAborts) {
   // A value outside the table is a bug in our code (an internal check), not a user error.
   EXPECT_DEATH(ToString(kActivationNames, static_cast<Activation>(42)), "missing from its name");

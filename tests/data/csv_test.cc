@@ -31,13 +31,7 @@ namespace fs = std::filesystem;
 class CsvTest : public secure::test::TempDirTest {};
 
 using secure::test::ErrorOf;
-
-void ExpectContainsAll(const std::string& message, const std::vector<std::string>& parts) {
-  for (const std::string& part : parts) {
-    EXPECT_NE(message.find(part), std::string::npos)
-        << "message '" << message << "' lacks '" << part << "'";
-  }
-}
+using secure::test::ExpectContainsAll;
 
 constexpr char kHeader[] = "x,y,vx,vy\n";
 

@@ -27,11 +27,9 @@ using secure::test::Hdf5TestFile;
 
 class Hdf5Test : public secure::test::TempDirTest {};
 
+// The shared check, and the message is one line.
 void ExpectContainsAll(const std::string& message, const std::vector<std::string>& parts) {
-  for (const std::string& part : parts) {
-    EXPECT_NE(message.find(part), std::string::npos)
-        << "message '" << message << "' lacks '" << part << "'";
-  }
+  test::ExpectContainsAll(message, parts);
   EXPECT_EQ(message.find('\n'), std::string::npos) << "not one line: " << message;
 }
 

@@ -42,11 +42,11 @@ TEST(ShieldTest, RandomSafeAggregationReturnsOneOfTheSafeSamples) {
   EXPECT_GT(chosen.size(), 5u);  // different seeds, different choices
 }
 
-TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
-  DoubleIntegrator sys;
-  // Near the obstacle, so that the policy's draw is safe for some seeds and not for others.
-  const Eigen::VectorXf state = Vec({5.0f, 7.3f, 0.0f, -0.6f});
-  const Eigen::VectorXf mu = Vec({0.0f, -1.0f}), sigma = Vec({3.0f, 3.0f});
+// The policy-draw tests' loop: for seeds 0..19 a kPolicyDraw shield on `sys` (its barrier and
+// dynamics), given to `decide(options, shield)`, which decides, checks and returns whether the
+// policy's draw was safe; both kinds of draw must occur.
+template <class System, class Decide>
+void ForPolicyDrawSeeds(System& sys, const Decide& decide) {
   int safe_draws = 0, unsafe_draws = 0;
   for (std::uint64_t seed = 0; seed < 20; ++seed) {
     SCOPED_TRACE("seed " + std::to_string(seed));
@@ -54,13 +54,24 @@ TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
     options.seed = seed;
     options.aggregation = Aggregation::kPolicyDraw;
     Shield shield(options, sys.barrier, sys.dynamics);
+    ++(decide(options, shield) ? safe_draws : unsafe_draws);
+  }
+  EXPECT_GT(safe_draws, 0);
+  EXPECT_GT(unsafe_draws, 0);
+}
+
+TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
+  DoubleIntegrator sys;
+  // Near the obstacle, so that the policy's draw is safe for some seeds and not for others.
+  const Eigen::VectorXf state = Vec({5.0f, 7.3f, 0.0f, -0.6f});
+  const Eigen::VectorXf mu = Vec({0.0f, -1.0f}), sigma = Vec({3.0f, 3.0f});
+  ForPolicyDrawSeeds(sys, [&](const ShieldOptions& options, Shield& shield) {
     const Decision d = shield.Decide(state, mu, sigma);
     // The policy's draw is the first sample of round 1.
-    Rng rng(seed);
+    Rng rng(options.seed);
     const Eigen::MatrixXf samples = DrawRounds(rng, mu, sigma, options.num_samples);
     const double g0 = IndependentG(sys.independent, sys.dynamics, options, state, samples.col(0));
     if (g0 >= 0.0) {
-      ++safe_draws;
       EXPECT_TRUE(BitEqual(d.action, samples.col(0))) << d.action.transpose();
       EXPECT_EQ(d.status, Status::kSafe);
       EXPECT_EQ(d.iterations, 1);
@@ -68,18 +79,16 @@ TEST(ShieldTest, PolicyDrawAggregationReturnsThePolicysSafeDrawElseAlgorithm1) {
       EXPECT_EQ(d.fallback, Fallback::kNone);
       EXPECT_NEAR(d.g, g0, 1e-9 * std::max(1.0, std::abs(g0)));
       EXPECT_NEAR(d.distance_to_mean, (samples.col(0) - mu).norm(), 1e-6);
-    } else {
-      // An unsafe draw: exactly Algorithm 1's decision (same draws, same seed).
-      ++unsafe_draws;
-      ShieldOptions mean_options = options;
-      mean_options.aggregation = Aggregation::kMean;
-      Shield mean_shield(mean_options, sys.barrier, sys.dynamics);
-      EXPECT_TRUE(d.intervened);
-      ExpectSameDecision(d, mean_shield.Decide(state, mu, sigma));
+      return true;
     }
-  }
-  EXPECT_GT(safe_draws, 0);
-  EXPECT_GT(unsafe_draws, 0);
+    // An unsafe draw: exactly Algorithm 1's decision (same draws, same seed).
+    ShieldOptions mean_options = options;
+    mean_options.aggregation = Aggregation::kMean;
+    Shield mean_shield(mean_options, sys.barrier, sys.dynamics);
+    EXPECT_TRUE(d.intervened);
+    ExpectSameDecision(d, mean_shield.Decide(state, mu, sigma));
+    return false;
+  });
 }
 
 TEST(ShieldTest, PolicyDrawEvaluatesOnlyTheDrawWhenItIsSafe) {
@@ -87,30 +96,21 @@ TEST(ShieldTest, PolicyDrawEvaluatesOnlyTheDrawWhenItIsSafe) {
   CountedHalfLine sys;
   long& evaluated = sys.evaluated;
   const Eigen::VectorXf state = Vec({0.0f}), mu = Vec({0.0f}), sigma = Vec({1.0f});
-  int safe_draws = 0, unsafe_draws = 0;
-  for (std::uint64_t seed = 0; seed < 20; ++seed) {
-    SCOPED_TRACE("seed " + std::to_string(seed));
-    ShieldOptions options;
-    options.seed = seed;
-    options.aggregation = Aggregation::kPolicyDraw;
-    Shield shield(options, sys.barrier, sys.dynamics);
+  ForPolicyDrawSeeds(sys, [&](const ShieldOptions& options, Shield& shield) {
     evaluated = 0;
     const Decision d = shield.Decide(state, mu, sigma);
-    Rng rng(seed);
+    Rng rng(options.seed);
     const float a0 = DrawRounds(rng, mu, sigma, options.num_samples)(0, 0);
     if (a0 <= 1.0f) {
-      ++safe_draws;
       EXPECT_EQ(evaluated, 2);  // h(s) and h(T(s, a0))
       EXPECT_EQ(d.action[0], a0);
       EXPECT_EQ(d.safe_ratio, 1.0);
-    } else {
-      ++unsafe_draws;
-      EXPECT_GE(evaluated, 2 + options.num_samples);  // the draw, then the whole round
-      EXPECT_LE(d.action[0], 1.0f);
+      return true;
     }
-  }
-  EXPECT_GT(safe_draws, 0);
-  EXPECT_GT(unsafe_draws, 0);
+    EXPECT_GE(evaluated, 2 + options.num_samples);  // the draw, then the whole round
+    EXPECT_LE(d.action[0], 1.0f);
+    return false;
+  });
 }
 
 TEST(ShieldTest, PolicyMeanAggregationReturnsASafeMeanElseAlgorithm1) {

@@ -24,6 +24,7 @@
 #include "secure/cbf/car_barrier.h"
 #include "domains/derby/derby.h"
 #include "domains/derby/domain.h"
+#include "secure/common/enum_strings.h"
 #include "secure/common/rng.h"
 #include "domains/double_integrator/double_integrator.h"
 #include "secure/nn/mlp.h"
@@ -56,14 +57,12 @@ Eigen::VectorXf RandomVector(int n, double lo, double hi) {
 /// Demolition Derby's constant-velocity shield model with a random per-car barrier.
 enum class SystemKind { kDoubleIntegratorTruth, kDoubleIntegratorNet, kDerbyCarNet };
 
-const char* Name(SystemKind kind) {
-  switch (kind) {
-    case SystemKind::kDoubleIntegratorTruth: return "double integrator, ground truth";
-    case SystemKind::kDoubleIntegratorNet: return "double integrator, barrier net";
-    case SystemKind::kDerbyCarNet: return "derby, per-car barrier";
-  }
-  return "?";
-}
+constexpr EnumTable<SystemKind, 3> kSystemKindNames{{
+    {SystemKind::kDoubleIntegratorTruth, "double integrator, ground truth"},
+    {SystemKind::kDoubleIntegratorNet, "double integrator, barrier net"},
+    {SystemKind::kDerbyCarNet, "derby, per-car barrier"},
+}};
+const char* Name(SystemKind kind) { return NameOf(kSystemKindNames, kind); }
 
 struct System {
   std::unique_ptr<cbf::BarrierNet> net;

@@ -185,6 +185,25 @@ TEST(FriedmanTest, RejectsBadInput) {
 // ---------------------------------------------------------------------------------------------
 // Wilcoxon signed-rank
 
+// SciPy's method='approx' result for differences that are all negative or zero (W+ = 0), with
+// zeros or ties: the zeros dropped, n ranked, W- and the p-value and zstatistic.
+struct ScipyAllNegative {
+  long zeros, n;
+  double w_minus, p, z;
+};
+
+// `r` is the asymptotic result `e`: statistic = W+ = 0, rank-biserial -1.
+void ExpectAllNegativeApprox(const WilcoxonResult& r, const ScipyAllNegative& e) {
+  EXPECT_EQ(r.method, "asymptotic");
+  EXPECT_EQ(r.zeros, e.zeros);
+  EXPECT_EQ(r.n, e.n);
+  EXPECT_EQ(r.statistic, 0.0);
+  EXPECT_EQ(r.w_minus, e.w_minus);
+  EXPECT_REL(r.p_value, e.p, kRefTol);
+  EXPECT_REL(r.z, e.z, kRefTol);
+  EXPECT_EQ(r.rank_biserial, -1.0);
+}
+
 TEST(WilcoxonTest, SmallExactCaseByHandAndScipy) {
   // d = 1.5, -0.5, 2.5, 3.5, 4.5, 5.5: ranks 2, 1, 3, 4, 5, 6, W- = 1, W+ = 20. Of the 2^6 sign
   // patterns, 2 have W+ >= 20 (W- = 0 or 1): p = 2 * 2 / 64.
@@ -244,14 +263,7 @@ TEST(WilcoxonTest, ZeroDifferencesAreDroppedAndSwitchToAsymptotic) {
   // Zeros and ties: stats.wilcoxon(col(L, 0), col(L, 1)) -> (0.0, 0.005749708623335458),
   // method='approx' gives the same, zstatistic -2.7617238536949698 (W+ = 0, W- = 45, n = 9).
   const WilcoxonResult l = WilcoxonSignedRank(Column(kRatings, 0), Column(kRatings, 1));
-  EXPECT_EQ(l.method, "asymptotic");
-  EXPECT_EQ(l.zeros, 3);
-  EXPECT_EQ(l.n, 9);
-  EXPECT_EQ(l.statistic, 0.0);
-  EXPECT_EQ(l.w_minus, 45.0);
-  EXPECT_REL(l.p_value, 0.005749708623335458, kRefTol);
-  EXPECT_REL(l.z, -2.7617238536949698, kRefTol);
-  EXPECT_EQ(l.rank_biserial, -1.0);
+  ExpectAllNegativeApprox(l, {3, 9, 45.0, 0.005749708623335458, -2.7617238536949698});
 }
 
 TEST(WilcoxonTest, TiesWithoutZerosUseTheNormalApproximationUnlikeScipy110) {
@@ -261,13 +273,7 @@ TEST(WilcoxonTest, TiesWithoutZerosUseTheNormalApproximationUnlikeScipy110) {
   // approximation: stats.wilcoxon(col(L, 0), col(L, 3), method='approx')
   //   -> (0.0, 0.0013155275236832191), zstatistic -3.2125707287191205
   const WilcoxonResult r = WilcoxonSignedRank(Column(kRatings, 0), Column(kRatings, 3));
-  EXPECT_EQ(r.method, "asymptotic");
-  EXPECT_EQ(r.zeros, 0);
-  EXPECT_EQ(r.n, 12);
-  EXPECT_EQ(r.statistic, 0.0);
-  EXPECT_EQ(r.w_minus, 78.0);
-  EXPECT_REL(r.p_value, 0.0013155275236832191, kRefTol);
-  EXPECT_REL(r.z, -3.2125707287191205, kRefTol);
+  ExpectAllNegativeApprox(r, {0, 12, 78.0, 0.0013155275236832191, -3.2125707287191205});
   // All differences equal: stats.wilcoxon([2, 3, 4, 5, 6], [1, 2, 3, 4, 5]) -> (0.0, 0.0625)
   // (exact), method='approx' -> (0.0, 0.025347318677468252), zstatistic -2.23606797749979.
   const WilcoxonResult equal = WilcoxonSignedRank({2, 3, 4, 5, 6}, {1, 2, 3, 4, 5});

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <limits>
 #include <string>
 #include <vector>
@@ -15,12 +16,6 @@
 
 namespace secure::domains::coffee_placing {
 namespace {
-
-long Count(const std::vector<int>& labels, int value) {
-  long n = 0;
-  for (int l : labels) n += l == value ? 1 : 0;
-  return n;
-}
 
 // The generator's states (safe and unsafe) side by side, and how many answers differ from
 // `expected` (1 for the first `safe` columns, 0 after).
@@ -69,7 +64,7 @@ TEST(CoffeeLabeller, IsDeterministicPerSeedAndFlipsAtTheConfiguredRate) {
   for (std::size_t i = 0; i < truth.size(); ++i) flipped += a[i] != truth[i] ? 1 : 0;
   // Binomial(8000, 0.2): sd 0.0045; the seed is fixed, the band is 4.5 sd wide either side.
   EXPECT_NEAR(double(flipped) / double(truth.size()), 0.2, 0.02);
-  EXPECT_EQ(Count(a, -1), 0);  // the person always answers
+  EXPECT_EQ(std::count(a.begin(), a.end(), -1), 0);  // the person always answers
 }
 
 // The person looks at the arm, not at the row's clearance number: a row whose clearance feature

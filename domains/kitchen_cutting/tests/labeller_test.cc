@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -16,12 +17,6 @@
 
 namespace secure::domains::kitchen_cutting {
 namespace {
-
-long Count(const std::vector<int>& labels, int value) {
-  long n = 0;
-  for (int l : labels) n += l == value ? 1 : 0;
-  return n;
-}
 
 // The generator's states with its own labels: every near-dangerous state satisfies a clause of
 // the rule (the generator accepts a draw by it), so the labeller calls it near-dangerous; the
@@ -36,9 +31,10 @@ TEST(KitchenLabeller, AgreesWithTheGeneratorsOwnLabels) {
   const experiments::DomainData d = domain.GenerateData(4000);
   const std::vector<int> near = domain.Label(d.near_dangerous.states, 1);
   const std::vector<int> safe = domain.Label(d.safe.states, 1);
-  EXPECT_EQ(Count(near, 0), d.near_dangerous.size());
-  EXPECT_GE(Count(safe, 1), d.safe.size() - 15);
-  EXPECT_EQ(Count(near, -1) + Count(safe, -1), 0);  // the person always answers
+  EXPECT_EQ(std::count(near.begin(), near.end(), 0), d.near_dangerous.size());
+  EXPECT_GE(std::count(safe.begin(), safe.end(), 1), d.safe.size() - 15);
+  // The person always answers.
+  EXPECT_EQ(std::count(near.begin(), near.end(), -1) + std::count(safe.begin(), safe.end(), -1), 0);
 }
 
 // Scenario (d) (the person's real reach, off by default) is made from the reach's future, which

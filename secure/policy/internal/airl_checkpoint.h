@@ -15,6 +15,7 @@
 #include "secure/nn/mlp.h"
 #include "secure/nn/torch_mlp.h"
 #include "secure/policy/airl_trainer.h"
+#include "secure/policy/internal/airl_ppo.h"
 #include "secure/policy/internal/torch_policy.h"
 
 namespace secure::policy::internal {
@@ -36,13 +37,10 @@ nlohmann::json TrainingShapingOptions(const AirlOptions& o);
 /// A learning-curve row from its ToJson() (missing or non-numeric fields: NaN).
 AirlIterationStats StatsFromJson(const nlohmann::json& j);
 
-/// What a checkpoint's archive holds besides the metadata.
-struct CheckpointModules {
-  TorchGaussian& policy;
-  nn::TorchMlp& value;
-  AirlDiscriminator& disc;
-  torch::optim::Adam& policy_opt;
-  torch::optim::Adam& value_opt;
+/// What a checkpoint's archive holds besides the metadata: what PPO updates (the policy, the
+/// value net, the discriminator, their optimisers) and the discriminator's optimiser and the
+/// normaliser.
+struct CheckpointModules : PpoNets {
   torch::optim::Adam& disc_opt;
   nn::Normalizer& normalizer;
 };
