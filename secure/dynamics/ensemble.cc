@@ -275,6 +275,16 @@ void PessimisticBarrier::DoEvaluateStates(const Eigen::Ref<const Eigen::MatrixXf
   }
   const Eigen::Index m = states.cols();
   const int k = model_.num_members();
+  if (options_.linear && options_.aggregate == PessimismOptions::Aggregate::kMeanStd &&
+      options_.kappa == 0) {
+    // The members' first-order deviations through ∇h(s) average to zero around their mean, so
+    // mean − 0·std is h(s̄⁺) itself: no gradient, no per-member values.
+    if (dense)
+      inner_->EvaluateDense(states, h);
+    else
+      inner_->Evaluate(states, h);
+    return;
+  }
   if (options_.linear) {
     LinearMembers(states, h, dense);
   } else if (dense) {

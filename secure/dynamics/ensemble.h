@@ -47,7 +47,8 @@ inline constexpr int kMaxHold = 20;
 ///               with s̄⁺ the members' mean: h on the M mean states plus one gradient per state s
 ///               (cached), so the decision costs about what the hand-written model's does.
 ///               An approximation: exact for a barrier affine in s, otherwise off by the
-///               curvature times the members' spread.
+///               curvature times the members' spread. With mean-std and κ = 0 the deviations
+///               average out: h is h(s̄⁺), with no gradient (the cheapest pessimism: M states).
 ///   hold        the action held for this many model steps inside one Step(), each member on its
 ///               own chain (s⁺_k = member k applied `hold` times), the pessimism over the
 ///               members at the end: a model that looks as far as a hand-written one that holds

@@ -401,6 +401,47 @@ TEST_F(DynamicsTest, PessimismMeanStdAndLinearOptions) {
              "mean-1.5std over the 5 members");
 }
 
+// mean-std with κ = 0 on the first-order path: the members' deviations average to zero, so h is
+// the inner h at the members' mean, from the M mean states alone (no gradient at s: the
+// finite-difference gradient of the old path evaluated 2d + 1 more states per decision).
+TEST_F(DynamicsTest, LinearMeanWithKappaZeroIsHAtTheMembersMeanWithoutAGradient) {
+  auto shared = std::make_shared<const EnsembleDynamics>(RandomEnsemble(4, 2, 5, {32, 32}, 11));
+  const EnsembleModel model(shared, 64);
+  PessimismOptions mean;
+  mean.aggregate = PessimismOptions::Aggregate::kMeanStd;
+  mean.kappa = 0;
+  mean.linear = true;
+  long columns = 0;
+  PessimisticBarrier barrier(
+      std::make_unique<CountingBarrier>(std::make_unique<QuadraticBarrier>(4), &columns), model,
+      mean);
+  QuadraticBarrier curved(4);
+  Rng rng(6);
+  const int m = 30;
+  Eigen::VectorXf s(4);
+  for (int i = 0; i < 4; ++i) s[i] = static_cast<float>(0.3 * rng.Normal());
+  const Eigen::MatrixXf actions = Normal(rng, 2, m);
+  Eigen::MatrixXf next(4, m), members(4, 5 * m);
+  model.Step(s, actions, next);
+  Eigen::VectorXf h(m), h_mean(m), h_members(5 * m);
+  barrier.Evaluate(next, h);
+  EXPECT_EQ(columns, m);
+  curved.Evaluate(next, h_mean);
+  model.StepMembers(s, actions, members);
+  curved.Evaluate(members, h_members);
+  double spread = 0;
+  for (int i = 0; i < m; ++i) {
+    EXPECT_FLOAT_EQ(h[i], h_mean[i]) << i;
+    for (int k = 1; k < 5; ++k) spread = std::max(spread, double(std::abs(h_members[k * m + i] - h_members[i])));
+  }
+  EXPECT_GT(spread, 1e-3);  // the members differ: the test would see a per-member path
+  // Off the last step it is the inner barrier, as on the other paths.
+  Eigen::VectorXf h_off(1), h_inner(1);
+  barrier.Evaluate(s, h_off);
+  curved.Evaluate(s, h_inner);
+  EXPECT_FLOAT_EQ(h_off[0], h_inner[0]);
+}
+
 // hold = H: one Step is each member applied H times from s with the action held, against the
 // double reference chained by hand; the members of the last Step are those chains' ends, so the
 // pessimistic barrier is the minimum over them; hold = 1 is the plain model, bit for bit.
