@@ -25,7 +25,7 @@ struct LabelEfficiencyCommand {
   bool quick = false, json = false, errors_from_labeller = false;
   int seeds = 0, rounds = -1, threads = 2;
   long k = 0, initial_labels = 0, pool = 0, episodes = -1, final_episodes = -1, eval_states = -1;
-  double radius = -1;
+  double radius = -1, k_growth = -1;
   std::uint64_t first_seed = 0;
 
   const Config* config = nullptr;
@@ -50,6 +50,9 @@ struct LabelEfficiencyCommand {
     AddSeedOption(cmd, "--first-seed", &first_seed, "seed i is first-seed + i");
     cmd->add_option("--rounds", rounds, "query rounds (default 8; quick 2)");
     cmd->add_option("--k", k, "queries per round (default 20; quick 10)");
+    cmd->add_option("--k-growth", k_growth,
+                    "round r asks round(k * k-growth^r) states (default 1: k every round; 2: "
+                    "labels doubling, a curve even in log(labels))");
     cmd->add_option("--initial-labels", initial_labels, "random labels to start from (default 20)");
     cmd->add_option("--pool", pool, "unlabelled candidate states per seed (default 20000)");
     cmd->add_option("--radius", radius, "diversity radius of every strategy's batch but random's");
@@ -110,6 +113,7 @@ struct LabelEfficiencyCommand {
     o.first_seed = first_seed;
     if (rounds >= 0) o.rounds = rounds;
     if (k > 0) o.k = k;
+    if (k_growth != -1) o.k_growth = k_growth;
     if (initial_labels > 0) o.initial_labels = initial_labels;
     if (pool > 0) o.pool = pool;
     if (radius >= 0) o.radius = radius;

@@ -62,8 +62,11 @@ void LabelEfficiencyOptions::Validate() const {
   SECURE_CHECK_FIELD(initial_labels >= 2 && initial_labels <= pool, T, "initial_labels",
                      initial_labels, "in [2, pool]");
   SECURE_CHECK_FIELD(rounds >= 0 && rounds <= 1000, T, "rounds", rounds, "in [0, 1000]");
-  SECURE_CHECK_FIELD(k >= 1 && initial_labels + rounds * k <= pool, T, "k", k,
-                     ">= 1, with initial_labels + rounds * k <= pool (" << pool << ")");
+  SECURE_CHECK_FIELD(std::isfinite(k_growth) && k_growth >= 1 && k_growth <= 10, T, "k_growth",
+                     k_growth, "in [1, 10]");
+  SECURE_CHECK_FIELD(k >= 1 && LabelsAtTheEnd() <= static_cast<double>(pool), T, "k", k,
+                     ">= 1, with initial_labels + the rounds' queries ("
+                         << LabelsAtTheEnd() << ") <= pool (" << pool << ")");
   SECURE_CHECK_FIELD(ensemble >= 2 && ensemble <= 64, T, "ensemble", ensemble, "in [2, 64]");
   SECURE_CHECK_FIELD(std::isfinite(radius) && radius >= 0, T, "radius", radius, ">= 0");
   SECURE_CHECK_FIELD(eval_states >= 0 && eval_states <= kMaxStates, T, "eval_states",
@@ -90,6 +93,17 @@ void LabelEfficiencyOptions::Validate() const {
   }
 }
 
+long LabelEfficiencyOptions::QueriesIn(int round) const {
+  return std::llround(static_cast<double>(k) * std::pow(k_growth, round));
+}
+
+double LabelEfficiencyOptions::LabelsAtTheEnd() const {
+  double labels = static_cast<double>(initial_labels);
+  for (int r = 0; r < rounds; ++r)
+    labels += std::round(static_cast<double>(k) * std::pow(k_growth, r));
+  return labels;
+}
+
 nlohmann::json LabelEfficiencyOptions::ToJson() const {
   std::vector<std::string> names;
   for (cbf::QueryStrategy s : strategies) names.push_back(ToString(cbf::kQueryStrategyNames, s));
@@ -113,6 +127,7 @@ nlohmann::json LabelEfficiencyOptions::ToJson() const {
           {"max_epochs", max_epochs}};
   // Absent at their defaults: the job files of older runs stay valid.
   if (errors_from_labeller) j["errors_from_labeller"] = true;
+  if (k_growth != 1) j["k_growth"] = k_growth;
   if (barrier_kind == BarrierKind::kPerObstacle) {
     j["barrier_kind"] = ToString(kBarrierKindNames, barrier_kind);
     j["per_obstacle_trainer"] = per_obstacle_trainer.ToJson();
@@ -361,7 +376,7 @@ struct Job {
       // Ask k more.
       cbf::QueryOptions q;
       q.strategy = strategy;
-      q.k = options.k;
+      q.k = options.QueriesIn(round);
       q.seed = Stream(seed, 0x9e7ULL) + static_cast<std::uint64_t>(round);
       q.diversity_radius = strategy == cbf::QueryStrategy::kRandom ? 0.0 : options.radius;
       if (strategy == cbf::QueryStrategy::kShieldRelevant && shield_run) {
@@ -478,7 +493,11 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
   if (progress != nullptr)
     *progress << "secure experiment label-efficiency on " << domain.name() << ": "
               << options.seeds << " seeds x " << S << " strategies, " << options.initial_labels
-              << " initial labels + " << options.rounds << " rounds x " << options.k << ", on "
+              << " initial labels + " << options.rounds << " rounds x " << options.k;
+  if (progress != nullptr && options.k_growth != 1)
+    *progress << " x " << options.k_growth << "^round";
+  if (progress != nullptr)
+    *progress << " (" << options.LabelsAtTheEnd() << " labels at the end), on "
               << options.threads << " threads"
               << (options.output_dir.empty() ? "" : ", writing to " + options.output_dir) << "\n";
   // Per seed: the pool and the ground-truth evaluation states (computed by the seed's jobs on
@@ -498,10 +517,11 @@ LabelEfficiencyResult RunLabelEfficiency(const Domain& domain,
         SeedData& sd = seed_data[static_cast<std::size_t>(job / S)];
         std::call_once(sd.once, [&] {
           sd.pool = domain.SampleQueryPool(options.pool, seed);
-          SECURE_CHECK(sd.pool.size() >= options.initial_labels + options.rounds * options.k,
+          SECURE_CHECK(static_cast<double>(sd.pool.size()) >= options.LabelsAtTheEnd(),
                        "label-efficiency: the " << domain.name() << " pool has " << sd.pool.size()
-                                                << " states, fewer than initial_labels + rounds "
-                                                   "* k");
+                                                << " states, fewer than the "
+                                                << options.LabelsAtTheEnd()
+                                                << " labels of the last round");
           std::unique_ptr<cbf::Barrier> truth = domain.MakeGroundTruth();
           if (truth && options.eval_states > 0) {
             sd.eval = domain.SampleQueryPool(options.eval_states, Stream(seed, 0xe5a1ULL));

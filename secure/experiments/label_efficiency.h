@@ -12,7 +12,9 @@
 //      preset where it has a ground truth, else the experiment preset's flat barrier trainer;
 //      epochs scaled so that every training takes the preset's number of gradient steps on
 //      `reference_states` states, so small label sets are not under-trained), measure it, then
-//      (before round R) ask k more: the strategy's k states of the still-unlabelled pool
+//      (before round R) ask k more (k·g^r before round r with k_growth g > 1: rounds spaced
+//      evenly in log(labels), as active-learning curves are drawn): the strategy's k states of
+//      the still-unlabelled pool
 //      (shield-relevant: of the states a shielded run with the current barrier visits, only on
 //      a domain with a shield run (an error elsewhere); margin over the pool in a round whose
 //      run visited fewer than k states;
@@ -73,6 +75,7 @@ struct LabelEfficiencyOptions {
   long initial_labels = 20;
   int rounds = 8;
   long k = 20;
+  double k_growth = 1.0;       // round r asks QueriesIn(r) = round(k · k_growth^r) states
   int ensemble = 3;            // barriers of the disagreement strategy
   double radius = 0.0;         // diversity radius of every strategy's batch but random's
   long eval_states = 200000;   // ground-truth error estimate per round (0: none)
@@ -100,8 +103,14 @@ struct LabelEfficiencyOptions {
   static LabelEfficiencyOptions For(const Domain& domain, Profile profile);
   /// @throws secure::Error naming the field and value.
   void Validate() const;
-  /// Everything that changes a result (not threads, verbose, shard, output_dir).
+  /// Everything that changes a result (not threads, verbose, shard, output_dir; k_growth only
+  /// where it is not 1, so that the runs of before it keep their task identity).
   nlohmann::json ToJson() const;
+  /// The states asked before round `round` (0-based): round(k · k_growth^round).
+  long QueriesIn(int round) const;
+  /// The labels of the last round: initial_labels plus every round's queries (in double: an
+  /// impossible schedule is a large number, not an overflow).
+  double LabelsAtTheEnd() const;
 };
 
 struct LabelEfficiencyPoint {

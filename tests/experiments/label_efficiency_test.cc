@@ -3,6 +3,7 @@
 // curve and the table say how often; a domain without a shield run rejects the strategy.
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -64,6 +65,48 @@ TEST(LabelEfficiencyTest, ShieldRelevantNeedsADomainWithAShieldRun) {
   LabelEfficiencyCurve margin;
   margin.strategy = "margin";
   EXPECT_FALSE(margin.ToJson().contains("margin_rounds"));
+}
+
+// k_growth: round r asks round(k · g^r) states, so the labels double with g = 2; the schedule
+// is checked against the pool before any training, and the options' JSON (the task identity)
+// carries k_growth only where it is not 1.
+TEST(LabelEfficiencyTest, GrowingRoundsAskKTimesGrowthToTheRound) {
+  const std::unique_ptr<Domain> d = Make("double-integrator");
+  LabelEfficiencyOptions o = LabelEfficiencyOptions::For(*d, Profile::kQuick);
+  o.strategies = {cbf::QueryStrategy::kRandom, cbf::QueryStrategy::kMargin};
+  o.seeds = 1;
+  o.initial_labels = 10;
+  o.k = 10;
+  o.rounds = 3;
+  o.final_episodes = 2;
+  o.verbose = false;
+  EXPECT_FALSE(o.ToJson().contains("k_growth"));
+  o.k_growth = 2;
+  EXPECT_EQ(o.QueriesIn(0), 10);
+  EXPECT_EQ(o.QueriesIn(2), 40);
+  EXPECT_EQ(o.LabelsAtTheEnd(), 10 + 10 + 20 + 40);
+  EXPECT_EQ(o.ToJson()["k_growth"], 2.0);
+  const LabelEfficiencyResult r = RunLabelEfficiency(*d, o, nullptr);
+  ASSERT_EQ(r.curves.size(), 2u);
+  for (const LabelEfficiencyCurve& c : r.curves) {
+    ASSERT_EQ(c.points.size(), 4u) << c.strategy;
+    EXPECT_EQ(c.points[0].labels, 10) << c.strategy;  // both classes among the first 10
+    EXPECT_EQ(c.points[1].labels, 20) << c.strategy;
+    EXPECT_EQ(c.points[2].labels, 40) << c.strategy;
+    EXPECT_EQ(c.points[3].labels, 80) << c.strategy;
+  }
+  // 1.5: 10, 15, 22.5 -> 23 (rounded half away from zero).
+  o.k_growth = 1.5;
+  EXPECT_EQ(o.QueriesIn(2), 23);
+  EXPECT_EQ(o.LabelsAtTheEnd(), 10 + 10 + 15 + 23);
+  // Bad schedules: one line naming the field and value.
+  o.k_growth = 0.5;
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "k_growth = 0.5");
+  o.k_growth = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "k_growth = nan");
+  o.k_growth = 10;
+  o.rounds = 6;  // 10 + 10 (1 + 10 + ... + 10^5) labels: more than the pool
+  EXPECT_HAS(ErrorOf([&] { o.Validate(); }), "<= pool (" + std::to_string(o.pool) + ")");
 }
 
 }  // namespace

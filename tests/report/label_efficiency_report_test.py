@@ -73,6 +73,20 @@ def label_efficiency():
               "margin's counts (paper's Table 1 at 60, random's error at 40) are not in the table")
         check("No closed-loop run" in mtext and 'id="fig-label_closed_loop"' not in mtext,
               "curves without closed-loop rates do not get a note instead of a figure")
+        check("× 2^round" not in mtext and "log scale" not in mtext,
+              "a run without k_growth is described as growing")
+    # Rounds growing by k_growth = 2: the page says so and draws labels on a log scale.
+    made_doc["options"] = {"initial_labels": 20, "rounds": 2, "k": 20, "k_growth": 2}
+    with open(os.path.join(made, "result.json"), "w") as f:
+        json.dump(made_doc, f)
+    r = run([CLI, "report", made])
+    if check(r.returncode == 0, "secure report on growing rounds failed: " + r.stderr):
+        with open(os.path.join(made, "report.html"), encoding="utf-8") as f:
+            mtext = f.read()
+        check("2 rounds of k = 20 × 2^round queries" in mtext,
+              "the page does not state the growing rounds (k × k_growth^round)")
+        check("Labels on a log scale" in mtext, "growing rounds are not drawn on a log scale")
+    del made_doc["options"]
     # A rate outside [0, 100] and a run without curves: one line naming the file and the field.
     made_doc["curves"][1]["points"][2]["under_conservative"] = 150
     with open(os.path.join(made, "result.json"), "w") as f:

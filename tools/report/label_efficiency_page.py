@@ -97,7 +97,7 @@ def mean_curve(seeds, measure):
     return labels[keep], ys.mean(axis=0), std
 
 
-def _panel(ax, by_strategy, measure, title, reference, reference_label):
+def _panel(ax, by_strategy, measure, title, reference, reference_label, log_x=False):
     drawn = False
     for strategy, seeds in by_strategy.items():
         c = mean_curve(seeds, measure)
@@ -112,7 +112,9 @@ def _panel(ax, by_strategy, measure, title, reference, reference_label):
     if drawn and reference is not None:
         ax.axhline(reference, color="black", ls="--", lw=1, label=reference_label)
     ax.set_title(title, fontsize=10)
-    ax.set_xlabel("labels used")
+    ax.set_xlabel("labels used (log scale)" if log_x else "labels used")
+    if log_x:  # rounds growing by k_growth: evenly spaced in log(labels)
+        ax.set_xscale("log")
     ax.set_ylabel("%")
     ax.grid(alpha=0.3)
     if drawn:
@@ -120,9 +122,11 @@ def _panel(ax, by_strategy, measure, title, reference, reference_label):
     return drawn
 
 
-def _figure(page, by_strategy, name, panels, caption):
+def _figure(page, by_strategy, name, panels, caption, log_x=False):
+    if log_x:
+        caption += " Labels on a log scale (the rounds grow by k_growth)."
     fig, axes = plt.subplots(1, len(panels), figsize=(11, 4))
-    drawn = [_panel(ax, by_strategy, *p) for ax, p in zip(axes, panels)]
+    drawn = [_panel(ax, by_strategy, *p, log_x=log_x) for ax, p in zip(axes, panels)]
     if not any(drawn):
         plt.close(fig)
         return False
@@ -199,12 +203,15 @@ def build(report, run_dir, out_path, write_to=None):
     fig_dir = report.prepare_figures(out_path, write_to, ["label_errors", "label_closed_loop"])
     page = report.Page(fig_dir)
     page.raw("<h1>SECURE label efficiency on %s</h1>" % html.escape(domain))
+    growth = opts.get("k_growth", 1)
+    log_x = isinstance(growth, (int, float)) and growth > 1
+    k = "%s × %s^round" % (opts.get("k", "?"), growth) if log_x else opts.get("k", "?")
     page.p("Run directory <code>%s</code>: %s initial labels, then %s rounds of k = %s queries "
            "per strategy (pool %s, diversity radius %s), %s closed-loop episodes per round and %s "
            "at the last; labeller: %s; %.1f s."
            % (tuple(html.escape(str(v)) for v in (
                os.path.abspath(run_dir), opts.get("initial_labels", "?"),
-               opts.get("rounds", "?"), opts.get("k", "?"), opts.get("pool", "?"),
+               opts.get("rounds", "?"), k, opts.get("pool", "?"),
                opts.get("radius", "?"), opts.get("episodes", "?"),
                opts.get("final_episodes", "?"), doc.get("labeller", "?"))) +
            (float(doc.get("seconds", 0) or 0),)))
@@ -224,7 +231,7 @@ def build(report, run_dir, out_path, write_to=None):
                    "estimate states of each round, one line per query strategy; dashed: the "
                    "paper's Table 1 with the full data set." if paper else
                    "Mean over seeds (shaded: &plusmn; one sample std); the paper has no Table 1 "
-                   "for this domain."):
+                   "for this domain.", log_x=log_x):
         page.note("No ground truth on the %s domain: the run measured no Table 1 error." % domain)
     page.h2("2. SECURE in closed loop against labels used")
     ref, source = _closed_loop_reference(report, run_dir, domain)
@@ -236,7 +243,7 @@ def build(report, run_dir, out_path, write_to=None):
                    "The shielded run with each round's barrier (mean over seeds, shaded &plusmn; "
                    "one sample std); dashed: %s." % html.escape(
                        "SECURE with the full data set, " + source if ref else
-                       "none (" + str(source) + ")")):
+                       "none (" + str(source) + ")"), log_x=log_x):
         page.note("No closed-loop run on the %s domain (Domain::HasShieldRun is false): the run "
                   "measured no dangerous or success rate." % domain)
     page.h2("3. Per strategy")
